@@ -1,0 +1,228 @@
+// SPDX-License-Identifier: MIT
+#include "solver/bench_forward.h"
+
+#include <Eigen/IterativeLinearSolvers>
+#include <Eigen/Sparse>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "solver/light.h"
+#include "solver/multigrid.h"
+#include "solver/synthetic.h"
+
+namespace translume {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+template <typename T>
+Eigen::SparseMatrix<double, Eigen::RowMajor> ToSparse(const Stencil<T>& A) {
+  const GridShape& s = A.shape;
+  const int64_t nxy = s.nx * s.ny;
+  std::vector<Eigen::Triplet<double>> trip;
+  trip.reserve(s.size() * 7);
+  for (int64_t k = 0; k < s.nz; ++k)
+    for (int64_t j = 0; j < s.ny; ++j)
+      for (int64_t i = 0; i < s.nx; ++i) {
+        const int64_t p = s.index(i, j, k);
+        trip.emplace_back(p, p, double(A.diag[p]));
+        auto off = [&](int64_t q, double c) {
+          trip.emplace_back(p, q, -c);
+          trip.emplace_back(q, p, -c);
+        };
+        if (i + 1 < s.nx) off(p + 1, A.cx[p]);
+        if (j + 1 < s.ny) off(p + s.nx, A.cy[p]);
+        if (k + 1 < s.nz) off(p + nxy, A.cz[p]);
+      }
+  Eigen::SparseMatrix<double, Eigen::RowMajor> M(s.size(), s.size());
+  M.setFromTriplets(trip.begin(), trip.end());
+  return M;
+}
+
+template <typename Solver>
+PeerResult RunEigenCg(const std::string& name, const Eigen::SparseMatrix<double, Eigen::RowMajor>& M,
+                      const Eigen::VectorXd& b, double tol, double ours) {
+  PeerResult r;
+  r.name = name;
+  r.ran = true;
+  const auto t0 = Clock::now();
+  Solver cg;
+  cg.setTolerance(tol);
+  cg.setMaxIterations(100000);
+  cg.compute(M);
+  Eigen::VectorXd x = cg.solve(b);
+  r.seconds = Since(t0);
+  r.iterations = cg.iterations();
+  r.residual = (b - M * x).norm() / b.norm();
+  r.converged = r.residual <= tol * 1.01;
+  r.ratio = r.seconds / ours;
+  r.lower_bound = !r.converged;
+  return r;
+}
+
+// The paper's relaxation (Jacobi sweeps, Stam 1995) on the same system, within a time budget.
+template <typename T>
+PeerResult RunJacobi(const Stencil<T>& A, const std::vector<T>& b, double tol, double budget,
+                     double ours) {
+  PeerResult r;
+  r.name = "Jacobi relaxation (paper)";
+  r.ran = true;
+  const int64_t n = A.shape.size();
+  std::vector<T> x(n, T(0)), res(n);
+  double bn = 0;
+  for (T v : b) bn += double(v) * double(v);
+  bn = std::sqrt(bn);
+  const auto t0 = Clock::now();
+  while (true) {
+    for (int s = 0; s < 10; ++s) {
+      StencilResidual(A, b.data(), x.data(), res.data());
+#pragma omp parallel for schedule(static)
+      for (int64_t p = 0; p < n; ++p) x[p] += res[p] / A.diag[p];
+    }
+    r.iterations += 10;
+    StencilResidual(A, b.data(), x.data(), res.data());
+    double rn = 0;
+#pragma omp parallel for reduction(+ : rn)
+    for (int64_t p = 0; p < n; ++p) rn += double(res[p]) * double(res[p]);
+    r.residual = std::sqrt(rn) / bn;
+    r.seconds = Since(t0);
+    if (r.residual <= tol) {
+      r.converged = true;
+      break;
+    }
+    if (r.seconds >= budget) break;
+  }
+  r.ratio = r.seconds / ours;
+  r.lower_bound = !r.converged;
+  return r;
+}
+
+template <typename T>
+ForwardBenchRow BenchOne(const GridShape& shape, const ForwardBenchOptions& o,
+                         void (*progress)(const std::string&)) {
+  SynthOptions so;
+  so.preset = "wax";
+  so.shape = shape;
+  const Material m = SynthesizeMaterial(so);
+  const int64_t n = shape.size();
+  std::vector<T> kappa(m.kappa[1].begin(), m.kappa[1].end()), mu(m.mu[1].begin(), m.mu[1].end());
+  MultigridOptions mo;
+  mo.tolerance = o.tolerance;
+  MultigridSolver<T> solver(shape, m.spacing_mm, mo);
+  solver.SetCoefficients(kappa.data(), mu.data(), m.C);
+  std::vector<T> b(n), x(n), y(n);
+  const std::vector<float> q = RasterizeLight(LightSpec::Parse("uniform"), shape, m.spacing_mm);
+  LitFaceSource(solver.grid(), shape.nz - 1, m.C, q.data(), b.data());
+
+  ForwardBenchRow row;
+  row.shape = shape;
+  row.levels = solver.num_levels();
+  std::vector<double> applies;
+  for (int r = 0; r < 3; ++r) solver.Apply(b.data(), y.data());
+  for (int r = 0; r < 21; ++r) {
+    const auto t0 = Clock::now();
+    solver.Apply(b.data(), y.data());
+    applies.push_back(Since(t0));
+  }
+  row.apply_seconds = Median(applies);
+  std::vector<double> solves;
+  for (int r = 0; r < std::max(1, o.repeats); ++r) {
+    std::fill(x.begin(), x.end(), T(0));
+    const SolveSummary s = solver.Solve(b.data(), x.data());
+    solves.push_back(s.seconds);
+    row.iterations = s.iterations;
+    row.residual = s.final_residual;
+  }
+  row.seconds = Median(solves);
+  row.work_units = row.seconds / row.apply_seconds;
+  row.nodes_per_second = double(n) / row.seconds;
+  if (progress)
+    progress(fmt::format("{}: multigrid-PCG {} iterations, {:.4f} s, {:.1f} work units",
+                         shape.ToString(), row.iterations, row.seconds, row.work_units));
+  if (o.peers) {
+    const auto M = ToSparse(solver.stencil());
+    Eigen::VectorXd bd(n);
+    for (int64_t p = 0; p < n; ++p) bd[p] = double(b[p]);
+    using Diag = Eigen::ConjugateGradient<Eigen::SparseMatrix<double, Eigen::RowMajor>,
+                                          Eigen::Lower | Eigen::Upper,
+                                          Eigen::DiagonalPreconditioner<double>>;
+    using Ic = Eigen::ConjugateGradient<Eigen::SparseMatrix<double, Eigen::RowMajor>,
+                                        Eigen::Lower | Eigen::Upper,
+                                        Eigen::IncompleteCholesky<double>>;
+    row.peers.push_back(RunEigenCg<Diag>("Eigen CG + diagonal", M, bd, o.tolerance, row.seconds));
+    if (progress) progress(fmt::format("{}: Eigen CG + diagonal {:.3f} s", shape.ToString(), row.peers.back().seconds));
+    row.peers.push_back(RunEigenCg<Ic>("Eigen CG + IncompleteCholesky", M, bd, o.tolerance, row.seconds));
+    if (progress) progress(fmt::format("{}: Eigen CG + IC {:.3f} s", shape.ToString(), row.peers.back().seconds));
+    const double budget = std::min(o.jacobi_factor * row.seconds, o.jacobi_cap_seconds);
+    row.peers.push_back(RunJacobi(solver.stencil(), b, o.tolerance, budget, row.seconds));
+    if (progress) progress(fmt::format("{}: Jacobi {:.3f} s, residual {:.2e}", shape.ToString(), row.peers.back().seconds, row.peers.back().residual));
+  }
+  return row;
+}
+
+}  // namespace
+
+std::vector<GridShape> DefaultForwardBenchGrids() {
+  return {{33, 33, 33}, {65, 65, 65}, {129, 129, 129}, {130, 53, 37}, {256, 256, 20}};
+}
+
+std::vector<ForwardBenchRow> RunForwardBench(const ForwardBenchOptions& o,
+                                             void (*progress)(const std::string&)) {
+  std::vector<GridShape> grids = o.grids.empty() ? DefaultForwardBenchGrids() : o.grids;
+  std::vector<ForwardBenchRow> rows;
+  for (const GridShape& g : grids) {
+    rows.push_back(o.precision == Precision::kDouble ? BenchOne<double>(g, o, progress)
+                                                     : BenchOne<float>(g, o, progress));
+  }
+  return rows;
+}
+
+std::string ForwardBenchTable(const std::vector<ForwardBenchRow>& rows) {
+  std::string out = fmt::format("{:>14} {:>6} {:>5} {:>10} {:>10} {:>8} {:>12}\n", "grid",
+                                "levels", "iters", "solve s", "apply s", "work u.", "nodes/s");
+  for (const auto& r : rows)
+    out += fmt::format("{:>14} {:>6} {:>5} {:>10.4f} {:>10.6f} {:>8.1f} {:>12.3g}\n",
+                       r.shape.ToString(), r.levels, r.iterations, r.seconds, r.apply_seconds,
+                       r.work_units, r.nodes_per_second);
+  bool any = false;
+  for (const auto& r : rows) any |= !r.peers.empty();
+  if (any) {
+    out += fmt::format("\n{:>14} {:<30} {:>10} {:>9} {:>10} {:>12}\n", "grid", "peer", "time s",
+                       "iters", "residual", "peer / ours");
+    for (const auto& r : rows)
+      for (const auto& p : r.peers)
+        out += fmt::format("{:>14} {:<30} {:>10.3f} {:>9} {:>10.2e} {:>12}\n", r.shape.ToString(),
+                           p.name, p.seconds, p.iterations, p.residual,
+                           fmt::format("{}{:.1f}x", p.lower_bound ? ">= " : "", p.ratio));
+  }
+  return out;
+}
+
+std::string ForwardBenchJson(const std::vector<ForwardBenchRow>& rows) {
+  nlohmann::json j = nlohmann::json::array();
+  for (const auto& r : rows) {
+    nlohmann::json row = {{"grid", r.shape.ToString()}, {"levels", r.levels},
+                          {"iterations", r.iterations}, {"seconds", r.seconds},
+                          {"apply_seconds", r.apply_seconds}, {"work_units", r.work_units},
+                          {"nodes_per_second", r.nodes_per_second}, {"residual", r.residual}};
+    for (const auto& p : r.peers)
+      row["peers"].push_back({{"name", p.name}, {"seconds", p.seconds},
+                              {"iterations", p.iterations}, {"residual", p.residual},
+                              {"converged", p.converged}, {"ratio", p.ratio},
+                              {"ratio_is_lower_bound", p.lower_bound}});
+    j.push_back(row);
+  }
+  return j.dump(2);
+}
+
+}  // namespace translume

@@ -1,0 +1,52 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "solver/forward.h"
+#include "solver/grid.h"
+
+namespace translume {
+
+struct ForwardBenchOptions {
+  std::vector<GridShape> grids;  // empty: the default list (small to the paper's grids)
+  int repeats = 5;               // our solver: median of this many cold solves
+  Precision precision = Precision::kDouble;
+  bool peers = true;             // also run Eigen CG (diagonal, IC) and Jacobi relaxation
+  // The paper's relaxation runs at most min(jacobi_factor * our time, jacobi_cap_seconds).
+  double jacobi_factor = 100;
+  double jacobi_cap_seconds = 60;
+  double tolerance = 1e-6;
+};
+
+struct PeerResult {
+  std::string name;
+  bool ran = false, converged = false;
+  int64_t iterations = 0;
+  double seconds = 0, residual = 0;
+  // Our solver's advantage: peer time / our time. When the peer did not converge within its
+  // budget this is a lower bound (`lower_bound` = true).
+  double ratio = 0;
+  bool lower_bound = false;
+};
+
+struct ForwardBenchRow {
+  GridShape shape;
+  int levels = 0, iterations = 0;
+  double seconds = 0;          // median solve to `tolerance`
+  double apply_seconds = 0;    // median operator application
+  double work_units = 0;       // seconds / apply_seconds
+  double nodes_per_second = 0;
+  double residual = 0;
+  std::vector<PeerResult> peers;
+};
+
+std::vector<GridShape> DefaultForwardBenchGrids();
+// Runs the benchmark; `progress` (may be null) receives one line per finished measurement.
+std::vector<ForwardBenchRow> RunForwardBench(const ForwardBenchOptions& options,
+                                             void (*progress)(const std::string&) = nullptr);
+std::string ForwardBenchTable(const std::vector<ForwardBenchRow>& rows);
+std::string ForwardBenchJson(const std::vector<ForwardBenchRow>& rows);
+
+}  // namespace translume

@@ -1,0 +1,67 @@
+// SPDX-License-Identifier: MIT
+#include "solver/forward.h"
+
+#include <cmath>
+#include <fmt/format.h>
+#include <numbers>
+
+#include "solver/status.h"
+
+namespace translume {
+
+Backend ParseBackend(const std::string& text) {
+  if (text == "cpu") return Backend::kCpu;
+  if (text == "gl")
+    throw InputError("--backend gl: the OpenGL backend is not part of this build yet; use "
+                     "--backend cpu");
+  throw InputError(fmt::format("--backend: unknown backend '{}' (available: cpu)", text));
+}
+
+Precision ParsePrecision(const std::string& text) {
+  if (text == "float") return Precision::kFloat;
+  if (text == "double") return Precision::kDouble;
+  throw InputError(fmt::format("--precision: '{}' is not 'float' or 'double'", text));
+}
+
+FacePattern GreyPattern(const std::vector<float>& q) { return {q, q, q}; }
+
+namespace {
+
+template <typename T>
+ForwardResult SolveForwardT(const Material& m, const FacePattern& q, const ForwardOptions& o) {
+  const GridShape& s = m.shape;
+  MultigridSolver<T> solver(s, m.spacing_mm, o.multigrid);
+  const int64_t n = s.size(), k_lit = LitFaceK(o.setup, s);
+  std::vector<T> kappa(n), mu(n), b(n), phi(n);
+  ForwardResult result;
+  for (int c = 0; c < 3; ++c) {
+    TL_CHECK(int64_t(q[c].size()) == s.face_size());
+    for (int64_t p = 0; p < n; ++p) {
+      kappa[p] = T(m.kappa[c][p]);
+      mu[p] = T(m.mu[c][p]);
+    }
+    solver.SetCoefficients(kappa.data(), mu.data(), m.C);
+    LitFaceSource(solver.grid(), k_lit, m.C, q[c].data(), b.data());
+    std::fill(phi.begin(), phi.end(), T(0));
+    result.summaries[c] = solver.Solve(b.data(), phi.data());
+    std::vector<float>& L = result.radiance[c];
+    L.resize(s.face_size());
+    const bool lit_front = o.setup == Setup::kFront;
+    for (int64_t f = 0; f < s.face_size(); ++f) {
+      const double incoming = lit_front ? q[c][f] : 0.0;
+      L[f] = float((double(phi[f]) - incoming) / (2 * std::numbers::pi));
+    }
+  }
+  return result;
+}
+
+}  // namespace
+
+ForwardResult SolveForward(const Material& material, const FacePattern& q,
+                           const ForwardOptions& options) {
+  if (std::string err = material.Validate(); !err.empty()) throw InputError("material: " + err);
+  return options.precision == Precision::kDouble ? SolveForwardT<double>(material, q, options)
+                                                 : SolveForwardT<float>(material, q, options);
+}
+
+}  // namespace translume

@@ -1,0 +1,45 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include "solver/grid.h"
+#include "solver/material.h"
+#include "solver/multigrid.h"
+
+namespace translume {
+
+// Where a diffusion solve runs. Only `cpu` exists in this build; `gl` is reserved for the
+// OpenGL compute backend.
+enum class Backend { kCpu };
+Backend ParseBackend(const std::string& text);
+
+enum class Precision { kFloat, kDouble };
+Precision ParsePrecision(const std::string& text);
+
+struct ForwardOptions {
+  Setup setup = Setup::kBack;
+  Backend backend = Backend::kCpu;
+  Precision precision = Precision::kDouble;
+  MultigridOptions multigrid;
+};
+
+// One RGB light pattern on the lit face: q[c][i + nx * j], c = R, G, B.
+using FacePattern = std::array<std::vector<float>, 3>;
+FacePattern GreyPattern(const std::vector<float>& q);
+
+struct ForwardResult {
+  // Front-face outgoing radiance L = (phi - q) / (2 pi) at nodes (i, j, 0), SPEC section 3,
+  // per channel, nx*ny values (i + nx * j).
+  FacePattern radiance;
+  std::array<SolveSummary, 3> summaries;
+};
+
+// Solves the forward problem of SPEC section 3 for every channel of `material` under light q
+// on the lit face of `options.setup`, and returns the front-face radiance.
+ForwardResult SolveForward(const Material& material, const FacePattern& q,
+                           const ForwardOptions& options);
+
+}  // namespace translume

@@ -1,0 +1,42 @@
+// SPDX-License-Identifier: MIT
+#include "solver/grid.h"
+
+#include <charconv>
+#include <vector>
+
+#include "solver/status.h"
+
+namespace translume {
+
+GridShape ParseGridShape(const std::string& text, const std::string& what) {
+  std::vector<int64_t> values;
+  size_t start = 0;
+  while (start <= text.size()) {
+    size_t end = text.find('x', start);
+    if (end == std::string::npos) end = text.size();
+    int64_t v = 0;
+    const char* first = text.data() + start;
+    const char* last = text.data() + end;
+    auto [ptr, ec] = std::from_chars(first, last, v);
+    if (ec != std::errc() || ptr != last || first == last) {
+      throw InputError(what + ": '" + text + "' is not a grid size NXxNYxNZ");
+    }
+    values.push_back(v);
+    start = end + 1;
+  }
+  if (values.size() != 3) throw InputError(what + ": '" + text + "' is not a grid size NXxNYxNZ");
+  for (int64_t v : values) {
+    if (v < 2) throw InputError(what + ": every grid dimension must be at least 2 nodes, got '" + text + "'");
+  }
+  return {values[0], values[1], values[2]};
+}
+
+Setup ParseSetup(const std::string& text) {
+  if (text == "back") return Setup::kBack;
+  if (text == "front") return Setup::kFront;
+  throw InputError("--setup: '" + text + "' is not 'back' or 'front'");
+}
+
+const char* SetupName(Setup setup) { return setup == Setup::kBack ? "back" : "front"; }
+
+}  // namespace translume

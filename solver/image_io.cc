@@ -1,0 +1,59 @@
+// SPDX-License-Identifier: MIT
+#include "solver/image_io.h"
+
+#include <OpenImageIO/imageio.h>
+
+#include <filesystem>
+#include <fmt/format.h>
+
+#include "solver/atomic_file.h"
+#include "solver/status.h"
+
+namespace translume {
+
+Image ReadImage(const std::string& path) {
+  if (!std::filesystem::exists(path)) throw InputError(fmt::format("{}: no such file", path));
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) {
+    throw InputError(fmt::format("{}: cannot read image: {}", path, OIIO::geterror()));
+  }
+  const OIIO::ImageSpec& spec = in->spec();
+  Image img;
+  img.width = spec.width;
+  img.height = spec.height;
+  img.channels = spec.nchannels;
+  img.data.resize(size_t(img.width) * img.height * img.channels);
+  if (!in->read_image(0, 0, 0, img.channels, OIIO::TypeDesc::FLOAT, img.data.data())) {
+    throw InputError(fmt::format("{}: cannot read image: {}", path, in->geterror()));
+  }
+  in->close();
+  return img;
+}
+
+void WriteImage(const std::string& path, const Image& image) {
+  TL_CHECK(image.data.size() == size_t(image.width) * image.height * image.channels);
+  WriteAtomically(path, [&](const std::string& tmp) {
+    auto out = OIIO::ImageOutput::create(tmp);
+    if (!out) throw InputError(fmt::format("{}: no image writer for this extension", path));
+    OIIO::ImageSpec spec(image.width, image.height, image.channels,
+                         tmp.ends_with(".exr") ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::UINT8);
+    if (tmp.ends_with(".exr")) spec.attribute("compression", "zip");
+    if (!out->open(tmp, spec) ||
+        !out->write_image(OIIO::TypeDesc::FLOAT, image.data.data()) || !out->close()) {
+      throw InputError(fmt::format("{}: cannot write image: {}", path, out->geterror()));
+    }
+  });
+}
+
+Image ImageFromPlanes(int width, int height, const std::vector<const float*>& planes) {
+  Image img;
+  img.width = width;
+  img.height = height;
+  img.channels = int(planes.size());
+  img.data.resize(size_t(width) * height * img.channels);
+  for (size_t p = 0; p < size_t(width) * height; ++p)
+    for (int c = 0; c < img.channels; ++c) img.data[p * img.channels + c] = planes[c][p];
+  return img;
+}
+
+}  // namespace translume

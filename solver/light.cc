@@ -1,0 +1,138 @@
+// SPDX-License-Identifier: MIT
+#include "solver/light.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fmt/format.h>
+
+#include "solver/image_io.h"
+#include "solver/status.h"
+
+namespace translume {
+namespace {
+
+[[noreturn]] void Bad(const std::string& text, const std::string& why) {
+  throw InputError(fmt::format("light '{}': {} (expected uniform, region:I,J/N, spot:X,Y,R "
+                               "or image:FILE)", text, why));
+}
+
+// Dual box of node i along an axis with n nodes and spacing h: [lo, hi] in mm.
+void DualBox(int64_t i, int64_t n, double h, double* lo, double* hi) {
+  *lo = std::max(0.0, (double(i) - 0.5) * h);
+  *hi = std::min(double(n - 1) * h, (double(i) + 0.5) * h);
+}
+
+double Overlap(double a0, double a1, double b0, double b1) {
+  return std::max(0.0, std::min(a1, b1) - std::max(a0, b0));
+}
+
+}  // namespace
+
+LightSpec LightSpec::Parse(const std::string& text) {
+  LightSpec s;
+  s.text = text;
+  if (text == "uniform") return s;
+  const size_t colon = text.find(':');
+  if (colon == std::string::npos) Bad(text, "unknown kind");
+  const std::string kind = text.substr(0, colon), args = text.substr(colon + 1);
+  char tail = 0;
+  if (kind == "region") {
+    s.kind = Kind::kRegion;
+    if (std::sscanf(args.c_str(), "%d,%d/%d%c", &s.region_i, &s.region_j, &s.region_n, &tail) != 3)
+      Bad(text, "region needs I,J/N");
+    if (s.region_n < 1 || s.region_i < 0 || s.region_j < 0 || s.region_i >= s.region_n ||
+        s.region_j >= s.region_n)
+      Bad(text, "region needs 0 <= I, J < N");
+  } else if (kind == "spot") {
+    s.kind = Kind::kSpot;
+    if (std::sscanf(args.c_str(), "%lf,%lf,%lf%c", &s.spot_x, &s.spot_y, &s.spot_r, &tail) != 3)
+      Bad(text, "spot needs X,Y,R in mm");
+    if (!(s.spot_r > 0) || !std::isfinite(s.spot_x) || !std::isfinite(s.spot_y))
+      Bad(text, "spot radius must be > 0");
+  } else if (kind == "image") {
+    s.kind = Kind::kImage;
+    s.image_path = args;
+    if (args.empty()) Bad(text, "image needs a file name");
+  } else {
+    Bad(text, "unknown kind '" + kind + "'");
+  }
+  return s;
+}
+
+std::vector<float> RasterizeLight(const LightSpec& spec, const GridShape& shape, double h) {
+  const int64_t nx = shape.nx, ny = shape.ny;
+  std::vector<float> q(nx * ny, 0.0f);
+  const double width = double(nx - 1) * h, height = double(ny - 1) * h;
+  Image img;
+  if (spec.kind == LightSpec::Kind::kImage) {
+    img = ReadImage(spec.image_path);
+    if (img.width < 1 || img.height < 1)
+      throw InputError(fmt::format("{}: empty light pattern image", spec.image_path));
+  }
+  // Supersampling for spots and images: S x S samples per dual box.
+  constexpr int S = 8;
+  for (int64_t j = 0; j < ny; ++j) {
+    double y0, y1;
+    DualBox(j, ny, h, &y0, &y1);
+    for (int64_t i = 0; i < nx; ++i) {
+      double x0, x1;
+      DualBox(i, nx, h, &x0, &x1);
+      double value = 0;
+      switch (spec.kind) {
+        case LightSpec::Kind::kUniform:
+          value = 1;
+          break;
+        case LightSpec::Kind::kRegion: {
+          const double n = spec.region_n;
+          const double cx0 = width * spec.region_i / n, cx1 = width * (spec.region_i + 1) / n;
+          const double cy0 = height * spec.region_j / n, cy1 = height * (spec.region_j + 1) / n;
+          value = Overlap(x0, x1, cx0, cx1) * Overlap(y0, y1, cy0, cy1) / ((x1 - x0) * (y1 - y0));
+          break;
+        }
+        case LightSpec::Kind::kSpot:
+        case LightSpec::Kind::kImage: {
+          double sum = 0;
+          for (int b = 0; b < S; ++b)
+            for (int a = 0; a < S; ++a) {
+              const double x = x0 + (a + 0.5) / S * (x1 - x0);
+              const double y = y0 + (b + 0.5) / S * (y1 - y0);
+              if (spec.kind == LightSpec::Kind::kSpot) {
+                const double dx = x - spec.spot_x, dy = y - spec.spot_y;
+                sum += (dx * dx + dy * dy <= spec.spot_r * spec.spot_r) ? 1.0 : 0.0;
+              } else {
+                // Nearest image pixel; the image covers [0, width] x [0, height].
+                const int px = std::clamp(int(x / width * img.width), 0, img.width - 1);
+                const int py = std::clamp(int(y / height * img.height), 0, img.height - 1);
+                double lum;
+                if (img.channels >= 3)
+                  lum = 0.2126 * img.at(px, py, 0) + 0.7152 * img.at(px, py, 1) +
+                        0.0722 * img.at(px, py, 2);
+                else
+                  lum = img.at(px, py, 0);
+                sum += lum;
+              }
+            }
+          value = sum / (S * S);
+          break;
+        }
+      }
+      q[i + nx * j] = float(value);
+    }
+  }
+  return q;
+}
+
+std::vector<LightSpec> RegionLights(const std::string& nxn) {
+  int a = 0, b = 0;
+  char tail = 0;
+  if (std::sscanf(nxn.c_str(), "%dx%d%c", &a, &b, &tail) != 2 || a != b || a < 1 || a > 64)
+    throw InputError(fmt::format("--lights: '{}' is not NxN with 1 <= N <= 64", nxn));
+  std::vector<LightSpec> lights;
+  for (int j = 0; j < a; ++j)
+    for (int i = 0; i < a; ++i)
+      lights.push_back(LightSpec::Parse(fmt::format("region:{},{}/{}", i, j, a)));
+  return lights;
+}
+
+}  // namespace translume

@@ -1,0 +1,223 @@
+// SPDX-License-Identifier: MIT
+// The only translation unit that includes OpenVDB (its headers are slow to compile).
+#include "solver/material_io.h"
+
+#include <openvdb/openvdb.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fmt/format.h>
+#include <mutex>
+#include <set>
+
+#include "solver/atomic_file.h"
+#include "solver/status.h"
+
+namespace translume {
+namespace {
+
+constexpr const char* kFormat = "material/1";
+
+void InitVdb() {
+  static std::once_flag once;
+  std::call_once(once, [] { openvdb::initialize(); });
+}
+
+template <typename GridT>
+typename GridT::Ptr MakeGrid(const std::string& name, double h) {
+  auto grid = GridT::create();
+  grid->setName(name);
+  grid->setTransform(openvdb::math::Transform::createLinearTransform(h));
+  return grid;
+}
+
+}  // namespace
+
+namespace {
+
+void WriteVdb(const std::string& path, const Material& m, const MaterialCorruption* corrupt) {
+  InitVdb();
+  const double h = m.spacing_mm;
+  auto kappa = MakeGrid<openvdb::Vec3fGrid>("kappa", h);
+  auto mu = MakeGrid<openvdb::Vec3fGrid>("mu", h);
+  auto albedo = MakeGrid<openvdb::Vec3fGrid>("albedo", h);
+  auto density = MakeGrid<openvdb::FloatGrid>("density", h);
+  density->setGridClass(openvdb::GRID_FOG_VOLUME);
+  auto ak = kappa->getAccessor();
+  auto am = mu->getAccessor();
+  auto aa = albedo->getAccessor();
+  auto ad = density->getAccessor();
+  const GridShape& s = m.shape;
+  for (int64_t k = 0; k < s.nz; ++k)
+    for (int64_t j = 0; j < s.ny; ++j)
+      for (int64_t i = 0; i < s.nx; ++i) {
+        const int64_t p = s.index(i, j, k);
+        const openvdb::Coord xyz{int32_t(i), int32_t(j), int32_t(k)};
+        openvdb::Vec3f kv(m.kappa[0][p], m.kappa[1][p], m.kappa[2][p]);
+        openvdb::Vec3f mv(m.mu[0][p], m.mu[1][p], m.mu[2][p]);
+        ak.setValue(xyz, kv);
+        am.setValue(xyz, mv);
+        float sigma = 0;
+        openvdb::Vec3f alb;
+        for (int c = 0; c < 3; ++c) {
+          sigma += 1.0f / (3.0f * kv[c]) / 3.0f;
+          alb[c] = 1.0f - 3.0f * kv[c] * mv[c];
+        }
+        aa.setValue(xyz, alb);
+        ad.setValue(xyz, sigma);
+      }
+  openvdb::GridPtrVec grids{kappa, mu, density, albedo};
+  openvdb::MetaMap meta;
+  using MC = MaterialCorruption;
+  const MC bad = corrupt ? *corrupt : MC(-1);
+  if (bad != MC::kMissingC) meta.insertMeta("C", openvdb::FloatMetadata(float(m.C)));
+  meta.insertMeta("eta", openvdb::FloatMetadata(float(m.eta)));
+  meta.insertMeta("translume_format",
+                  openvdb::StringMetadata(bad == MC::kWrongFormat ? "material/99" : kFormat));
+  if (bad == MC::kUnknownMetadata) meta.insertMeta("albedo_scale", openvdb::FloatMetadata(2.0f));
+  if (bad == MC::kMissingMu) grids = {kappa, density, albedo};
+  if (bad == MC::kShapeMismatch) am.setValueOff(openvdb::Coord(int(s.nx - 1), int(s.ny - 1), int(s.nz - 1)));
+  if (bad == MC::kMissingVoxel) {
+    am.setValueOff(openvdb::Coord(1, 1, 1));
+    ak.setValueOff(openvdb::Coord(1, 1, 1));
+  }
+  if (bad == MC::kNegativeKappa) ak.setValue(openvdb::Coord(1, 0, 0), openvdb::Vec3f(0.1f, -0.2f, 0.1f));
+  if (bad == MC::kNanMu) am.setValue(openvdb::Coord(0, 1, 0), openvdb::Vec3f(0.01f, 0.01f, NAN));
+  if (bad == MC::kWrongGridType) {
+    auto fake = MakeGrid<openvdb::FloatGrid>("mu", m.spacing_mm);
+    fake->tree().setValue(openvdb::Coord(0, 0, 0), 1.0f);
+    grids = {kappa, fake, density, albedo};
+  }
+  WriteAtomically(path, [&](const std::string& tmp) {
+    try {
+      openvdb::io::File file(tmp);
+      file.write(grids, meta);
+      file.close();
+    } catch (const openvdb::Exception& e) {
+      throw InputError(fmt::format("{}: cannot write material file: {}", path, e.what()));
+    }
+  });
+}
+
+}  // namespace
+
+void WriteMaterial(const std::string& path, const Material& m) {
+  if (std::string err = m.Validate(); !err.empty()) {
+    throw InputError(fmt::format("{}: refusing to write an invalid material: {}", path, err));
+  }
+  WriteVdb(path, m, nullptr);
+}
+
+void WriteCorruptMaterialForTest(const std::string& path, const Material& m,
+                                 MaterialCorruption corruption) {
+  WriteVdb(path, m, &corruption);
+}
+
+Material ReadMaterial(const std::string& path) {
+  InitVdb();
+  if (!std::filesystem::exists(path)) throw InputError(fmt::format("{}: no such file", path));
+  openvdb::io::File file(path);
+  try {
+    file.open();
+  } catch (const openvdb::Exception& e) {
+    throw InputError(fmt::format("{}: not a readable OpenVDB file ({})", path, e.what()));
+  }
+  Material m;
+  auto meta = file.getMetadata();
+  bool have_c = false, have_eta = false;
+  const std::set<std::string> known = {"C", "eta", "translume_format"};
+  for (auto it = meta->beginMeta(); it != meta->endMeta(); ++it) {
+    const std::string& key = it->first;
+    if (!known.count(key)) {
+      throw InputError(fmt::format("{}: unknown file metadata '{}' (expected C, eta, "
+                                   "translume_format)", path, key));
+    }
+    if (key == "translume_format") {
+      const std::string v = it->second->str();
+      if (v != kFormat)
+        throw InputError(fmt::format("{}: translume_format is '{}', this build reads '{}'", path,
+                                     v, kFormat));
+      continue;
+    }
+    double value = 0;
+    if (auto f = openvdb::DynamicPtrCast<openvdb::FloatMetadata>(it->second)) value = f->value();
+    else if (auto d = openvdb::DynamicPtrCast<openvdb::DoubleMetadata>(it->second)) value = d->value();
+    else
+      throw InputError(fmt::format("{}: metadata '{}' has type {}, expected float", path, key,
+                                   it->second->typeName()));
+    if (key == "C") { m.C = value; have_c = true; }
+    if (key == "eta") { m.eta = value; have_eta = true; }
+  }
+  if (!have_c) throw InputError(fmt::format("{}: missing file metadata 'C'", path));
+  if (!have_eta) throw InputError(fmt::format("{}: missing file metadata 'eta'", path));
+  if (!(m.C >= 1) || !std::isfinite(m.C))
+    throw InputError(fmt::format("{}: metadata C = {} is not a finite number >= 1", path, m.C));
+  if (!(m.eta > 0) || !std::isfinite(m.eta))
+    throw InputError(fmt::format("{}: metadata eta = {} is not positive", path, m.eta));
+
+  openvdb::Vec3fGrid::Ptr grids[2];
+  const char* names[2] = {"kappa", "mu"};
+  for (int g = 0; g < 2; ++g) {
+    if (!file.hasGrid(names[g]))
+      throw InputError(fmt::format("{}: missing grid '{}'", path, names[g]));
+    auto base = file.readGrid(names[g]);
+    grids[g] = openvdb::gridPtrCast<openvdb::Vec3fGrid>(base);
+    if (!grids[g])
+      throw InputError(fmt::format("{}: grid '{}' has type {}, expected Vec3f", path, names[g],
+                                   base->valueType()));
+  }
+  file.close();
+
+  openvdb::CoordBBox box[2];
+  for (int g = 0; g < 2; ++g) {
+    const auto& xf = grids[g]->transform();
+    const openvdb::Vec3d vs = xf.voxelSize();
+    const openvdb::Vec3d origin = xf.indexToWorld(openvdb::Vec3d(0, 0, 0));
+    if (!xf.isLinear() || std::abs(vs[0] - vs[1]) > 1e-6 * vs[0] ||
+        std::abs(vs[0] - vs[2]) > 1e-6 * vs[0] || origin.length() > 1e-6 * vs[0])
+      throw InputError(fmt::format("{}: grid '{}' does not have a uniform linear transform "
+                                   "with voxel (0,0,0) at the origin", path, names[g]));
+    if (g == 0) m.spacing_mm = vs[0];
+    else if (std::abs(vs[0] - m.spacing_mm) > 1e-6 * m.spacing_mm)
+      throw InputError(fmt::format("{}: grids 'kappa' and 'mu' have different voxel sizes "
+                                   "({} and {} mm)", path, m.spacing_mm, vs[0]));
+    box[g] = grids[g]->evalActiveVoxelBoundingBox();
+    if (box[g].empty()) throw InputError(fmt::format("{}: grid '{}' is empty", path, names[g]));
+    if (box[g].min() != openvdb::Coord(0, 0, 0))
+      throw InputError(fmt::format("{}: grid '{}' does not start at voxel (0,0,0)", path,
+                                   names[g]));
+  }
+  if (box[0] != box[1])
+    throw InputError(fmt::format("{}: grids 'kappa' and 'mu' have different shapes", path));
+  const openvdb::Coord dim = box[0].dim();
+  m.shape = {dim.x(), dim.y(), dim.z()};
+  for (int g = 0; g < 2; ++g) {
+    if (int64_t(grids[g]->activeVoxelCount()) != m.shape.size())
+      throw InputError(fmt::format("{}: grid '{}' has {} active voxels, a dense {} grid needs {}",
+                                   path, names[g], grids[g]->activeVoxelCount(),
+                                   m.shape.ToString(), m.shape.size()));
+  }
+  for (int c = 0; c < 3; ++c) {
+    m.kappa[c].resize(m.shape.size());
+    m.mu[c].resize(m.shape.size());
+  }
+  auto ak = grids[0]->getConstAccessor();
+  auto am = grids[1]->getConstAccessor();
+  const GridShape& s = m.shape;
+  for (int64_t k = 0; k < s.nz; ++k)
+    for (int64_t j = 0; j < s.ny; ++j)
+      for (int64_t i = 0; i < s.nx; ++i) {
+        const openvdb::Coord xyz{int32_t(i), int32_t(j), int32_t(k)};
+        const openvdb::Vec3f kv = ak.getValue(xyz), mv = am.getValue(xyz);
+        const int64_t p = s.index(i, j, k);
+        for (int c = 0; c < 3; ++c) {
+          m.kappa[c][p] = kv[c];
+          m.mu[c][p] = mv[c];
+        }
+      }
+  if (std::string err = m.Validate(); !err.empty())
+    throw InputError(fmt::format("{}: {}", path, err));
+  return m;
+}
+
+}  // namespace translume

@@ -1,0 +1,103 @@
+// SPDX-License-Identifier: MIT
+#include "solver/material_io.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "solver/status.h"
+#include "solver/synthetic.h"
+
+namespace translume {
+namespace {
+
+namespace fs = std::filesystem;
+
+class MaterialIo : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("translume_mio_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    SynthOptions o;
+    o.preset = "inclusions";
+    o.shape = {9, 7, 5};
+    o.spacing_mm = 0.25;
+    o.eta = 1.4;
+    material_ = SynthesizeMaterial(o);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+
+  // Expects ReadMaterial to throw an InputError whose message names the file and `what`.
+  void ExpectRejected(const std::string& path, const std::string& what) {
+    try {
+      ReadMaterial(path);
+      FAIL() << "no error for " << what;
+    } catch (const InputError& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(path), std::string::npos) << msg;
+      EXPECT_NE(msg.find(what), std::string::npos) << msg;
+      EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+    }
+  }
+
+  fs::path dir_;
+  Material material_;
+};
+
+TEST_F(MaterialIo, RoundTripIsExact) {
+  const std::string path = Path("m.vdb");
+  WriteMaterial(path, material_);
+  const Material back = ReadMaterial(path);
+  EXPECT_EQ(back.shape, material_.shape);
+  EXPECT_DOUBLE_EQ(back.spacing_mm, material_.spacing_mm);
+  EXPECT_NEAR(back.C, material_.C, 1e-6);
+  EXPECT_NEAR(back.eta, 1.4, 1e-6);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_EQ(back.kappa[c], material_.kappa[c]);
+    EXPECT_EQ(back.mu[c], material_.mu[c]);
+  }
+  // No temporary file left behind.
+  int files = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir_)) ++files;
+  EXPECT_EQ(files, 1);
+}
+
+TEST_F(MaterialIo, RejectsEveryBrokenFile) {
+  ExpectRejected(Path("absent.vdb"), "no such file");
+  {
+    std::ofstream(Path("text.vdb")) << "not a vdb";
+    ExpectRejected(Path("text.vdb"), "not a readable OpenVDB file");
+  }
+  const std::pair<MaterialCorruption, std::string> cases[] = {
+      {MaterialCorruption::kMissingMu, "missing grid 'mu'"},
+      {MaterialCorruption::kMissingC, "missing file metadata 'C'"},
+      {MaterialCorruption::kUnknownMetadata, "unknown file metadata 'albedo_scale'"},
+      {MaterialCorruption::kShapeMismatch, "different shapes"},
+      {MaterialCorruption::kNegativeKappa, "kappa = -0.2"},
+      {MaterialCorruption::kNanMu, "mu = nan"},
+      {MaterialCorruption::kWrongGridType, "expected Vec3f"},
+      {MaterialCorruption::kMissingVoxel, "active voxels"},
+      {MaterialCorruption::kWrongFormat, "translume_format"},
+  };
+  int n = 0;
+  for (const auto& [corruption, what] : cases) {
+    const std::string path = Path("bad" + std::to_string(n++) + ".vdb");
+    WriteCorruptMaterialForTest(path, material_, corruption);
+    ExpectRejected(path, what);
+  }
+}
+
+TEST_F(MaterialIo, RefusesToWriteInvalidMaterialAndLeavesNothing) {
+  Material bad = material_;
+  bad.mu[1][3] = 0;
+  const std::string path = Path("bad.vdb");
+  EXPECT_THROW(WriteMaterial(path, bad), InputError);
+  EXPECT_FALSE(fs::exists(path));
+}
+
+}  // namespace
+}  // namespace translume

@@ -1,0 +1,59 @@
+// SPDX-License-Identifier: MIT
+#include "solver/memory.h"
+
+#include <fmt/format.h>
+#include <fstream>
+#include <sstream>
+
+#include "solver/status.h"
+
+namespace translume {
+
+MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision precision) {
+  const double n = double(shape.size());
+  const double t = precision == Precision::kDouble ? 8 : 4;
+  // Per level: kappa, mu, cx, cy, cz, diag, lu_c, lu_inv, b, x, r, transfer temporaries.
+  const double hierarchy = 12 * t * n * 4.0 / 3.0;
+  // Finest level extras: CG vectors r, z, p, q; the caller's kappa, mu, b, phi.
+  const double solve = hierarchy + 8 * t * n;
+  const double material = 6 * 4 * n;  // RGB kappa and mu, float
+  MemoryEstimate e;
+  e.forward_bytes = int64_t(solve + material);
+  // Recovery, per channel: forward and adjoint fields of every condition (kept for warm starts
+  // and the gradient), parameters, gradient and optimiser history (~20 vectors of 2N doubles),
+  // one solver. Three channels run concurrently.
+  const double per_channel = solve + 2.0 * conditions * t * n + 20 * 2 * 8 * n;
+  e.recovery_bytes = int64_t(3 * per_channel + material);
+  return e;
+}
+
+int64_t AvailableMemoryBytes() {
+  std::ifstream in("/proc/meminfo");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("MemAvailable:", 0) == 0) {
+      std::istringstream s(line.substr(13));
+      int64_t kb = 0;
+      s >> kb;
+      return kb * 1024;
+    }
+  }
+  return -1;
+}
+
+void CheckFitsInMemory(int64_t bytes, const std::string& what) {
+  const int64_t avail = AvailableMemoryBytes();
+  if (avail > 0 && bytes > avail) {
+    throw InputError(fmt::format("{} needs about {} of memory, but only {} is available",
+                                 what, FormatBytes(bytes), FormatBytes(avail)));
+  }
+}
+
+std::string FormatBytes(int64_t bytes) {
+  const double b = double(bytes);
+  if (b >= 1024.0 * 1024 * 1024) return fmt::format("{:.2f} GiB", b / (1024.0 * 1024 * 1024));
+  if (b >= 1024.0 * 1024) return fmt::format("{:.1f} MiB", b / (1024.0 * 1024));
+  return fmt::format("{:.1f} KiB", b / 1024.0);
+}
+
+}  // namespace translume

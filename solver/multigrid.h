@@ -1,0 +1,81 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "solver/stencil.h"
+
+namespace translume {
+
+struct MultigridOptions {
+  // Stop when ||b - A x|| <= tolerance * ||b|| (2-norms).
+  double tolerance = 1e-6;
+  int max_iterations = 100;
+  // z-line Gauss-Seidel half-sweep pairs before and after the coarse-grid correction.
+  int pre_smoothing = 1;
+  int post_smoothing = 1;
+  // Stop coarsening at this many nodes; the coarsest level is solved exactly (sparse Cholesky).
+  int64_t coarsest_nodes = 1500;
+
+  // Empty if valid, else the broken constraint.
+  std::string Validate() const;
+};
+
+struct SolveSummary {
+  bool converged = false;
+  int iterations = 0;
+  double initial_residual = 0;  // relative: ||b - A x0|| / ||b||
+  double final_residual = 0;    // relative, recomputed from the returned x
+  double seconds = 0;
+  std::string message;
+  std::string BriefReport() const;
+};
+
+// Conjugate gradients preconditioned by one multigrid V-cycle, for the SPD system A x = b of
+// one channel (SPEC section 3). The hierarchy coarsens vertex-centred (every other node, each
+// axis while it has >= 3 nodes and is not already much coarser than the others: semi-coarsening
+// for flat grids such as 256 x 256 x 20), re-discretises kappa and mu averaged by the
+// restriction weights, smooths with red-black (zebra) z-line Gauss-Seidel, which stays robust
+// when z is strongly coupled, prolongs trilinearly, restricts by the transpose and solves the
+// coarsest level exactly. The V-cycle is symmetric, so CG applies. T is float or double; dot
+// products accumulate in double.
+//
+// Usage: construct once per grid, SetCoefficients() whenever kappa/mu change (cheap: O(N)),
+// Solve() any number of right-hand sides, each warm-started from the x passed in. The adjoint
+// system is the same matrix (A is symmetric), so adjoint solves use Solve() too.
+template <typename T>
+class MultigridSolver {
+ public:
+  MultigridSolver(const GridShape& shape, double h, const MultigridOptions& options = {});
+  ~MultigridSolver();
+
+  void SetCoefficients(const T* kappa, const T* mu, double C);
+  // x holds the initial guess on entry (zeros for a cold start) and the solution on exit.
+  SolveSummary Solve(const T* b, T* x);
+  // y = A x on the finest level.
+  void Apply(const T* x, T* y) const;
+
+  const Stencil<T>& stencil() const;
+  const TensorGrid& grid() const;
+  int num_levels() const;
+  // Shapes of every level, finest first (for reports and tests).
+  std::vector<GridShape> level_shapes() const;
+  const MultigridOptions& options() const { return options_; }
+  MultigridOptions& mutable_options() { return options_; }
+
+ private:
+  struct Level;
+  void VCycle(size_t l, const T* b, T* x);
+  void Smooth(const Level& L, const T* b, T* x, int color) const;
+  void Restrict(const Level& L, const T* fine, T* coarse) const;
+  void ProlongAdd(const Level& L, const T* coarse, T* fine) const;
+
+  MultigridOptions options_;
+  std::vector<std::unique_ptr<Level>> levels_;
+  std::vector<T> r_, z_, p_, q_;
+  bool has_coefficients_ = false;
+};
+
+}  // namespace translume

@@ -1,0 +1,134 @@
+// SPDX-License-Identifier: MIT
+#include "solver/multigrid.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+namespace translume {
+namespace {
+
+// SPEC section 3: exact front-face radiance of a uniformly back-lit homogeneous slab.
+double SlabFrontRadiance(double kappa, double mu, double C, double T, double q) {
+  const double s = std::sqrt(mu / kappa), a = 2 * C * kappa * s;
+  const double A = q / ((1 + a) - std::exp(-2 * s * T) * (1 - a) * (1 - a) / (1 + a));
+  const double B = -A * std::exp(-2 * s * T) * (1 - a) / (1 + a);
+  return (A * std::exp(-s * T) + B * std::exp(s * T)) / (2 * std::numbers::pi);
+}
+
+template <typename T>
+SolveSummary SolveSlab(int nz, double* rel_err) {
+  const double kappa = 0.1, mu = 0.1, C = 2.6021, thick = 2.0, width = 16.0;
+  const double h = thick / (nz - 1);
+  const int64_t nx = int64_t(std::llround(width / h)) + 1;
+  const GridShape s{nx, nx, nz};
+  MultigridSolver<T> mg(s, h);
+  std::vector<T> K(s.size(), T(kappa)), M(s.size(), T(mu)), b(s.size()), x(s.size(), T(0));
+  mg.SetCoefficients(K.data(), M.data(), C);
+  std::vector<float> q(s.face_size(), 1.0f);
+  LitFaceSource(mg.grid(), nz - 1, C, q.data(), b.data());
+  const SolveSummary sum = mg.Solve(b.data(), x.data());
+  const double exact = SlabFrontRadiance(kappa, mu, C, thick, 1.0);
+  const double got = double(x[s.index(nx / 2, nx / 2, 0)]) / (2 * std::numbers::pi);
+  *rel_err = std::abs(got - exact) / exact;
+  return sum;
+}
+
+TEST(Multigrid, AnalyticSlabConvergesAtSecondOrderWithSpecNumbers) {
+  const int nzs[3] = {5, 9, 17};
+  const double spec[3] = {3.0e-2, 7.6e-3, 1.9e-3};
+  double err[3];
+  for (int i = 0; i < 3; ++i) {
+    const SolveSummary s = SolveSlab<double>(nzs[i], &err[i]);
+    EXPECT_TRUE(s.converged) << s.BriefReport();
+    EXPECT_NEAR(err[i], spec[i], 0.05 * spec[i]) << "nz = " << nzs[i];
+  }
+  EXPECT_NEAR(err[0] / err[1], 4.0, 0.3);
+  EXPECT_NEAR(err[1] / err[2], 4.0, 0.3);
+}
+
+// Smooth heterogeneous coefficients on an n^3 grid, back-lit.
+template <typename T>
+SolveSummary SolveHetero(const GridShape& s, std::vector<T>* x, double h = 0.1,
+                         double kappa_scale = 1.0, const std::vector<T>* warm = nullptr) {
+  MultigridSolver<T> mg(s, h);
+  std::vector<T> K(s.size()), M(s.size()), b(s.size());
+  for (int64_t k = 0; k < s.nz; ++k)
+    for (int64_t j = 0; j < s.ny; ++j)
+      for (int64_t i = 0; i < s.nx; ++i) {
+        const double u = double(i) / s.nx, v = double(j) / s.ny, w = double(k) / s.nz;
+        K[s.index(i, j, k)] = T(kappa_scale * (0.2 + 0.15 * std::sin(6 * u + 3 * w) * std::cos(5 * v)));
+        M[s.index(i, j, k)] = T(0.02 + 0.015 * std::cos(4 * u * v + 2 * w));
+      }
+  mg.SetCoefficients(K.data(), M.data(), 2.6);
+  std::vector<float> q(s.face_size());
+  for (int64_t f = 0; f < s.face_size(); ++f) q[f] = float(f % 7 == 0 ? 1.0 : 0.25);
+  LitFaceSource(mg.grid(), s.nz - 1, 2.6, q.data(), b.data());
+  if (warm) *x = *warm;
+  else x->assign(s.size(), T(0));
+  return mg.Solve(b.data(), x->data());
+}
+
+TEST(Multigrid, IterationsDoNotGrowWithTheGrid) {
+  std::vector<int> iters;
+  for (int n : {17, 33, 65}) {
+    std::vector<double> x;
+    const SolveSummary s = SolveHetero<double>({n, n, n}, &x, 1.6 / (n - 1));
+    ASSERT_TRUE(s.converged) << s.BriefReport();
+    EXPECT_LE(s.final_residual, 1e-6);
+    iters.push_back(s.iterations);
+  }
+  EXPECT_LE(*std::max_element(iters.begin(), iters.end()) -
+                *std::min_element(iters.begin(), iters.end()), 2);
+  EXPECT_LE(iters.back(), 12);
+}
+
+TEST(Multigrid, FlatAndOddGridsConverge) {
+  for (GridShape s : {GridShape{128, 128, 10}, GridShape{30, 17, 12}, GridShape{2, 40, 3},
+                      GridShape{50, 3, 2}}) {
+    std::vector<double> x;
+    const SolveSummary sum = SolveHetero<double>(s, &x);
+    EXPECT_TRUE(sum.converged) << s.ToString() << ": " << sum.BriefReport();
+    EXPECT_LE(sum.iterations, 15) << s.ToString();
+  }
+}
+
+TEST(Multigrid, FloatAgreesWithDouble) {
+  const GridShape s{33, 25, 17};
+  std::vector<double> xd;
+  std::vector<float> xf;
+  SolveHetero<double>(s, &xd);
+  const SolveSummary sf = SolveHetero<float>(s, &xf);
+  EXPECT_LE(sf.final_residual, 5e-6) << sf.BriefReport();
+  double num = 0, den = 0;
+  for (int64_t p = 0; p < s.size(); ++p) {
+    num += (xd[p] - xf[p]) * (xd[p] - xf[p]);
+    den += xd[p] * xd[p];
+  }
+  EXPECT_LT(std::sqrt(num / den), 1e-5);
+}
+
+TEST(Multigrid, WarmStartNeedsFewerIterations) {
+  const GridShape s{40, 30, 20};
+  std::vector<double> x0, x1, x2;
+  SolveHetero<double>(s, &x0);
+  const SolveSummary cold = SolveHetero<double>(s, &x1, 0.1, 1.01);
+  const SolveSummary warm = SolveHetero<double>(s, &x2, 0.1, 1.01, &x0);
+  EXPECT_TRUE(warm.converged);
+  EXPECT_LT(warm.initial_residual, 0.05);
+  EXPECT_LT(warm.iterations, cold.iterations);
+}
+
+TEST(Multigrid, OptionsValidationNamesTheConstraint) {
+  MultigridOptions o;
+  EXPECT_EQ(o.Validate(), "");
+  o.tolerance = 0;
+  EXPECT_NE(o.Validate().find("tolerance"), std::string::npos);
+  o = {};
+  o.pre_smoothing = 2;
+  EXPECT_NE(o.Validate().find("symmetric"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace translume

@@ -1,0 +1,145 @@
+// SPDX-License-Identifier: MIT
+#include "solver/stencil.h"
+
+#include <algorithm>
+#include <type_traits>
+
+#include "solver/status.h"
+
+namespace translume {
+
+TensorGrid TensorGrid::Uniform(const GridShape& shape, double h) {
+  TensorGrid g;
+  g.shape = shape;
+  for (int a = 0; a < 3; ++a) {
+    g.coord[a].resize(shape.n(a));
+    for (int64_t i = 0; i < shape.n(a); ++i) g.coord[a][i] = double(i) * h;
+  }
+  return g;
+}
+
+double TensorGrid::Width(int axis, int64_t i) const {
+  const int64_t n = shape.n(axis);
+  double w = 0;
+  if (i > 0) w += 0.5 * Gap(axis, i - 1);
+  if (i + 1 < n) w += 0.5 * Gap(axis, i);
+  return w;
+}
+
+template <typename T>
+void AssembleStencil(const TensorGrid& g, const T* kappa, const T* mu, double C,
+                     Stencil<T>* st) {
+  const GridShape& s = g.shape;
+  const int64_t nx = s.nx, ny = s.ny, nz = s.nz, nxy = nx * ny;
+  st->shape = s;
+  st->cx.assign(s.size(), T(0));
+  st->cy.assign(s.size(), T(0));
+  st->cz.assign(s.size(), T(0));
+  st->diag.assign(s.size(), T(0));
+  const double robin = 1.0 / (2.0 * C);
+  // Conductances first (each face once), then the diagonal from them.
+#pragma omp parallel for schedule(static)
+  for (int64_t k = 0; k < nz; ++k) {
+    const double wz = g.Width(2, k);
+    for (int64_t j = 0; j < ny; ++j) {
+      const double wy = g.Width(1, j);
+      for (int64_t i = 0; i < nx; ++i) {
+        const double wx = g.Width(0, i);
+        const int64_t p = i + nx * (j + ny * k);
+        if (i + 1 < nx) st->cx[p] = FaceConductance<T>(wy * wz / g.Gap(0, i), kappa[p], kappa[p + 1]);
+        if (j + 1 < ny) st->cy[p] = FaceConductance<T>(wx * wz / g.Gap(1, j), kappa[p], kappa[p + nx]);
+        if (k + 1 < nz) st->cz[p] = FaceConductance<T>(wx * wy / g.Gap(2, k), kappa[p], kappa[p + nxy]);
+      }
+    }
+  }
+#pragma omp parallel for schedule(static)
+  for (int64_t k = 0; k < nz; ++k) {
+    const double wz = g.Width(2, k);
+    const int bz = (k == 0) + (k == nz - 1);
+    for (int64_t j = 0; j < ny; ++j) {
+      const double wy = g.Width(1, j);
+      const int by = (j == 0) + (j == ny - 1);
+      for (int64_t i = 0; i < nx; ++i) {
+        const double wx = g.Width(0, i);
+        const int bx = (i == 0) + (i == nx - 1);
+        const int64_t p = i + nx * (j + ny * k);
+        double d = wx * wy * wz * double(mu[p]) +
+                   robin * (bx * wy * wz + by * wx * wz + bz * wx * wy);
+        T c = st->cx[p] + st->cy[p] + st->cz[p];
+        if (i > 0) c += st->cx[p - 1];
+        if (j > 0) c += st->cy[p - nx];
+        if (k > 0) c += st->cz[p - nxy];
+        st->diag[p] = T(d) + c;
+      }
+    }
+  }
+}
+
+namespace {
+
+// One x-row of A x (row j, plane k), shared by Apply and Residual.
+template <typename T, bool kResidual>
+inline void StencilRow(const Stencil<T>& A, const T* b, const T* x, T* y, int64_t j, int64_t k) {
+  const int64_t nx = A.shape.nx, ny = A.shape.ny, nz = A.shape.nz, nxy = nx * ny;
+  const int64_t row = nx * (j + ny * k);
+  const T* cx = A.cx.data();
+  const T* cy = A.cy.data();
+  const T* cz = A.cz.data();
+  const T* dg = A.diag.data();
+  const bool has_ym = j > 0, has_yp = j + 1 < ny, has_zm = k > 0, has_zp = k + 1 < nz;
+  // Residuals accumulate in double: b - A x cancels almost completely near convergence, and a
+  // float sum would stall the float solver above a relative residual of 1e-6.
+  using Acc = std::conditional_t<kResidual, double, T>;
+  for (int64_t i = 0; i < nx; ++i) {
+    const int64_t p = row + i;
+    Acc v = Acc(dg[p]) * Acc(x[p]);
+    if (i > 0) v -= Acc(cx[p - 1]) * Acc(x[p - 1]);
+    if (i + 1 < nx) v -= Acc(cx[p]) * Acc(x[p + 1]);
+    if (has_ym) v -= Acc(cy[p - nx]) * Acc(x[p - nx]);
+    if (has_yp) v -= Acc(cy[p]) * Acc(x[p + nx]);
+    if (has_zm) v -= Acc(cz[p - nxy]) * Acc(x[p - nxy]);
+    if (has_zp) v -= Acc(cz[p]) * Acc(x[p + nxy]);
+    if constexpr (kResidual) y[p] = T(Acc(b[p]) - v);
+    else y[p] = T(v);
+  }
+}
+
+}  // namespace
+
+template <typename T>
+void ApplyStencil(const Stencil<T>& A, const T* x, T* y) {
+  const int64_t ny = A.shape.ny, nz = A.shape.nz;
+#pragma omp parallel for collapse(2) schedule(static)
+  for (int64_t k = 0; k < nz; ++k)
+    for (int64_t j = 0; j < ny; ++j) StencilRow<T, false>(A, nullptr, x, y, j, k);
+}
+
+template <typename T>
+void StencilResidual(const Stencil<T>& A, const T* b, const T* x, T* r) {
+  const int64_t ny = A.shape.ny, nz = A.shape.nz;
+#pragma omp parallel for collapse(2) schedule(static)
+  for (int64_t k = 0; k < nz; ++k)
+    for (int64_t j = 0; j < ny; ++j) StencilRow<T, true>(A, b, x, r, j, k);
+}
+
+template <typename T>
+void LitFaceSource(const TensorGrid& g, int64_t k_lit, double C, const float* q, T* b) {
+  const GridShape& s = g.shape;
+  TL_CHECK(k_lit == 0 || k_lit == s.nz - 1);
+  std::fill(b, b + s.size(), T(0));
+  const double robin = 1.0 / (2.0 * C);
+  for (int64_t j = 0; j < s.ny; ++j)
+    for (int64_t i = 0; i < s.nx; ++i)
+      b[s.index(i, j, k_lit)] = T(g.Width(0, i) * g.Width(1, j) * robin * q[i + s.nx * j]);
+}
+
+#define TL_INSTANTIATE(T)                                                                     \
+  template void AssembleStencil<T>(const TensorGrid&, const T*, const T*, double, Stencil<T>*); \
+  template void ApplyStencil<T>(const Stencil<T>&, const T*, T*);                             \
+  template void StencilResidual<T>(const Stencil<T>&, const T*, const T*, T*);               \
+  template void LitFaceSource<T>(const TensorGrid&, int64_t, double, const float*, T*);
+TL_INSTANTIATE(float)
+TL_INSTANTIATE(double)
+#undef TL_INSTANTIATE
+
+}  // namespace translume

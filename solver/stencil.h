@@ -1,0 +1,64 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <array>
+#include <vector>
+
+#include "solver/grid.h"
+
+namespace translume {
+
+// Node coordinates of a tensor-product grid (mm), one list per axis. The finest multigrid
+// level is the uniform grid of SPEC section 2; coarser levels keep every other node and may have
+// one wider last interval, so the geometry is per axis.
+struct TensorGrid {
+  GridShape shape;
+  std::array<std::vector<double>, 3> coord;
+
+  static TensorGrid Uniform(const GridShape& shape, double h);
+  // Distance between node i and i + 1 along `axis`.
+  double Gap(int axis, int64_t i) const { return coord[axis][i + 1] - coord[axis][i]; }
+  // Width of node i's dual box along `axis`: half the gaps on each side; the box is halved on
+  // the boundary (SPEC section 3: half, quarter and eighth boxes).
+  double Width(int axis, int64_t i) const;
+};
+
+// The canonical finite-volume operator of SPEC section 3 for one channel, as a symmetric
+// 7-point stencil:
+//   (A phi)_p = diag_p phi_p - sum_{q in N(p)} c_pq phi_q
+//   c_pq   = A_pq (kappa_p + kappa_q) / 2 / |x_q - x_p|                  (face conductance)
+//   diag_p = sum_q c_pq + V_p mu_p + sum_{boundary axes a of p} A_p^a / (2 C)
+// and the right-hand side b_p = A_p^z q_p / (2 C) on the lit face. A phi = b is the paper's
+// Equations (1), (2), (8) in conservative, second-order form. cx[p] couples p and p + e_x
+// (0 on the last x plane), likewise cy and cz.
+template <typename T>
+struct Stencil {
+  GridShape shape;
+  std::vector<T> cx, cy, cz, diag;
+};
+
+// The per-node math, written once: conductance of the face between two nodes.
+template <typename T>
+inline T FaceConductance(double area_over_gap, T kappa_p, T kappa_q) {
+  return T(0.5 * area_over_gap) * (kappa_p + kappa_q);
+}
+
+// Assembles the stencil from per-node kappa (mm) and mu (1/mm) on `grid`.
+template <typename T>
+void AssembleStencil(const TensorGrid& grid, const T* kappa, const T* mu, double C,
+                     Stencil<T>* stencil);
+
+// y = A x. Multithreaded.
+template <typename T>
+void ApplyStencil(const Stencil<T>& A, const T* x, T* y);
+
+// r = b - A x. Multithreaded.
+template <typename T>
+void StencilResidual(const Stencil<T>& A, const T* b, const T* x, T* r);
+
+// Right-hand side for light q (nx*ny values on face k_lit): b_p = A_p^z q_p / (2 C) at the
+// lit-face nodes, 0 elsewhere. The light enters through the lit face only.
+template <typename T>
+void LitFaceSource(const TensorGrid& grid, int64_t k_lit, double C, const float* q, T* b);
+
+}  // namespace translume

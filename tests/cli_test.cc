@@ -1,0 +1,108 @@
+// SPDX-License-Identifier: MIT
+// Runs the `translume` binary as a user would.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+
+#include "solver/image_io.h"
+#include "solver/material_io.h"
+
+namespace translume {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct CommandRun {
+  int status = -1;
+  std::string output;  // stdout and stderr
+};
+
+CommandRun Translume(const std::string& args) {
+  CommandRun r;
+  const std::string cmd = std::string(TRANSLUME_BINARY) + " " + args + " 2>&1";
+  FILE* pipe = popen(cmd.c_str(), "r");
+  if (!pipe) return r;
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) r.output.append(buf.data(), n);
+  const int st = pclose(pipe);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  return r;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("translume_cli_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string P(const std::string& name) const { return (dir_ / name).string(); }
+  // A failed command: exit 1 or 2, exactly one line of output naming `what`.
+  void ExpectOneLineError(const CommandRun& r, const std::string& what) {
+    EXPECT_TRUE(r.status == 1 || r.status == 2) << r.output;
+    EXPECT_NE(r.output.find(what), std::string::npos) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  }
+  fs::path dir_;
+};
+
+TEST_F(Cli, SynthThenForwardWritesRadiance) {
+  CommandRun r = Translume("synth --preset layered --grid 20x16x8 --spacing 0.4 -o " + P("m.vdb"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const Material m = ReadMaterial(P("m.vdb"));
+  EXPECT_EQ(m.shape, (GridShape{20, 16, 8}));
+  r = Translume("forward " + P("m.vdb") + " --light region:1,1/2 -o " + P("L.exr"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("converged"), std::string::npos);
+  const Image L = ReadImage(P("L.exr"));
+  EXPECT_EQ(L.width, 20);
+  EXPECT_EQ(L.height, 16);
+  EXPECT_EQ(L.channels, 3);
+  // Lit lower-right quadrant: brighter there than in the opposite corner.
+  EXPECT_GT(L.at(17, 13, 1), L.at(2, 2, 1));
+  r = Translume("forward " + P("m.vdb") + " --setup front --precision float --light spot:3,3,1 -o " + P("F.exr"));
+  EXPECT_EQ(r.status, 0) << r.output;
+}
+
+TEST_F(Cli, BadArgumentsGiveOneLineAndNoOutput) {
+  ExpectOneLineError(Translume("synth --preset granite -o " + P("g.vdb")), "granite");
+  EXPECT_FALSE(fs::exists(P("g.vdb")));
+  ExpectOneLineError(Translume("synth --preset wax --grid 10x1x4 -o " + P("g.vdb")), "--grid");
+  ExpectOneLineError(Translume("synth --preset wax -o " + P("g.png")), ".vdb");
+  ASSERT_EQ(Translume("synth --preset wax --grid 8x8x4 -o " + P("m.vdb")).status, 0);
+  ExpectOneLineError(Translume("forward " + P("m.vdb") + " --light spot:1,2 -o " + P("L.exr")),
+                     "spot:1,2");
+  EXPECT_FALSE(fs::exists(P("L.exr")));
+  ExpectOneLineError(Translume("forward " + P("missing.vdb") + " -o " + P("L.exr")),
+                     P("missing.vdb") + ": no such file");
+  EXPECT_FALSE(fs::exists(P("L.exr")));
+  ExpectOneLineError(Translume("forward " + P("m.vdb") + " --setup side -o " + P("L.exr")), "side");
+  ExpectOneLineError(Translume("forward " + P("m.vdb") + " --backend vulkan -o " + P("L.exr")), "vulkan");
+  ExpectOneLineError(Translume("frobnicate"), "unknown command");
+  EXPECT_FALSE(fs::exists(P("L.exr")));
+  // Nothing but the one material is left in the folder (no temporary files).
+  int files = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir_)) ++files;
+  EXPECT_EQ(files, 1);
+}
+
+TEST_F(Cli, InfoSizesAGridAndRefusesWhatDoesNotFit) {
+  CommandRun r = Translume("info --grid 130x53x37");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("threads:"), std::string::npos);
+  EXPECT_NE(r.output.find("forward solve:"), std::string::npos);
+  r = Translume("info --grid 4000x4000x4000");
+  EXPECT_NE(r.output.find("does NOT fit"), std::string::npos) << r.output;
+  EXPECT_EQ(Translume("--help").status, 0);
+  EXPECT_EQ(Translume("forward --help").status, 0);
+}
+
+}  // namespace
+}  // namespace translume

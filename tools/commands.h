@@ -1,0 +1,22 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <string>
+
+namespace translume {
+
+// Subcommands: argv[0] is the subcommand's name. Each returns the process exit status and may
+// throw InputError (exit 1, one line) or CLI::Error (usage, exit 2).
+int RunSynth(int argc, char** argv);
+int RunForward(int argc, char** argv);
+int RunInfo(int argc, char** argv);
+int RunBench(int argc, char** argv);
+int RunDemo(int argc, char** argv);
+
+// Options every subcommand takes (--threads).
+void AddCommonOptions(CLI::App& app);
+// Parses argv into app; on --help prints and returns true (caller exits 0).
+bool ParseOrHelp(CLI::App& app, int argc, char** argv);
+
+}  // namespace translume

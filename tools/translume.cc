@@ -1,0 +1,74 @@
+// SPDX-License-Identifier: MIT
+// translume: acquire heterogeneous translucent materials from photographs (Wang et al. 2008).
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <cstring>
+#include <exception>
+#include <string>
+
+#include "solver/status.h"
+#include "solver/threads.h"
+#include "tools/commands.h"
+
+namespace {
+
+struct Command {
+  const char* name;
+  int (*run)(int, char**);
+  const char* help;
+};
+
+const Command kCommands[] = {
+    {"demo", translume::RunDemo, "Run the main job on the embedded default sample"},
+    {"synth", translume::RunSynth, "Write a synthetic material volume (.vdb)"},
+    {"forward", translume::RunForward, "Simulate the front-face radiance of a material under a light"},
+    {"bench", translume::RunBench, "Benchmarks: bench forward"},
+    {"info", translume::RunInfo, "Version, build, backends, threads, memory estimates"},
+};
+
+void PrintUsage(FILE* out) {
+  std::fprintf(out,
+               "translume %s: heterogeneous translucent materials from photographs\n\n"
+               "usage: translume COMMAND [options]   (translume COMMAND --help for its options)\n\n"
+               "commands:\n",
+               TRANSLUME_VERSION);
+  for (const Command& c : kCommands) std::fprintf(out, "  %-12s %s\n", c.name, c.help);
+  std::fprintf(out, "\nEvery command takes --threads N. Docs: README.md and docs/.\n");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  translume::InitThreadsFromEnvironment();
+  if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h") ||
+      !std::strcmp(argv[1], "help")) {
+    PrintUsage(stdout);
+    return argc < 2 ? 2 : 0;
+  }
+  if (!std::strcmp(argv[1], "--version")) {
+    std::printf("translume %s\n", TRANSLUME_VERSION);
+    return 0;
+  }
+  for (const Command& c : kCommands) {
+    if (std::strcmp(argv[1], c.name) != 0) continue;
+    try {
+      return c.run(argc - 1, argv + 1);
+    } catch (const CLI::ParseError& e) {
+      std::fprintf(stderr, "translume %s: %s (see translume %s --help)\n", c.name, e.what(),
+                   c.name);
+      return 2;
+    } catch (const translume::InputError& e) {
+      std::fprintf(stderr, "translume %s: error: %s\n", c.name, e.what());
+      return 1;
+    } catch (const translume::Interrupted& e) {
+      std::fprintf(stderr, "translume %s: interrupted: %s\n", c.name, e.what());
+      return 130;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "translume %s: error: %s\n", c.name, e.what());
+      return 1;
+    }
+  }
+  std::fprintf(stderr, "translume: unknown command '%s'\n\n", argv[1]);
+  PrintUsage(stderr);
+  return 2;
+}
