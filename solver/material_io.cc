@@ -76,7 +76,10 @@ void WriteVdb(const std::string& path, const Material& m, const MaterialCorrupti
                   openvdb::StringMetadata(bad == MC::kWrongFormat ? "material/99" : kFormat));
   if (bad == MC::kUnknownMetadata) meta.insertMeta("albedo_scale", openvdb::FloatMetadata(2.0f));
   if (bad == MC::kMissingMu) grids = {kappa, density, albedo};
-  if (bad == MC::kShapeMismatch) am.setValueOff(openvdb::Coord(int(s.nx - 1), int(s.ny - 1), int(s.nz - 1)));
+  if (bad == MC::kShapeMismatch) {
+    for (int32_t j = 0; j < int32_t(s.ny); ++j)
+      for (int32_t i = 0; i < int32_t(s.nx); ++i) am.setValueOff(openvdb::Coord{i, j, int32_t(s.nz - 1)});
+  }
   if (bad == MC::kMissingVoxel) {
     am.setValueOff(openvdb::Coord(1, 1, 1));
     ak.setValueOff(openvdb::Coord(1, 1, 1));

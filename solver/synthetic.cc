@@ -23,7 +23,7 @@ constexpr Measured kSkin2{{1.09, 1.59, 1.79}, {0.013, 0.070, 0.145}};
 constexpr Measured kApple{{2.29, 2.39, 1.97}, {0.0030, 0.0034, 0.046}};
 constexpr Measured kPotato{{0.68, 0.70, 0.55}, {0.0024, 0.0090, 0.12}};
 constexpr Measured kSkimmilk{{0.70, 1.22, 1.90}, {0.0014, 0.0025, 0.0142}};
-constexpr Measured kChicken{{0.19, 0.25, 0.32}, {0.018, 0.088, 0.20}};
+constexpr Measured kSkin1{{0.74, 0.88, 1.01}, {0.032, 0.17, 0.48}};
 
 struct Coeffs {
   Rgb kappa, mu;
@@ -145,7 +145,7 @@ Material SynthesizeMaterial(const SynthOptions& o) {
   }
 
   const Coeffs marble = FromMeasured(kMarble, 4.0);
-  const Coeffs vein = FromMeasured(kChicken, 0.5);
+  const Coeffs vein = FromMeasured(kSkin1, 0.2);
   const Coeffs skin = FromMeasured(kSkin2, 0.5);
   const Coeffs apple = FromMeasured(kApple, 2.0);
   const Coeffs wax = FromMeasured(kPotato, 1.0);
@@ -188,8 +188,8 @@ Material SynthesizeMaterial(const SynthOptions& o) {
         }
         const int64_t p = shape.index(i, j, k);
         for (int ch = 0; ch < 3; ++ch) {
-          m.kappa[ch][p] = float(c.kappa[ch]);
-          m.mu[ch][p] = float(c.mu[ch]);
+          m.kappa[ch][p] = float(std::clamp(c.kappa[ch], 0.04, 0.55));
+          m.mu[ch][p] = float(std::clamp(c.mu[ch], 0.001, 0.1));
         }
       }
   TL_CHECK(m.Validate().empty());

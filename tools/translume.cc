@@ -68,7 +68,6 @@ int main(int argc, char** argv) {
       return 1;
     }
   }
-  std::fprintf(stderr, "translume: unknown command '%s'\n\n", argv[1]);
-  PrintUsage(stderr);
+  std::fprintf(stderr, "translume: unknown command '%s' (see translume --help)\n", argv[1]);
   return 2;
 }
