@@ -18,6 +18,8 @@ struct MultigridOptions {
   int post_smoothing = 1;
   // Stop coarsening at this many nodes; the coarsest level is solved exactly (sparse Cholesky).
   int64_t coarsest_nodes = 1500;
+  // 1: V-cycle, 2: W-cycle.
+  int cycle_index = 1;
 
   // Empty if valid, else the broken constraint.
   std::string Validate() const;
