@@ -9,95 +9,11 @@
 #include <cmath>
 #include <fmt/format.h>
 
+#include "solver/multigrid_hierarchy.h"
 #include "solver/status.h"
 
 namespace translume {
 namespace {
-
-// Linear interpolation from a coarse to a fine node list along one axis, and its transpose.
-struct AxisTransfer {
-  bool coarsened = false;
-  int64_t n_fine = 0, n_coarse = 0;
-  std::vector<int64_t> lo, hi;   // per fine node: bracketing coarse nodes
-  std::vector<double> wlo, whi;  // and their weights (whi = 0 where fine == coarse node)
-  // Transpose, flattened: coarse node c gathers fine nodes g_idx[g_start[c] .. g_start[c+1]).
-  std::vector<int64_t> g_start, g_idx;
-  std::vector<double> g_w;
-};
-
-AxisTransfer MakeAxisTransfer(const std::vector<double>& fine, bool coarsen,
-                              std::vector<double>* coarse) {
-  const int64_t n = int64_t(fine.size());
-  AxisTransfer t;
-  t.coarsened = coarsen;
-  std::vector<int64_t> keep;
-  if (!coarsen) {
-    for (int64_t i = 0; i < n; ++i) keep.push_back(i);
-  } else {
-    // Every other node; for an even count drop node n-2 so the last interval is 3 fine
-    // intervals wide instead of 1 (keeps neighbouring intervals within a factor 1.5).
-    const int64_t last_even = (n % 2 == 1) ? n - 1 : n - 4;
-    for (int64_t i = 0; i <= last_even; i += 2) keep.push_back(i);
-    if (keep.back() != n - 1) keep.push_back(n - 1);
-  }
-  coarse->clear();
-  for (int64_t i : keep) coarse->push_back(fine[i]);
-  const int64_t nc = int64_t(keep.size());
-  t.n_fine = n;
-  t.n_coarse = nc;
-  t.lo.resize(n);
-  t.hi.resize(n);
-  t.wlo.resize(n);
-  t.whi.resize(n);
-  std::vector<std::vector<std::pair<int64_t, double>>> gather(nc);
-  int64_t c = 0;
-  for (int64_t i = 0; i < n; ++i) {
-    while (c + 1 < nc && keep[c + 1] <= i) ++c;
-    if (keep[c] == i) {
-      t.lo[i] = t.hi[i] = c;
-      t.wlo[i] = 1;
-      t.whi[i] = 0;
-      gather[c].push_back({i, 1.0});
-    } else {
-      const double x0 = fine[keep[c]], x1 = fine[keep[c + 1]];
-      const double w = (fine[i] - x0) / (x1 - x0);
-      t.lo[i] = c;
-      t.hi[i] = c + 1;
-      t.wlo[i] = 1 - w;
-      t.whi[i] = w;
-      gather[c].push_back({i, 1 - w});
-      gather[c + 1].push_back({i, w});
-    }
-  }
-  t.g_start.push_back(0);
-  for (int64_t cc = 0; cc < nc; ++cc) {
-    for (auto [i, w] : gather[cc]) {
-      t.g_idx.push_back(i);
-      t.g_w.push_back(w);
-    }
-    t.g_start.push_back(int64_t(t.g_idx.size()));
-  }
-  return t;
-}
-
-double MeanGap(const std::vector<double>& c) { return (c.back() - c.front()) / double(c.size() - 1); }
-
-// Which axes to coarsen: keep x and y within a factor ~2 of each other (the smoother handles
-// strong coupling along z only), and coarsen z only while it is not coarser than x and y.
-std::array<bool, 3> ChooseCoarsening(const TensorGrid& g) {
-  std::array<double, 3> gap;
-  std::array<bool, 3> can;
-  for (int a = 0; a < 3; ++a) {
-    gap[a] = MeanGap(g.coord[a]);
-    can[a] = g.shape.n(a) >= 3;
-  }
-  std::array<bool, 3> out;
-  out[0] = can[0] && (!can[1] || gap[0] <= 1.5 * gap[1]);
-  out[1] = can[1] && (!can[0] || gap[1] <= 1.5 * gap[0]);
-  out[2] = can[2] && gap[2] <= 1.01 * std::min(gap[0], gap[1]);
-  if (!out[0] && !out[1] && can[2] && !can[0] && !can[1]) out[2] = true;
-  return out;
-}
 
 template <typename T>
 double Dot(const T* a, const T* b, int64_t n) {
@@ -126,112 +42,26 @@ std::string SolveSummary::BriefReport() const {
 
 template <typename T>
 struct MultigridSolver<T>::Level {
-  TensorGrid grid;
+  MultigridLevel geo;
+  const TensorGrid& grid = geo.grid;
   Stencil<T> A;
   std::vector<T> lu_c, lu_inv;  // factors of every z-column's tridiagonal block
   std::vector<T> b, x, r;
   std::vector<T> kappa, mu;
-  std::array<AxisTransfer, 3> to_coarse;  // towards the next coarser level
   std::vector<T> restrict_norm;          // on this level: R applied to ones from the finer one
   mutable std::vector<T> tmp_a, tmp_b;   // intermediate results of separable transfers
   std::vector<T> zeros;                  // one x-row of zeros (missing neighbours)
   std::unique_ptr<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>> direct;
 };
 
-namespace {
-
-// Separable transfers. Along one axis with stride `stride` (1, nx, nx*ny of the source shape),
-// `outer` independent lines, each `inner` contiguous values wide, are mapped from n_in to n_out
-// nodes. Restriction gathers through the transpose lists; prolongation interpolates.
-template <typename T>
-void RestrictAxis(const AxisTransfer& t, const T* in, T* out, int64_t inner, int64_t outer) {
-  const int64_t n_in = t.n_fine, n_out = t.n_coarse;
-#pragma omp parallel for collapse(2) schedule(static)
-  for (int64_t o = 0; o < outer; ++o)
-    for (int64_t c = 0; c < n_out; ++c) {
-      const T* src = in + o * n_in * inner;
-      T* dst = out + (o * n_out + c) * inner;
-      for (int64_t v = 0; v < inner; ++v) dst[v] = T(0);
-      for (int64_t g = t.g_start[c]; g < t.g_start[c + 1]; ++g) {
-        const T w = T(t.g_w[g]);
-        const T* s = src + t.g_idx[g] * inner;
-        for (int64_t v = 0; v < inner; ++v) dst[v] += w * s[v];
-      }
-    }
-}
-
-template <typename T>
-void ProlongAxis(const AxisTransfer& t, const T* in, T* out, int64_t inner, int64_t outer,
-                 bool add) {
-  const int64_t n_in = t.n_coarse, n_out = t.n_fine;
-#pragma omp parallel for collapse(2) schedule(static)
-  for (int64_t o = 0; o < outer; ++o)
-    for (int64_t f = 0; f < n_out; ++f) {
-      const T* a = in + (o * n_in + t.lo[f]) * inner;
-      const T* b = in + (o * n_in + t.hi[f]) * inner;
-      const T wa = T(t.wlo[f]), wb = T(t.whi[f]);
-      T* dst = out + (o * n_out + f) * inner;
-      if (add)
-        for (int64_t v = 0; v < inner; ++v) dst[v] += wa * a[v] + wb * b[v];
-      else
-        for (int64_t v = 0; v < inner; ++v) dst[v] = wa * a[v] + wb * b[v];
-    }
-}
-
-// x-axis lines are the contiguous direction: one value per line, handled row by row.
-template <typename T>
-void RestrictX(const AxisTransfer& t, const T* in, T* out, int64_t rows) {
-  const int64_t n_in = t.n_fine, n_out = t.n_coarse;
-#pragma omp parallel for schedule(static)
-  for (int64_t r = 0; r < rows; ++r) {
-    const T* src = in + r * n_in;
-    T* dst = out + r * n_out;
-    for (int64_t c = 0; c < n_out; ++c) {
-      T s = 0;
-      for (int64_t g = t.g_start[c]; g < t.g_start[c + 1]; ++g) s += T(t.g_w[g]) * src[t.g_idx[g]];
-      dst[c] = s;
-    }
-  }
-}
-
-template <typename T>
-void ProlongXAdd(const AxisTransfer& t, const T* in, T* out, int64_t rows) {
-  const int64_t n_in = t.n_coarse, n_out = t.n_fine;
-#pragma omp parallel for schedule(static)
-  for (int64_t r = 0; r < rows; ++r) {
-    const T* src = in + r * n_in;
-    T* dst = out + r * n_out;
-    for (int64_t f = 0; f < n_out; ++f)
-      dst[f] += T(t.wlo[f]) * src[t.lo[f]] + T(t.whi[f]) * src[t.hi[f]];
-  }
-}
-
-}  // namespace
-
-// c = R f = P^T f: x, then y, then z (each pass shrinks the data).
 template <typename T>
 void MultigridSolver<T>::Restrict(const Level& L, const T* f, T* c) const {
-  const auto& t = L.to_coarse;
-  const int64_t ny = L.grid.shape.ny, nz = L.grid.shape.nz;
-  const int64_t mx = t[0].n_coarse, my = t[1].n_coarse;
-  T* a = L.tmp_a.data();
-  T* b = L.tmp_b.data();
-  RestrictX(t[0], f, a, ny * nz);                 // (mx, ny, nz)
-  RestrictAxis(t[1], a, b, mx, nz);               // (mx, my, nz)
-  RestrictAxis(t[2], b, c, mx * my, 1);           // (mx, my, mz)
+  Restrict3(L.geo, f, c, L.tmp_a.data(), L.tmp_b.data());
 }
 
-// f += P c: z, then y, then x (each pass grows the data).
 template <typename T>
 void MultigridSolver<T>::ProlongAdd(const Level& L, const T* c, T* f) const {
-  const auto& t = L.to_coarse;
-  const int64_t ny = L.grid.shape.ny, nz = L.grid.shape.nz;
-  const int64_t mx = t[0].n_coarse, my = t[1].n_coarse;
-  T* a = L.tmp_a.data();
-  T* b = L.tmp_b.data();
-  ProlongAxis(t[2], c, b, mx * my, 1, false);     // (mx, my, nz)
-  ProlongAxis(t[1], b, a, mx, nz, false);         // (mx, ny, nz)
-  ProlongXAdd(t[0], a, f, ny * nz);               // (nx, ny, nz)
+  ProlongAdd3(L.geo, c, f, L.tmp_a.data(), L.tmp_b.data());
 }
 
 template <typename T>
@@ -241,20 +71,10 @@ MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
   if (std::string err = options_.Validate(); !err.empty())
     throw InputError("multigrid options: " + err);
   TL_CHECK(shape.nx >= 2 && shape.ny >= 2 && shape.nz >= 2 && h > 0);
-  auto level = std::make_unique<Level>();
-  level->grid = TensorGrid::Uniform(shape, h);
-  levels_.push_back(std::move(level));
-  while (true) {
-    Level& L = *levels_.back();
-    if (L.grid.shape.size() <= options_.coarsest_nodes) break;
-    const std::array<bool, 3> coarsen = ChooseCoarsening(L.grid);
-    if (!coarsen[0] && !coarsen[1] && !coarsen[2]) break;
-    auto next = std::make_unique<Level>();
-    for (int a = 0; a < 3; ++a)
-      L.to_coarse[a] = MakeAxisTransfer(L.grid.coord[a], coarsen[a], &next->grid.coord[a]);
-    next->grid.shape = {int64_t(next->grid.coord[0].size()), int64_t(next->grid.coord[1].size()),
-                        int64_t(next->grid.coord[2].size())};
-    levels_.push_back(std::move(next));
+  for (MultigridLevel& geo : BuildMultigridHierarchy(shape, h, options_.coarsest_nodes)) {
+    auto level = std::make_unique<Level>();
+    level->geo = std::move(geo);
+    levels_.push_back(std::move(level));
   }
   for (size_t l = 0; l < levels_.size(); ++l) {
     Level& L = *levels_[l];
@@ -268,7 +88,7 @@ MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
     }
     if (l + 1 < levels_.size()) {
       L.r.resize(n);
-      const auto& t = L.to_coarse;
+      const auto& t = L.geo.to_coarse;
       L.tmp_a.resize(t[0].n_coarse * L.grid.shape.ny * L.grid.shape.nz);
       L.tmp_b.resize(t[0].n_coarse * t[1].n_coarse * L.grid.shape.nz);
     }

@@ -1,0 +1,55 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "solver/stencil.h"
+
+namespace translume {
+
+// Linear interpolation from a coarse to a fine node list along one axis (prolongation P), and
+// its transpose (restriction R = P^T).
+struct AxisTransfer {
+  bool coarsened = false;
+  int64_t n_fine = 0, n_coarse = 0;
+  std::vector<int64_t> lo, hi;   // per fine node: the bracketing coarse nodes
+  std::vector<double> wlo, whi;  // and their weights (whi = 0 where fine == coarse node)
+  // Transpose, flattened: coarse node c gathers fine nodes g_idx[g_start[c] .. g_start[c+1]).
+  std::vector<int64_t> g_start, g_idx;
+  std::vector<double> g_w;
+};
+
+// One level of the geometric hierarchy shared by every backend: the level's tensor grid and
+// the per-axis transfers towards the next coarser level (absent on the coarsest).
+struct MultigridLevel {
+  TensorGrid grid;
+  std::array<AxisTransfer, 3> to_coarse;
+};
+
+// Vertex-centred coarsening of the uniform grid (shape, h): every other node per coarsened
+// axis (for an even count the last node stays and the one before it goes, so neighbouring
+// intervals stay within 1.5x). Semi-coarsening keeps x and y within 1.5x of each other and z no
+// coarser than them (the z-line smoother absorbs strong z coupling). Stops at
+// <= coarsest_nodes nodes or when no axis can coarsen. Finest level first.
+std::vector<MultigridLevel> BuildMultigridHierarchy(const GridShape& shape, double h,
+                                                    int64_t coarsest_nodes);
+
+// Separable transfer along one axis. The data is `outer` blocks of n nodes along the axis, each
+// node `inner` contiguous values (x: inner = 1; y: inner = nx'; z: inner = nx' ny', where the
+// primes are the current sizes of the axes already transferred).
+template <typename T>
+void RestrictAxis(const AxisTransfer& t, const T* in, T* out, int64_t inner, int64_t outer);
+template <typename T>
+void ProlongAxis(const AxisTransfer& t, const T* in, T* out, int64_t inner, int64_t outer,
+                 bool add);
+
+// Full 3-D transfers between `fine` and the next coarser level, through two temporaries of
+// (coarse nx) * ny * nz and (coarse nx) * (coarse ny) * nz values.
+template <typename T>
+void Restrict3(const MultigridLevel& fine, const T* f, T* c, T* tmp_a, T* tmp_b);
+template <typename T>
+void ProlongAdd3(const MultigridLevel& fine, const T* c, T* f, T* tmp_a, T* tmp_b);
+
+}  // namespace translume
