@@ -9,6 +9,8 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "solver/gl_context.h"
+#include "solver/gl_solver.h"
 #include "solver/light.h"
 #include "solver/multigrid.h"
 #include "solver/synthetic.h"
@@ -170,6 +172,67 @@ ForwardBenchRow BenchOne(const GridShape& shape, const ForwardBenchOptions& o,
   return row;
 }
 
+// The gl backend on the same problem, with the cpu multigrid solver (same precision as
+// requested, in the same process) as the peer.
+ForwardBenchRow BenchGl(const GridShape& shape, const ForwardBenchOptions& o,
+                        void (*progress)(const std::string&)) {
+  SynthOptions so;
+  so.preset = "wax";
+  so.shape = shape;
+  const Material m = SynthesizeMaterial(so);
+  const int64_t n = shape.size();
+  MultigridOptions mo;
+  mo.tolerance = o.tolerance;
+  GlMultigridSolver solver(shape, m.spacing_mm, mo);
+  solver.SetCoefficients(m.kappa[1].data(), m.mu[1].data(), m.C);
+  std::vector<float> b(n), x(n);
+  const std::vector<float> q = RasterizeLight(LightSpec::Parse("uniform"), shape, m.spacing_mm);
+  LitFaceSource(TensorGrid::Uniform(shape, m.spacing_mm), shape.nz - 1, m.C, q.data(), b.data());
+  ForwardBenchRow row;
+  row.shape = shape;
+  row.levels = solver.num_levels();
+  std::fill(x.begin(), x.end(), 0.0f);
+  solver.Solve(b.data(), x.data());  // warm-up: shader compilation, first touch
+  std::vector<double> solves;
+  for (int r = 0; r < std::max(1, o.repeats); ++r) {
+    std::fill(x.begin(), x.end(), 0.0f);
+    const SolveSummary s = solver.Solve(b.data(), x.data());
+    solves.push_back(s.seconds);
+    row.iterations = s.iterations;
+    row.residual = s.final_residual;
+  }
+  row.seconds = Median(solves);
+  row.apply_seconds = solver.TimeApply(11);
+  row.work_units = row.seconds / row.apply_seconds;
+  row.nodes_per_second = double(n) / row.seconds;
+  row.apply_bandwidth = double(solver.ApplyBytes()) / row.apply_seconds;
+  const int64_t copy_bytes = std::max<int64_t>(solver.ApplyBytes(), int64_t(256) << 20);
+  row.copy_bandwidth = 2.0 * double(copy_bytes) / solver.TimeCopy(copy_bytes, 11);
+  if (progress)
+    progress(fmt::format("{}: gl {} iterations, {:.4f} s, stencil {:.1f} GB/s = {:.0f}% of copy "
+                         "{:.1f} GB/s", shape.ToString(), row.iterations, row.seconds,
+                         row.apply_bandwidth / 1e9, 100 * row.apply_bandwidth / row.copy_bandwidth,
+                         row.copy_bandwidth / 1e9));
+  if (o.peers) {
+    ForwardBenchOptions co = o;
+    co.peers = false;
+    co.backend = Backend::kCpu;
+    co.repeats = std::min(o.repeats, 3);
+    const ForwardBenchRow cpu = o.precision == Precision::kDouble ? BenchOne<double>(shape, co, nullptr)
+                                                                  : BenchOne<float>(shape, co, nullptr);
+    PeerResult p;
+    p.name = std::string("cpu multigrid-PCG (") +
+             (o.precision == Precision::kDouble ? "double" : "float") + ")";
+    p.ran = p.converged = true;
+    p.iterations = cpu.iterations;
+    p.seconds = cpu.seconds;
+    p.residual = cpu.residual;
+    p.ratio = cpu.seconds / row.seconds;
+    row.peers.push_back(p);
+  }
+  return row;
+}
+
 }  // namespace
 
 std::vector<GridShape> DefaultForwardBenchGrids() {
@@ -181,8 +244,9 @@ std::vector<ForwardBenchRow> RunForwardBench(const ForwardBenchOptions& o,
   std::vector<GridShape> grids = o.grids.empty() ? DefaultForwardBenchGrids() : o.grids;
   std::vector<ForwardBenchRow> rows;
   for (const GridShape& g : grids) {
-    rows.push_back(o.precision == Precision::kDouble ? BenchOne<double>(g, o, progress)
-                                                     : BenchOne<float>(g, o, progress));
+    if (o.backend == Backend::kGl) rows.push_back(BenchGl(g, o, progress));
+    else if (o.precision == Precision::kDouble) rows.push_back(BenchOne<double>(g, o, progress));
+    else rows.push_back(BenchOne<float>(g, o, progress));
   }
   return rows;
 }
@@ -194,6 +258,14 @@ std::string ForwardBenchTable(const std::vector<ForwardBenchRow>& rows) {
     out += fmt::format("{:>14} {:>6} {:>5} {:>10.4f} {:>10.6f} {:>8.1f} {:>12.3g}\n",
                        r.shape.ToString(), r.levels, r.iterations, r.seconds, r.apply_seconds,
                        r.work_units, r.nodes_per_second);
+  if (!rows.empty() && rows[0].copy_bandwidth > 0) {
+    out += fmt::format("\n{:>14} {:>14} {:>14} {:>12}\n", "grid", "stencil GB/s", "copy GB/s",
+                       "stencil/copy");
+    for (const auto& r : rows)
+      out += fmt::format("{:>14} {:>14.1f} {:>14.1f} {:>11.0f}%\n", r.shape.ToString(),
+                         r.apply_bandwidth / 1e9, r.copy_bandwidth / 1e9,
+                         100 * r.apply_bandwidth / r.copy_bandwidth);
+  }
   bool any = false;
   for (const auto& r : rows) any |= !r.peers.empty();
   if (any) {
@@ -215,6 +287,11 @@ std::string ForwardBenchJson(const std::vector<ForwardBenchRow>& rows) {
                           {"iterations", r.iterations}, {"seconds", r.seconds},
                           {"apply_seconds", r.apply_seconds}, {"work_units", r.work_units},
                           {"nodes_per_second", r.nodes_per_second}, {"residual", r.residual}};
+    if (r.copy_bandwidth > 0) {
+      row["stencil_bytes_per_second"] = r.apply_bandwidth;
+      row["copy_bytes_per_second"] = r.copy_bandwidth;
+      row["stencil_fraction_of_copy"] = r.apply_bandwidth / r.copy_bandwidth;
+    }
     for (const auto& p : r.peers)
       row["peers"].push_back({{"name", p.name}, {"seconds", p.seconds},
                               {"iterations", p.iterations}, {"residual", p.residual},

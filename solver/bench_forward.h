@@ -13,6 +13,7 @@ struct ForwardBenchOptions {
   std::vector<GridShape> grids;  // empty: the default list (small to the paper's grids)
   int repeats = 5;               // our solver: median of this many cold solves
   Precision precision = Precision::kDouble;
+  Backend backend = Backend::kCpu;  // gl: float, with the cpu solver as the peer
   bool peers = true;             // also run Eigen CG (diagonal, IC) and Jacobi relaxation
   // The paper's relaxation runs at most min(jacobi_factor * our time, jacobi_cap_seconds).
   double jacobi_factor = 100;
@@ -39,6 +40,9 @@ struct ForwardBenchRow {
   double work_units = 0;       // seconds / apply_seconds
   double nodes_per_second = 0;
   double residual = 0;
+  // gl only: effective bandwidth of the stencil (ApplyBytes / apply_seconds) and of a plain
+  // copy kernel measured in the same run (the device's practical peak), bytes per second.
+  double apply_bandwidth = 0, copy_bandwidth = 0;
   std::vector<PeerResult> peers;
 };
 

@@ -5,16 +5,15 @@
 #include <fmt/format.h>
 #include <numbers>
 
+#include "solver/gl_solver.h"
 #include "solver/status.h"
 
 namespace translume {
 
 Backend ParseBackend(const std::string& text) {
   if (text == "cpu") return Backend::kCpu;
-  if (text == "gl")
-    throw InputError("--backend gl: the OpenGL backend is not part of this build yet; use "
-                     "--backend cpu");
-  throw InputError(fmt::format("--backend: unknown backend '{}' (available: cpu)", text));
+  if (text == "gl") return Backend::kGl;
+  throw InputError(fmt::format("--backend: unknown backend '{}' (available: cpu, gl)", text));
 }
 
 Precision ParsePrecision(const std::string& text) {
@@ -27,10 +26,11 @@ FacePattern GreyPattern(const std::vector<float>& q) { return {q, q, q}; }
 
 namespace {
 
-template <typename T>
+template <typename Solver, typename T>
 ForwardResult SolveForwardT(const Material& m, const FacePattern& q, const ForwardOptions& o) {
   const GridShape& s = m.shape;
-  MultigridSolver<T> solver(s, m.spacing_mm, o.multigrid);
+  Solver solver(s, m.spacing_mm, o.multigrid);
+  const TensorGrid grid = TensorGrid::Uniform(s, m.spacing_mm);
   const int64_t n = s.size(), k_lit = LitFaceK(o.setup, s);
   std::vector<T> kappa(n), mu(n), b(n), phi(n);
   ForwardResult result;
@@ -41,7 +41,7 @@ ForwardResult SolveForwardT(const Material& m, const FacePattern& q, const Forwa
       mu[p] = T(m.mu[c][p]);
     }
     solver.SetCoefficients(kappa.data(), mu.data(), m.C);
-    LitFaceSource(solver.grid(), k_lit, m.C, q[c].data(), b.data());
+    LitFaceSource(grid, k_lit, m.C, q[c].data(), b.data());
     std::fill(phi.begin(), phi.end(), T(0));
     result.summaries[c] = solver.Solve(b.data(), phi.data());
     std::vector<float>& L = result.radiance[c];
@@ -60,8 +60,11 @@ ForwardResult SolveForwardT(const Material& m, const FacePattern& q, const Forwa
 ForwardResult SolveForward(const Material& material, const FacePattern& q,
                            const ForwardOptions& options) {
   if (std::string err = material.Validate(); !err.empty()) throw InputError("material: " + err);
-  return options.precision == Precision::kDouble ? SolveForwardT<double>(material, q, options)
-                                                 : SolveForwardT<float>(material, q, options);
+  if (options.backend == Backend::kGl)
+    return SolveForwardT<GlMultigridSolver, float>(material, q, options);
+  return options.precision == Precision::kDouble
+             ? SolveForwardT<MultigridSolver<double>, double>(material, q, options)
+             : SolveForwardT<MultigridSolver<float>, float>(material, q, options);
 }
 
 }  // namespace translume

@@ -11,9 +11,9 @@
 
 namespace translume {
 
-// Where a diffusion solve runs. Only `cpu` exists in this build; `gl` is reserved for the
-// OpenGL compute backend.
-enum class Backend { kCpu };
+// Where a diffusion solve runs: `cpu` (OpenMP, float or double) or `gl` (OpenGL compute
+// shaders in a headless context, float; see gl_solver.h).
+enum class Backend { kCpu, kGl };
 Backend ParseBackend(const std::string& text);
 
 enum class Precision { kFloat, kDouble };

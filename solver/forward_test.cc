@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "solver/light.h"
@@ -11,18 +12,30 @@
 namespace translume {
 namespace {
 
-TEST(Forward, SymmetricSpotGivesSymmetricRadiance) {
+// Every forward test body runs on each backend (gl on Mesa llvmpipe where there is no GPU).
+class ForwardOnBackend : public ::testing::TestWithParam<Backend> {
+ protected:
+  ForwardOptions Options() const {
+    ForwardOptions o;
+    o.backend = GetParam();
+    return o;
+  }
+  // Float backends reach a relative residual of ~1e-6; their radiance agrees to ~1e-5.
+  double Tolerance() const { return GetParam() == Backend::kGl ? 2e-5 : 1e-5; }
+};
+
+TEST_P(ForwardOnBackend, SymmetricSpotGivesSymmetricRadiance) {
   const Material m = Material::Constant({31, 31, 9}, 0.25, {0.2f, 0.15f, 0.1f}, {0.01f, 0.02f, 0.05f});
   const FacePattern q = GreyPattern(RasterizeLight(LightSpec::Parse("spot:3.75,3.75,1"), m.shape, 0.25));
-  const ForwardResult r = SolveForward(m, q, {});
+  const ForwardResult r = SolveForward(m, q, Options());
   for (int c = 0; c < 3; ++c) {
-    EXPECT_TRUE(r.summaries[c].converged);
+    EXPECT_LE(r.summaries[c].final_residual, 5e-6) << r.summaries[c].BriefReport();
     for (int64_t j = 0; j < 31; ++j)
       for (int64_t i = 0; i < 31; ++i) {
         const double a = r.radiance[c][i + 31 * j], b = r.radiance[c][(30 - i) + 31 * j],
                      t = r.radiance[c][j + 31 * i];
-        EXPECT_NEAR(a, b, 1e-5 * r.radiance[c][15 + 31 * 15]);
-        EXPECT_NEAR(a, t, 1e-5 * r.radiance[c][15 + 31 * 15]);
+        EXPECT_NEAR(a, b, Tolerance() * r.radiance[c][15 + 31 * 15]);
+        EXPECT_NEAR(a, t, Tolerance() * r.radiance[c][15 + 31 * 15]);
         EXPECT_GT(a, 0);
       }
     // More absorption (blue) transmits less.
@@ -30,9 +43,9 @@ TEST(Forward, SymmetricSpotGivesSymmetricRadiance) {
   }
 }
 
-TEST(Forward, FrontSetupSubtractsIncomingLight) {
+TEST_P(ForwardOnBackend, FrontSetupSubtractsIncomingLight) {
   const Material m = Material::Constant({21, 21, 8}, 0.5, {0.2f, 0.2f, 0.2f}, {0.02f, 0.02f, 0.02f});
-  ForwardOptions o;
+  ForwardOptions o = Options();
   o.setup = Setup::kFront;
   const auto spot = RasterizeLight(LightSpec::Parse("spot:5,5,1.5"), m.shape, 0.5);
   const ForwardResult r = SolveForward(m, GreyPattern(spot), o);
@@ -43,7 +56,9 @@ TEST(Forward, FrontSetupSubtractsIncomingLight) {
   EXPECT_LT(r.radiance[0][10 + 21 * 10], 0);
 }
 
-TEST(Forward, FloatAndDoubleAgreeOnASyntheticMaterial) {
+// Float solves (cpu float, gl) against the cpu double reference: radiance within 1e-4 relative
+// (issue 5's target), measured as a relative L2 error over the face.
+TEST_P(ForwardOnBackend, AgreesWithCpuDoubleOnASyntheticMaterial) {
   SynthOptions so;
   so.preset = "marble";
   so.shape = {40, 30, 10};
@@ -51,6 +66,7 @@ TEST(Forward, FloatAndDoubleAgreeOnASyntheticMaterial) {
   const FacePattern q = GreyPattern(RasterizeLight(LightSpec::Parse("region:1,2/4"), m.shape, m.spacing_mm));
   ForwardOptions o;
   const ForwardResult d = SolveForward(m, q, o);
+  o = Options();
   o.precision = Precision::kFloat;
   const ForwardResult f = SolveForward(m, q, o);
   for (int c = 0; c < 3; ++c) {
@@ -60,8 +76,16 @@ TEST(Forward, FloatAndDoubleAgreeOnASyntheticMaterial) {
       den += std::pow(d.radiance[c][p], 2);
     }
     EXPECT_LT(std::sqrt(num / den), 1e-5);
+    double worst = 0, top = 0;
+    for (size_t p = 0; p < d.radiance[c].size(); ++p) top = std::max(top, double(d.radiance[c][p]));
+    for (size_t p = 0; p < d.radiance[c].size(); ++p)
+      worst = std::max(worst, std::abs(d.radiance[c][p] - f.radiance[c][p]) / top);
+    EXPECT_LT(worst, 1e-4);
   }
 }
+
+INSTANTIATE_TEST_SUITE_P(Backends, ForwardOnBackend, ::testing::Values(Backend::kCpu, Backend::kGl),
+                         [](const auto& info) { return info.param == Backend::kCpu ? "cpu" : "gl"; });
 
 }  // namespace
 }  // namespace translume

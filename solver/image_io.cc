@@ -45,6 +45,14 @@ void WriteImage(const std::string& path, const Image& image) {
   });
 }
 
+std::vector<float> RasterizeLightFile(const LightSpec& spec, const GridShape& shape, double h) {
+  if (spec.kind != LightSpec::Kind::kImage) return RasterizeLight(spec, shape, h);
+  const Image pattern = ReadImage(spec.image_path);
+  if (pattern.width < 1 || pattern.height < 1)
+    throw InputError(fmt::format("{}: empty light pattern image", spec.image_path));
+  return RasterizeLight(spec, shape, h, &pattern);
+}
+
 Image ImageFromPlanes(int width, int height, const std::vector<const float*>& planes) {
   Image img;
   img.width = width;

@@ -6,7 +6,6 @@
 #include <cstdio>
 #include <fmt/format.h>
 
-#include "solver/image_io.h"
 #include "solver/status.h"
 
 namespace translume {
@@ -60,16 +59,16 @@ LightSpec LightSpec::Parse(const std::string& text) {
   return s;
 }
 
-std::vector<float> RasterizeLight(const LightSpec& spec, const GridShape& shape, double h) {
+std::vector<float> RasterizeLight(const LightSpec& spec, const GridShape& shape, double h,
+                                  const Image* pattern) {
   const int64_t nx = shape.nx, ny = shape.ny;
   std::vector<float> q(nx * ny, 0.0f);
   const double width = double(nx - 1) * h, height = double(ny - 1) * h;
-  Image img;
-  if (spec.kind == LightSpec::Kind::kImage) {
-    img = ReadImage(spec.image_path);
-    if (img.width < 1 || img.height < 1)
-      throw InputError(fmt::format("{}: empty light pattern image", spec.image_path));
-  }
+  if (spec.kind == LightSpec::Kind::kImage)
+    TL_CHECK_MSG(pattern && pattern->width > 0 && pattern->height > 0,
+                 "image lights need their decoded pattern (see RasterizeLightFile)");
+  static const Image kNone;
+  const Image& img = pattern ? *pattern : kNone;
   // Supersampling for spots and images: S x S samples per dual box.
   constexpr int S = 8;
   for (int64_t j = 0; j < ny; ++j) {

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "solver/grid.h"
+#include "solver/image.h"
 
 namespace translume {
 
@@ -31,7 +32,9 @@ struct LightSpec {
 // pattern over the node's dual box on the face (the face area it owns in the finite-volume
 // discretisation, SPEC section 3), so region patterns of an N x N split sum to `uniform`
 // exactly and partially covered nodes get fractional light.
-std::vector<float> RasterizeLight(const LightSpec& spec, const GridShape& shape, double h);
+// `image:` lights need the decoded pattern (RasterizeLightFile in image_io.h reads it).
+std::vector<float> RasterizeLight(const LightSpec& spec, const GridShape& shape, double h,
+                                  const Image* pattern = nullptr);
 
 // "4x4" -> the 16 region specs region:I,J/4 in row-major order (J outer). Throws InputError.
 std::vector<LightSpec> RegionLights(const std::string& nxn);

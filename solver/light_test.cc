@@ -69,7 +69,7 @@ TEST(Light, ImagePatternUsesLuminance) {
       for (int c = 0; c < 3; ++c) img.at(x, y, c) = 0.5f;
   WriteImage(path, img);
   const GridShape s{9, 5, 3};
-  const auto q = RasterizeLight(LightSpec::Parse("image:" + path), s, 1.0);
+  const auto q = RasterizeLightFile(LightSpec::Parse("image:" + path), s, 1.0);
   EXPECT_NEAR(q[0], 0.0, 1e-6);
   EXPECT_NEAR(q[8 + 9 * 4], 0.5, 1e-6);
   std::filesystem::remove(path);
@@ -86,7 +86,7 @@ TEST(Light, MalformedSpecsAreRejectedWithTheirText) {
     }
   }
   EXPECT_THROW(RegionLights("4x3"), InputError);
-  EXPECT_THROW(RasterizeLight(LightSpec::Parse("image:/nonexistent.png"), {4, 4, 2}, 1.0), InputError);
+  EXPECT_THROW(RasterizeLightFile(LightSpec::Parse("image:/nonexistent.png"), {4, 4, 2}, 1.0), InputError);
 }
 
 }  // namespace

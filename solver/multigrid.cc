@@ -7,6 +7,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <type_traits>
 #include <fmt/format.h>
 
 #include "solver/multigrid_hierarchy.h"
@@ -240,11 +241,21 @@ void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x) {
 }
 
 template <typename T>
-SolveSummary MultigridSolver<T>::Solve(const T* b, T* x) {
+SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
   TL_CHECK_MSG(has_coefficients_, "SetCoefficients() must be called before Solve()");
   const auto t0 = std::chrono::steady_clock::now();
   const Level& L0 = *levels_[0];
   const int64_t n = L0.grid.shape.size();
+  // The iterate is kept in double: A amplifies the rounding of a float iterate, whose residual
+  // would stall at a few 1e-6. For T = double this is x_out itself.
+  std::vector<double> x_store;
+  double* x;
+  if constexpr (std::is_same_v<T, double>) {
+    x = x_out;
+  } else {
+    x_store.assign(x_out, x_out + n);
+    x = x_store.data();
+  }
   SolveSummary sum;
   auto finish = [&](bool converged, std::string message) {
     StencilResidual(L0.A, b, x, r_.data());
@@ -252,12 +263,14 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x) {
     sum.final_residual = bn > 0 ? std::sqrt(Dot(r_.data(), r_.data(), n)) / bn : 0.0;
     sum.converged = converged;
     sum.message = std::move(message);
+    if constexpr (!std::is_same_v<T, double>)
+      for (int64_t i = 0; i < n; ++i) x_out[i] = T(x[i]);
     sum.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return sum;
   };
   const double bnorm = std::sqrt(Dot(b, b, n));
   if (bnorm == 0) {
-    std::fill(x, x + n, T(0));
+    std::fill(x, x + n, 0.0);
     return finish(true, "zero right-hand side");
   }
   T* r = r_.data();
@@ -284,21 +297,18 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x) {
     double rr = 0;
 #pragma omp parallel for reduction(+ : rr) schedule(static)
     for (int64_t i = 0; i < n; ++i) {
-      x[i] += T(alpha) * p[i];
+      x[i] += alpha * double(p[i]);
       r[i] -= T(alpha) * q[i];
       rr += double(r[i]) * double(r[i]);
     }
     ++sum.iterations;
     rnorm = std::sqrt(rr);
     if (rnorm <= tol) {
-      // The recursive residual drifts in float: confirm with the true one.
+      // The recursive residual drifts: confirm with the true one.
       StencilResidual(L0.A, b, x, r);
       rnorm = std::sqrt(Dot(r, r, n));
       if (rnorm <= tol) return finish(true, "");
-      if (++restarts > 3) {
-        return finish(false, fmt::format("stagnated at the precision of {}",
-                                         sizeof(T) == 4 ? "float" : "double"));
-      }
+      if (++restarts > 3) return finish(false, "stagnated");
       restart = true;
       continue;
     }

@@ -78,8 +78,8 @@ void AssembleStencil(const TensorGrid& g, const T* kappa, const T* mu, double C,
 namespace {
 
 // One x-row of A x (row j, plane k), shared by Apply and Residual.
-template <typename T, bool kResidual>
-inline void StencilRow(const Stencil<T>& A, const T* b, const T* x, T* y, int64_t j, int64_t k) {
+template <typename T, typename X, bool kResidual>
+inline void StencilRow(const Stencil<T>& A, const T* b, const X* x, T* y, int64_t j, int64_t k) {
   const int64_t nx = A.shape.nx, ny = A.shape.ny, nz = A.shape.nz, nxy = nx * ny;
   const int64_t row = nx * (j + ny * k);
   const T* cx = A.cx.data();
@@ -111,15 +111,15 @@ void ApplyStencil(const Stencil<T>& A, const T* x, T* y) {
   const int64_t ny = A.shape.ny, nz = A.shape.nz;
 #pragma omp parallel for collapse(2) schedule(static)
   for (int64_t k = 0; k < nz; ++k)
-    for (int64_t j = 0; j < ny; ++j) StencilRow<T, false>(A, nullptr, x, y, j, k);
+    for (int64_t j = 0; j < ny; ++j) StencilRow<T, T, false>(A, nullptr, x, y, j, k);
 }
 
-template <typename T>
-void StencilResidual(const Stencil<T>& A, const T* b, const T* x, T* r) {
+template <typename T, typename X>
+void StencilResidual(const Stencil<T>& A, const T* b, const X* x, T* r) {
   const int64_t ny = A.shape.ny, nz = A.shape.nz;
 #pragma omp parallel for collapse(2) schedule(static)
   for (int64_t k = 0; k < nz; ++k)
-    for (int64_t j = 0; j < ny; ++j) StencilRow<T, true>(A, b, x, r, j, k);
+    for (int64_t j = 0; j < ny; ++j) StencilRow<T, X, true>(A, b, x, r, j, k);
 }
 
 template <typename T>
@@ -136,10 +136,11 @@ void LitFaceSource(const TensorGrid& g, int64_t k_lit, double C, const float* q,
 #define TL_INSTANTIATE(T)                                                                     \
   template void AssembleStencil<T>(const TensorGrid&, const T*, const T*, double, Stencil<T>*); \
   template void ApplyStencil<T>(const Stencil<T>&, const T*, T*);                             \
-  template void StencilResidual<T>(const Stencil<T>&, const T*, const T*, T*);               \
+  template void StencilResidual<T, T>(const Stencil<T>&, const T*, const T*, T*);           \
   template void LitFaceSource<T>(const TensorGrid&, int64_t, double, const float*, T*);
 TL_INSTANTIATE(float)
 TL_INSTANTIATE(double)
 #undef TL_INSTANTIATE
+template void StencilResidual<float, double>(const Stencil<float>&, const float*, const double*, float*);
 
 }  // namespace translume

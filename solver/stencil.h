@@ -52,9 +52,10 @@ void AssembleStencil(const TensorGrid& grid, const T* kappa, const T* mu, double
 template <typename T>
 void ApplyStencil(const Stencil<T>& A, const T* x, T* y);
 
-// r = b - A x. Multithreaded.
-template <typename T>
-void StencilResidual(const Stencil<T>& A, const T* b, const T* x, T* r);
+// r = b - A x, accumulated in double. x may be double for a float stencil (a float solver's
+// iterate is kept in double; see MultigridSolver). Multithreaded.
+template <typename T, typename X>
+void StencilResidual(const Stencil<T>& A, const T* b, const X* x, T* r);
 
 // Right-hand side for light q (nx*ny values on face k_lit): b_p = A_p^z q_p / (2 C) at the
 // lit-face nodes, 0 elsewhere. The light enters through the lit face only.

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: MIT
-// Subcommands over the solver library: synth, forward, info, bench, demo.
+// Subcommands over the solver library: synth, forward, info, demo.
 #include <omp.h>
 
 #include <algorithm>
@@ -8,8 +8,8 @@
 #include <filesystem>
 #include <fmt/format.h>
 
-#include "solver/bench_forward.h"
 #include "solver/forward.h"
+#include "solver/gl_context.h"
 #include "solver/image_io.h"
 #include "solver/light.h"
 #include "solver/material_io.h"
@@ -104,7 +104,7 @@ int RunForward(int argc, char** argv) {
   const Material m = ReadMaterial(material_path);
   CheckFitsInMemory(EstimateMemory(m.shape, 1, fo.precision).forward_bytes,
                     fmt::format("a forward solve on the {} grid", m.shape.ToString()));
-  const FacePattern q = GreyPattern(RasterizeLight(spec, m.shape, m.spacing_mm));
+  const FacePattern q = GreyPattern(RasterizeLightFile(spec, m.shape, m.spacing_mm));
   std::printf("forward: %s, grid %s, h %g mm, light %s, setup %s, %d threads\n",
               material_path.c_str(), m.shape.ToString().c_str(), m.spacing_mm, light.c_str(),
               SetupName(fo.setup), NumThreads());
@@ -123,6 +123,10 @@ int RunInfo(int argc, char** argv) {
                "recovery need for a material or grid.", "translume info"};
   std::string material_path, grid, precision = "double";
   int conditions = 16;
+  bool gl = false;
+  app.add_flag("--gl", gl, "Create a headless OpenGL context and print platform, vendor, "
+                           "renderer, version and limits (TRANSLUME_GL=device|surfaceless|osmesa "
+                           "forces a platform)");
   app.add_option("material", material_path, "Material file (.vdb) to size");
   app.add_option("--grid", grid, "Grid NXxNYxNZ to size");
   app.add_option("--conditions", conditions, "Illumination conditions of a recovery")
@@ -131,7 +135,21 @@ int RunInfo(int argc, char** argv) {
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   std::printf("translume %s (%s build)\n", TRANSLUME_VERSION, TRANSLUME_BUILD_TYPE);
-  std::printf("backends: cpu (multigrid-preconditioned CG, float and double)\n");
+  std::printf("backends: cpu (multigrid-preconditioned CG, float and double), gl (OpenGL compute, "
+              "float)\n");
+  if (gl) {
+    try {
+      std::printf("gl backend:\n  %s\n", [] {
+        std::string s = GlContext::Get().info().ToString();
+        for (size_t p = s.find('\n'); p != std::string::npos; p = s.find('\n', p + 3)) s.replace(p, 1, "\n  ");
+        return s;
+      }().c_str());
+    } catch (const InputError& e) {
+      std::printf("gl backend: unavailable: %s\n", e.what());
+    }
+  } else {
+    std::printf("gl backend: not probed (translume info --gl creates a context and prints it)\n");
+  }
   std::printf("threads: %d in use (of %d hardware threads); change with --threads N or "
               "TRANSLUME_THREADS=N\n", NumThreads(), omp_get_num_procs());
   std::printf("indices: 64-bit\n");
@@ -151,41 +169,6 @@ int RunInfo(int argc, char** argv) {
                 FormatBytes(e.recovery_bytes).c_str(),
                 avail > 0 && e.recovery_bytes > avail ? "  (does NOT fit in available memory)" : "");
   }
-  return 0;
-}
-
-namespace {
-void PrintProgress(const std::string& line) {
-  std::fprintf(stderr, "  %s\n", line.c_str());
-}
-}  // namespace
-
-int RunBench(int argc, char** argv) {
-  CLI::App app{"Benchmarks. Results are medians; ratios compare solvers run side by side in\n"
-               "the same process on the same problem.", "translume bench"};
-  app.require_subcommand(1);
-  auto* fwd = app.add_subcommand("forward", "Forward solve to 1e-6: multigrid-PCG vs Eigen CG "
-                                            "(diagonal, IC) and the paper's Jacobi relaxation");
-  ForwardBenchOptions o;
-  std::vector<std::string> grids;
-  bool json = false, no_peers = false;
-  std::string precision = "double";
-  fwd->add_option("--grids", grids, "Grids NXxNYxNZ (default: 33^3, 65^3, 129^3, 130x53x37, 256x256x20)")
-      ->delimiter(',');
-  fwd->add_option("--repeats", o.repeats, "Solves per grid (median)")->capture_default_str();
-  fwd->add_option("--precision", precision, "float or double")->capture_default_str();
-  fwd->add_option("--jacobi-cap", o.jacobi_cap_seconds, "Longest Jacobi run per grid, seconds")
-      ->capture_default_str();
-  fwd->add_flag("--no-peers", no_peers, "Skip the Eigen and Jacobi peers");
-  fwd->add_flag("--json", json, "Print JSON instead of a table");
-  AddCommonOptions(app);
-  if (ParseOrHelp(app, argc, argv)) return 0;
-  for (const auto& g : grids) o.grids.push_back(ParseGridShape(g, "--grids"));
-  o.precision = ParsePrecision(precision);
-  o.peers = !no_peers;
-  std::fprintf(stderr, "bench forward: %d threads, %s\n", NumThreads(), precision.c_str());
-  const auto rows = RunForwardBench(o, PrintProgress);
-  std::printf("%s\n", (json ? ForwardBenchJson(rows) : ForwardBenchTable(rows)).c_str());
   return 0;
 }
 

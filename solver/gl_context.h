@@ -1,0 +1,40 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace translume {
+
+// A headless OpenGL 4.3+ core context for compute shaders, behind a plain C++ interface: no GL,
+// EGL or OSMesa header appears outside gl_*.cc. Platforms, in order of preference:
+//   device       EGL on a GPU device (EGL_EXT_platform_device; NVIDIA and other vendors);
+//                Mesa's software device is skipped in favour of the next platform
+//   surfaceless  Mesa's surfaceless EGL platform (llvmpipe on a machine without a GPU)
+//   osmesa       OSMesa, core profile 4.5
+// TRANSLUME_GL=device|surfaceless|osmesa forces one. libEGL and libOSMesa are loaded at run
+// time, so the binary runs (with --backend cpu) where neither is installed.
+struct GlInfo {
+  std::string platform, vendor, renderer, version;
+  int max_work_group_count[3] = {0, 0, 0};
+  int max_work_group_invocations = 0;
+  int64_t max_ssbo_bytes = 0;
+  std::string ToString() const;
+};
+
+class GlContext {
+ public:
+  // The process-wide context, created on first use and current on the calling thread. Throws
+  // InputError (one line, with a hint to use --backend cpu) if no platform gives GL >= 4.3.
+  static GlContext& Get();
+  const GlInfo& info() const { return info_; }
+
+  GlContext(const GlContext&) = delete;
+  GlContext& operator=(const GlContext&) = delete;
+
+ private:
+  GlContext() = default;
+  GlInfo info_;
+};
+
+}  // namespace translume

@@ -1,0 +1,40 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <memory>
+
+#include "solver/multigrid.h"
+
+namespace translume {
+
+// The `gl` backend of MultigridSolver: the same multigrid-preconditioned CG (same hierarchy,
+// zebra z-line smoother, separable transfers; see multigrid.h) as OpenGL compute shaders
+// (solver/shaders/*.comp) over shader storage buffers, float32 storage, dot products reduced in
+// double. Differences from the cpu backend: the coarsest level (<= 64 nodes where the grid
+// allows) is solved by 8 symmetric sweep pairs instead of a direct factorisation, and the
+// coefficients are assembled on the GPU, so SetCoefficients uploads only kappa and mu.
+// Uses the process-wide GlContext; call from the thread that created it.
+class GlMultigridSolver {
+ public:
+  GlMultigridSolver(const GridShape& shape, double h, const MultigridOptions& options = {});
+  ~GlMultigridSolver();
+
+  void SetCoefficients(const float* kappa, const float* mu, double C);
+  // x: initial guess in, solution out (host arrays of shape.size() floats).
+  SolveSummary Solve(const float* b, float* x);
+  void Apply(const float* x, float* y);
+  int num_levels() const;
+
+  // Benchmarks: median seconds of one stencil application on the finest level, and of one
+  // device-to-device copy of `bytes` bytes by a compute shader, each over `repetitions` runs.
+  double TimeApply(int repetitions);
+  double TimeCopy(int64_t bytes, int repetitions);
+  // Bytes one stencil application must move at least: x, cx, cy, cz, diag read, y written.
+  int64_t ApplyBytes() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace translume
