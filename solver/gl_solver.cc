@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "solver/gl_solver.h"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -170,6 +171,8 @@ struct GlMultigridSolver::Impl {
   std::vector<std::unique_ptr<GLevel>> levels;
   Buffer r, z, p, q, partial, result;
   Buffer xd;  // the conjugate-gradient iterate, double
+  Buffer coarse_inverse;  // dense inverse of the coarsest operator (when small enough)
+  bool dense_coarse = false;
   int64_t n0 = 0;
   int coarse_sweeps = 8;
 
@@ -213,6 +216,10 @@ struct GlMultigridSolver::Impl {
     GLevel& L = *levels[l];
     x.Zero();
     if (l + 1 == levels.size()) {
+      if (dense_coarse) {
+        Run("dense_solve", {&coarse_inverse, &b, &x}, {int(L.n)}, L.n);
+        return;
+      }
       for (int s = 0; s < coarse_sweeps; ++s) {
         Smooth(L, b, x, 0);
         Smooth(L, b, x, 1);
@@ -319,6 +326,35 @@ void GlMultigridSolver::SetCoefficients(const float* kappa, const float* mu, dou
         {int(L.s.nx), int(L.s.ny), int(L.s.nz)}, L.n, 3, float(1.0 / (2.0 * C)));
     Run("factor", {&L.cz, &L.diag, &L.inv, &L.luc}, {int(L.s.nx), int(L.s.ny), int(L.s.nz)},
         L.s.nx * L.s.ny);
+  }
+  // The coarsest level: an exact dense inverse when it is small (one dispatch per V-cycle
+  // instead of many sweeps); the few values travel to the host and back once per update.
+  GLevel& Lc = *I.levels.back();
+  I.dense_coarse = Lc.n <= 1024;
+  if (I.dense_coarse) {
+    const int64_t n = Lc.n;
+    const GridShape& s = Lc.s;
+    std::vector<float> cx(n), cy(n), cz(n), dg(n);
+    Lc.cx.Download(cx.data(), n * 4);
+    Lc.cy.Download(cy.data(), n * 4);
+    Lc.cz.Download(cz.data(), n * 4);
+    Lc.diag.Download(dg.data(), n * 4);
+    Eigen::MatrixXd M = Eigen::MatrixXd::Zero(n, n);
+    for (int64_t k = 0; k < s.nz; ++k)
+      for (int64_t j = 0; j < s.ny; ++j)
+        for (int64_t i = 0; i < s.nx; ++i) {
+          const int64_t p = s.index(i, j, k);
+          M(p, p) = dg[p];
+          auto couple = [&](int64_t q, float c) { M(p, q) = M(q, p) = -double(c); };
+          if (i + 1 < s.nx) couple(p + 1, cx[p]);
+          if (j + 1 < s.ny) couple(p + s.nx, cy[p]);
+          if (k + 1 < s.nz) couple(p + s.nx * s.ny, cz[p]);
+        }
+    const Eigen::MatrixXd inv = M.llt().solve(Eigen::MatrixXd::Identity(n, n));
+    std::vector<float> f(n * n);
+    for (int64_t r = 0; r < n; ++r)
+      for (int64_t c = 0; c < n; ++c) f[r * n + c] = float(inv(r, c));
+    I.coarse_inverse.Alloc(n * n * 4, f.data());
   }
 }
 
