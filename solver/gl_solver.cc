@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fmt/format.h>
 #include <map>
@@ -59,44 +60,44 @@ class Buffer {
   int64_t bytes_ = 0;
 };
 
-// Replaces the GLSL log's source-string numbers (0: common.glsl, 1: the defines, 2: the file)
-// by file names, so errors read "solver/shaders/smooth.comp:12(5): error: ...".
+// Lines of common.glsl are numbered from kCommonLine on, the file's from 1 (see
+// CompileProgram), so a log line "0:12(5): error" (Mesa) or "0(12) : error" (NVIDIA) can name its
+// file: "solver/shaders/smooth.comp:12(5): error ...".
+constexpr int kCommonLine = 100000;
+
 std::string NameLog(const std::string& log, const std::string& common, const std::string& file) {
   std::istringstream in(log);
   std::string line, out;
   while (std::getline(in, line)) {
-    if (line.size() > 1 && line[0] >= '0' && line[0] <= '2' && (line[1] == ':' || line[1] == '('))
-      line = (line[0] == '0' ? common : line[0] == '1' ? std::string("(defines)") : file) + ":" +
-             line.substr(line[1] == ':' ? 2 : 1);
-    out += line + " | ";
+    int string_no = 0, number = 0, used = 0;
+    if (std::sscanf(line.c_str(), "%d:%d%n", &string_no, &number, &used) == 2 ||
+        std::sscanf(line.c_str(), "%d(%d)%n", &string_no, &number, &used) == 2) {
+      const bool in_common = number >= kCommonLine;
+      line = fmt::format("{}:{}{}", in_common ? common : file,
+                         in_common ? number - kCommonLine + 1 : number, line.substr(used));
+    }
+    out += line + (in.peek() == EOF ? "" : " | ");
   }
   return out;
 }
 
-// The program of solver/shaders/NAME.comp, compiled once with `defines` (e.g. "#define X\n").
-GLuint Program(const std::string& name, const std::string& defines = "") {
-  static std::map<std::string, GLuint> cache;
-  if (auto it = cache.find(name + defines); it != cache.end()) return it->second;
-  const gl::EmbeddedShader* common = nullptr;
-  const gl::EmbeddedShader* file = nullptr;
-  for (int s = 0; s < gl::kNumEmbeddedShaders; ++s) {
-    const std::string n = gl::kEmbeddedShaders[s].name;
-    if (n == "solver/shaders/common.glsl") common = &gl::kEmbeddedShaders[s];
-    if (n == "solver/shaders/" + name + ".comp") file = &gl::kEmbeddedShaders[s];
-  }
-  TL_CHECK_MSG(common && file, "shader " + name + " is not embedded");
+// Compiles and links one compute program from common.glsl, `defines` and the file's text.
+GLuint CompileProgram(const gl::EmbeddedShader& common, const std::string& defines,
+                      const std::string& file_name, const char* source) {
   GLuint shader = api.CreateShader(GL_COMPUTE_SHADER);
-  const std::string header = defines + "#line 1 2\n";
-  const char* sources[3] = {common->source, header.c_str(), file->source};
-  api.ShaderSource(shader, 3, sources, nullptr);
+  const std::string text = fmt::format("#version 430\n#line {}\n{}{}#line 1\n{}", kCommonLine,
+                                       common.source, defines, source);
+  const char* sources[1] = {text.c_str()};
+  api.ShaderSource(shader, 1, sources, nullptr);
   api.CompileShader(shader);
   GLint ok = 0;
   api.GetShaderiv(shader, GL_COMPILE_STATUS, &ok);
   if (!ok) {
     char log[8192];
     api.GetShaderInfoLog(shader, sizeof(log), nullptr, log);
-    throw InputError(fmt::format("--backend gl: compiling {} failed: {}", file->name,
-                                 NameLog(log, common->name, file->name)));
+    api.DeleteShader(shader);
+    throw InputError(fmt::format("--backend gl: compiling {} failed: {}", file_name,
+                                 NameLog(log, common.name, file_name)));
   }
   GLuint program = api.CreateProgram();
   api.AttachShader(program, shader);
@@ -106,8 +107,25 @@ GLuint Program(const std::string& name, const std::string& defines = "") {
   if (!ok) {
     char log[8192];
     api.GetProgramInfoLog(program, sizeof(log), nullptr, log);
-    throw InputError(fmt::format("--backend gl: linking {} failed: {}", file->name, log));
+    throw InputError(fmt::format("--backend gl: linking {} failed: {}", file_name, log));
   }
+  return program;
+}
+
+const gl::EmbeddedShader& FindShader(const std::string& name) {
+  for (int s = 0; s < gl::kNumEmbeddedShaders; ++s)
+    if (name == gl::kEmbeddedShaders[s].name) return gl::kEmbeddedShaders[s];
+  TL_CHECK_MSG(false, "shader " + name + " is not embedded");
+  std::abort();
+}
+
+// The program of solver/shaders/NAME.comp, compiled once with `defines` (e.g. "#define X\n").
+GLuint Program(const std::string& name, const std::string& defines = "") {
+  static std::map<std::string, GLuint> cache;
+  if (auto it = cache.find(name + defines); it != cache.end()) return it->second;
+  const gl::EmbeddedShader& file = FindShader("solver/shaders/" + name + ".comp");
+  const GLuint program =
+      CompileProgram(FindShader("solver/shaders/common.glsl"), defines, file.name, file.source);
   cache[name + defines] = program;
   return program;
 }
@@ -165,6 +183,13 @@ struct GLevel {
 };
 
 }  // namespace
+
+void CompileGlShaderForTest(const std::string& file_name, const std::string& source) {
+  GlContext::Get();
+  const GLuint program =
+      CompileProgram(FindShader("solver/shaders/common.glsl"), "", file_name, source.c_str());
+  api.DeleteProgram(program);
+}
 
 struct GlMultigridSolver::Impl {
   MultigridOptions options;

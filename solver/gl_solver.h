@@ -2,6 +2,7 @@
 #pragma once
 
 #include <memory>
+#include <string>
 
 #include "solver/multigrid.h"
 
@@ -36,5 +37,9 @@ class GlMultigridSolver {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+// For tests: compiles `source` as a compute shader the way the backend's shaders are compiled
+// (after common.glsl); throws InputError naming `file_name` and the line on a compile error.
+void CompileGlShaderForTest(const std::string& file_name, const std::string& source);
 
 }  // namespace translume

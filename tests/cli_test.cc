@@ -21,9 +21,9 @@ struct CommandRun {
   std::string output;  // stdout and stderr
 };
 
-CommandRun Translume(const std::string& args) {
+CommandRun Translume(const std::string& args, const std::string& env = "") {
   CommandRun r;
-  const std::string cmd = std::string(TRANSLUME_BINARY) + " " + args + " 2>&1";
+  const std::string cmd = env + " " + std::string(TRANSLUME_BINARY) + " " + args + " 2>&1";
   FILE* pipe = popen(cmd.c_str(), "r");
   if (!pipe) return r;
   std::array<char, 4096> buf;
@@ -93,6 +93,20 @@ TEST_F(Cli, BadArgumentsGiveOneLineAndNoOutput) {
   EXPECT_EQ(files, 1);
 }
 
+TEST_F(Cli, GlPlatformsCanBeForcedAndBadOnesAreNamed) {
+  CommandRun r = Translume("info --gl", "TRANSLUME_GL=osmesa");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("platform osmesa"), std::string::npos) << r.output;
+  ASSERT_EQ(Translume("synth --preset wax --grid 12x10x6 -o " + P("m.vdb")).status, 0);
+  ExpectOneLineError(Translume("forward " + P("m.vdb") + " --backend gl -o " + P("L.exr"),
+                               "TRANSLUME_GL=vulkan"),
+                     "TRANSLUME_GL='vulkan'");
+  EXPECT_FALSE(fs::exists(P("L.exr")));
+  r = Translume("forward " + P("m.vdb") + " --backend gl -o " + P("L.exr"), "TRANSLUME_GL=osmesa");
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_TRUE(fs::exists(P("L.exr")));
+}
+
 TEST_F(Cli, InfoSizesAGridAndRefusesWhatDoesNotFit) {
   CommandRun r = Translume("info --grid 130x53x37");
   ASSERT_EQ(r.status, 0) << r.output;
@@ -100,6 +114,9 @@ TEST_F(Cli, InfoSizesAGridAndRefusesWhatDoesNotFit) {
   EXPECT_NE(r.output.find("forward solve:"), std::string::npos);
   r = Translume("info --grid 4000x4000x4000");
   EXPECT_NE(r.output.find("does NOT fit"), std::string::npos) << r.output;
+  ExpectOneLineError(Translume("synth --preset wax --grid 4000x4000x4000 -o " + P("huge.vdb")),
+                     "only");
+  EXPECT_FALSE(fs::exists(P("huge.vdb")));
   EXPECT_EQ(Translume("--help").status, 0);
   EXPECT_EQ(Translume("forward --help").status, 0);
 }

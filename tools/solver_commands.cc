@@ -68,6 +68,9 @@ int RunSynth(int argc, char** argv) {
   if (ParseOrHelp(app, argc, argv)) return 0;
   RequireOutputExtension(out, ".vdb", "-o");
   if (!grid.empty()) o.shape = ParseGridShape(grid, "--grid");
+  const GridShape shape = o.shape.size() > 0 ? o.shape : DefaultSynthShape(o.preset);
+  // The material (RGB kappa, mu) plus OpenVDB's copy while writing.
+  CheckFitsInMemory(shape.size() * 3 * 4 * 4, fmt::format("a {} material", shape.ToString()));
   const Material m = SynthesizeMaterial(o);
   WriteMaterial(out, m);
   std::printf("wrote %s: preset %s, grid %s, spacing %g mm, C %.4f\n", out.c_str(),
@@ -101,6 +104,7 @@ int RunForward(int argc, char** argv) {
   if (std::string err = fo.multigrid.Validate(); !err.empty())
     throw InputError("--tolerance: " + err);
   const LightSpec spec = LightSpec::Parse(light);
+  if (fo.backend == Backend::kGl) GlContext::Get();  // fail before any output
   const Material m = ReadMaterial(material_path);
   CheckFitsInMemory(EstimateMemory(m.shape, 1, fo.precision).forward_bytes,
                     fmt::format("a forward solve on the {} grid", m.shape.ToString()));
