@@ -303,6 +303,7 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
     }
     ++sum.iterations;
     rnorm = std::sqrt(rr);
+    sum.history.push_back(rnorm / bnorm);
     if (rnorm <= tol) {
       // The recursive residual drifts: confirm with the true one.
       StencilResidual(L0.A, b, x, r);

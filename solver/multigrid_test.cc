@@ -126,7 +126,7 @@ TEST(Multigrid, OptionsValidationNamesTheConstraint) {
   o.tolerance = 0;
   EXPECT_NE(o.Validate().find("tolerance"), std::string::npos);
   o = {};
-  o.pre_smoothing = 2;
+  o.pre_smoothing = 3;
   EXPECT_NE(o.Validate().find("symmetric"), std::string::npos);
 }
 
