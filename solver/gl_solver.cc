@@ -11,54 +11,13 @@
 #include <map>
 #include <sstream>
 
-#include "solver/gl_api.h"
+#include "solver/gl_internal.h"
 #include "solver/gl_context.h"
 #include "solver/gl_shaders.h"
 #include "solver/multigrid_hierarchy.h"
 #include "solver/status.h"
 
-namespace translume {
-namespace {
-
-using gl::api;
-
-class Buffer {
- public:
-  Buffer() = default;
-  Buffer(const Buffer&) = delete;
-  ~Buffer() {
-    if (id_) api.DeleteBuffers(1, &id_);
-  }
-  void Alloc(int64_t bytes, const void* data = nullptr) {
-    if (!id_) api.GenBuffers(1, &id_);
-    bytes_ = std::max<int64_t>(bytes, 16);
-    api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
-    api.BufferData(GL_SHADER_STORAGE_BUFFER, bytes_, data, GL_DYNAMIC_DRAW);
-  }
-  void Upload(const void* data, int64_t bytes) {
-    api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
-    api.BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, bytes, data);
-  }
-  void Download(void* data, int64_t bytes) const {
-    api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
-    api.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, bytes, data);
-  }
-  void Zero() {
-    api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
-    api.ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32F, GL_RED, GL_FLOAT, nullptr);
-  }
-  void CopyFrom(const Buffer& src, int64_t bytes) {
-    api.BindBuffer(GL_COPY_READ_BUFFER, src.id_);
-    api.BindBuffer(GL_COPY_WRITE_BUFFER, id_);
-    api.CopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, 0, bytes);
-  }
-  GLuint id() const { return id_; }
-
- private:
-  GLuint id_ = 0;
-  int64_t bytes_ = 0;
-};
+namespace translume {namespace gl_internal {
 
 // Lines of common.glsl are numbered from kCommonLine on, the file's from 1 (see
 // CompileProgram), so a log line "0:12(5): error" (Mesa) or "0(12) : error" (NVIDIA) can name its
@@ -120,7 +79,7 @@ const gl::EmbeddedShader& FindShader(const std::string& name) {
 }
 
 // The program of solver/shaders/NAME.comp, compiled once with `defines` (e.g. "#define X\n").
-GLuint Program(const std::string& name, const std::string& defines = "") {
+GLuint Program(const std::string& name, const std::string& defines) {
   static std::map<std::string, GLuint> cache;
   if (auto it = cache.find(name + defines); it != cache.end()) return it->second;
   const gl::EmbeddedShader& file = FindShader("solver/shaders/" + name + ".comp");
@@ -134,8 +93,8 @@ GLuint Program(const std::string& name, const std::string& defines = "") {
 // `threads` threads (256 per group, tiled to stay under 65535 groups per dimension).
 // Returns the number of work groups.
 int64_t Run(const char* name, std::initializer_list<const Buffer*> buffers,
-            std::initializer_list<int> ints, int64_t threads, int float_location = -1,
-            float float_value = 0, const char* defines = "") {
+            std::initializer_list<int> ints, int64_t threads, int float_location,
+            float float_value, const char* defines) {
   const GLuint prog = Program(name, defines);
   api.UseProgram(prog);
   GLuint b = 0;
@@ -150,39 +109,11 @@ int64_t Run(const char* name, std::initializer_list<const Buffer*> buffers,
   return gx * gy;
 }
 
-struct AxisBuffers {
-  Buffer gstart, gidx, gw, lohi, w;
-  int n_fine = 0, n_coarse = 0;
-  void Upload(const AxisTransfer& t) {
-    n_fine = int(t.n_fine);
-    n_coarse = int(t.n_coarse);
-    std::vector<int> gs(t.g_start.begin(), t.g_start.end()), gi(t.g_idx.begin(), t.g_idx.end());
-    std::vector<float> gwf(t.g_w.begin(), t.g_w.end());
-    std::vector<int> lh(2 * t.n_fine);
-    std::vector<float> wf(2 * t.n_fine);
-    for (int64_t f = 0; f < t.n_fine; ++f) {
-      lh[2 * f] = int(t.lo[f]);
-      lh[2 * f + 1] = int(t.hi[f]);
-      wf[2 * f] = float(t.wlo[f]);
-      wf[2 * f + 1] = float(t.whi[f]);
-    }
-    gstart.Alloc(gs.size() * 4, gs.data());
-    gidx.Alloc(gi.size() * 4, gi.data());
-    gw.Alloc(gwf.size() * 4, gwf.data());
-    lohi.Alloc(lh.size() * 4, lh.data());
-    w.Alloc(wf.size() * 4, wf.data());
-  }
-};
+}  // namespace gl_internal
 
-struct GLevel {
-  MultigridLevel geo;
-  GridShape s;
-  int64_t n = 0;
-  Buffer geometry, kappa, mu, cx, cy, cz, diag, inv, luc, b, x, r, rnorm, tmp_a, tmp_b;
-  std::array<AxisBuffers, 3> t;
-};
-
-}  // namespace
+using gl::api;
+using gl_internal::CompileProgram;
+using gl_internal::FindShader;
 
 void CompileGlShaderForTest(const std::string& file_name, const std::string& source) {
   GlContext::Get();
@@ -191,90 +122,6 @@ void CompileGlShaderForTest(const std::string& file_name, const std::string& sou
   api.DeleteProgram(program);
 }
 
-struct GlMultigridSolver::Impl {
-  MultigridOptions options;
-  std::vector<std::unique_ptr<GLevel>> levels;
-  Buffer r, z, p, q, partial, result;
-  Buffer xd;  // the conjugate-gradient iterate, double
-  Buffer coarse_inverse;  // dense inverse of the coarsest operator (when small enough)
-  bool dense_coarse = false;
-  int64_t n0 = 0;
-  int coarse_sweeps = 8;
-
-  void Restrict(GLevel& L, const Buffer& f, Buffer& c) {
-    const int ny = int(L.s.ny), nz = int(L.s.nz), mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
-    auto pass = [&](const AxisBuffers& a, const Buffer& in, Buffer& out, int inner, int outer) {
-      Run("restrict_axis", {&in, &out, &a.gstart, &a.gidx, &a.gw},
-          {a.n_fine, a.n_coarse, inner, outer}, int64_t(outer) * a.n_coarse * inner);
-    };
-    pass(L.t[0], f, L.tmp_a, 1, ny * nz);
-    pass(L.t[1], L.tmp_a, L.tmp_b, mx, nz);
-    pass(L.t[2], L.tmp_b, c, mx * my, 1);
-  }
-
-  void ProlongAdd(GLevel& L, const Buffer& c, Buffer& f) {
-    const int ny = int(L.s.ny), nz = int(L.s.nz), mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
-    auto pass = [&](const AxisBuffers& a, const Buffer& in, Buffer& out, int inner, int outer,
-                    int add) {
-      Run("prolong_axis", {&in, &out, &a.lohi, &a.w}, {a.n_coarse, a.n_fine, inner, outer, add},
-          int64_t(outer) * a.n_fine * inner);
-    };
-    pass(L.t[2], c, L.tmp_b, mx * my, 1, 0);
-    pass(L.t[1], L.tmp_b, L.tmp_a, mx, nz, 0);
-    pass(L.t[0], L.tmp_a, f, 1, ny * nz, 1);
-  }
-
-  void Smooth(GLevel& L, const Buffer& b, Buffer& x, int color) {
-    const int half = int((L.s.nx + 1) / 2);
-    Run("smooth", {&L.cx, &L.cy, &L.cz, &L.inv, &L.luc, &b, &x},
-        {int(L.s.nx), int(L.s.ny), int(L.s.nz), color}, int64_t(half) * L.s.ny);
-  }
-
-  void Stencil(GLevel& L, const Buffer& x, const Buffer& b, Buffer& out, int mode,
-               bool x_double = false) {
-    Run("residual", {&L.cx, &L.cy, &L.cz, &L.diag, &x, &b, &out},
-        {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode}, L.n, -1, 0,
-        x_double ? "#define X_DOUBLE\n" : "");
-  }
-
-  void VCycle(size_t l, const Buffer& b, Buffer& x) {
-    GLevel& L = *levels[l];
-    x.Zero();
-    if (l + 1 == levels.size()) {
-      if (dense_coarse) {
-        Run("dense_solve", {&coarse_inverse, &b, &x}, {int(L.n)}, L.n);
-        return;
-      }
-      for (int s = 0; s < coarse_sweeps; ++s) {
-        Smooth(L, b, x, 0);
-        Smooth(L, b, x, 1);
-        Smooth(L, b, x, 1);
-        Smooth(L, b, x, 0);
-      }
-      return;
-    }
-    for (int s = 0; s < options.pre_smoothing; ++s) {
-      Smooth(L, b, x, 0);
-      Smooth(L, b, x, 1);
-    }
-    Stencil(L, x, b, L.r, 0);
-    GLevel& C = *levels[l + 1];
-    Restrict(L, L.r, C.b);
-    VCycle(l + 1, C.b, C.x);
-    ProlongAdd(L, C.x, x);
-    for (int s = 0; s < options.post_smoothing; ++s) {
-      Smooth(L, b, x, 1);
-      Smooth(L, b, x, 0);
-    }
-  }
-
-  // Dots into result[slot] (double); read with ReadResults.
-  void Dot(const Buffer& a, const Buffer& b, int slot) {
-    const int64_t m = Run("dot", {&a, &b, &partial}, {int(n0)}, n0);
-    Run("reduce", {&partial, &result}, {int(m), slot}, 256);
-  }
-  void ReadResults(double* out, int count) { result.Download(out, count * 8); }
-};
 
 GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const MultigridOptions& options)
     : impl_(std::make_unique<Impl>()) {
@@ -391,37 +238,25 @@ void GlMultigridSolver::Apply(const float* x, float* y) {
   I.q.Download(y, L.n * 4);
 }
 
-SolveSummary GlMultigridSolver::Solve(const float* b_host, float* x_host) {
+SolveSummary GlMultigridSolver::Impl::SolveDevice(const Buffer& b, Buffer& x) {
   const auto t0 = std::chrono::steady_clock::now();
-  Impl& I = *impl_;
-  GLevel& L = *I.levels[0];
-  const int64_t n = I.n0;
-  // b lives in the finest level's b buffer; the iterate in double (see residual.comp).
-  Buffer& b = L.b;
-  Buffer& x = I.xd;
-  b.Upload(b_host, n * 4);
-  {
-    std::vector<double> x0(x_host, x_host + n);
-    x.Upload(x0.data(), n * 8);
-  }
+  GLevel& L = *levels[0];
+  const int64_t n = n0;
   SolveSummary sum;
   double v[2];
-  I.Dot(b, b, 0);
-  I.Stencil(L, x, b, I.r, 0, true);
-  I.Dot(I.r, I.r, 1);
-  I.ReadResults(v, 2);
+  Dot(b, b, 0);
+  Stencil(L, x, b, r, 0, true);
+  Dot(r, r, 1);
+  ReadResults(v, 2);
   const double bnorm = std::sqrt(v[0]);
   auto finish = [&](bool converged, std::string message) {
-    I.Stencil(L, x, b, I.r, 0, true);
-    I.Dot(I.r, I.r, 0);
+    Stencil(L, x, b, r, 0, true);
+    Dot(r, r, 0);
     double rr;
-    I.ReadResults(&rr, 1);
+    ReadResults(&rr, 1);
     sum.final_residual = bnorm > 0 ? std::sqrt(rr) / bnorm : 0.0;
     sum.converged = converged;
     sum.message = std::move(message);
-    std::vector<double> xh(n);
-    x.Download(xh.data(), n * 8);
-    for (int64_t i = 0; i < n; ++i) x_host[i] = float(xh[i]);
     sum.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return sum;
   };
@@ -431,45 +266,61 @@ SolveSummary GlMultigridSolver::Solve(const float* b_host, float* x_host) {
     return finish(true, "zero right-hand side");
   }
   sum.initial_residual = std::sqrt(v[1]) / bnorm;
-  if (sum.initial_residual <= I.options.tolerance) return finish(true, "");
-  const double tol = I.options.tolerance * bnorm;
+  if (sum.initial_residual <= options.tolerance) return finish(true, "");
+  const double tol = options.tolerance * bnorm;
   int restarts = 0;
   double rz = 0;
   auto restart = [&]() {
-    I.VCycle(0, I.r, I.z);
-    I.p.CopyFrom(I.z, n * 4);
-    I.Dot(I.r, I.z, 0);
-    I.ReadResults(&rz, 1);
+    VCycle(0, r, z);
+    p.CopyFrom(z, n * 4);
+    Dot(r, z, 0);
+    ReadResults(&rz, 1);
   };
   restart();
-  while (sum.iterations < I.options.max_iterations) {
-    I.Stencil(L, I.p, I.p, I.q, 1);
-    I.Dot(I.p, I.q, 0);
+  while (sum.iterations < options.max_iterations) {
+    Stencil(L, p, p, q, 1);
+    Dot(p, q, 0);
     double pq;
-    I.ReadResults(&pq, 1);
+    ReadResults(&pq, 1);
     const float alpha = float(rz / pq);
-    Run("vector_ops", {&x, &I.r, &I.p, &I.q}, {int(n), 0}, n, 2, alpha, "#define X_DOUBLE\n");
+    Run("vector_ops", {&x, &r, &p, &q}, {int(n), 0}, n, 2, alpha, "#define X_DOUBLE\n");
     ++sum.iterations;
     // Precondition before looking at the residual: one read-back per iteration for both dots.
-    I.VCycle(0, I.r, I.z);
-    I.Dot(I.r, I.r, 0);
-    I.Dot(I.r, I.z, 1);
-    I.ReadResults(v, 2);
+    VCycle(0, r, z);
+    Dot(r, r, 0);
+    Dot(r, z, 1);
+    ReadResults(v, 2);
+    sum.history.push_back(std::sqrt(v[0]) / bnorm);
     if (std::sqrt(v[0]) <= tol) {
-      I.Stencil(L, x, b, I.r, 0, true);
-      I.Dot(I.r, I.r, 0);
+      Stencil(L, x, b, r, 0, true);
+      Dot(r, r, 0);
       double rr;
-      I.ReadResults(&rr, 1);
+      ReadResults(&rr, 1);
       if (std::sqrt(rr) <= tol) return finish(true, "");
-      if (++restarts > 3) return finish(false, "stagnated at the precision of float");
+      if (++restarts > 3) return finish(false, "stagnated");
       restart();
       continue;
     }
     const double beta = v[1] / rz;
     rz = v[1];
-    Run("vector_ops", {&I.p, &I.z, &I.z, &I.z}, {int(n), 1}, n, 2, float(beta));
+    Run("vector_ops", {&p, &z, &z, &z}, {int(n), 1}, n, 2, float(beta));
   }
-  return finish(false, fmt::format("reached max_iterations = {}", I.options.max_iterations));
+  return finish(false, fmt::format("reached max_iterations = {}", options.max_iterations));
+}
+
+SolveSummary GlMultigridSolver::Solve(const float* b_host, float* x_host) {
+  const auto t0 = std::chrono::steady_clock::now();
+  Impl& I = *impl_;
+  const int64_t n = I.n0;
+  // b lives in the finest level's b buffer; the iterate in double (see residual.comp).
+  I.levels[0]->b.Upload(b_host, n * 4);
+  std::vector<double> xd(x_host, x_host + n);
+  I.xd.Upload(xd.data(), n * 8);
+  SolveSummary sum = I.SolveDevice(I.levels[0]->b, I.xd);
+  I.xd.Download(xd.data(), n * 8);
+  for (int64_t i = 0; i < n; ++i) x_host[i] = float(xd[i]);
+  sum.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return sum;
 }
 
 double GlMultigridSolver::TimeApply(int repetitions) {
