@@ -1,0 +1,193 @@
+// SPDX-License-Identifier: MIT
+// Subcommands over the calib library: calibrate (camera, projector, response, white) and hdr.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+#include "calib/camera_calib.h"
+#include "calib/error.h"
+#include "calib/hdr.h"
+#include "solver/atomic_file.h"
+#include "tools/commands.h"
+
+namespace translume {
+namespace {
+
+namespace fs = std::filesystem;
+
+void RequireExtension(const std::string& path, std::initializer_list<const char*> exts,
+                      const char* flag) {
+  const std::string e = fs::path(path).extension().string();
+  for (const char* x : exts)
+    if (e == x) return;
+  throw calib::CalibError(fmt::format("{} {}: the output must end in {}", flag, path, *exts.begin()));
+}
+
+// Refuses an output that would replace one of the inputs or land inside an input folder.
+void RequireNotInput(const std::string& out, const std::vector<std::string>& inputs) {
+  std::error_code ec;
+  const fs::path o = fs::weakly_canonical(out, ec);
+  for (const std::string& in : inputs) {
+    const fs::path i = fs::weakly_canonical(in, ec);
+    if (o == i || (fs::is_directory(i) && o.parent_path() == i))
+      throw calib::CalibError(fmt::format("-o {}: would overwrite or add to the input {}", out, in));
+  }
+}
+
+// OpenCV exceptions carry multi-line messages: keep the first meaningful line.
+template <typename F>
+int OneLineErrors(F&& f) {
+  try {
+    return f();
+  } catch (const cv::Exception& e) {
+    std::string msg = e.err.empty() ? e.what() : e.err;
+    std::replace(msg.begin(), msg.end(), '\n', ' ');
+    throw std::runtime_error("OpenCV: " + msg);
+  }
+}
+
+std::vector<calib::NamedImage> ReadPhotos(const std::string& dir) {
+  if (!fs::is_directory(dir)) throw calib::CalibError(dir + ": not a folder");
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    std::string ext = e.path().extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (e.is_regular_file() && (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" ||
+                                ext == ".tiff" || ext == ".bmp"))
+      files.push_back(e.path());
+  }
+  std::sort(files.begin(), files.end());
+  if (files.empty()) throw calib::CalibError(dir + ": no photos (.png, .jpg, .tif, .bmp)");
+  std::vector<calib::NamedImage> views;
+  for (const fs::path& p : files) {
+    cv::Mat rgb = calib::ReadRgbImage(p.string());
+    cv::Mat gray8;
+    if (rgb.depth() == CV_16U) rgb.convertTo(rgb, CV_8U, 1.0 / 257);
+    else if (rgb.depth() == CV_32F) rgb.convertTo(rgb, CV_8U, 255);
+    cv::cvtColor(rgb, gray8, cv::COLOR_RGB2GRAY);
+    views.push_back({p.string(), gray8});
+  }
+  return views;
+}
+
+int RunCalibrateCamera(int argc, char** argv) {
+  CLI::App app{"Camera intrinsics (Zhang) from photos of a printed board in a folder.\n"
+               "Boards: chessboard:COLSxROWS:SQUARE_MM (inner corners) or\n"
+               "charuco:SXxSY:SQUARE_MM:MARKER_MM[:DICT] (squares; DICT 4X4_50, 4X4_100,\n"
+               "5X5_100 (default), 6X6_250). Writes OpenCV FileStorage YAML.",
+               "translume calibrate camera"};
+  std::string dir, board_text, out;
+  calib::CameraCalibOptions o;
+  app.add_option("IMAGES_DIR", dir, "Folder of board photos")->required();
+  app.add_option("--board", board_text, "Board specification")->required();
+  app.add_option("--min-views", o.min_views, "Fewest usable views")->capture_default_str();
+  app.add_option("--outlier-factor", o.outlier_factor,
+                 "Drop views with RMS above this multiple of the median")->capture_default_str();
+  app.add_option("-o,--output", out, "Output calibration (.yml)")->required();
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
+  RequireNotInput(out, {dir});
+  const calib::BoardSpec board = calib::BoardSpec::Parse(board_text);
+  const calib::CameraCalibration c = calib::CalibrateCamera(board, ReadPhotos(dir), o);
+  WriteAtomically(out, [&](const std::string& tmp) {
+    calib::WriteCameraCalibration(tmp, c, board.ToString());
+  });
+  std::printf("wrote %s: %s\n", out.c_str(), c.BriefReport().c_str());
+  for (const std::string& d : c.dropped) std::printf("  dropped %s\n", d.c_str());
+  return 0;
+}
+
+int RunCalibrateResponse(int argc, char** argv) {
+  CLI::App app{"Camera response curve (Debevec & Malik 1997) from 8-bit exposure stacks, one\n"
+               "folder each (exposure times from EXIF or exposures.json).",
+               "translume calibrate response"};
+  std::vector<std::string> dirs;
+  std::string out;
+  calib::ResponseOptions o;
+  app.add_option("STACKS", dirs, "Exposure stack folders")->required();
+  app.add_option("--samples", o.samples_per_stack, "Pixels sampled per stack")->capture_default_str();
+  app.add_option("--smoothness", o.smoothness, "Smoothness weight lambda")->capture_default_str();
+  app.add_option("-o,--output", out, "Output response curve (.yml)")->required();
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
+  RequireNotInput(out, dirs);
+  std::vector<calib::ExposureStack> stacks;
+  for (const std::string& d : dirs) stacks.push_back(calib::ReadExposureStack(d));
+  const calib::ResponseCurve curve = calib::CalibrateResponse(stacks, o);
+  WriteAtomically(out, [&](const std::string& tmp) { calib::WriteResponse(tmp, curve); });
+  std::printf("wrote %s: response from %zu stacks; linear value of code 32 / 128 / 224: "
+              "R %.4f %.4f, G %.4f %.4f, B %.4f %.4f (code 128 = 1)\n",
+              out.c_str(), stacks.size(), curve.lut.at<cv::Vec3f>(32)[0], curve.lut.at<cv::Vec3f>(224)[0],
+              curve.lut.at<cv::Vec3f>(32)[1], curve.lut.at<cv::Vec3f>(224)[1],
+              curve.lut.at<cv::Vec3f>(32)[2], curve.lut.at<cv::Vec3f>(224)[2]);
+  return 0;
+}
+
+}  // namespace
+
+int RunCalibrate(int argc, char** argv) {
+  static const char* kUsage =
+      "usage: translume calibrate SUBCOMMAND [options]   (translume calibrate SUBCOMMAND --help)\n\n"
+      "subcommands:\n"
+      "  camera      Camera intrinsics from photos of a printed board\n"
+      "  projector   Projector intrinsics and camera-projector pose from board planes\n"
+      "  response    Camera response curve from 8-bit exposure stacks\n"
+      "  white       White balance gains and black level under projector white\n"
+      "Photo protocol: docs/capture.md.\n";
+  if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h")) {
+    std::fputs(kUsage, argc < 2 ? stderr : stdout);
+    return argc < 2 ? 2 : 0;
+  }
+  const std::string sub = argv[1];
+  return OneLineErrors([&] {
+    if (sub == "camera") return RunCalibrateCamera(argc - 1, argv + 1);
+    if (sub == "response") return RunCalibrateResponse(argc - 1, argv + 1);
+    throw calib::CalibError(fmt::format("unknown subcommand '{}' (camera, projector, response, "
+                                        "white)", sub));
+  });
+}
+
+int RunHdr(int argc, char** argv) {
+  CLI::App app{"Merge an exposure stack (a folder of photos; times from EXIF or exposures.json)\n"
+               "into a linear HDR radiance image (OpenEXR, per second). 8-bit photos need\n"
+               "--response; 16-bit, float and camera RAW photos are linear. Channels saturated\n"
+               "in every exposure are written as +inf and counted.",
+               "translume hdr"};
+  std::string dir, response_path, black_dir, out;
+  calib::MergeOptions o;
+  app.add_option("STACK_DIR", dir, "Exposure stack folder")->required();
+  app.add_option("--response", response_path, "Response curve (.yml) for 8-bit photos");
+  app.add_option("--black", black_dir, "Black frame stack (same exposure times) to subtract");
+  app.add_option("--low", o.low_code, "8-bit: highest under-exposed code")->capture_default_str();
+  app.add_option("--high", o.high_code, "8-bit: lowest saturated code")->capture_default_str();
+  app.add_option("-o,--output", out, "Output HDR image (.exr)")->required();
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  return OneLineErrors([&] {
+    RequireExtension(out, {".exr"}, "-o");
+    std::vector<std::string> inputs{dir};
+    if (!black_dir.empty()) inputs.push_back(black_dir);
+    RequireNotInput(out, inputs);
+    calib::ResponseCurve curve;
+    if (!response_path.empty()) curve = calib::ReadResponse(response_path);
+    const calib::ExposureStack stack = calib::ReadExposureStack(dir);
+    calib::ExposureStack black;
+    if (!black_dir.empty()) black = calib::ReadExposureStack(black_dir);
+    const calib::HdrImage h = calib::MergeHdr(stack, response_path.empty() ? nullptr : &curve,
+                                              black_dir.empty() ? nullptr : &black, o);
+    WriteAtomically(out, [&](const std::string& tmp) { calib::WriteExr(tmp, h.radiance); });
+    std::printf("wrote %s: %zu exposures, %s\n", out.c_str(), stack.exposures.size(),
+                h.BriefReport().c_str());
+    return 0;
+  });
+}
+
+}  // namespace translume
