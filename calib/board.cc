@@ -148,14 +148,39 @@ std::vector<cv::Point2f> FindChessboardGrid(const cv::Mat& image, int cols, int 
   if (at(0, rows - 1).y < at(0, 0).y)
     for (int j = 0; j < rows / 2; ++j)
       for (int i = 0; i < cols; ++i) std::swap(at(i, j), at(i, rows - 1 - j));
+  // OpenCV 4.6's SB detector with CALIB_CB_ACCURACY occasionally puts one corner several
+  // pixels off (seen on projected boards). A corner is replaced by its neighbours' prediction
+  // when every prediction (midpoints of opposite neighbours, or extrapolation at the border)
+  // disagrees with it by more than 2 px.
+  std::vector<bool> bad(c.size(), false);
+  std::vector<cv::Point2f> predicted(c.size());
+  for (int j = 0; j < rows; ++j)
+    for (int i = 0; i < cols; ++i) {
+      std::vector<cv::Point2f> p;
+      if (i > 0 && i + 1 < cols) p.push_back((at(i - 1, j) + at(i + 1, j)) * 0.5f);
+      else p.push_back(i == 0 ? 2 * at(1, j) - at(2, j) : 2 * at(i - 1, j) - at(i - 2, j));
+      if (j > 0 && j + 1 < rows) p.push_back((at(i, j - 1) + at(i, j + 1)) * 0.5f);
+      else p.push_back(j == 0 ? 2 * at(i, 1) - at(i, 2) : 2 * at(i, j - 1) - at(i, j - 2));
+      double best = 1e30;
+      for (const cv::Point2f& q : p) best = std::min(best, double(cv::norm(q - at(i, j))));
+      const size_t k = size_t(j) * cols + i;
+      bad[k] = best > 2.0;
+      predicted[k] = (p[0] + p[1]) * 0.5f;
+    }
+  for (size_t k = 0; k < c.size(); ++k)
+    if (bad[k]) c[k] = predicted[k];
   // The SB detector's corners carry a bias of ~0.1 px on synthetic views with lens
   // distortion; a saddle-point refinement in a window of a quarter square removes most of it.
   double spacing = 1e30;
   for (int j = 0; j < rows; ++j)
     for (int i = 0; i + 1 < cols; ++i) spacing = std::min(spacing, double(cv::norm(at(i + 1, j) - at(i, j))));
   const int half = std::clamp(int(spacing / 4), 2, 6);
-  cv::cornerSubPix(gray, c, cv::Size(half, half), cv::Size(-1, -1),
+  std::vector<cv::Point2f> refined = c;
+  cv::cornerSubPix(gray, refined, cv::Size(half, half), cv::Size(-1, -1),
                    cv::TermCriteria(cv::TermCriteria::EPS | cv::TermCriteria::COUNT, 50, 1e-4));
+  // The refinement can run off to a neighbouring edge; keep the SB corner then.
+  for (size_t k = 0; k < c.size(); ++k)
+    if (cv::norm(refined[k] - c[k]) < (bad[k] ? 3.0 : 0.75)) c[k] = refined[k];
   return c;
 }
 

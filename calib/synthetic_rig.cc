@@ -91,51 +91,6 @@ Pose Pose::FromRodrigues(const cv::Vec3d& rvec, const cv::Vec3d& t) {
   return p;
 }
 
-ProjectorChessboard ProjectorChessboard::Centered(cv::Size size, int cols, int rows, int sq) {
-  ProjectorChessboard b;
-  b.projector_size = size;
-  b.cols = cols;
-  b.rows = rows;
-  b.square_px = sq;
-  b.origin = {(size.width - (cols + 1) * sq) / 2, (size.height - (rows + 1) * sq) / 2};
-  return b;
-}
-
-std::string ProjectorChessboard::Validate() const {
-  if (cols < 3 || rows < 3 || cols == rows) return "needs at least 3x3 inner corners, cols != rows";
-  if (square_px < 4) return "squares must be at least 4 projector pixels";
-  if (origin.x < square_px || origin.y < square_px ||
-      origin.x + (cols + 2) * square_px > projector_size.width ||
-      origin.y + (rows + 2) * square_px > projector_size.height)
-    return "the board and its one-square white border must fit in the projector image";
-  return "";
-}
-
-std::vector<cv::Point2f> ProjectorChessboard::Corners() const {
-  std::vector<cv::Point2f> c;
-  for (int j = 0; j < rows; ++j)
-    for (int i = 0; i < cols; ++i)
-      c.emplace_back(float(origin.x + (i + 1) * square_px - 0.5),
-                     float(origin.y + (j + 1) * square_px - 0.5));
-  return c;
-}
-
-int ProjectorChessboard::ValueAtPixel(int x, int y) const {
-  const int fx = x - origin.x, fy = y - origin.y;
-  const int a = fx >= 0 ? fx / square_px : -1 - (-fx - 1) / square_px;
-  const int b = fy >= 0 ? fy / square_px : -1 - (-fy - 1) / square_px;
-  if (a < -1 || b < -1 || a > cols + 1 || b > rows + 1) return 0;   // beyond the border
-  if (a == -1 || b == -1 || a == cols + 1 || b == rows + 1) return 1;  // white border
-  return (a + b) & 1;
-}
-
-cv::Mat ProjectorChessboard::MakeImage() const {
-  cv::Mat img(projector_size, CV_8UC1);
-  for (int y = 0; y < img.rows; ++y)
-    for (int x = 0; x < img.cols; ++x) img.at<uint8_t>(y, x) = ValueAtPixel(x, y) ? 255 : 0;
-  return img;
-}
-
 double SyntheticResponse::Apply(double x, int c) const {
   x = std::clamp(x, 0.0, 1.0);
   const double g = gamma[c];
@@ -219,7 +174,8 @@ std::vector<Pose> SyntheticRig::BoardPoses(const BoardSpec& board, int n, double
 }
 
 std::vector<Pose> SyntheticRig::PlanePoses(const ProjectorChessboard& pattern, int n,
-                                           double distance_mm, uint64_t seed) const {
+                                           double distance_mm, uint64_t seed,
+                                           const BoardSpec* board) const {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> U(-1.0, 1.0);
   const int s = pattern.square_px;
@@ -234,6 +190,16 @@ std::vector<Pose> SyntheticRig::PlanePoses(const ProjectorChessboard& pattern, i
     p.R = RotX((k & 1) ? big : 8 * kDeg * U(rng)) * RotY((k & 1) ? 8 * kDeg * U(rng) : big);
     p.t = cv::Vec3d(20 * U(rng), 20 * U(rng), distance_mm * (1 + 0.2 * U(rng)));
     bool ok = true;
+    if (board) {
+      const cv::Rect2d a = board->SquaresArea();
+      const double m = board->square_mm;
+      p.t -= p.R * cv::Vec3d(a.x + a.width / 2, a.y + a.height / 2, 0);
+      for (double x : {a.x - m, a.x + a.width + m})
+        for (double y : {a.y - m, a.y + a.height + m}) {
+          const cv::Vec3d X = p.Apply({x, y, 0});
+          ok = ok && X[2] > 0 && Inside(camera.size, ToPixel(camera, X), 4);
+        }
+    }
     for (float x : {c0.x, c1.x})
       for (float y : {c0.y, c1.y}) {
         cv::Vec3d X;

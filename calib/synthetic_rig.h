@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "calib/board.h"
+#include "calib/projector_pattern.h"
 
 namespace translume::calib {
 
@@ -29,27 +30,6 @@ struct Pose {
   Pose Inverse() const;
   // From a Rodrigues rotation vector (radians) and a translation.
   static Pose FromRodrigues(const cv::Vec3d& rvec, const cv::Vec3d& t);
-};
-
-// A chessboard shown by the projector, in projector pixels. Squares are whole pixels: square
-// (a, b), a in [0, cols], b in [0, rows], covers pixel columns [origin.x + a square_px,
-// origin.x + (a + 1) square_px) and likewise rows. Inner corner (i, j) sits at continuous
-// position origin + ((i + 1) square_px - 0.5, (j + 1) square_px - 0.5). Square (0, 0) is
-// black; one square of white surrounds the board, black beyond.
-struct ProjectorChessboard {
-  cv::Size projector_size{1024, 768};
-  int cols = 9, rows = 6;  // inner corners
-  int square_px = 80;
-  cv::Point origin{0, 0};  // top-left pixel of square (0, 0)
-
-  // The board centred on the projector image.
-  static ProjectorChessboard Centered(cv::Size projector_size, int cols, int rows, int square_px);
-  std::string Validate() const;
-  std::vector<cv::Point2f> Corners() const;  // row-major, projector pixels
-  // Pattern value (0 or 1) of projector pixel (x, y) (integers).
-  int ValueAtPixel(int x, int y) const;
-  // The 8-bit image to show on the projector.
-  cv::Mat MakeImage() const;
 };
 
 // Camera response for synthetic 8-bit photos: code = round(255 f(x)), x linear in [0, 1].
@@ -111,8 +91,10 @@ class SyntheticRig {
                                uint64_t seed) const;
   // `n` plane poses (camera_from_plane) facing the camera at about distance_mm on which the
   // projector's pattern lands fully inside the camera view. Plane frame: z = 0 on the plane.
+  // With `board`, the plane frame is the board's frame and the printed board (with its
+  // margin) is in view too.
   std::vector<Pose> PlanePoses(const ProjectorChessboard& pattern, int n, double distance_mm,
-                               uint64_t seed) const;
+                               uint64_t seed, const BoardSpec* board = nullptr) const;
 
   // A grey 8-bit photo of a printed board (white albedo 0.9, black 0.05) at camera_from_board
   // under uniform light.
