@@ -98,15 +98,28 @@ cv::Mat ReadLinearRgb(const std::string& path) {
   return m;
 }
 
-void WriteExr(const std::string& path, const cv::Mat& rgb) {
-  CV_Assert(rgb.type() == CV_32FC3);
-  const cv::Mat c = rgb.isContinuous() ? rgb : rgb.clone();
+namespace {
+
+void WriteWithOiio(const std::string& path, const cv::Mat& image, OIIO::TypeDesc type) {
+  const cv::Mat c = image.isContinuous() ? image : image.clone();
   auto out = OIIO::ImageOutput::create(path);
   if (!out) throw CalibError(fmt::format("{}: cannot write: {}", path, FirstLine(OIIO::geterror())));
-  OIIO::ImageSpec spec(c.cols, c.rows, 3, OIIO::TypeDesc::FLOAT);
-  spec.channelnames = {"R", "G", "B"};
-  if (!out->open(path, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, c.data) || !out->close())
+  OIIO::ImageSpec spec(c.cols, c.rows, c.channels(), type);
+  if (c.channels() == 3) spec.channelnames = {"R", "G", "B"};
+  if (!out->open(path, spec) || !out->write_image(type, c.data) || !out->close())
     throw CalibError(fmt::format("{}: cannot write: {}", path, FirstLine(out->geterror())));
+}
+
+}  // namespace
+
+void WriteExr(const std::string& path, const cv::Mat& rgb) {
+  CV_Assert(rgb.type() == CV_32FC3);
+  WriteWithOiio(path, rgb, OIIO::TypeDesc::FLOAT);
+}
+
+void WriteImage8(const std::string& path, const cv::Mat& image) {
+  CV_Assert(image.type() == CV_8UC1 || image.type() == CV_8UC3);
+  WriteWithOiio(path, image, OIIO::TypeDesc::UINT8);
 }
 
 ExposureStack ReadExposureStack(const std::string& dir) {

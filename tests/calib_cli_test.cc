@@ -14,6 +14,7 @@
 
 #include "calib/camera_calib.h"
 #include "calib/hdr.h"
+#include "calib/projector_calib.h"
 #include "calib/synthetic_rig.h"
 
 namespace translume {
@@ -133,6 +134,47 @@ TEST_F(CalibCli, CameraBadInputs) {
   ExpectOneLineError(Translume("calibrate camera " + P("blank") + " --board chessboard:9x6:25 -o " +
                                P("blank/cam.yml")), "would overwrite or add to the input");
   ExpectOneLineError(Translume("calibrate wobble"), "unknown subcommand 'wobble'");
+}
+
+TEST_F(CalibCli, CalibrateProjectorFromPlanes) {
+  const SyntheticRig rig = SyntheticRig::Default();
+  const BoardSpec board = BoardSpec::Parse("chessboard:9x6:25");
+  CameraCalibration cam;
+  cam.image_size = rig.camera.size;
+  cam.K = rig.camera.K;
+  cam.dist = cv::Mat(rig.camera.dist).reshape(1, 1).clone();
+  WriteCameraCalibration(P("camera.yml"), cam, board.ToString());
+  ASSERT_EQ(Translume("calibrate projector --write-pattern " + P("pattern.png") +
+                      " --pattern 11x7:64 --projector-size 1024x768").status, 0);
+  const cv::Mat shown = ReadRgbImage(P("pattern.png"));
+  const ProjectorChessboard pattern = ProjectorChessboard::Centered({1024, 768}, 11, 7, 64);
+  EXPECT_EQ(shown.size(), cv::Size(1024, 768));
+  EXPECT_EQ(shown.at<cv::Vec3b>(pattern.origin.y, pattern.origin.x)[0], 0);
+  EXPECT_EQ(shown.at<cv::Vec3b>(pattern.origin.y, pattern.origin.x + 64)[0], 255);
+  fs::create_directories(P("planes"));
+  int k = 0;
+  for (const Pose& p : rig.PlanePoses(pattern, 6, 520, 3, &board)) {
+    cv::imwrite(P(fmt::format("planes/p{}_board.png", k)), rig.RenderBoard(board, p));
+    cv::imwrite(P(fmt::format("planes/p{}_pattern.png", k++)), rig.RenderProjectedChessboard(p, pattern));
+  }
+  const std::string args = "calibrate projector " + P("planes") + " --camera " + P("camera.yml") +
+                           " --board chessboard:9x6:25 --pattern 11x7:64 -o ";
+  CommandRun r = Translume(args + P("projector.yml"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const ProjectorCalibration pc = ReadProjectorCalibration(P("projector.yml"));
+  EXPECT_NEAR(pc.K(0, 0) / rig.projector.K(0, 0), 1.0, 0.005);
+  EXPECT_LT(cv::norm(pc.T - rig.projector_from_camera.t), 1.0);
+  // Bad inputs: a photo without its partner, a pattern that does not fit, a bad camera file.
+  WriteSentinels();
+  ExpectOneLineError(Translume(args.substr(0, args.find("11x7:64")) + "11x7:200 -o " + P("out.yml")),
+                     "--pattern 11x7:200");
+  ExpectOneLineError(Translume("calibrate projector " + P("planes") + " --camera " + P("out.yml") +
+                               " --board chessboard:9x6:25 -o " + P("out.yml")),
+                     "would overwrite or add to the input");
+  ExpectOneLineError(Translume("calibrate projector " + P("planes") + " --camera " + P("pattern.png") +
+                               " --board chessboard:9x6:25 -o " + P("out.yml")), P("pattern.png"));
+  fs::remove(P("planes/p2_pattern.png"));
+  ExpectOneLineError(Translume(args + P("out.yml")), P("planes/p2") + ": plane has no _pattern photo");
 }
 
 TEST_F(CalibCli, ResponseThenHdr) {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
+#include <map>
 #include <filesystem>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
@@ -13,6 +14,8 @@
 #include "calib/camera_calib.h"
 #include "calib/error.h"
 #include "calib/hdr.h"
+#include "calib/projector_calib.h"
+#include <regex>
 #include "solver/atomic_file.h"
 #include "tools/commands.h"
 
@@ -52,6 +55,16 @@ int OneLineErrors(F&& f) {
   }
 }
 
+// An 8-bit grey version of any photo.
+cv::Mat ReadGray8(const std::string& path) {
+  cv::Mat rgb = calib::ReadRgbImage(path);
+  cv::Mat gray8;
+  if (rgb.depth() == CV_16U) rgb.convertTo(rgb, CV_8U, 1.0 / 257);
+  else if (rgb.depth() == CV_32F) rgb.convertTo(rgb, CV_8U, 255);
+  cv::cvtColor(rgb, gray8, cv::COLOR_RGB2GRAY);
+  return gray8;
+}
+
 std::vector<calib::NamedImage> ReadPhotos(const std::string& dir) {
   if (!fs::is_directory(dir)) throw calib::CalibError(dir + ": not a folder");
   std::vector<fs::path> files;
@@ -65,15 +78,48 @@ std::vector<calib::NamedImage> ReadPhotos(const std::string& dir) {
   std::sort(files.begin(), files.end());
   if (files.empty()) throw calib::CalibError(dir + ": no photos (.png, .jpg, .tif, .bmp)");
   std::vector<calib::NamedImage> views;
-  for (const fs::path& p : files) {
-    cv::Mat rgb = calib::ReadRgbImage(p.string());
-    cv::Mat gray8;
-    if (rgb.depth() == CV_16U) rgb.convertTo(rgb, CV_8U, 1.0 / 257);
-    else if (rgb.depth() == CV_32F) rgb.convertTo(rgb, CV_8U, 255);
-    cv::cvtColor(rgb, gray8, cv::COLOR_RGB2GRAY);
-    views.push_back({p.string(), gray8});
-  }
+  for (const fs::path& p : files) views.push_back({p.string(), ReadGray8(p.string())});
   return views;
+}
+
+// Plane photos: NAME_board.EXT and NAME_pattern.EXT pairs in one folder.
+std::vector<calib::PlaneView> ReadPlanes(const std::string& dir) {
+  std::vector<calib::NamedImage> photos = ReadPhotos(dir);
+  std::map<std::string, calib::PlaneView> planes;
+  for (calib::NamedImage& p : photos) {
+    const std::string stem = fs::path(p.name).stem().string();
+    const size_t us = stem.rfind('_');
+    const std::string kind = us == std::string::npos ? "" : stem.substr(us + 1);
+    if (kind != "board" && kind != "pattern")
+      throw calib::CalibError(p.name + ": plane photos must be named NAME_board.EXT or "
+                              "NAME_pattern.EXT");
+    calib::PlaneView& v = planes[stem.substr(0, us)];
+    v.name = (fs::path(dir) / stem.substr(0, us)).string();
+    (kind == "board" ? v.board_photo : v.pattern_photo) = p.image;
+  }
+  std::vector<calib::PlaneView> out;
+  for (auto& [name, v] : planes) {
+    if (v.board_photo.empty() || v.pattern_photo.empty())
+      throw calib::CalibError(fmt::format("{}: plane has no {} photo", v.name,
+                                          v.board_photo.empty() ? "_board" : "_pattern"));
+    out.push_back(v);
+  }
+  return out;
+}
+
+// "COLSxROWS:SQUARE_PX" centred on a projector of `size`.
+calib::ProjectorChessboard ParsePattern(const std::string& text, const std::string& size) {
+  std::smatch m, n;
+  static const std::regex pat(R"((\d+)x(\d+):(\d+))"), wh(R"((\d+)x(\d+))");
+  if (!std::regex_match(text, m, pat))
+    throw calib::CalibError(fmt::format("--pattern {}: expected COLSxROWS:SQUARE_PX", text));
+  if (!std::regex_match(size, n, wh))
+    throw calib::CalibError(fmt::format("--projector-size {}: expected WIDTHxHEIGHT", size));
+  const calib::ProjectorChessboard b = calib::ProjectorChessboard::Centered(
+      {std::stoi(n[1]), std::stoi(n[2])}, std::stoi(m[1]), std::stoi(m[2]), std::stoi(m[3]));
+  if (std::string why = b.Validate(); !why.empty())
+    throw calib::CalibError(fmt::format("--pattern {}: {}", text, why));
+  return b;
 }
 
 int RunCalibrateCamera(int argc, char** argv) {
@@ -101,6 +147,53 @@ int RunCalibrateCamera(int argc, char** argv) {
   });
   std::printf("wrote %s: %s\n", out.c_str(), c.BriefReport().c_str());
   for (const std::string& d : c.dropped) std::printf("  dropped %s\n", d.c_str());
+  return 0;
+}
+
+int RunCalibrateProjector(int argc, char** argv) {
+  CLI::App app{"Projector intrinsics and camera-projector pose from planes (docs/capture.md):\n"
+               "PLANES_DIR holds NAME_board.EXT (printed board on the plane) and\n"
+               "NAME_pattern.EXT (projected chessboard on the same plane) per plane pose.\n"
+               "--write-pattern writes the chessboard image to show on the projector.",
+               "translume calibrate projector"};
+  std::string dir, camera_path, board_text, pattern_text = "11x7:64", size = "1024x768", out,
+      write_pattern;
+  calib::ProjectorCalibOptions o;
+  app.add_option("PLANES_DIR", dir, "Folder of plane photos");
+  app.add_option("--camera", camera_path, "Camera calibration (.yml, translume calibrate camera)");
+  app.add_option("--board", board_text, "Printed board specification");
+  app.add_option("--pattern", pattern_text, "Projected chessboard COLSxROWS:SQUARE_PX (inner "
+                 "corners), centred")->capture_default_str();
+  app.add_option("--projector-size", size, "Projector resolution WxH")->capture_default_str();
+  app.add_option("--min-planes", o.min_planes, "Fewest usable planes")->capture_default_str();
+  app.add_option("--write-pattern", write_pattern, "Write the pattern image (.png) and exit");
+  app.add_option("-o,--output", out, "Output calibration (.yml)");
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  const calib::ProjectorChessboard pattern = ParsePattern(pattern_text, size);
+  if (!write_pattern.empty()) {
+    RequireExtension(write_pattern, {".png"}, "--write-pattern");
+    WriteAtomically(write_pattern, [&](const std::string& tmp) {
+      calib::WriteImage8(tmp, pattern.MakeImage());
+    });
+    std::printf("wrote %s: %dx%d projector chessboard, %dx%d inner corners of %d px\n",
+                write_pattern.c_str(), pattern.projector_size.width,
+                pattern.projector_size.height, pattern.cols, pattern.rows, pattern.square_px);
+    return 0;
+  }
+  if (dir.empty() || camera_path.empty() || board_text.empty() || out.empty())
+    throw CLI::RequiredError("PLANES_DIR, --camera, --board and -o");
+  RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
+  RequireNotInput(out, {dir, camera_path});
+  const calib::BoardSpec board = calib::BoardSpec::Parse(board_text);
+  const calib::CameraCalibration camera = calib::ReadCameraCalibration(camera_path);
+  const calib::ProjectorCalibration p =
+      calib::CalibrateProjector(camera, board, pattern, ReadPlanes(dir), o);
+  WriteAtomically(out, [&](const std::string& tmp) {
+    calib::WriteProjectorCalibration(tmp, p, camera, pattern_text + " on " + size);
+  });
+  std::printf("wrote %s: %s\n", out.c_str(), p.BriefReport().c_str());
+  for (const std::string& d : p.dropped) std::printf("  dropped %s\n", d.c_str());
   return 0;
 }
 
@@ -149,6 +242,7 @@ int RunCalibrate(int argc, char** argv) {
   const std::string sub = argv[1];
   return OneLineErrors([&] {
     if (sub == "camera") return RunCalibrateCamera(argc - 1, argv + 1);
+    if (sub == "projector") return RunCalibrateProjector(argc - 1, argv + 1);
     if (sub == "response") return RunCalibrateResponse(argc - 1, argv + 1);
     throw calib::CalibError(fmt::format("unknown subcommand '{}' (camera, projector, response, "
                                         "white)", sub));
