@@ -314,7 +314,6 @@ cv::Mat SyntheticRig::RenderChartRadiance(const SyntheticChart& chart, const Pos
   const cv::Mat& rays = CameraRays();
   const int N = std::max(1, supersample);
   const cv::Vec3d nrm(pose.R(0, 2), pose.R(1, 2), pose.R(2, 2));
-  const Pose cp = projector_from_camera.Inverse();
   const cv::Size2d size = chart.SizeMm();
   cv::Mat img(camera.size, CV_32FC3, cv::Scalar::all(0));
   cv::parallel_for_(cv::Range(0, camera.size.height), [&](const cv::Range& r) {
@@ -336,12 +335,8 @@ cv::Mat SyntheticRig::RenderChartRadiance(const SyntheticChart& chart, const Pos
             if (p[0] < 0 || p[1] < 0 || p[0] > size.width || p[1] > size.height) continue;
             const cv::Vec3d Xp = projector_from_camera.Apply(X);
             if (Xp[2] <= 0 || !Inside(projector.size, ToPixel(projector, Xp), 0)) continue;
-            const cv::Vec3d to_projector = cp.t - X;
-            const double dist = cv::norm(to_projector);
-            const double cosi = std::abs(nrm.dot(to_projector)) / dist;
-            const double E = cosi * (500.0 / dist) * (500.0 / dist);
             const cv::Vec3d alb = chart.AlbedoAt(p[0], p[1]);
-            for (int c = 0; c < 3; ++c) sum[c] += alb[c] * E * projector_rgb[c] / kPi * camera_gain[c];
+            for (int c = 0; c < 3; ++c) sum[c] += alb[c] * projector_rgb[c] / kPi * camera_gain[c];
           }
         img.at<cv::Vec3f>(y, x) = cv::Vec3f(sum / double(N * N));
       }

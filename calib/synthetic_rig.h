@@ -105,11 +105,11 @@ class SyntheticRig {
   cv::Mat RenderProjectedChessboard(const Pose& camera_from_plane,
                                     const ProjectorChessboard& pattern,
                                     const PhotoOptions& o = {}) const;
-  // Linear camera radiance (CV_32FC3, RGB, camera units with the camera response removed) of
-  // the chart at camera_from_chart lit by projector full white of per-channel intensity
-  // `projector_rgb`: L = albedo * E / pi with E the projector irradiance (E = projector_rgb *
-  // cos(incidence) * (d0 / d)^2, d0 = 500 mm), times `camera_gain` per channel. Outside the
-  // chart: black.
+  // Linear camera radiance (CV_32FC3, RGB) of the chart at camera_from_chart lit by projector
+  // full white of uniform per-channel irradiance `projector_rgb` (a flat field) where the
+  // projector reaches: L = albedo * projector_rgb / pi, times `camera_gain` per channel (the
+  // camera's unknown per-channel sensitivity). Outside the chart: black. The gains that
+  // WhiteBalance should find are 1 / (camera_gain * projector_rgb).
   cv::Mat RenderChartRadiance(const SyntheticChart& chart, const Pose& camera_from_chart,
                               const cv::Vec3d& projector_rgb, const cv::Vec3d& camera_gain,
                               int supersample = 4) const;
