@@ -16,6 +16,7 @@
 #include "calib/hdr.h"
 #include "calib/projector_calib.h"
 #include "calib/synthetic_rig.h"
+#include "calib/white.h"
 
 namespace translume {
 namespace {
@@ -175,6 +176,48 @@ TEST_F(CalibCli, CalibrateProjectorFromPlanes) {
                                " --board chessboard:9x6:25 -o " + P("out.yml")), P("pattern.png"));
   fs::remove(P("planes/p2_pattern.png"));
   ExpectOneLineError(Translume(args + P("out.yml")), P("planes/p2") + ": plane has no _pattern photo");
+}
+
+TEST_F(CalibCli, CalibrateWhite) {
+  const SyntheticRig rig = SyntheticRig::Default();
+  const SyntheticChart chart = SyntheticChart::ColorChecker();
+  Pose pose;
+  const cv::Size2d size = chart.SizeMm();
+  pose.t = cv::Vec3d(-size.width / 2, -size.height / 2, 600);
+  const cv::Vec3d gain(0.9, 1.1, 0.7);
+  WriteExr(P("white.exr"), rig.RenderChartRadiance(chart, pose, {1, 1, 1}, gain));
+  WriteExr(P("black.exr"), rig.RenderChartRadiance(chart, pose, {0.01, 0.01, 0.01}, gain));
+  CommandRun r = Translume("calibrate white " + P("white.exr") + " --black " + P("black.exr") +
+                           " --chart colorchecker -o " + P("white.yml"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  WhiteBalance w = ReadWhiteBalance(P("white.yml"));
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(w.gains[c] * gain[c] * 0.99, 1.0, 0.01);
+  // The white patch (index 18) by its corners, from the chart geometry.
+  const cv::Point2d ctr = chart.PatchCenter(18);
+  std::vector<cv::Point3d> X;
+  for (const auto& d : {cv::Point2d(-8, -8), cv::Point2d(8, -8), cv::Point2d(8, 8), cv::Point2d(-8, 8)}) {
+    const cv::Vec3d x = pose.Apply({ctr.x + d.x, ctr.y + d.y, 0});
+    X.emplace_back(x[0], x[1], x[2]);
+  }
+  std::string corners;
+  for (const auto& p : rig.camera.Project(X)) corners += fmt::format("{}{:.2f},{:.2f}", corners.empty() ? "" : ",", p.x, p.y);
+  const cv::Vec3d a = chart.albedo[18];
+  r = Translume(fmt::format("calibrate white {} --black {} --patch {} --albedo {},{},{} -o {}",
+                            P("white.exr"), P("black.exr"), corners, a[0], a[1], a[2], P("patch.yml")));
+  ASSERT_EQ(r.status, 0) << r.output;
+  w = ReadWhiteBalance(P("patch.yml"));
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(w.gains[c] * gain[c] * 0.99, 1.0, 0.01);
+  WriteSentinels();
+  const std::string base = "calibrate white " + P("white.exr") + " ";
+  ExpectOneLineError(Translume(base + "-o " + P("out.yml")), "either --chart");
+  ExpectOneLineError(Translume(base + "--patch 1,2,3 --albedo 0.9 -o " + P("out.yml")),
+                     "--patch 1,2,3: expected 8");
+  ExpectOneLineError(Translume(base + "--patch " + corners + " -o " + P("out.yml")), "--patch needs --albedo");
+  ExpectOneLineError(Translume(base + "--chart macbeth -o " + P("out.yml")), "--chart macbeth");
+  ExpectOneLineError(Translume("calibrate white " + P("missing.exr") + " --chart colorchecker -o " +
+                               P("out.yml")), P("missing.exr") + ": no such file");
+  ExpectOneLineError(Translume(base + "--black " + P("out.exr") + " --chart colorchecker -o " + P("out.yml")),
+                     P("out.exr") + ": cannot read image");
 }
 
 TEST_F(CalibCli, ResponseThenHdr) {

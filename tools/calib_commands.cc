@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <map>
+#include <sstream>
 #include <filesystem>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
@@ -15,6 +16,7 @@
 #include "calib/error.h"
 #include "calib/hdr.h"
 #include "calib/projector_calib.h"
+#include "calib/white.h"
 #include <regex>
 #include "solver/atomic_file.h"
 #include "tools/commands.h"
@@ -224,6 +226,85 @@ int RunCalibrateResponse(int argc, char** argv) {
   return 0;
 }
 
+// A linear HDR image: an .exr file, or an exposure stack folder merged here.
+cv::Mat ReadHdrOrStack(const std::string& path, const std::string& response_path) {
+  if (!fs::is_directory(path)) return calib::ReadLinearRgb(path);
+  calib::ResponseCurve curve;
+  if (!response_path.empty()) curve = calib::ReadResponse(response_path);
+  return calib::MergeHdr(calib::ReadExposureStack(path), response_path.empty() ? nullptr : &curve)
+      .radiance;
+}
+
+std::vector<double> ParseNumbers(const std::string& text, const char* flag, size_t n1, size_t n2) {
+  std::vector<double> v;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    try {
+      size_t used = 0;
+      v.push_back(std::stod(item, &used));
+      if (used != item.size()) throw std::invalid_argument(item);
+    } catch (const std::exception&) {
+      throw calib::CalibError(fmt::format("{} {}: '{}' is not a number", flag, text, item));
+    }
+  }
+  if (v.size() != n1 && v.size() != n2)
+    throw calib::CalibError(fmt::format("{} {}: expected {} comma-separated numbers", flag, text,
+                                        n1 == n2 ? std::to_string(n1) : fmt::format("{} or {}", n1, n2)));
+  return v;
+}
+
+int RunCalibrateWhite(int argc, char** argv) {
+  CLI::App app{"White balance gains (camera HDR -> radiance in the projector's units of incoming\n"
+               "light) from the HDR of a reference target under projector full white, minus the\n"
+               "HDR under projector black. WHITE and --black are .exr files or exposure stack\n"
+               "folders. Target: --chart colorchecker, or --patch X1,Y1,..,X4,Y4 --albedo A[,A,A].",
+               "translume calibrate white"};
+  std::string white_path, black_path, response_path, chart, patch, albedo_text, out;
+  app.add_option("WHITE", white_path, "HDR (.exr) or stack folder under projector white")->required();
+  app.add_option("--black", black_path, "HDR (.exr) or stack folder under projector black");
+  app.add_option("--response", response_path, "Response curve for 8-bit stacks");
+  app.add_option("--chart", chart, "Reference chart: colorchecker");
+  app.add_option("--patch", patch, "Image corners of a white patch X1,Y1,X2,Y2,X3,Y3,X4,Y4");
+  app.add_option("--albedo", albedo_text, "Albedo of the patch: A or R,G,B");
+  app.add_option("-o,--output", out, "Output white balance (.yml)")->required();
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
+  std::vector<std::string> inputs{white_path};
+  if (!black_path.empty()) inputs.push_back(black_path);
+  RequireNotInput(out, inputs);
+  if (chart.empty() == patch.empty())
+    throw calib::CalibError("give either --chart colorchecker or --patch (with --albedo)");
+  if (!chart.empty() && chart != "colorchecker")
+    throw calib::CalibError(fmt::format("--chart {}: only 'colorchecker' is known", chart));
+  std::vector<cv::Point2f> corners;
+  cv::Vec3d albedo;
+  if (!patch.empty()) {
+    if (albedo_text.empty()) throw calib::CalibError("--patch needs --albedo");
+    const std::vector<double> p = ParseNumbers(patch, "--patch", 8, 8);
+    for (int k = 0; k < 4; ++k) corners.emplace_back(float(p[2 * k]), float(p[2 * k + 1]));
+    const std::vector<double> a = ParseNumbers(albedo_text, "--albedo", 1, 3);
+    albedo = a.size() == 1 ? cv::Vec3d::all(a[0]) : cv::Vec3d(a[0], a[1], a[2]);
+  }
+  const cv::Mat white = ReadHdrOrStack(white_path, response_path);
+  const cv::Mat black = black_path.empty() ? cv::Mat() : ReadHdrOrStack(black_path, response_path);
+  const calib::WhiteBalance w = patch.empty() ? calib::WhiteFromColorChecker(white, black)
+                                              : calib::WhiteFromPatch(white, black, corners, albedo);
+  cv::Vec3d black_mean(0, 0, 0);
+  if (!black.empty()) {
+    const cv::Scalar m = cv::mean(black);
+    black_mean = cv::Vec3d(m[0], m[1], m[2]);
+  }
+  const std::string black_image =
+      !black_path.empty() && !fs::is_directory(black_path) ? fs::absolute(black_path).string() : "";
+  WriteAtomically(out, [&](const std::string& tmp) {
+    calib::WriteWhiteBalance(tmp, w, black_mean, black_image);
+  });
+  std::printf("wrote %s: %s\n", out.c_str(), w.BriefReport().c_str());
+  return 0;
+}
+
 }  // namespace
 
 int RunCalibrate(int argc, char** argv) {
@@ -244,6 +325,7 @@ int RunCalibrate(int argc, char** argv) {
     if (sub == "camera") return RunCalibrateCamera(argc - 1, argv + 1);
     if (sub == "projector") return RunCalibrateProjector(argc - 1, argv + 1);
     if (sub == "response") return RunCalibrateResponse(argc - 1, argv + 1);
+    if (sub == "white") return RunCalibrateWhite(argc - 1, argv + 1);
     throw calib::CalibError(fmt::format("unknown subcommand '{}' (camera, projector, response, "
                                         "white)", sub));
   });
