@@ -103,13 +103,13 @@ TEST_F(CalibCli, CalibrateCameraFromPhotos) {
   const BoardSpec board = BoardSpec::Parse("chessboard:9x6:25");
   fs::create_directories(P("photos"));
   int k = 0;
-  for (const Pose& p : rig.BoardPoses(board, 8, 450, 21))
+  for (const Pose& p : rig.BoardPoses(board, 6, 450, 21))
     cv::imwrite(P(fmt::format("photos/v{}.png", k++)), rig.RenderBoard(board, p));
   cv::imwrite(P("photos/zz_blank.png"), cv::Mat(rig.camera.size, CV_8UC1, cv::Scalar(80)));
   const CommandRun r = Translume("calibrate camera " + P("photos") +
                                  " --board chessboard:9x6:25 -o " + P("cam/camera.yml"));
   ASSERT_EQ(r.status, 0) << r.output;
-  EXPECT_NE(r.output.find("dropped zz_blank.png: board not found"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("zz_blank.png: board not found"), std::string::npos) << r.output;
   const CameraCalibration c = ReadCameraCalibration(P("cam/camera.yml"));
   EXPECT_NEAR(c.K(0, 0) / rig.camera.K(0, 0), 1.0, 0.003);
   EXPECT_EQ(c.image_size, rig.camera.size);
@@ -154,7 +154,7 @@ TEST_F(CalibCli, CalibrateProjectorFromPlanes) {
   EXPECT_EQ(shown.at<cv::Vec3b>(pattern.origin.y, pattern.origin.x + 64)[0], 255);
   fs::create_directories(P("planes"));
   int k = 0;
-  for (const Pose& p : rig.PlanePoses(pattern, 6, 520, 3, &board)) {
+  for (const Pose& p : rig.PlanePoses(pattern, 5, 520, 3, &board)) {
     cv::imwrite(P(fmt::format("planes/p{}_board.png", k)), rig.RenderBoard(board, p));
     cv::imwrite(P(fmt::format("planes/p{}_pattern.png", k++)), rig.RenderProjectedChessboard(p, pattern));
   }
