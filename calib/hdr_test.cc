@@ -11,6 +11,7 @@
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <opencv2/photo.hpp>
 #include <random>
 
 #include "calib/error.h"
@@ -139,6 +140,18 @@ TEST(Hdr, EightBitResponseAndMergeMeetTargets) {
   EXPECT_LE(e.median, 0.015);
   EXPECT_LE(e.p95, 0.04);
   ExpectSaturatedBlockFlagged(h);
+  // OpenCV's stock MergeDebevec with the same curve, for comparison (SPEC section 8): its
+  // weights do not exclude clipped samples.
+  std::vector<cv::Mat> images;
+  for (const Exposure& x : stack.exposures) images.push_back(x.pixels);
+  cv::Mat ocv;
+  cv::createMergeDebevec()->process(images, ocv, std::vector<float>(t.begin(), t.end()), curve.lut);
+  HdrImage o;
+  o.radiance = ocv;
+  const ErrorStats eo = Errors(truth, o, false);
+  std::printf("OpenCV MergeDebevec: median error %.3f%%, 95th percentile %.3f%%\n", 100 * eo.median,
+              100 * eo.p95);
+  EXPECT_GT(eo.p95, 2 * e.p95);
 }
 
 TEST(Hdr, SixteenBitLinearMergeWithBlackFrames) {
@@ -228,6 +241,22 @@ TEST_F(HdrFiles, ReadsExifExposureTime) {
   EXPECT_DOUBLE_EQ(s.exposures[1].seconds, 0.5);
   EXPECT_EQ(s.exposures[0].pixels.type(), CV_16UC3);
   EXPECT_EQ(s.exposures[0].pixels.at<cv::Vec3w>(0, 0)[2], 3000);
+  // JPEG carries EXIF too; 8-bit stays 8-bit.
+  fs::remove_all(dir_);
+  fs::create_directories(dir_);
+  const cv::Mat img8(8, 8, CV_8UC3, cv::Scalar(10, 20, 30));
+  for (int j = 0; j < 2; ++j) {
+    const std::string path = P(fmt::format("j{}.jpg", j));
+    auto out = OIIO::ImageOutput::create(path);
+    OIIO::ImageSpec spec(8, 8, 3, OIIO::TypeDesc::UINT8);
+    spec.attribute("ExposureTime", j ? 0.02f : 0.01f);
+    ASSERT_TRUE(out->open(path, spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, img8.data));
+    out->close();
+  }
+  const ExposureStack j = ReadExposureStack(dir_.string());
+  EXPECT_NEAR(j.exposures[1].seconds, 0.02, 1e-5);  // EXIF rational
+  EXPECT_TRUE(j.IsEightBit());
 }
 
 TEST_F(HdrFiles, BadStacksNameTheFile) {
