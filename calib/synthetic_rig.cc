@@ -54,14 +54,21 @@ bool Inside(const cv::Size& s, const cv::Point2d& p, double margin) {
          p.y <= s.height - 1 - margin;
 }
 
-// Projector ray through pixel p, intersected with the plane z = 0 of camera_from_plane;
-// returns the point in the camera frame (false when it misses).
-bool ProjectorPixelOnPlane(const SyntheticRig& rig, const Pose& camera_from_plane,
-                           const cv::Point2f& p, cv::Vec3d* X) {
-  std::vector<cv::Point2f> in{p}, out;
-  cv::undistortPoints(in, out, rig.projector.K, rig.projector.dist, cv::noArray(), cv::noArray(),
+}  // namespace
+
+std::vector<cv::Point2d> DeviceModel::Project(const std::vector<cv::Point3d>& points) const {
+  std::vector<cv::Point2d> out;
+  out.reserve(points.size());
+  for (const auto& p : points) out.push_back(ToPixel(*this, cv::Vec3d(p.x, p.y, p.z)));
+  return out;
+}
+
+bool SyntheticRig::ProjectorPixelOnPlane(const Pose& camera_from_plane, const cv::Point2d& p,
+                                         cv::Vec3d* X) const {
+  std::vector<cv::Point2d> in{p}, out;
+  cv::undistortPoints(in, out, projector.K, projector.dist, cv::noArray(), cv::noArray(),
                       cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-12));
-  const Pose camera_from_projector = rig.projector_from_camera.Inverse();
+  const Pose camera_from_projector = projector_from_camera.Inverse();
   const cv::Vec3d C = camera_from_projector.t;
   const cv::Vec3d d = camera_from_projector.R * cv::Vec3d(out[0].x, out[0].y, 1.0);
   const cv::Vec3d n(camera_from_plane.R(0, 2), camera_from_plane.R(1, 2), camera_from_plane.R(2, 2));
@@ -71,15 +78,6 @@ bool ProjectorPixelOnPlane(const SyntheticRig& rig, const Pose& camera_from_plan
   if (s <= 0) return false;
   *X = C + s * d;
   return true;
-}
-
-}  // namespace
-
-std::vector<cv::Point2d> DeviceModel::Project(const std::vector<cv::Point3d>& points) const {
-  std::vector<cv::Point2d> out;
-  out.reserve(points.size());
-  for (const auto& p : points) out.push_back(ToPixel(*this, cv::Vec3d(p.x, p.y, p.z)));
-  return out;
 }
 
 Pose Pose::Inverse() const { return {R.t(), -(R.t() * t)}; }
@@ -203,7 +201,7 @@ std::vector<Pose> SyntheticRig::PlanePoses(const ProjectorChessboard& pattern, i
     for (float x : {c0.x, c1.x})
       for (float y : {c0.y, c1.y}) {
         cv::Vec3d X;
-        ok = ok && ProjectorPixelOnPlane(*this, p, {x, y}, &X) &&
+        ok = ok && ProjectorPixelOnPlane(p, {x, y}, &X) &&
              Inside(camera.size, ToPixel(camera, X), 8);
       }
     if (ok) poses.push_back(p);
@@ -295,6 +293,12 @@ cv::Mat SyntheticRig::RenderBoard(const BoardSpec& board, const Pose& pose,
 
 cv::Mat SyntheticRig::RenderProjectedChessboard(const Pose& pose, const ProjectorChessboard& pat,
                                                 const PhotoOptions& o) const {
+  return RenderProjectedImage(pose, pat.MakeImage(), o);
+}
+
+cv::Mat SyntheticRig::RenderProjectedImage(const Pose& pose, const cv::Mat& image,
+                                           const PhotoOptions& o) const {
+  CV_Assert(image.type() == CV_8UC1 && image.size() == projector.size);
   return RenderPlane(pose, o, [&](const cv::Vec3d&, const cv::Vec3d& X) {
     const cv::Vec3d Xp = projector_from_camera.Apply(X);
     double light = o.ambient;
@@ -302,7 +306,7 @@ cv::Mat SyntheticRig::RenderProjectedChessboard(const Pose& pose, const Projecto
       const cv::Point2d q = ToPixel(projector, Xp);
       const int px = int(std::floor(q.x + 0.5)), py = int(std::floor(q.y + 0.5));
       if (px >= 0 && py >= 0 && px < projector.size.width && py < projector.size.height)
-        light += pat.ValueAtPixel(px, py);
+        light += image.at<uint8_t>(py, px) / 255.0;
     }
     return 0.9 * light;
   });

@@ -101,10 +101,19 @@ class SyntheticRig {
   cv::Mat RenderBoard(const BoardSpec& board, const Pose& camera_from_board,
                       const PhotoOptions& o = {}) const;
   // A grey 8-bit photo of a white plane (albedo 0.9) at camera_from_plane lit by the projector
-  // showing `pattern` (plus o.ambient room light).
+  // showing `pattern` (plus o.ambient room light). pattern.projector_size must be
+  // projector.size.
   cv::Mat RenderProjectedChessboard(const Pose& camera_from_plane,
                                     const ProjectorChessboard& pattern,
                                     const PhotoOptions& o = {}) const;
+  // The same for any 8-bit grey projector image (projector.size; 255 = full white; each
+  // projector pixel a sharp square, as on a DLP).
+  cv::Mat RenderProjectedImage(const Pose& camera_from_plane, const cv::Mat& projector_image,
+                               const PhotoOptions& o = {}) const;
+  // Where the ray of projector pixel `p` (continuous, OpenCV convention) meets the plane
+  // z = 0 of camera_from_plane, in the camera frame (mm); false when it misses.
+  bool ProjectorPixelOnPlane(const Pose& camera_from_plane, const cv::Point2d& p,
+                             cv::Vec3d* camera_xyz) const;
   // Linear camera radiance (CV_32FC3, RGB) of the chart at camera_from_chart lit by projector
   // full white of uniform per-channel irradiance `projector_rgb` (a flat field) where the
   // projector reaches: L = albedo * projector_rgb / pi, times `camera_gain` per channel (the
