@@ -193,6 +193,13 @@ ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
                                 const ResponseOptions& o) {
   if (std::string why = o.Validate(); !why.empty()) throw CalibError("response: " + why);
   if (stacks.empty()) throw CalibError("response: no exposure stacks");
+  for (const ExposureStack& s : stacks) {
+    if (s.exposures.size() < 2)
+      throw CalibError(fmt::format("{}: an exposure stack needs at least 2 images", s.dir));
+    for (const Exposure& e : s.exposures)
+      if (e.pixels.type() != CV_8UC3 || e.pixels.size() != s.Size() || !(e.seconds > 0))
+        throw CalibError(e.path + ": expected 8-bit RGB of the stack's size with a positive time");
+  }
   for (const ExposureStack& s : stacks)
     if (!s.IsEightBit())
       throw CalibError(s.dir + ": the response curve is fitted to 8-bit stacks only (16-bit "
@@ -320,6 +327,15 @@ HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
   if (std::string why = o.Validate(); !why.empty()) throw CalibError("hdr merge: " + why);
   if (stack.exposures.size() < 2)
     throw CalibError(fmt::format("{}: an exposure stack needs at least 2 images", stack.dir));
+  for (const Exposure& e : stack.exposures) {
+    const Exposure& f = stack.exposures[0];
+    if (e.pixels.size() != f.pixels.size() || e.pixels.type() != f.pixels.type())
+      throw CalibError(fmt::format("{}: size or pixel type differs from {}", e.path, f.path));
+    if (e.pixels.type() != CV_8UC3 && e.pixels.type() != CV_16UC3 && e.pixels.type() != CV_32FC3)
+      throw CalibError(e.path + ": expected 3-channel 8-bit, 16-bit or float pixels");
+    if (!(e.seconds > 0) || !std::isfinite(e.seconds))
+      throw CalibError(e.path + ": exposure time must be positive");
+  }
   const bool eight = stack.IsEightBit();
   if (eight && !response)
     throw CalibError(stack.dir + ": 8-bit photos need a response curve (translume calibrate "

@@ -15,8 +15,8 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-// The camera (calibrated from 8 board views, or the rig's true one), then n planes with board
-// and pattern photos.
+// n planes with board and pattern photos, and the camera: calibrated from the planes' board
+// photos (as a user may do), or the rig's true one.
 struct ProjectorScene {
   SyntheticRig rig = SyntheticRig::Default();
   BoardSpec board = BoardSpec::Parse("chessboard:9x6:25");
@@ -25,20 +25,6 @@ struct ProjectorScene {
   std::vector<PlaneView> planes;
   ProjectorScene(int n, bool calibrate_camera) {
     int k = 0;
-    if (calibrate_camera) {
-      std::vector<NamedImage> views;
-      for (const Pose& p : rig.BoardPoses(board, 8, 450, 5)) {
-        PhotoOptions o;
-        o.seed = uint64_t(100 + k);
-        views.push_back({fmt::format("cam{}", k++), rig.RenderBoard(board, p, o)});
-      }
-      camera = CalibrateCamera(board, views);
-    } else {
-      camera.image_size = rig.camera.size;
-      camera.K = rig.camera.K;
-      camera.dist = cv::Mat(rig.camera.dist).reshape(1, 1).clone();
-    }
-    k = 0;
     for (const Pose& p : rig.PlanePoses(pattern, n, 520, 17, &board)) {
       PhotoOptions o;
       o.seed = uint64_t(200 + k);
@@ -49,12 +35,22 @@ struct ProjectorScene {
       v.pattern_photo = rig.RenderProjectedChessboard(p, pattern, o);
       planes.push_back(v);
     }
+    if (calibrate_camera) {
+      std::vector<NamedImage> views;
+      for (const PlaneView& v : planes) views.push_back({v.name, v.board_photo});
+      camera = CalibrateCamera(board, views);
+    } else {
+      camera.image_size = rig.camera.size;
+      camera.K = rig.camera.K;
+      camera.dist = cv::Mat(rig.camera.dist).reshape(1, 1).clone();
+    }
   }
 };
 
 TEST(ProjectorCalib, MeetsTargets) {
   const ProjectorScene s(8, true);
   ASSERT_EQ(s.planes.size(), 8u);
+  std::printf("camera: %s\n", s.camera.BriefReport().c_str());
   const ProjectorCalibration p = CalibrateProjector(s.camera, s.board, s.pattern, s.planes);
   std::printf("%s\n", p.BriefReport().c_str());
   for (const auto& d : p.dropped) std::printf("dropped %s\n", d.c_str());
@@ -79,15 +75,15 @@ TEST(ProjectorCalib, MeetsTargets) {
 }
 
 TEST(ProjectorCalib, DropsPlanesWithoutPatternAndRejectsTooFew) {
-  const ProjectorScene s(5, false);
+  const ProjectorScene s(4, false);
   std::vector<PlaneView> planes = s.planes;
   planes[2].pattern_photo = cv::Mat(s.rig.camera.size, CV_8UC1, cv::Scalar(30));
-  planes[3].board_photo = cv::Mat(s.rig.camera.size, CV_8UC1, cv::Scalar(30));
+  planes.push_back({"blank", cv::Mat(s.rig.camera.size, CV_8UC1, cv::Scalar(30)), planes[0].pattern_photo});
   const ProjectorCalibration p = CalibrateProjector(s.camera, s.board, s.pattern, planes,
                                                     {.min_planes = 3});
   ASSERT_EQ(p.dropped.size(), 2u);
   EXPECT_EQ(p.dropped[0], "plane2: projected pattern not found");
-  EXPECT_EQ(p.dropped[1], "plane3: printed board not found");
+  EXPECT_EQ(p.dropped[1], "blank: printed board not found");
   try {
     CalibrateProjector(s.camera, s.board, s.pattern, planes);
     FAIL();

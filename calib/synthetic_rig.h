@@ -42,7 +42,8 @@ struct SyntheticResponse {
 
 // Options for one rendered photo.
 struct PhotoOptions {
-  int supersample = 5;          // N x N samples per pixel (box filter antialiasing)
+  int supersample = 5;          // N x N jittered samples per pixel (box filter antialiasing),
+                                // where the pixel's corners and centre differ
   double blur_sigma_px = 0.5;   // Gaussian optical blur after sampling (0: none)
   double noise_sigma = 1.0;     // Gaussian noise, 8-bit codes
   double white_level = 215.0;   // 8-bit code of a white (albedo 1 under full light) surface
