@@ -97,6 +97,21 @@ ErrorStats Errors(const cv::Mat& truth, const HdrImage& h, bool one_scale_for_al
   return s;
 }
 
+// The recovered curve against the true inverse response of channel c (up to scale: both
+// normalised at code 128), worst relative error over codes 8..245.
+double WorstResponseError(const ResponseCurve& curve, const SyntheticResponse& f, int c) {
+  auto inv = [&](double code) {  // true linear value of an 8-bit code, by bisection
+    double lo = 0, hi = 1;
+    for (int i = 0; i < 60; ++i) ((255 * f.Apply((lo + hi) / 2, c) < code) ? lo : hi) = (lo + hi) / 2;
+    return (lo + hi) / 2;
+  };
+  const double ref = curve.lut.at<cv::Vec3f>(128)[c];
+  double worst = 0;
+  for (int z = 8; z <= 245; ++z)
+    worst = std::max(worst, std::abs(curve.lut.at<cv::Vec3f>(z)[c] / ref * inv(128) / inv(z) - 1));
+  return worst;
+}
+
 void ExpectSaturatedBlockFlagged(const HdrImage& h) {
   for (int y = 0; y < 20; ++y)
     for (int x = 0; x < 20; ++x)
@@ -115,17 +130,8 @@ TEST(Hdr, EightBitResponseAndMergeMeetTargets) {
   const ExposureStack calib = MakeStack(SyntheticRig::RenderExposureStack(TestScene(11), t, f, so), t);
   const ResponseCurve curve = CalibrateResponse({calib});
   ASSERT_EQ(curve.Validate(), "");
-  // The recovered curve against the true inverse response (per channel, up to scale).
   for (int c = 0; c < 3; ++c) {
-    double worst = 0;
-    const double ref = curve.lut.at<cv::Vec3f>(128)[c];
-    auto inv = [&](double code) {  // true linear value of an 8-bit code, by bisection
-      double lo = 0, hi = 1;
-      for (int i = 0; i < 60; ++i) ((255 * f.Apply((lo + hi) / 2, c) < code) ? lo : hi) = (lo + hi) / 2;
-      return (lo + hi) / 2;
-    };
-    for (int z = 8; z <= 245; ++z)
-      worst = std::max(worst, std::abs(curve.lut.at<cv::Vec3f>(z)[c] / ref * inv(128) / inv(z) - 1));
+    const double worst = WorstResponseError(curve, f, c);
     std::printf("channel %d: worst response error over codes 8..245: %.3f%%\n", c, 100 * worst);
     EXPECT_LT(worst, 0.04);
   }
@@ -152,6 +158,20 @@ TEST(Hdr, EightBitResponseAndMergeMeetTargets) {
   std::printf("OpenCV MergeDebevec: median error %.3f%%, 95th percentile %.3f%%\n", 100 * eo.median,
               100 * eo.p95);
   EXPECT_GT(eo.p95, 2 * e.p95);
+}
+
+TEST(Hdr, ResponseFromTwoStacksWithDifferentTimes) {
+  const SyntheticResponse f;
+  const auto t = NineTimes();
+  const std::vector<double> t2{0.5, 2.0, 8.0, 32.0, 128.0};
+  StackOptions so;
+  so.seed = 8;
+  const ExposureStack a = MakeStack(SyntheticRig::RenderExposureStack(TestScene(21), t, f, so), t);
+  so.seed = 9;
+  const ExposureStack b = MakeStack(SyntheticRig::RenderExposureStack(TestScene(22), t2, f, so), t2);
+  const ResponseCurve two = CalibrateResponse({a, b});
+  for (int c = 0; c < 3; ++c) EXPECT_LT(WorstResponseError(two, f, c), 0.04) << "channel " << c;
+  EXPECT_THROW(CalibrateResponse({a, ExposureStack{"one", {a.exposures[0]}}}), CalibError);
 }
 
 TEST(Hdr, SixteenBitLinearMergeWithBlackFrames) {
