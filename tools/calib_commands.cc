@@ -19,6 +19,7 @@
 #include "calib/white.h"
 #include <regex>
 #include "solver/atomic_file.h"
+#include "solver/threads.h"
 #include "tools/commands.h"
 
 namespace translume {
@@ -44,6 +45,9 @@ void RequireNotInput(const std::string& out, const std::vector<std::string>& inp
       throw calib::CalibError(fmt::format("-o {}: would overwrite or add to the input {}", out, in));
   }
 }
+
+// OpenCV's own thread pool follows --threads / TRANSLUME_THREADS too.
+void ApplyThreads() { cv::setNumThreads(NumThreads()); }
 
 // OpenCV exceptions carry multi-line messages: keep the first meaningful line.
 template <typename F>
@@ -140,6 +144,7 @@ int RunCalibrateCamera(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output calibration (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
+  ApplyThreads();
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   RequireNotInput(out, {dir});
   const calib::BoardSpec board = calib::BoardSpec::Parse(board_text);
@@ -172,6 +177,7 @@ int RunCalibrateProjector(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output calibration (.yml)");
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
+  ApplyThreads();
   const calib::ProjectorChessboard pattern = ParsePattern(pattern_text, size);
   if (!write_pattern.empty()) {
     RequireExtension(write_pattern, {".png"}, "--write-pattern");
@@ -212,6 +218,7 @@ int RunCalibrateResponse(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output response curve (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
+  ApplyThreads();
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   RequireNotInput(out, dirs);
   std::vector<calib::ExposureStack> stacks;
@@ -270,6 +277,7 @@ int RunCalibrateWhite(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output white balance (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
+  ApplyThreads();
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   std::vector<std::string> inputs{white_path};
   if (!black_path.empty()) inputs.push_back(black_path);
@@ -347,6 +355,7 @@ int RunHdr(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output HDR image (.exr)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
+  ApplyThreads();
   return OneLineErrors([&] {
     RequireExtension(out, {".exr"}, "-o");
     std::vector<std::string> inputs{dir};
