@@ -13,6 +13,8 @@ int RunForward(int argc, char** argv);
 int RunInfo(int argc, char** argv);
 int RunBench(int argc, char** argv);
 int RunDemo(int argc, char** argv);
+int RunCalibrate(int argc, char** argv);  // calibrate camera|projector|response|white
+int RunHdr(int argc, char** argv);
 
 // Options every subcommand takes (--threads).
 void AddCommonOptions(CLI::App& app);

@@ -23,6 +23,8 @@ const Command kCommands[] = {
     {"synth", translume::RunSynth, "Write a synthetic material volume (.vdb)"},
     {"forward", translume::RunForward, "Simulate the front-face radiance of a material under a light"},
     {"bench", translume::RunBench, "Benchmarks: bench forward"},
+    {"calibrate", translume::RunCalibrate, "Calibrate camera, projector, response, white balance"},
+    {"hdr", translume::RunHdr, "Merge an exposure stack into a linear HDR image (.exr)"},
     {"info", translume::RunInfo, "Version, build, backends, threads, memory estimates"},
 };
 

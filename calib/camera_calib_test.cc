@@ -1,0 +1,140 @@
+// SPDX-License-Identifier: MIT
+#include "calib/camera_calib.h"
+
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <opencv2/imgproc.hpp>
+
+#include "calib/error.h"
+#include "calib/synthetic_rig.h"
+
+namespace translume::calib {
+namespace {
+
+std::vector<NamedImage> RenderViews(const SyntheticRig& rig, const BoardSpec& board, int n,
+                                    uint64_t seed) {
+  std::vector<NamedImage> views;
+  int k = 0;
+  for (const Pose& p : rig.BoardPoses(board, n, 450, seed)) {
+    PhotoOptions o;
+    o.seed = seed * 100 + uint64_t(k);
+    views.push_back({fmt::format("view{:02d}.png", k++), rig.RenderBoard(board, p, o)});
+  }
+  return views;
+}
+
+// Twelve chessboard views, rendered once for the whole suite.
+const std::vector<NamedImage>& ChessViews() {
+  static const std::vector<NamedImage> views = RenderViews(
+      SyntheticRig::Default(), BoardSpec::Parse("chessboard:9x6:25"), 12, 7);
+  return views;
+}
+
+void ExpectIntrinsics(const SyntheticRig& rig, const CameraCalibration& c) {
+  const double fx = rig.camera.K(0, 0), fy = rig.camera.K(1, 1);
+  std::printf("fx %.3f (%.4f%%) fy %.3f (%.4f%%) cx %.3f (%+.3f) cy %.3f (%+.3f) RMS %.4f px\n",
+              c.K(0, 0), 100 * (c.K(0, 0) / fx - 1), c.K(1, 1), 100 * (c.K(1, 1) / fy - 1),
+              c.K(0, 2), c.K(0, 2) - rig.camera.K(0, 2), c.K(1, 2), c.K(1, 2) - rig.camera.K(1, 2),
+              c.rms);
+  EXPECT_NEAR(c.K(0, 0) / fx, 1.0, 0.002);
+  EXPECT_NEAR(c.K(1, 1) / fy, 1.0, 0.002);
+  EXPECT_NEAR(c.K(0, 2), rig.camera.K(0, 2), 1.0);
+  EXPECT_NEAR(c.K(1, 2), rig.camera.K(1, 2), 1.0);
+  EXPECT_LE(c.rms, 0.1);
+  EXPECT_NEAR(c.dist.at<double>(0), rig.camera.dist[0], 0.01);
+}
+
+TEST(CameraCalib, ChessboardMeetsTargets) {
+  const SyntheticRig rig = SyntheticRig::Default();
+  const BoardSpec board = BoardSpec::Parse("chessboard:9x6:25");
+  const auto& views = ChessViews();
+  ASSERT_EQ(views.size(), 12u);
+  const CameraCalibration c = CalibrateCamera(board, views);
+  std::printf("%s\n", c.BriefReport().c_str());
+  EXPECT_EQ(c.used_views.size(), 12u);
+  EXPECT_TRUE(c.dropped.empty());
+  ExpectIntrinsics(rig, c);
+}
+
+TEST(CameraCalib, CharucoMeetsTargets) {
+  const SyntheticRig rig = SyntheticRig::Default();
+  const BoardSpec board = BoardSpec::Parse("charuco:10x7:25:18");
+  const auto views = RenderViews(rig, board, 9, 11);
+  const CameraCalibration c = CalibrateCamera(board, views);
+  std::printf("%s\n", c.BriefReport().c_str());
+  EXPECT_EQ(c.used_views.size(), 9u);
+  ExpectIntrinsics(rig, c);
+}
+
+TEST(CameraCalib, DropsBlankAndOutlierViewsAndListsThem) {
+  const SyntheticRig rig = SyntheticRig::Default();
+  const BoardSpec board = BoardSpec::Parse("chessboard:9x6:25");
+  std::vector<NamedImage> views(ChessViews().begin(), ChessViews().begin() + 8);
+  views.push_back({"blank.png", cv::Mat(rig.camera.size, CV_8UC1, cv::Scalar(90))});
+  // A photo with a wavy, non-rigid distortion of 1.5 px: its corners fit no camera.
+  cv::Mat mx(rig.camera.size, CV_32F), my(rig.camera.size, CV_32F);
+  for (int y = 0; y < mx.rows; ++y)
+    for (int x = 0; x < mx.cols; ++x) {
+      mx.at<float>(y, x) = float(x + 1.5 * std::sin(y / 25.0));
+      my.at<float>(y, x) = float(y + 1.5 * std::cos(x / 31.0));
+    }
+  cv::Mat warped;
+  cv::remap(ChessViews()[9].image, warped, mx, my, cv::INTER_LINEAR);
+  views.push_back({"wavy.png", warped});
+  const CameraCalibration c = CalibrateCamera(board, views);
+  std::printf("%s\n", c.BriefReport().c_str());
+  ASSERT_EQ(c.dropped.size(), 2u);
+  EXPECT_NE(c.dropped[0].find("blank.png: board not found"), std::string::npos);
+  EXPECT_NE(c.dropped[1].find("wavy.png: reprojection RMS"), std::string::npos) << c.dropped[1];
+  EXPECT_EQ(c.used_views.size(), 8u);
+  EXPECT_NEAR(c.K(0, 0) / rig.camera.K(0, 0), 1.0, 0.003);
+}
+
+TEST(CameraCalib, BadInputsThrowNamingTheFile) {
+  const SyntheticRig rig = SyntheticRig::Default();
+  const BoardSpec board = BoardSpec::Parse("chessboard:9x6:25");
+  std::vector<NamedImage> views(ChessViews().begin(), ChessViews().begin() + 3);
+  try {
+    CalibrateCamera(board, views);
+    FAIL() << "3 views accepted";
+  } catch (const CalibError& e) {
+    EXPECT_NE(std::string(e.what()).find("only 3 usable views"), std::string::npos) << e.what();
+  }
+  views.push_back({"small.png", cv::Mat(100, 120, CV_8UC1, cv::Scalar(0))});
+  try {
+    CalibrateCamera(board, views);
+    FAIL() << "different sizes accepted";
+  } catch (const CalibError& e) {
+    EXPECT_NE(std::string(e.what()).find("small.png: image is 120x100"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(BoardSpec::Parse("chessboard:9x9:25"), CalibError);
+  EXPECT_THROW(BoardSpec::Parse("chessboard:9x6"), CalibError);
+  EXPECT_THROW(BoardSpec::Parse("charuco:9x7:20:25"), CalibError);
+  EXPECT_THROW(BoardSpec::Parse("charuco:9x7:20:15:7X7_1"), CalibError);
+}
+
+TEST(CameraCalib, YamlRoundTripLoadsInOpenCV) {
+  const SyntheticRig rig = SyntheticRig::Default();
+  const BoardSpec board = BoardSpec::Parse("chessboard:9x6:25");
+  const CameraCalibration c = CalibrateCamera(board, ChessViews());
+  const std::string path =
+      (std::filesystem::temp_directory_path() / "translume_camera_roundtrip.yml").string();
+  WriteCameraCalibration(path, c, board.ToString());
+  cv::FileStorage fs(path, cv::FileStorage::READ);
+  cv::Mat K;
+  fs["camera_matrix"] >> K;
+  EXPECT_NEAR(K.at<double>(0, 0), c.K(0, 0), 1e-9);
+  const CameraCalibration r = ReadCameraCalibration(path);
+  EXPECT_EQ(r.image_size, c.image_size);
+  EXPECT_NEAR(r.dist.at<double>(1), c.dist.at<double>(1), 1e-12);
+  std::filesystem::remove(path);
+  EXPECT_THROW(ReadCameraCalibration(path), CalibError);
+}
+
+}  // namespace
+}  // namespace translume::calib

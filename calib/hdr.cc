@@ -1,0 +1,430 @@
+// SPDX-License-Identifier: MIT
+#include "calib/hdr.h"
+
+#include <fmt/format.h>
+
+#include <Eigen/Sparse>
+#include <OpenImageIO/imageio.h>
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+#include <random>
+#include <set>
+
+#include "calib/error.h"
+
+namespace translume::calib {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string Lower(std::string s) {
+  for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+bool IsRaw(const std::string& path) {
+  static const std::set<std::string> raw = {".cr2", ".cr3", ".nef", ".arw", ".dng",
+                                            ".raf", ".orf", ".rw2", ".pef", ".srw"};
+  return raw.count(Lower(fs::path(path).extension().string())) > 0;
+}
+
+bool IsImageFile(const fs::path& p) {
+  static const std::set<std::string> ext = {".png", ".tif", ".tiff", ".jpg", ".jpeg", ".exr"};
+  return ext.count(Lower(p.extension().string())) > 0 || IsRaw(p.string());
+}
+
+// OpenImageIO's error text, first line only (our messages are one line).
+std::string FirstLine(std::string s) {
+  const size_t n = s.find('\n');
+  if (n != std::string::npos) s.resize(n);
+  return s.empty() ? "unknown error" : s;
+}
+
+// Debevec & Malik's hat weight over the 8-bit codes.
+double HatWeight(int z) { return z <= 127 ? z + 1.0 : 256.0 - z; }
+
+}  // namespace
+
+cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds) {
+  if (!fs::exists(path)) throw CalibError(path + ": no such file");
+  OIIO::ImageSpec config;
+  if (IsRaw(path)) {
+    config.attribute("raw:use_camera_wb", 0);
+    config.attribute("raw:auto_bright", 0);
+    config.attribute("raw:ColorSpace", "sRGB-linear");
+    config.attribute("raw:Exposure", 1.0f);
+  }
+  auto in = OIIO::ImageInput::open(path, &config);
+  if (!in) throw CalibError(fmt::format("{}: cannot read image: {}", path, FirstLine(OIIO::geterror())));
+  const OIIO::ImageSpec& spec = in->spec();
+  if (exif_seconds) *exif_seconds = spec.get_float_attribute("ExposureTime", 0.0f);
+  int depth = CV_32F;
+  OIIO::TypeDesc type = OIIO::TypeDesc::FLOAT;
+  if (spec.format == OIIO::TypeDesc::UINT8 && !IsRaw(path)) {
+    depth = CV_8U;
+    type = OIIO::TypeDesc::UINT8;
+  } else if (spec.format != OIIO::TypeDesc::FLOAT && spec.format != OIIO::TypeDesc::HALF &&
+             spec.format != OIIO::TypeDesc::DOUBLE) {
+    depth = CV_16U;
+    type = OIIO::TypeDesc::UINT16;
+  }
+  const int nch = spec.nchannels;
+  if (nch < 1 || spec.width <= 0 || spec.height <= 0)
+    throw CalibError(path + ": image has no pixels");
+  cv::Mat raw(spec.height, spec.width, CV_MAKETYPE(depth, std::min(nch, 4)));
+  const bool ok = in->read_image(0, 0, 0, std::min(nch, 4), type, raw.data);
+  if (!ok) throw CalibError(fmt::format("{}: cannot decode image: {}", path, FirstLine(in->geterror())));
+  cv::Mat rgb;
+  if (raw.channels() == 1) cv::cvtColor(raw, rgb, cv::COLOR_GRAY2RGB);
+  else if (raw.channels() == 2) {
+    std::vector<cv::Mat> ch;
+    cv::split(raw, ch);
+    cv::merge(std::vector<cv::Mat>{ch[0], ch[0], ch[0]}, rgb);
+  } else if (raw.channels() == 4) cv::cvtColor(raw, rgb, cv::COLOR_RGBA2RGB);
+  else rgb = raw;
+  return rgb;
+}
+
+cv::Mat ReadLinearRgb(const std::string& path) {
+  cv::Mat m = ReadRgbImage(path);
+  if (m.depth() == CV_8U) m.convertTo(m, CV_32F, 1.0 / 255);
+  else if (m.depth() == CV_16U) m.convertTo(m, CV_32F, 1.0 / 65535);
+  return m;
+}
+
+namespace {
+
+void WriteWithOiio(const std::string& path, const cv::Mat& image, OIIO::TypeDesc type) {
+  const cv::Mat c = image.isContinuous() ? image : image.clone();
+  auto out = OIIO::ImageOutput::create(path);
+  if (!out) throw CalibError(fmt::format("{}: cannot write: {}", path, FirstLine(OIIO::geterror())));
+  OIIO::ImageSpec spec(c.cols, c.rows, c.channels(), type);
+  if (c.channels() == 3) spec.channelnames = {"R", "G", "B"};
+  if (!out->open(path, spec) || !out->write_image(type, c.data) || !out->close())
+    throw CalibError(fmt::format("{}: cannot write: {}", path, FirstLine(out->geterror())));
+}
+
+}  // namespace
+
+void WriteExr(const std::string& path, const cv::Mat& rgb) {
+  CV_Assert(rgb.type() == CV_32FC3);
+  WriteWithOiio(path, rgb, OIIO::TypeDesc::FLOAT);
+}
+
+void WriteImage8(const std::string& path, const cv::Mat& image) {
+  CV_Assert(image.type() == CV_8UC1 || image.type() == CV_8UC3);
+  WriteWithOiio(path, image, OIIO::TypeDesc::UINT8);
+}
+
+ExposureStack ReadExposureStack(const std::string& dir) {
+  if (!fs::is_directory(dir)) throw CalibError(dir + ": not a folder");
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.is_regular_file() && IsImageFile(e.path()) && e.path().filename().string()[0] != '.')
+      files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  if (files.size() < 2)
+    throw CalibError(fmt::format("{}: an exposure stack needs at least 2 images, found {}", dir,
+                                 files.size()));
+  nlohmann::json times;
+  const fs::path json_path = fs::path(dir) / "exposures.json";
+  if (fs::exists(json_path)) {
+    std::ifstream f(json_path);
+    try {
+      times = nlohmann::json::parse(f);
+    } catch (const std::exception& e) {
+      throw CalibError(fmt::format("{}: not valid JSON", json_path.string()));
+    }
+    if (!times.is_object())
+      throw CalibError(json_path.string() + ": expected an object {\"file name\": seconds}");
+  }
+  ExposureStack s;
+  s.dir = dir;
+  for (const fs::path& p : files) {
+    Exposure e;
+    e.path = p.string();
+    double exif = 0;
+    e.pixels = ReadRgbImage(e.path, &exif);
+    const std::string name = p.filename().string();
+    if (exif > 0) e.seconds = exif;
+    else if (times.contains(name) && times[name].is_number()) e.seconds = times[name].get<double>();
+    if (!(e.seconds > 0) || !std::isfinite(e.seconds))
+      throw CalibError(fmt::format("{}: no exposure time (no EXIF ExposureTime and no positive "
+                                   "entry \"{}\" in {})", e.path, name, json_path.string()));
+    if (!s.exposures.empty()) {
+      const Exposure& f = s.exposures[0];
+      if (e.pixels.size() != f.pixels.size())
+        throw CalibError(fmt::format("{}: image is {}x{} but {} is {}x{}", e.path, e.pixels.cols,
+                                     e.pixels.rows, f.path, f.pixels.cols, f.pixels.rows));
+      if (e.pixels.depth() != f.pixels.depth())
+        throw CalibError(fmt::format("{}: bit depth differs from {}", e.path, f.path));
+    }
+    s.exposures.push_back(std::move(e));
+  }
+  return s;
+}
+
+std::string ResponseCurve::Validate() const {
+  if (lut.rows != 256 || lut.cols != 1 || lut.type() != CV_32FC3)
+    return "response must be 256x1 with 3 float channels";
+  for (int z = 0; z < 256; ++z)
+    for (int c = 0; c < 3; ++c) {
+      const float v = lut.at<cv::Vec3f>(z)[c];
+      if (!(v > 0) || !std::isfinite(v)) return fmt::format("response({}) is not positive", z);
+      if (z > 0 && !(v > lut.at<cv::Vec3f>(z - 1)[c]))
+        return fmt::format("response is not increasing at code {} (channel {})", z, c);
+    }
+  return "";
+}
+
+std::string ResponseOptions::Validate() const {
+  if (samples_per_stack < 20) return "samples_per_stack must be at least 20";
+  if (!(smoothness > 0)) return "smoothness must be positive";
+  return "";
+}
+
+ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
+                                const ResponseOptions& o) {
+  if (std::string why = o.Validate(); !why.empty()) throw CalibError("response: " + why);
+  if (stacks.empty()) throw CalibError("response: no exposure stacks");
+  for (const ExposureStack& s : stacks) {
+    if (s.exposures.size() < 2)
+      throw CalibError(fmt::format("{}: an exposure stack needs at least 2 images", s.dir));
+    for (const Exposure& e : s.exposures)
+      if (e.pixels.type() != CV_8UC3 || e.pixels.size() != s.Size() || !(e.seconds > 0))
+        throw CalibError(e.path + ": expected 8-bit RGB of the stack's size with a positive time");
+  }
+  for (const ExposureStack& s : stacks)
+    if (!s.IsEightBit())
+      throw CalibError(s.dir + ": the response curve is fitted to 8-bit stacks only (16-bit "
+                       "and RAW photos are linear and need none)");
+  ResponseCurve curve;
+  curve.lut.create(256, 1, CV_32FC3);
+  std::mt19937_64 rng(o.seed);
+  for (int c = 0; c < 3; ++c) {
+    // Sample positions, stratified by the code in the middle exposure so that the whole
+    // curve is constrained.
+    struct Sample {
+      size_t stack;
+      cv::Point p;
+    };
+    std::vector<Sample> samples;
+    for (size_t si = 0; si < stacks.size(); ++si) {
+      const ExposureStack& s = stacks[si];
+      const cv::Mat& mid = s.exposures[s.exposures.size() / 2].pixels;
+      constexpr int kBins = 32;
+      std::vector<std::vector<cv::Point>> bins(kBins);
+      for (int y = 0; y < mid.rows; y += 2)
+        for (int x = 0; x < mid.cols; x += 2) bins[mid.at<cv::Vec3b>(y, x)[c] / 8].emplace_back(x, y);
+      const size_t per_bin = size_t(o.samples_per_stack) / kBins + 1;
+      for (auto& b : bins) {
+        std::shuffle(b.begin(), b.end(), rng);
+        for (size_t k = 0; k < std::min(per_bin, b.size()); ++k) samples.push_back({si, b[k]});
+      }
+    }
+    // Unknowns: g(0..255), then ln E per sample. Rows: data, smoothness, g(128) = 0.
+    using Triplet = Eigen::Triplet<double>;
+    std::vector<Triplet> t;
+    std::vector<double> rhs;
+    int row = 0;
+    int used = 0;
+    for (size_t k = 0; k < samples.size(); ++k) {
+      const ExposureStack& s = stacks[samples[k].stack];
+      int valid = 0;
+      for (const Exposure& e : s.exposures) {
+        const int z = e.pixels.at<cv::Vec3b>(samples[k].p)[c];
+        valid += (z > 2 && z < 253);
+      }
+      if (valid < 2) continue;
+      const int col = 256 + used++;
+      for (const Exposure& e : s.exposures) {
+        const int z = e.pixels.at<cv::Vec3b>(samples[k].p)[c];
+        if (z <= 2 || z >= 253) continue;
+        const double w = HatWeight(z);
+        t.emplace_back(row, z, w);
+        t.emplace_back(row, col, -w);
+        rhs.push_back(w * std::log(e.seconds));
+        ++row;
+      }
+    }
+    if (used < 10)
+      throw CalibError("response: fewer than 10 pixels are well exposed in two or more photos; "
+                       "use stacks with overlapping exposures");
+    for (int z = 1; z < 255; ++z) {
+      const double w = o.smoothness * HatWeight(z);
+      t.emplace_back(row, z - 1, w);
+      t.emplace_back(row, z, -2 * w);
+      t.emplace_back(row, z + 1, w);
+      rhs.push_back(0);
+      ++row;
+    }
+    t.emplace_back(row, 128, 1e3);
+    rhs.push_back(0);
+    ++row;
+    Eigen::SparseMatrix<double> A(row, 256 + used);
+    A.setFromTriplets(t.begin(), t.end());
+    const Eigen::Map<const Eigen::VectorXd> b(rhs.data(), Eigen::Index(rhs.size()));
+    const Eigen::SparseMatrix<double> AtA = A.transpose() * A;
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(AtA);
+    if (solver.info() != Eigen::Success) throw CalibError("response: the least-squares system is singular");
+    const Eigen::VectorXd g = solver.solve(A.transpose() * b);
+    for (int z = 0; z < 256; ++z) curve.lut.at<cv::Vec3f>(z)[c] = float(std::exp(g[z]));
+  }
+  // Codes without data follow the smoothness prior; enforce monotonicity at the ends.
+  for (int c = 0; c < 3; ++c)
+    for (int z = 1; z < 256; ++z) {
+      float& v = curve.lut.at<cv::Vec3f>(z)[c];
+      v = std::max(v, std::nextafter(curve.lut.at<cv::Vec3f>(z - 1)[c], 1e30f));
+    }
+  return curve;
+}
+
+void WriteResponse(const std::string& path, const ResponseCurve& curve) {
+  cv::FileStorage fs(path, cv::FileStorage::WRITE);
+  if (!fs.isOpened()) throw CalibError(path + ": cannot open for writing");
+  fs << "channels" << "RGB";
+  fs << "response" << curve.lut;
+}
+
+ResponseCurve ReadResponse(const std::string& path) {
+  if (!fs::exists(path)) throw CalibError(path + ": no such file");
+  ResponseCurve c;
+  try {
+    cv::FileStorage f(path, cv::FileStorage::READ);
+    if (!f.isOpened()) throw CalibError(path + ": cannot read");
+    f["response"] >> c.lut;
+  } catch (const cv::Exception&) {
+    throw CalibError(path + ": not an OpenCV YAML/XML file");
+  }
+  if (std::string why = c.Validate(); !why.empty()) throw CalibError(path + ": " + why);
+  return c;
+}
+
+std::string MergeOptions::Validate() const {
+  if (low_code < 0 || high_code > 255 || high_code - low_code < 10)
+    return "need 0 <= low_code < high_code - 10 <= 245";
+  if (!(low_linear >= 0 && high_linear <= 1 && high_linear > low_linear))
+    return "need 0 <= low_linear < high_linear <= 1";
+  return "";
+}
+
+std::string HdrImage::BriefReport() const {
+  const size_t n = radiance.total() * 3;
+  return fmt::format("{}x{} HDR; {} channel samples saturated in every exposure ({:.3f}%), {} "
+                     "under-exposed in every exposure ({:.3f}%)",
+                     radiance.cols, radiance.rows, saturated, 100.0 * saturated / std::max<size_t>(n, 1),
+                     underexposed, 100.0 * underexposed / std::max<size_t>(n, 1));
+}
+
+HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
+                  const ExposureStack* black, const MergeOptions& o) {
+  if (std::string why = o.Validate(); !why.empty()) throw CalibError("hdr merge: " + why);
+  if (stack.exposures.size() < 2)
+    throw CalibError(fmt::format("{}: an exposure stack needs at least 2 images", stack.dir));
+  for (const Exposure& e : stack.exposures) {
+    const Exposure& f = stack.exposures[0];
+    if (e.pixels.size() != f.pixels.size() || e.pixels.type() != f.pixels.type())
+      throw CalibError(fmt::format("{}: size or pixel type differs from {}", e.path, f.path));
+    if (e.pixels.type() != CV_8UC3 && e.pixels.type() != CV_16UC3 && e.pixels.type() != CV_32FC3)
+      throw CalibError(e.path + ": expected 3-channel 8-bit, 16-bit or float pixels");
+    if (!(e.seconds > 0) || !std::isfinite(e.seconds))
+      throw CalibError(e.path + ": exposure time must be positive");
+  }
+  const bool eight = stack.IsEightBit();
+  if (eight && !response)
+    throw CalibError(stack.dir + ": 8-bit photos need a response curve (translume calibrate "
+                     "response)");
+  if (eight) {
+    if (std::string why = response->Validate(); !why.empty()) throw CalibError("response: " + why);
+  }
+  const size_t P = stack.exposures.size();
+  // Per exposure: linearisation lookup and the matching black exposure.
+  std::vector<const Exposure*> blacks(P, nullptr);
+  if (black) {
+    for (size_t j = 0; j < P; ++j) {
+      const Exposure& e = stack.exposures[j];
+      for (const Exposure& b : black->exposures)
+        if (std::abs(b.seconds / e.seconds - 1) < 0.01) blacks[j] = &b;
+      if (!blacks[j])
+        throw CalibError(fmt::format("{}: the black stack {} has no photo at {} s", e.path,
+                                     black->dir, e.seconds));
+      if (blacks[j]->pixels.size() != e.pixels.size() ||
+          blacks[j]->pixels.depth() != e.pixels.depth())
+        throw CalibError(fmt::format("{}: size or bit depth differs from {}", blacks[j]->path, e.path));
+    }
+  }
+  const float full = stack.exposures[0].pixels.depth() == CV_16U ? 65535.f : 1.f;
+  auto code = [&](const cv::Mat& m, int y, int x, int c) -> float {
+    switch (m.depth()) {
+      case CV_8U: return m.at<cv::Vec3b>(y, x)[c];
+      case CV_16U: return m.at<cv::Vec3w>(y, x)[c] / full;
+      default: return m.at<cv::Vec3f>(y, x)[c];
+    }
+  };
+  auto linear = [&](float v, int c) -> double {
+    return eight ? response->lut.at<cv::Vec3f>(int(v))[c] : v;
+  };
+  // Exposures sorted by time: shortest first.
+  std::vector<size_t> order(P);
+  for (size_t j = 0; j < P; ++j) order[j] = j;
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return stack.exposures[a].seconds < stack.exposures[b].seconds;
+  });
+  HdrImage h;
+  const cv::Size size = stack.Size();
+  h.radiance.create(size, CV_32FC3);
+  h.flags.create(size, CV_8UC3);
+  const double lo = eight ? o.low_code : o.low_linear, hi = eight ? o.high_code : o.high_linear;
+  std::atomic<size_t> saturated{0}, under{0};
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& r) {
+    size_t sat_local = 0, under_local = 0;
+    for (int y = r.start; y < r.end; ++y)
+      for (int x = 0; x < size.width; ++x)
+        for (int c = 0; c < 3; ++c) {
+          double num = 0, den = 0;
+          for (size_t j = 0; j < P; ++j) {
+            const Exposure& e = stack.exposures[j];
+            const float v = code(e.pixels, y, x, c);
+            if (v <= lo || v >= hi) continue;
+            // Hat weight over the valid range, never quite 0 for a valid sample.
+            const double u = (v - lo) / (hi - lo);
+            const double w = std::max(1.0 - std::abs(2 * u - 1), 0.02);
+            double xl = linear(v, c);
+            if (blacks[j]) xl -= linear(code(blacks[j]->pixels, y, x, c), c);
+            num += w * xl;
+            den += w * e.seconds;
+          }
+          float value;
+          uint8_t flag = kHdrOk;
+          if (den > 0) {
+            value = float(num / den);
+          } else if (code(stack.exposures[order[0]].pixels, y, x, c) >= hi) {
+            value = std::numeric_limits<float>::infinity();
+            flag = kHdrSaturated;
+            ++sat_local;
+          } else {
+            const size_t j = order[P - 1];
+            double xl = linear(code(stack.exposures[j].pixels, y, x, c), c);
+            if (blacks[j]) xl -= linear(code(blacks[j]->pixels, y, x, c), c);
+            value = float(std::max(xl, 0.0) / stack.exposures[j].seconds);
+            flag = kHdrUnderexposed;
+            ++under_local;
+          }
+          h.radiance.at<cv::Vec3f>(y, x)[c] = value;
+          h.flags.at<cv::Vec3b>(y, x)[c] = flag;
+        }
+    saturated += sat_local;
+    under += under_local;
+  });
+  h.saturated = saturated;
+  h.underexposed = under;
+  return h;
+}
+
+}  // namespace translume::calib

@@ -1,0 +1,316 @@
+// SPDX-License-Identifier: MIT
+#include "calib/hdr.h"
+
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <OpenImageIO/imageio.h>
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/photo.hpp>
+#include <random>
+
+#include "calib/error.h"
+#include "calib/synthetic_rig.h"
+
+namespace translume::calib {
+namespace {
+
+namespace fs = std::filesystem;
+
+// A radiance image spanning 4 decades (1e-4 .. 1 per second): a log ramp along x with
+// per-channel offsets, random constant patches, and a 20x20 block far too bright for every
+// exposure (top-left).
+cv::Mat TestScene(uint64_t seed) {
+  cv::Mat E(160, 240, CV_32FC3);
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> U(0, 1);
+  for (int y = 0; y < E.rows; ++y)
+    for (int x = 0; x < E.cols; ++x)
+      for (int c = 0; c < 3; ++c) {
+        const double l = -4 + 4 * (x + 0.5) / E.cols - 0.15 * c * (y % 7) / 7.0;
+        E.at<cv::Vec3f>(y, x)[c] = float(std::pow(10.0, std::clamp(l, -4.0, 0.0)));
+      }
+  for (int k = 0; k < 40; ++k) {
+    const cv::Rect r(int(U(rng) * 220), int(U(rng) * 140), 12, 12);
+    const cv::Vec3f v(float(std::pow(10.0, -4 + 4 * U(rng))), float(std::pow(10.0, -4 + 4 * U(rng))),
+                      float(std::pow(10.0, -4 + 4 * U(rng))));
+    E(r).setTo(cv::Scalar(v[0], v[1], v[2]));
+  }
+  E(cv::Rect(0, 0, 20, 20)).setTo(cv::Scalar(50, 50, 50));
+  return E;
+}
+
+std::vector<double> NineTimes() {
+  std::vector<double> t;
+  for (int j = 0; j < 9; ++j) t.push_back(0.9 * std::pow(2.5, j));  // 1.3 stops apart
+  return t;
+}
+
+ExposureStack MakeStack(const std::vector<cv::Mat>& images, const std::vector<double>& t) {
+  ExposureStack s;
+  s.dir = "synthetic";
+  for (size_t j = 0; j < images.size(); ++j)
+    s.exposures.push_back({fmt::format("e{}.png", j), images[j], t[j]});
+  return s;
+}
+
+struct ErrorStats {
+  double median = 0, p95 = 0;
+  cv::Vec3d scale;
+};
+
+// Relative errors after one scale per channel (the median ratio) over finite, unflagged pixels
+// outside the saturated block.
+ErrorStats Errors(const cv::Mat& truth, const HdrImage& h, bool one_scale_for_all) {
+  std::vector<double> ratio[3];
+  for (int y = 0; y < truth.rows; ++y)
+    for (int x = 0; x < truth.cols; ++x)
+      for (int c = 0; c < 3; ++c) {
+        const float t = truth.at<cv::Vec3f>(y, x)[c];
+        if (t > 1.0f) continue;
+        ratio[c].push_back(h.radiance.at<cv::Vec3f>(y, x)[c] / t);
+      }
+  ErrorStats s;
+  std::vector<double> all;
+  for (int c = 0; c < 3; ++c) {
+    std::vector<double> r = ratio[c];
+    std::nth_element(r.begin(), r.begin() + long(r.size() / 2), r.end());
+    s.scale[c] = r[r.size() / 2];
+    all.insert(all.end(), ratio[c].begin(), ratio[c].end());
+  }
+  if (one_scale_for_all) {
+    std::vector<double> r = all;
+    std::nth_element(r.begin(), r.begin() + long(r.size() / 2), r.end());
+    s.scale = cv::Vec3d::all(r[r.size() / 2]);
+  }
+  std::vector<double> err;
+  for (int c = 0; c < 3; ++c)
+    for (double r : ratio[c]) err.push_back(std::abs(r / s.scale[c] - 1));
+  std::sort(err.begin(), err.end());
+  s.median = err[err.size() / 2];
+  s.p95 = err[size_t(0.95 * (err.size() - 1))];
+  return s;
+}
+
+// The recovered curve against the true inverse response of channel c (up to scale: both
+// normalised at code 128), worst relative error over codes 8..245.
+double WorstResponseError(const ResponseCurve& curve, const SyntheticResponse& f, int c) {
+  auto inv = [&](double code) {  // true linear value of an 8-bit code, by bisection
+    double lo = 0, hi = 1;
+    for (int i = 0; i < 60; ++i) ((255 * f.Apply((lo + hi) / 2, c) < code) ? lo : hi) = (lo + hi) / 2;
+    return (lo + hi) / 2;
+  };
+  const double ref = curve.lut.at<cv::Vec3f>(128)[c];
+  double worst = 0;
+  for (int z = 8; z <= 245; ++z)
+    worst = std::max(worst, std::abs(curve.lut.at<cv::Vec3f>(z)[c] / ref * inv(128) / inv(z) - 1));
+  return worst;
+}
+
+void ExpectSaturatedBlockFlagged(const HdrImage& h) {
+  for (int y = 0; y < 20; ++y)
+    for (int x = 0; x < 20; ++x)
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_EQ(h.flags.at<cv::Vec3b>(y, x)[c], kHdrSaturated);
+        EXPECT_TRUE(std::isinf(h.radiance.at<cv::Vec3f>(y, x)[c]));
+      }
+  EXPECT_EQ(h.saturated, 20u * 20u * 3u);
+}
+
+TEST(Hdr, EightBitResponseAndMergeMeetTargets) {
+  const SyntheticResponse f;
+  const auto t = NineTimes();
+  StackOptions so;
+  so.seed = 3;
+  const ExposureStack calib = MakeStack(SyntheticRig::RenderExposureStack(TestScene(11), t, f, so), t);
+  const ResponseCurve curve = CalibrateResponse({calib});
+  ASSERT_EQ(curve.Validate(), "");
+  for (int c = 0; c < 3; ++c) {
+    const double worst = WorstResponseError(curve, f, c);
+    std::printf("channel %d: worst response error over codes 8..245: %.3f%%\n", c, 100 * worst);
+    EXPECT_LT(worst, 0.04);
+  }
+  so.seed = 4;
+  const cv::Mat truth = TestScene(12);
+  const ExposureStack stack = MakeStack(SyntheticRig::RenderExposureStack(truth, t, f, so), t);
+  const HdrImage h = MergeHdr(stack, &curve);
+  std::printf("%s\n", h.BriefReport().c_str());
+  const ErrorStats e = Errors(truth, h, false);
+  std::printf("8-bit: median error %.3f%%, 95th percentile %.3f%% over 4 decades\n",
+              100 * e.median, 100 * e.p95);
+  EXPECT_LE(e.median, 0.015);
+  EXPECT_LE(e.p95, 0.04);
+  ExpectSaturatedBlockFlagged(h);
+  // OpenCV's stock MergeDebevec with the same curve, for comparison (SPEC section 8): its
+  // weights do not exclude clipped samples.
+  std::vector<cv::Mat> images;
+  for (const Exposure& x : stack.exposures) images.push_back(x.pixels);
+  cv::Mat ocv;
+  cv::createMergeDebevec()->process(images, ocv, std::vector<float>(t.begin(), t.end()), curve.lut);
+  HdrImage o;
+  o.radiance = ocv;
+  const ErrorStats eo = Errors(truth, o, false);
+  std::printf("OpenCV MergeDebevec: median error %.3f%%, 95th percentile %.3f%%\n", 100 * eo.median,
+              100 * eo.p95);
+  EXPECT_GT(eo.p95, 2 * e.p95);
+}
+
+TEST(Hdr, ResponseFromTwoStacksWithDifferentTimes) {
+  const SyntheticResponse f;
+  const auto t = NineTimes();
+  const std::vector<double> t2{0.5, 2.0, 8.0, 32.0, 128.0};
+  StackOptions so;
+  so.seed = 8;
+  const ExposureStack a = MakeStack(SyntheticRig::RenderExposureStack(TestScene(21), t, f, so), t);
+  so.seed = 9;
+  const ExposureStack b = MakeStack(SyntheticRig::RenderExposureStack(TestScene(22), t2, f, so), t2);
+  const ResponseCurve two = CalibrateResponse({a, b});
+  for (int c = 0; c < 3; ++c) EXPECT_LT(WorstResponseError(two, f, c), 0.04) << "channel " << c;
+  EXPECT_THROW(CalibrateResponse({a, ExposureStack{"one", {a.exposures[0]}}}), CalibError);
+}
+
+TEST(Hdr, SixteenBitLinearMergeWithBlackFrames) {
+  const auto t = NineTimes();
+  StackOptions so;
+  so.bits = 16;
+  so.seed = 5;
+  const cv::Mat truth = TestScene(13);
+  auto images = SyntheticRig::RenderExposureStack(truth, t, {}, so);
+  // A sensor offset of 1% of full scale, recorded by black frames at the same times.
+  so.seed = 6;
+  auto darks = SyntheticRig::RenderExposureStack(cv::Mat::zeros(truth.size(), CV_32FC3), t, {}, so);
+  for (auto* v : {&images, &darks})
+    for (cv::Mat& m : *v) m += cv::Scalar::all(655);
+  const ExposureStack stack = MakeStack(images, t), black = MakeStack(darks, t);
+  const HdrImage h = MergeHdr(stack, nullptr, &black);
+  const ErrorStats e = Errors(truth, h, true);
+  std::printf("16-bit + black: scale %.4f, median error %.3f%%, 95th percentile %.3f%%\n",
+              e.scale[0], 100 * e.median, 100 * e.p95);
+  EXPECT_NEAR(e.scale[0], 1.0, 0.01);  // linear data: absolute units (per second)
+  EXPECT_LE(e.median, 0.015);
+  EXPECT_LE(e.p95, 0.04);
+  ExpectSaturatedBlockFlagged(h);
+  // Without the black frames the dark end is biased.
+  const ErrorStats biased = Errors(truth, MergeHdr(stack, nullptr), true);
+  EXPECT_GT(biased.p95, e.p95 + 0.01);
+}
+
+class HdrFiles : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("translume_hdr_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  // Writes a 3-photo 8-bit stack as PNG with exposures.json.
+  void WriteStack(bool with_json = true) {
+    const std::vector<double> t{0.01, 0.04, 0.16};
+    auto images = SyntheticRig::RenderExposureStack(TestScene(1)(cv::Rect(0, 0, 64, 48)), t, {}, {});
+    nlohmann_json_ = "{";
+    for (size_t j = 0; j < images.size(); ++j) {
+      cv::Mat bgr;
+      cv::cvtColor(images[j], bgr, cv::COLOR_RGB2BGR);
+      cv::imwrite((dir_ / fmt::format("img{}.png", j)).string(), bgr);
+      nlohmann_json_ += fmt::format("{}\"img{}.png\": {}", j ? ", " : "", j, t[j]);
+    }
+    nlohmann_json_ += "}";
+    if (with_json) std::ofstream(dir_ / "exposures.json") << nlohmann_json_;
+  }
+  std::string P(const std::string& n) const { return (dir_ / n).string(); }
+  std::string Error(const std::function<void()>& f) {
+    try {
+      f();
+    } catch (const CalibError& e) {
+      return e.what();
+    }
+    return "(no error)";
+  }
+  fs::path dir_;
+  std::string nlohmann_json_;
+};
+
+TEST_F(HdrFiles, ReadsStackWithJsonTimes) {
+  WriteStack();
+  const ExposureStack s = ReadExposureStack(dir_.string());
+  ASSERT_EQ(s.exposures.size(), 3u);
+  EXPECT_DOUBLE_EQ(s.exposures[1].seconds, 0.04);
+  EXPECT_EQ(s.exposures[0].pixels.type(), CV_8UC3);
+  EXPECT_TRUE(s.IsEightBit());
+}
+
+TEST_F(HdrFiles, ReadsExifExposureTime) {
+  cv::Mat img(8, 8, CV_16UC3, cv::Scalar(1000, 2000, 3000));
+  for (int j = 0; j < 2; ++j) {
+    auto out = OIIO::ImageOutput::create(P(fmt::format("x{}.tif", j)));
+    OIIO::ImageSpec spec(8, 8, 3, OIIO::TypeDesc::UINT16);
+    spec.attribute("ExposureTime", j ? 0.5f : 0.125f);
+    ASSERT_TRUE(out->open(P(fmt::format("x{}.tif", j)), spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT16, img.data));
+    out->close();
+  }
+  const ExposureStack s = ReadExposureStack(dir_.string());
+  ASSERT_EQ(s.exposures.size(), 2u);
+  EXPECT_DOUBLE_EQ(s.exposures[0].seconds, 0.125);
+  EXPECT_DOUBLE_EQ(s.exposures[1].seconds, 0.5);
+  EXPECT_EQ(s.exposures[0].pixels.type(), CV_16UC3);
+  EXPECT_EQ(s.exposures[0].pixels.at<cv::Vec3w>(0, 0)[2], 3000);
+  // JPEG carries EXIF too; 8-bit stays 8-bit.
+  fs::remove_all(dir_);
+  fs::create_directories(dir_);
+  const cv::Mat img8(8, 8, CV_8UC3, cv::Scalar(10, 20, 30));
+  for (int j = 0; j < 2; ++j) {
+    const std::string path = P(fmt::format("j{}.jpg", j));
+    auto out = OIIO::ImageOutput::create(path);
+    OIIO::ImageSpec spec(8, 8, 3, OIIO::TypeDesc::UINT8);
+    spec.attribute("ExposureTime", j ? 0.02f : 0.01f);
+    ASSERT_TRUE(out->open(path, spec));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, img8.data));
+    out->close();
+  }
+  const ExposureStack j = ReadExposureStack(dir_.string());
+  EXPECT_NEAR(j.exposures[1].seconds, 0.02, 1e-5);  // EXIF rational
+  EXPECT_TRUE(j.IsEightBit());
+}
+
+TEST_F(HdrFiles, BadStacksNameTheFile) {
+  WriteStack(false);
+  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img0.png") + ": no exposure time"), 0u);
+  std::ofstream(dir_ / "exposures.json") << nlohmann_json_;
+  cv::imwrite(P("img3.png"), cv::Mat(10, 10, CV_8UC3));
+  std::ofstream(dir_ / "exposures.json") << nlohmann_json_.substr(0, nlohmann_json_.size() - 1) + ", \"img3.png\": 1}";
+  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": image is 10x10"), 0u);
+  std::ofstream(P("img3.png")) << "not a png at all";
+  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": cannot read image"), 0u);
+  for (int j : {1, 2, 3}) fs::remove(P(fmt::format("img{}.png", j)));
+  EXPECT_NE(Error([&] { ReadExposureStack(dir_.string()); }).find("at least 2 images, found 1"), std::string::npos);
+  // An 8-bit stack needs a response curve; a response file must be valid.
+  WriteStack();
+  const ExposureStack s = ReadExposureStack(dir_.string());
+  EXPECT_NE(Error([&] { MergeHdr(s, nullptr); }).find("need a response curve"), std::string::npos);
+  std::ofstream(P("bad.yml")) << "%YAML:1.0\nresponse: 3\n";
+  EXPECT_NE(Error([&] { ReadResponse(P("bad.yml")); }).find(P("bad.yml") + ": "), std::string::npos);
+}
+
+TEST_F(HdrFiles, ResponseAndExrRoundTrip) {
+  ResponseCurve c;
+  c.lut.create(256, 1, CV_32FC3);
+  for (int z = 0; z < 256; ++z) c.lut.at<cv::Vec3f>(z) = cv::Vec3f::all(float(std::pow((z + 1) / 129.0, 2.2)));
+  WriteResponse(P("r.yml"), c);
+  EXPECT_EQ(cv::norm(ReadResponse(P("r.yml")).lut, c.lut, cv::NORM_INF), 0.0);
+  cv::Mat img(5, 7, CV_32FC3, cv::Scalar(0.5, 2.0, 1e-4));
+  img.at<cv::Vec3f>(1, 1)[0] = std::numeric_limits<float>::infinity();
+  WriteExr(P("a.exr"), img);
+  const cv::Mat back = ReadLinearRgb(P("a.exr"));
+  EXPECT_FLOAT_EQ(back.at<cv::Vec3f>(4, 6)[1], 2.0f);
+  EXPECT_TRUE(std::isinf(back.at<cv::Vec3f>(1, 1)[0]));
+}
+
+}  // namespace
+}  // namespace translume::calib

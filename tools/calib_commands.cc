@@ -1,0 +1,378 @@
+// SPDX-License-Identifier: MIT
+// Subcommands over the calib library: calibrate (camera, projector, response, white) and hdr.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstring>
+#include <map>
+#include <sstream>
+#include <filesystem>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+#include "calib/camera_calib.h"
+#include "calib/error.h"
+#include "calib/hdr.h"
+#include "calib/projector_calib.h"
+#include "calib/white.h"
+#include <regex>
+#include "solver/atomic_file.h"
+#include "solver/threads.h"
+#include "tools/commands.h"
+
+namespace translume {
+namespace {
+
+namespace fs = std::filesystem;
+
+void RequireExtension(const std::string& path, std::initializer_list<const char*> exts,
+                      const char* flag) {
+  const std::string e = fs::path(path).extension().string();
+  for (const char* x : exts)
+    if (e == x) return;
+  throw calib::CalibError(fmt::format("{} {}: the output must end in {}", flag, path, *exts.begin()));
+}
+
+// Refuses an output that would replace one of the inputs or land inside an input folder.
+void RequireNotInput(const std::string& out, const std::vector<std::string>& inputs) {
+  std::error_code ec;
+  const fs::path o = fs::weakly_canonical(out, ec);
+  for (const std::string& in : inputs) {
+    const fs::path i = fs::weakly_canonical(in, ec);
+    if (o == i || (fs::is_directory(i) && o.parent_path() == i))
+      throw calib::CalibError(fmt::format("-o {}: would overwrite or add to the input {}", out, in));
+  }
+}
+
+// OpenCV's own thread pool follows --threads / TRANSLUME_THREADS too.
+void ApplyThreads() { cv::setNumThreads(NumThreads()); }
+
+// OpenCV exceptions carry multi-line messages: keep the first meaningful line.
+template <typename F>
+int OneLineErrors(F&& f) {
+  try {
+    return f();
+  } catch (const cv::Exception& e) {
+    std::string msg = e.err.empty() ? e.what() : e.err;
+    std::replace(msg.begin(), msg.end(), '\n', ' ');
+    throw std::runtime_error("OpenCV: " + msg);
+  }
+}
+
+// An 8-bit grey version of any photo.
+cv::Mat ReadGray8(const std::string& path) {
+  cv::Mat rgb = calib::ReadRgbImage(path);
+  cv::Mat gray8;
+  if (rgb.depth() == CV_16U) rgb.convertTo(rgb, CV_8U, 1.0 / 257);
+  else if (rgb.depth() == CV_32F) rgb.convertTo(rgb, CV_8U, 255);
+  cv::cvtColor(rgb, gray8, cv::COLOR_RGB2GRAY);
+  return gray8;
+}
+
+std::vector<calib::NamedImage> ReadPhotos(const std::string& dir) {
+  if (!fs::is_directory(dir)) throw calib::CalibError(dir + ": not a folder");
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    std::string ext = e.path().extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (e.is_regular_file() && (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" ||
+                                ext == ".tiff" || ext == ".bmp"))
+      files.push_back(e.path());
+  }
+  std::sort(files.begin(), files.end());
+  if (files.empty()) throw calib::CalibError(dir + ": no photos (.png, .jpg, .tif, .bmp)");
+  std::vector<calib::NamedImage> views;
+  for (const fs::path& p : files) views.push_back({p.string(), ReadGray8(p.string())});
+  return views;
+}
+
+// Plane photos: NAME_board.EXT and NAME_pattern.EXT pairs in one folder.
+std::vector<calib::PlaneView> ReadPlanes(const std::string& dir) {
+  std::vector<calib::NamedImage> photos = ReadPhotos(dir);
+  std::map<std::string, calib::PlaneView> planes;
+  for (calib::NamedImage& p : photos) {
+    const std::string stem = fs::path(p.name).stem().string();
+    const size_t us = stem.rfind('_');
+    const std::string kind = us == std::string::npos ? "" : stem.substr(us + 1);
+    if (kind != "board" && kind != "pattern")
+      throw calib::CalibError(p.name + ": plane photos must be named NAME_board.EXT or "
+                              "NAME_pattern.EXT");
+    calib::PlaneView& v = planes[stem.substr(0, us)];
+    v.name = (fs::path(dir) / stem.substr(0, us)).string();
+    (kind == "board" ? v.board_photo : v.pattern_photo) = p.image;
+  }
+  std::vector<calib::PlaneView> out;
+  for (auto& [name, v] : planes) {
+    if (v.board_photo.empty() || v.pattern_photo.empty())
+      throw calib::CalibError(fmt::format("{}: plane has no {} photo", v.name,
+                                          v.board_photo.empty() ? "_board" : "_pattern"));
+    out.push_back(v);
+  }
+  return out;
+}
+
+// "COLSxROWS:SQUARE_PX" centred on a projector of `size`.
+calib::ProjectorChessboard ParsePattern(const std::string& text, const std::string& size) {
+  std::smatch m, n;
+  static const std::regex pat(R"((\d+)x(\d+):(\d+))"), wh(R"((\d+)x(\d+))");
+  if (!std::regex_match(text, m, pat))
+    throw calib::CalibError(fmt::format("--pattern {}: expected COLSxROWS:SQUARE_PX", text));
+  if (!std::regex_match(size, n, wh))
+    throw calib::CalibError(fmt::format("--projector-size {}: expected WIDTHxHEIGHT", size));
+  const calib::ProjectorChessboard b = calib::ProjectorChessboard::Centered(
+      {std::stoi(n[1]), std::stoi(n[2])}, std::stoi(m[1]), std::stoi(m[2]), std::stoi(m[3]));
+  if (std::string why = b.Validate(); !why.empty())
+    throw calib::CalibError(fmt::format("--pattern {}: {}", text, why));
+  return b;
+}
+
+int RunCalibrateCamera(int argc, char** argv) {
+  CLI::App app{"Camera intrinsics (Zhang) from photos of a printed board in a folder.\n"
+               "Boards: chessboard:COLSxROWS:SQUARE_MM (inner corners) or\n"
+               "charuco:SXxSY:SQUARE_MM:MARKER_MM[:DICT] (squares; DICT 4X4_50, 4X4_100,\n"
+               "5X5_100 (default), 6X6_250). Writes OpenCV FileStorage YAML.",
+               "translume calibrate camera"};
+  std::string dir, board_text, out;
+  calib::CameraCalibOptions o;
+  app.add_option("IMAGES_DIR", dir, "Folder of board photos")->required();
+  app.add_option("--board", board_text, "Board specification")->required();
+  app.add_option("--min-views", o.min_views, "Fewest usable views")->capture_default_str();
+  app.add_option("--outlier-factor", o.outlier_factor,
+                 "Drop views with RMS above this multiple of the median")->capture_default_str();
+  app.add_option("-o,--output", out, "Output calibration (.yml)")->required();
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  ApplyThreads();
+  RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
+  RequireNotInput(out, {dir});
+  const calib::BoardSpec board = calib::BoardSpec::Parse(board_text);
+  const calib::CameraCalibration c = calib::CalibrateCamera(board, ReadPhotos(dir), o);
+  WriteAtomically(out, [&](const std::string& tmp) {
+    calib::WriteCameraCalibration(tmp, c, board.ToString());
+  });
+  std::printf("wrote %s: %s\n", out.c_str(), c.BriefReport().c_str());
+  for (const std::string& d : c.dropped) std::printf("  dropped %s\n", d.c_str());
+  return 0;
+}
+
+int RunCalibrateProjector(int argc, char** argv) {
+  CLI::App app{"Projector intrinsics and camera-projector pose from planes (docs/capture.md):\n"
+               "PLANES_DIR holds NAME_board.EXT (printed board on the plane) and\n"
+               "NAME_pattern.EXT (projected chessboard on the same plane) per plane pose.\n"
+               "--write-pattern writes the chessboard image to show on the projector.",
+               "translume calibrate projector"};
+  std::string dir, camera_path, board_text, pattern_text = "11x7:64", size = "1024x768", out,
+      write_pattern;
+  calib::ProjectorCalibOptions o;
+  app.add_option("PLANES_DIR", dir, "Folder of plane photos");
+  app.add_option("--camera", camera_path, "Camera calibration (.yml, translume calibrate camera)");
+  app.add_option("--board", board_text, "Printed board specification");
+  app.add_option("--pattern", pattern_text, "Projected chessboard COLSxROWS:SQUARE_PX (inner "
+                 "corners), centred")->capture_default_str();
+  app.add_option("--projector-size", size, "Projector resolution WxH")->capture_default_str();
+  app.add_option("--min-planes", o.min_planes, "Fewest usable planes")->capture_default_str();
+  app.add_option("--write-pattern", write_pattern, "Write the pattern image (.png) and exit");
+  app.add_option("-o,--output", out, "Output calibration (.yml)");
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  ApplyThreads();
+  const calib::ProjectorChessboard pattern = ParsePattern(pattern_text, size);
+  if (!write_pattern.empty()) {
+    RequireExtension(write_pattern, {".png"}, "--write-pattern");
+    WriteAtomically(write_pattern, [&](const std::string& tmp) {
+      calib::WriteImage8(tmp, pattern.MakeImage());
+    });
+    std::printf("wrote %s: %dx%d projector chessboard, %dx%d inner corners of %d px\n",
+                write_pattern.c_str(), pattern.projector_size.width,
+                pattern.projector_size.height, pattern.cols, pattern.rows, pattern.square_px);
+    return 0;
+  }
+  if (dir.empty() || camera_path.empty() || board_text.empty() || out.empty())
+    throw CLI::RequiredError("PLANES_DIR, --camera, --board and -o");
+  RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
+  RequireNotInput(out, {dir, camera_path});
+  const calib::BoardSpec board = calib::BoardSpec::Parse(board_text);
+  const calib::CameraCalibration camera = calib::ReadCameraCalibration(camera_path);
+  const calib::ProjectorCalibration p =
+      calib::CalibrateProjector(camera, board, pattern, ReadPlanes(dir), o);
+  WriteAtomically(out, [&](const std::string& tmp) {
+    calib::WriteProjectorCalibration(tmp, p, camera, pattern_text + " on " + size);
+  });
+  std::printf("wrote %s: %s\n", out.c_str(), p.BriefReport().c_str());
+  for (const std::string& d : p.dropped) std::printf("  dropped %s\n", d.c_str());
+  return 0;
+}
+
+int RunCalibrateResponse(int argc, char** argv) {
+  CLI::App app{"Camera response curve (Debevec & Malik 1997) from 8-bit exposure stacks, one\n"
+               "folder each (exposure times from EXIF or exposures.json).",
+               "translume calibrate response"};
+  std::vector<std::string> dirs;
+  std::string out;
+  calib::ResponseOptions o;
+  app.add_option("STACKS", dirs, "Exposure stack folders")->required();
+  app.add_option("--samples", o.samples_per_stack, "Pixels sampled per stack")->capture_default_str();
+  app.add_option("--smoothness", o.smoothness, "Smoothness weight lambda")->capture_default_str();
+  app.add_option("-o,--output", out, "Output response curve (.yml)")->required();
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  ApplyThreads();
+  RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
+  RequireNotInput(out, dirs);
+  std::vector<calib::ExposureStack> stacks;
+  for (const std::string& d : dirs) stacks.push_back(calib::ReadExposureStack(d));
+  const calib::ResponseCurve curve = calib::CalibrateResponse(stacks, o);
+  WriteAtomically(out, [&](const std::string& tmp) { calib::WriteResponse(tmp, curve); });
+  std::printf("wrote %s: response from %zu stacks; linear value of code 32 / 128 / 224: "
+              "R %.4f %.4f, G %.4f %.4f, B %.4f %.4f (code 128 = 1)\n",
+              out.c_str(), stacks.size(), curve.lut.at<cv::Vec3f>(32)[0], curve.lut.at<cv::Vec3f>(224)[0],
+              curve.lut.at<cv::Vec3f>(32)[1], curve.lut.at<cv::Vec3f>(224)[1],
+              curve.lut.at<cv::Vec3f>(32)[2], curve.lut.at<cv::Vec3f>(224)[2]);
+  return 0;
+}
+
+// A linear HDR image: an .exr file, or an exposure stack folder merged here.
+cv::Mat ReadHdrOrStack(const std::string& path, const std::string& response_path) {
+  if (!fs::is_directory(path)) return calib::ReadLinearRgb(path);
+  calib::ResponseCurve curve;
+  if (!response_path.empty()) curve = calib::ReadResponse(response_path);
+  return calib::MergeHdr(calib::ReadExposureStack(path), response_path.empty() ? nullptr : &curve)
+      .radiance;
+}
+
+std::vector<double> ParseNumbers(const std::string& text, const char* flag, size_t n1, size_t n2) {
+  std::vector<double> v;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    try {
+      size_t used = 0;
+      v.push_back(std::stod(item, &used));
+      if (used != item.size()) throw std::invalid_argument(item);
+    } catch (const std::exception&) {
+      throw calib::CalibError(fmt::format("{} {}: '{}' is not a number", flag, text, item));
+    }
+  }
+  if (v.size() != n1 && v.size() != n2)
+    throw calib::CalibError(fmt::format("{} {}: expected {} comma-separated numbers", flag, text,
+                                        n1 == n2 ? std::to_string(n1) : fmt::format("{} or {}", n1, n2)));
+  return v;
+}
+
+int RunCalibrateWhite(int argc, char** argv) {
+  CLI::App app{"White balance gains (camera HDR -> radiance in the projector's units of incoming\n"
+               "light) from the HDR of a reference target under projector full white, minus the\n"
+               "HDR under projector black. WHITE and --black are .exr files or exposure stack\n"
+               "folders. Target: --chart colorchecker, or --patch X1,Y1,..,X4,Y4 --albedo A[,A,A].",
+               "translume calibrate white"};
+  std::string white_path, black_path, response_path, chart, patch, albedo_text, out;
+  app.add_option("WHITE", white_path, "HDR (.exr) or stack folder under projector white")->required();
+  app.add_option("--black", black_path, "HDR (.exr) or stack folder under projector black");
+  app.add_option("--response", response_path, "Response curve for 8-bit stacks");
+  app.add_option("--chart", chart, "Reference chart: colorchecker");
+  app.add_option("--patch", patch, "Image corners of a white patch X1,Y1,X2,Y2,X3,Y3,X4,Y4");
+  app.add_option("--albedo", albedo_text, "Albedo of the patch: A or R,G,B");
+  app.add_option("-o,--output", out, "Output white balance (.yml)")->required();
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  ApplyThreads();
+  RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
+  std::vector<std::string> inputs{white_path};
+  if (!black_path.empty()) inputs.push_back(black_path);
+  RequireNotInput(out, inputs);
+  if (chart.empty() == patch.empty())
+    throw calib::CalibError("give either --chart colorchecker or --patch (with --albedo)");
+  if (!chart.empty() && chart != "colorchecker")
+    throw calib::CalibError(fmt::format("--chart {}: only 'colorchecker' is known", chart));
+  std::vector<cv::Point2f> corners;
+  cv::Vec3d albedo;
+  if (!patch.empty()) {
+    if (albedo_text.empty()) throw calib::CalibError("--patch needs --albedo");
+    const std::vector<double> p = ParseNumbers(patch, "--patch", 8, 8);
+    for (int k = 0; k < 4; ++k) corners.emplace_back(float(p[2 * k]), float(p[2 * k + 1]));
+    const std::vector<double> a = ParseNumbers(albedo_text, "--albedo", 1, 3);
+    albedo = a.size() == 1 ? cv::Vec3d::all(a[0]) : cv::Vec3d(a[0], a[1], a[2]);
+  }
+  const cv::Mat white = ReadHdrOrStack(white_path, response_path);
+  const cv::Mat black = black_path.empty() ? cv::Mat() : ReadHdrOrStack(black_path, response_path);
+  const calib::WhiteBalance w = patch.empty() ? calib::WhiteFromColorChecker(white, black)
+                                              : calib::WhiteFromPatch(white, black, corners, albedo);
+  cv::Vec3d black_mean(0, 0, 0);
+  if (!black.empty()) {
+    const cv::Scalar m = cv::mean(black);
+    black_mean = cv::Vec3d(m[0], m[1], m[2]);
+  }
+  const std::string black_image =
+      !black_path.empty() && !fs::is_directory(black_path) ? fs::absolute(black_path).string() : "";
+  WriteAtomically(out, [&](const std::string& tmp) {
+    calib::WriteWhiteBalance(tmp, w, black_mean, black_image);
+  });
+  std::printf("wrote %s: %s\n", out.c_str(), w.BriefReport().c_str());
+  return 0;
+}
+
+}  // namespace
+
+int RunCalibrate(int argc, char** argv) {
+  static const char* kUsage =
+      "usage: translume calibrate SUBCOMMAND [options]   (translume calibrate SUBCOMMAND --help)\n\n"
+      "subcommands:\n"
+      "  camera      Camera intrinsics from photos of a printed board\n"
+      "  projector   Projector intrinsics and camera-projector pose from board planes\n"
+      "  response    Camera response curve from 8-bit exposure stacks\n"
+      "  white       White balance gains and black level under projector white\n"
+      "Photo protocol: docs/capture.md.\n";
+  if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h")) {
+    std::fputs(kUsage, argc < 2 ? stderr : stdout);
+    return argc < 2 ? 2 : 0;
+  }
+  const std::string sub = argv[1];
+  return OneLineErrors([&] {
+    if (sub == "camera") return RunCalibrateCamera(argc - 1, argv + 1);
+    if (sub == "projector") return RunCalibrateProjector(argc - 1, argv + 1);
+    if (sub == "response") return RunCalibrateResponse(argc - 1, argv + 1);
+    if (sub == "white") return RunCalibrateWhite(argc - 1, argv + 1);
+    throw calib::CalibError(fmt::format("unknown subcommand '{}' (camera, projector, response, "
+                                        "white)", sub));
+  });
+}
+
+int RunHdr(int argc, char** argv) {
+  CLI::App app{"Merge an exposure stack (a folder of photos; times from EXIF or exposures.json)\n"
+               "into a linear HDR radiance image (OpenEXR, per second). 8-bit photos need\n"
+               "--response; 16-bit, float and camera RAW photos are linear. Channels saturated\n"
+               "in every exposure are written as +inf and counted.",
+               "translume hdr"};
+  std::string dir, response_path, black_dir, out;
+  calib::MergeOptions o;
+  app.add_option("STACK_DIR", dir, "Exposure stack folder")->required();
+  app.add_option("--response", response_path, "Response curve (.yml) for 8-bit photos");
+  app.add_option("--black", black_dir, "Black frame stack (same exposure times) to subtract");
+  app.add_option("--low", o.low_code, "8-bit: highest under-exposed code")->capture_default_str();
+  app.add_option("--high", o.high_code, "8-bit: lowest saturated code")->capture_default_str();
+  app.add_option("-o,--output", out, "Output HDR image (.exr)")->required();
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  ApplyThreads();
+  return OneLineErrors([&] {
+    RequireExtension(out, {".exr"}, "-o");
+    std::vector<std::string> inputs{dir};
+    if (!black_dir.empty()) inputs.push_back(black_dir);
+    RequireNotInput(out, inputs);
+    calib::ResponseCurve curve;
+    if (!response_path.empty()) curve = calib::ReadResponse(response_path);
+    const calib::ExposureStack stack = calib::ReadExposureStack(dir);
+    calib::ExposureStack black;
+    if (!black_dir.empty()) black = calib::ReadExposureStack(black_dir);
+    const calib::HdrImage h = calib::MergeHdr(stack, response_path.empty() ? nullptr : &curve,
+                                              black_dir.empty() ? nullptr : &black, o);
+    WriteAtomically(out, [&](const std::string& tmp) { calib::WriteExr(tmp, h.radiance); });
+    std::printf("wrote %s: %zu exposures, %s\n", out.c_str(), stack.exposures.size(),
+                h.BriefReport().c_str());
+    return 0;
+  });
+}
+
+}  // namespace translume
