@@ -45,11 +45,12 @@ CameraCalibration CalibrateCamera(const BoardSpec& board, const std::vector<Name
   std::vector<std::vector<cv::Point3f>> obj;
   std::vector<std::vector<cv::Point2f>> img;
   std::vector<std::string> names;
-  for (const NamedImage& v : views) {
+  for (const NamedImage& v : views)  // before any (slow) detection
     if (v.image.size() != c.image_size)
       throw CalibError(fmt::format("{}: image is {}x{} but {} is {}x{}; all photos must have the "
                                    "same size", v.name, v.image.cols, v.image.rows,
                                    views[0].name, c.image_size.width, c.image_size.height));
+  for (const NamedImage& v : views) {
     const BoardDetection d = DetectBoard(board, v.image);
     if (!d.found) {
       c.dropped.push_back(v.name + ": board not found");

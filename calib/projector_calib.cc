@@ -55,12 +55,13 @@ ProjectorCalibration CalibrateProjector(const CameraCalibration& camera, const B
   std::vector<std::vector<cv::Point2f>> cam, proj;
   std::vector<std::string> names;
   const std::vector<cv::Point2f> proj_corners = pattern.Corners();
-  for (const PlaneView& v : planes) {
+  for (const PlaneView& v : planes)  // before any (slow) detection
     for (const cv::Mat* m : {&v.board_photo, &v.pattern_photo})
       if (m->size() != camera.image_size)
         throw CalibError(fmt::format("{}: photo is {}x{} but the camera calibration is {}x{}",
                                      v.name, m->cols, m->rows, camera.image_size.width,
                                      camera.image_size.height));
+  for (const PlaneView& v : planes) {
     const BoardDetection d = DetectBoard(board, v.board_photo);
     if (!d.found) {
       pc.dropped.push_back(v.name + ": printed board not found");

@@ -85,10 +85,10 @@ TEST(ProjectorCalib, DropsPlanesWithoutPatternAndRejectsTooFew) {
   EXPECT_EQ(p.dropped[0], "plane2: projected pattern not found");
   EXPECT_EQ(p.dropped[1], "blank: printed board not found");
   try {
-    CalibrateProjector(s.camera, s.board, s.pattern, planes);
+    CalibrateProjector(s.camera, s.board, s.pattern, {planes[0], planes[1], planes[2]});
     FAIL();
   } catch (const CalibError& e) {
-    EXPECT_NE(std::string(e.what()).find("only 3 usable planes of 5 (need 4)"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("only 2 usable planes of 3 (need 4)"), std::string::npos) << e.what();
   }
   planes[0].board_photo = cv::Mat(10, 10, CV_8UC1);
   EXPECT_THROW(CalibrateProjector(s.camera, s.board, s.pattern, planes), CalibError);

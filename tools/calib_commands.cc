@@ -5,11 +5,12 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
-#include <map>
-#include <sstream>
 #include <filesystem>
+#include <map>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <regex>
+#include <sstream>
 #include <stdexcept>
 
 #include "calib/camera_calib.h"
@@ -17,7 +18,6 @@
 #include "calib/hdr.h"
 #include "calib/projector_calib.h"
 #include "calib/white.h"
-#include <regex>
 #include "solver/atomic_file.h"
 #include "solver/threads.h"
 #include "tools/commands.h"
