@@ -72,7 +72,17 @@ MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
   if (std::string err = options_.Validate(); !err.empty())
     throw InputError("multigrid options: " + err);
   TL_CHECK(shape.nx >= 2 && shape.ny >= 2 && shape.nz >= 2 && h > 0);
-  for (MultigridLevel& geo : BuildMultigridHierarchy(shape, h, options_.coarsest_nodes)) {
+  const bool mixed = std::is_same_v<T, double> && options_.mixed_precision;
+  if (mixed) {
+    MultigridOptions fo = options_;
+    fo.mixed_precision = false;
+    float_preconditioner_ = std::make_unique<MultigridSolver<float>>(shape, h, fo);
+    rf_.resize(shape.size());
+    zf_.resize(shape.size());
+  }
+  // Mixed precision: only the finest level in T (coarsest_nodes = its size stops coarsening).
+  for (MultigridLevel& geo :
+       BuildMultigridHierarchy(shape, h, mixed ? shape.size() : options_.coarsest_nodes)) {
     auto level = std::make_unique<Level>();
     level->geo = std::move(geo);
     levels_.push_back(std::move(level));
@@ -125,6 +135,7 @@ void MultigridSolver<T>::SetCoefficients(const T* kappa, const T* mu, double C) 
       }
     }
     AssembleStencil(L.grid, L.kappa.data(), L.mu.data(), C, &L.A);
+    if (float_preconditioner_) break;  // the float hierarchy smooths and solves
     const GridShape& s = L.grid.shape;
     const int64_t nxy = s.nx * s.ny;
     if (l + 1 < levels_.size()) {
@@ -162,7 +173,26 @@ void MultigridSolver<T>::SetCoefficients(const T* kappa, const T* mu, double C) 
       TL_CHECK_MSG(L.direct->info() == Eigen::Success, "coarsest-level factorisation failed");
     }
   }
+  if (float_preconditioner_) {
+    const int64_t n = levels_[0]->grid.shape.size();
+    std::vector<float> kf(kappa, kappa + n), mf(mu, mu + n);
+    float_preconditioner_->SetCoefficients(kf.data(), mf.data(), C);
+  }
   has_coefficients_ = true;
+}
+
+template <typename T>
+void MultigridSolver<T>::Precondition(const T* r, T* z) {
+  if (!float_preconditioner_) {
+    VCycle(0, r, z);
+    return;
+  }
+  const int64_t n = int64_t(rf_.size());
+#pragma omp parallel for schedule(static)
+  for (int64_t i = 0; i < n; ++i) rf_[i] = float(r[i]);
+  float_preconditioner_->Precondition(rf_.data(), zf_.data());
+#pragma omp parallel for schedule(static)
+  for (int64_t i = 0; i < n; ++i) z[i] = T(zf_[i]);
 }
 
 template <typename T>
@@ -287,7 +317,7 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
   double rz = 0;
   while (sum.iterations < options_.max_iterations) {
     if (restart) {
-      VCycle(0, r, z);
+      Precondition(r, z);
       std::copy(z, z + n, p);
       rz = Dot(r, z, n);
       restart = false;
@@ -313,7 +343,7 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
       restart = true;
       continue;
     }
-    VCycle(0, r, z);
+    Precondition(r, z);
     const double rz_new = Dot(r, z, n);
     const double beta = rz_new / rz;
     rz = rz_new;
@@ -335,10 +365,13 @@ template <typename T>
 const TensorGrid& MultigridSolver<T>::grid() const { return levels_[0]->grid; }
 
 template <typename T>
-int MultigridSolver<T>::num_levels() const { return int(levels_.size()); }
+int MultigridSolver<T>::num_levels() const {
+  return float_preconditioner_ ? float_preconditioner_->num_levels() : int(levels_.size());
+}
 
 template <typename T>
 std::vector<GridShape> MultigridSolver<T>::level_shapes() const {
+  if (float_preconditioner_) return float_preconditioner_->level_shapes();
   std::vector<GridShape> out;
   for (const auto& L : levels_) out.push_back(L->grid.shape);
   return out;

@@ -21,6 +21,9 @@ struct MultigridOptions {
   int64_t coarsest_nodes = 1500;
   // 1: V-cycle, 2: W-cycle.
   int cycle_index = 1;
+  // Double solvers only: precondition with a float V-cycle (half the memory traffic of the
+  // hierarchy; CG, the residuals and the iterate stay in double, so the accuracy is unchanged).
+  bool mixed_precision = true;
 
   // Empty if valid, else the broken constraint.
   std::string Validate() const;
@@ -60,6 +63,8 @@ class MultigridSolver {
   SolveSummary Solve(const T* b, T* x);
   // y = A x on the finest level.
   void Apply(const T* x, T* y) const;
+  // z = M r: one V-cycle (the preconditioner), from z = 0.
+  void Precondition(const T* r, T* z);
 
   const Stencil<T>& stencil() const;
   const TensorGrid& grid() const;
@@ -78,6 +83,10 @@ class MultigridSolver {
 
   MultigridOptions options_;
   std::vector<std::unique_ptr<Level>> levels_;
+  // With mixed_precision (T = double): the float hierarchy that preconditions; levels_ then
+  // holds only the finest level's double operator.
+  std::unique_ptr<MultigridSolver<float>> float_preconditioner_;
+  std::vector<float> rf_, zf_;
   std::vector<T> r_, z_, p_, q_;
   bool has_coefficients_ = false;
 };

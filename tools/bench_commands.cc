@@ -25,6 +25,7 @@ int RunBench(int argc, char** argv) {
   app.require_subcommand(1);
   auto* fwd = app.add_subcommand("forward", "Forward solve to 1e-6: multigrid-PCG vs Eigen CG "
                                             "(diagonal, IC) and the paper's Jacobi relaxation");
+  fwd->fallthrough();  // --threads after the subcommand too
   ForwardBenchOptions o;
   std::vector<std::string> grids;
   bool json = false, no_peers = false;
