@@ -52,16 +52,15 @@ class CpuChannelObjective : public ChannelObjective {
       std::fill(gk, gk + n, 0.0);
       std::fill(gm, gm + n, 0.0);
     }
-    const double to_L = 1.0 / (2 * std::numbers::pi);
     worst_ = 0;
     double J = 0;
     for (size_t m = 0; m < b_.size(); ++m) {
       Track(solver_.Solve(b_[m].data(), phi_[m].data()));
       double mis = 0;
       for (int64_t f = 0; f < nf; ++f) {
-        const double r = (phi_[m][f] - q_front_[m][f]) * to_L - L_[m][f];
+        const double r = Misfit(m, f);
         mis += w_[m][f] * r * r;
-        rhs_[f] = 2 * w_[m][f] * r * to_L / denom_;  // dJ/dphi on the front face (k = 0)
+        rhs_[f] = 2 * w_[m][f] * r * kToL / denom_;  // dJ/dphi on the front face (k = 0)
       }
       misfit_[m] = mis;
       J += mis;
@@ -72,12 +71,24 @@ class CpuChannelObjective : public ChannelObjective {
     return J / denom_;
   }
 
+  void Residuals(std::vector<double>* out) const override {
+    const int64_t nf = shape_.face_size();
+    out->resize(b_.size() * nf);
+    for (size_t m = 0; m < b_.size(); ++m)
+      for (int64_t f = 0; f < nf; ++f) (*out)[m * nf + f] = std::sqrt(w_[m][f] / denom_) * Misfit(m, f);
+  }
+
   int64_t solves() const override { return solves_; }
   const std::vector<double>& condition_misfit() const override { return misfit_; }
   const std::vector<double>& condition_norm() const override { return norm_; }
   double worst_residual() const override { return worst_; }
 
  private:
+  static constexpr double kToL = 1.0 / (2 * std::numbers::pi);
+  // L^R - L at front-face node f of condition m, from the current phi (paper Eq. (3)).
+  double Misfit(size_t m, int64_t f) const {
+    return (phi_[m][f] - q_front_[m][f]) * kToL - L_[m][f];
+  }
   void Track(const SolveSummary& s) {
     ++solves_;
     worst_ = std::max(worst_, s.converged ? s.final_residual : std::max(s.final_residual, 1.0));

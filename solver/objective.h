@@ -35,6 +35,9 @@ class ChannelObjective {
   // From the last Evaluate: per condition sum_p w (L^R - L)^2 and sum_p w L^2.
   virtual const std::vector<double>& condition_misfit() const = 0;
   virtual const std::vector<double>& condition_norm() const = 0;
+  // From the last Evaluate: the weighted residuals r = sqrt(w / D) (L^R - L), all conditions'
+  // front faces concatenated (M nx ny values), so that J = |r|^2.
+  virtual void Residuals(std::vector<double>* r) const = 0;
   // The worst relative residual of the last Evaluate's solves, and whether all converged.
   virtual double worst_residual() const = 0;
 };

@@ -13,6 +13,9 @@ int RunForward(int argc, char** argv);
 int RunInfo(int argc, char** argv);
 int RunBench(int argc, char** argv);
 int RunDemo(int argc, char** argv);
+int RunSimulate(int argc, char** argv);
+int RunSolve(int argc, char** argv);
+int RunEvaluate(int argc, char** argv);
 
 // Options every subcommand takes (--threads).
 void AddCommonOptions(CLI::App& app);

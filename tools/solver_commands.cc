@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "solver/bench_forward.h"
+#include "solver/bench_recovery.h"
 #include "solver/forward.h"
 #include "solver/image_io.h"
 #include "solver/light.h"
@@ -178,8 +179,32 @@ int RunBench(int argc, char** argv) {
       ->capture_default_str();
   fwd->add_flag("--no-peers", no_peers, "Skip the Eigen and Jacobi peers");
   fwd->add_flag("--json", json, "Print JSON instead of a table");
+  auto* rec = app.add_subcommand("recovery", "Synthetic recoveries (4 presets x back/front x 0/1 % "
+                                             "noise, 16 conditions) and the paper's optimiser vs lbfgs");
+  RecoveryBenchOptions ro;
+  bool full = false;
+  std::string rec_grid;
+  rec->add_flag("--json", json, "Print JSON instead of a table");
+  rec->add_flag("--full", full, "64x48x16 grids (slow) instead of the default 24x18x6");
+  rec->add_option("--grid", rec_grid, "Recovery grid NXxNYxNZ (overrides --full)");
+  rec->add_option("--presets", ro.presets, "Presets")->delimiter(',');
+  rec->add_option("--max-iterations", ro.recovery.max_iterations, "Iterations per recovery")
+      ->capture_default_str();
+  rec->add_option("--lambda", ro.recovery.lambda, "lambda for noise-free data")->capture_default_str();
+  rec->add_option("--noisy-lambda", ro.noisy_lambda, "lambda for 1 % noise")->capture_default_str();
+  rec->add_option("--paper-iterations", ro.paper_iterations, "Iterations of the paper optimiser")
+      ->capture_default_str();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
+  if (rec->parsed()) {
+    if (full) ro.shape = {64, 48, 16};
+    if (!rec_grid.empty()) ro.shape = ParseGridShape(rec_grid, "--grid");
+    if (std::string err = ro.recovery.Validate(); !err.empty()) throw InputError("bench recovery: " + err);
+    std::fprintf(stderr, "bench recovery: grid %s, %d threads\n", ro.shape.ToString().c_str(), NumThreads());
+    const RecoveryBenchResult r = RunRecoveryBench(ro, PrintProgress);
+    std::printf("%s\n", (json ? RecoveryBenchJson(r) : RecoveryBenchTable(r)).c_str());
+    return 0;
+  }
   for (const auto& g : grids) o.grids.push_back(ParseGridShape(g, "--grids"));
   o.precision = ParsePrecision(precision);
   o.peers = !no_peers;
