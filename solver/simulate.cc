@@ -5,8 +5,13 @@
 #include <cmath>
 #include <fmt/format.h>
 #include <random>
+#include <thread>
+#include <atomic>
+#include <exception>
+#include <omp.h>
 
 #include "solver/status.h"
+#include "solver/threads.h"
 
 namespace translume {
 
@@ -58,13 +63,31 @@ std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
   ForwardOptions fo;
   fo.setup = setup;
   fo.multigrid = multigrid;
-  std::vector<FacePattern> out;
-  for (const FacePattern& q : lights) {
-    ForwardResult r = SolveForward(material, q, fo);
-    for (const auto& sum : r.summaries)
-      if (!sum.converged) throw InputError("forward solve did not converge: " + sum.BriefReport());
-    out.push_back(std::move(r.radiance));
-  }
+  std::vector<FacePattern> out(lights.size());
+  // Conditions in parallel, one OpenMP thread each: independent solves scale better than
+  // threads inside one solve, and small grids do not suffer from OpenMP barriers.
+  std::atomic<size_t> next{0};
+  std::vector<std::exception_ptr> errors(lights.size());
+  auto worker = [&] {
+    omp_set_num_threads(1);
+    for (size_t l = next++; l < lights.size(); l = next++) {
+      try {
+        ForwardResult r = SolveForward(material, lights[l], fo);
+        for (const auto& sum : r.summaries)
+          if (!sum.converged) throw InputError("forward solve did not converge: " + sum.BriefReport());
+        out[l] = std::move(r.radiance);
+      } catch (...) {
+        errors[l] = std::current_exception();
+      }
+    }
+  };
+  const int workers = std::max(1, std::min<int>(NumThreads(), int(lights.size())));
+  std::vector<std::thread> pool;
+  for (int t = 1; t < workers; ++t) pool.emplace_back(worker);
+  worker();
+  for (auto& t : pool) t.join();
+  for (auto& e : errors)
+    if (e) std::rethrow_exception(e);
   return out;
 }
 
