@@ -18,7 +18,9 @@ class CpuChannelObjective : public ChannelObjective {
       : shape_(d.shape), C_(d.C), solver_(d.shape, d.spacing_mm, mg) {
     const int64_t n = shape_.size(), nf = shape_.face_size(), M = int64_t(d.conditions.size());
     const int64_t k_lit = LitFaceK(d.setup, shape_);
-    b_.resize(M);
+    k_lit_ = k_lit;
+    q_.resize(M);
+    b_.assign(n, 0.0);
     phi_.assign(M, std::vector<double>(n, 0.0));
     psi_.assign(M, std::vector<double>(n, 0.0));
     L_.resize(M);
@@ -30,8 +32,7 @@ class CpuChannelObjective : public ChannelObjective {
     denom_ = 0;
     for (int64_t m = 0; m < M; ++m) {
       const DatasetCondition& c = d.conditions[m];
-      b_[m].resize(n);
-      LitFaceSource(solver_.grid(), k_lit, C_, c.q[channel].data(), b_[m].data());
+      q_[m] = c.q[channel];
       L_[m].assign(c.L[channel].begin(), c.L[channel].end());
       w_[m].assign(c.mask.begin(), c.mask.end());
       q_front_[m].assign(nf, 0.0);
@@ -54,8 +55,10 @@ class CpuChannelObjective : public ChannelObjective {
     }
     worst_ = 0;
     double J = 0;
-    for (size_t m = 0; m < b_.size(); ++m) {
-      Track(solver_.Solve(b_[m].data(), phi_[m].data()));
+    for (size_t m = 0; m < q_.size(); ++m) {
+      // b is O(face) to rebuild; keeping one per condition would cost M volumes.
+      LitFaceSource(solver_.grid(), k_lit_, C_, q_[m].data(), b_.data());
+      Track(solver_.Solve(b_.data(), phi_[m].data()));
       double mis = 0;
       for (int64_t f = 0; f < nf; ++f) {
         const double r = Misfit(m, f);
@@ -73,8 +76,8 @@ class CpuChannelObjective : public ChannelObjective {
 
   void Residuals(std::vector<double>* out) const override {
     const int64_t nf = shape_.face_size();
-    out->resize(b_.size() * nf);
-    for (size_t m = 0; m < b_.size(); ++m)
+    out->resize(q_.size() * nf);
+    for (size_t m = 0; m < q_.size(); ++m)
       for (int64_t f = 0; f < nf; ++f) (*out)[m * nf + f] = std::sqrt(w_[m][f] / denom_) * Misfit(m, f);
   }
 
@@ -97,8 +100,10 @@ class CpuChannelObjective : public ChannelObjective {
   GridShape shape_;
   double C_;
   MultigridSolver<double> solver_;
-  std::vector<std::vector<double>> b_, phi_, psi_, L_, w_, q_front_;
-  std::vector<double> rhs_, misfit_, norm_;
+  int64_t k_lit_ = 0;
+  std::vector<std::vector<float>> q_;                       // lit-face light per condition
+  std::vector<std::vector<double>> phi_, psi_, L_, w_, q_front_;  // kept between evaluations
+  std::vector<double> b_, rhs_, misfit_, norm_;
   double denom_ = 0, worst_ = 0;
   int64_t solves_ = 0;
 };

@@ -19,6 +19,7 @@
 #include "solver/image_io.h"
 #include "solver/light.h"
 #include "solver/material_io.h"
+#include "solver/memory.h"
 #include "solver/recover.h"
 #include "solver/simulate.h"
 #include "solver/status.h"
@@ -129,6 +130,9 @@ int RunSolve(int argc, char** argv) {
   o.backend = ParseBackend(backend);
   if (std::string err = o.Validate(); !err.empty()) throw InputError("solve: " + err);
   const Dataset d = ReadDataset(dataset_path);
+  CheckFitsInMemory(EstimateMemory(d.shape, int(d.conditions.size()), Precision::kDouble).recovery_bytes,
+                    fmt::format("a recovery on the {} grid with {} conditions", d.shape.ToString(),
+                                d.conditions.size()));
   RecoveryState state;
   if (!checkpoint.empty() && fs::exists(checkpoint)) {
     state = ReadCheckpoint(checkpoint, d);

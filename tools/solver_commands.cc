@@ -188,6 +188,7 @@ int RunBench(int argc, char** argv) {
   rec->add_flag("--full", full, "64x48x16 grids (slow) instead of the default 24x18x6");
   rec->add_option("--grid", rec_grid, "Recovery grid NXxNYxNZ (overrides --full)");
   rec->add_option("--presets", ro.presets, "Presets")->delimiter(',');
+  rec->add_option("--spacing", ro.spacing_mm, "Node spacing h in mm")->capture_default_str();
   rec->add_option("--max-iterations", ro.recovery.max_iterations, "Iterations per recovery")
       ->capture_default_str();
   rec->add_option("--lambda", ro.recovery.lambda, "lambda for noise-free data")->capture_default_str();
