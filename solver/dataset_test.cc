@@ -130,5 +130,41 @@ TEST(Simulate, RefineKeepsCoarseNodesAndInterpolates) {
   EXPECT_FLOAT_EQ(f.kappa[0][f.shape.index(4, 4, 0)], 1);
 }
 
+TEST(Simulate, FrontMaskNoiseAndHoldout) {
+  const Material m = Material::Constant({16, 12, 4}, 0.5, {0.2f, 0.2f, 0.2f}, {0.02f, 0.02f, 0.02f});
+  SimulateOptions o;
+  o.lights = RegionLights("2x2");
+  o.setup = Setup::kFront;
+  o.holdout = 3;
+  const SimulatedData clean = SimulateDataset(m, o);
+  ASSERT_EQ(clean.training.conditions.size(), 4u);
+  ASSERT_EQ(clean.holdout.conditions.size(), 3u);
+  EXPECT_EQ(clean.holdout_lights[0].kind, LightSpec::Kind::kSpot);
+  // region:0,0/2 covers x < 3.75 mm, y < 2.75 mm: the dual boxes of nodes i <= 7, j <= 5.
+  // Masked with a margin of 2 nodes, measured beyond.
+  const auto& mask = clean.training.conditions[0].mask;
+  EXPECT_EQ(mask[0], 0.0f);
+  EXPECT_EQ(mask[9 + 16 * 2], 0.0f);
+  EXPECT_EQ(mask[10 + 16 * 2], 1.0f);
+  EXPECT_EQ(mask[2 + 16 * 7], 0.0f);
+  EXPECT_EQ(mask[2 + 16 * 8], 1.0f);
+  o.noise = 0.05;
+  const SimulatedData noisy = SimulateDataset(m, o);
+  double s1 = 0, s2 = 0;
+  int count = 0;
+  for (size_t l = 0; l < 4; ++l)
+    for (int c = 0; c < 3; ++c)
+      for (size_t p = 0; p < 192; ++p) {
+        const double r = noisy.training.conditions[l].L[c][p] / clean.training.conditions[l].L[c][p] - 1;
+        s1 += r;
+        s2 += r * r;
+        ++count;
+      }
+  EXPECT_NEAR(s1 / count, 0.0, 0.01);
+  EXPECT_NEAR(std::sqrt(s2 / count), 0.05, 0.005);
+  o.oversample = 0;
+  EXPECT_THROW(SimulateDataset(m, o), InputError);
+}
+
 }  // namespace
 }  // namespace translume

@@ -32,7 +32,15 @@ namespace {
 namespace fs = std::filesystem;
 
 volatile std::sig_atomic_t g_interrupted = 0;
-void OnSigint(int) { g_interrupted = 1; }
+// First Ctrl-C: finish the current iteration, then write the best material so far. A second
+// one ends the process at once (the default action).
+void OnSigint(int) {
+  if (g_interrupted) {
+    std::signal(SIGINT, SIG_DFL);
+    std::raise(SIGINT);
+  }
+  g_interrupted = 1;
+}
 
 // 8-bit PNG slices of kappa and mu at depths 0, nz/4, nz/2, 3nz/4 and nz-1, RGB = channels,
 // each quantity scaled by its maximum over the volume: PREFIX_kappa_kNN.png, PREFIX_mu_kNN.png.
@@ -105,7 +113,8 @@ int RunSimulate(int argc, char** argv) {
 int RunSolve(int argc, char** argv) {
   CLI::App app{"Recover per-node kappa and mu (RGB) from a node-space dataset (SPEC section 4):\n"
                "homogeneous fit first, then the heterogeneous fit in log(kappa), log(mu).\n"
-               "Ctrl-C stops after the current iteration and writes the best material so far.\n"
+               "Ctrl-C stops after the current iteration and writes the best material so far\n"
+               "(exit status 130); a second Ctrl-C ends at once.\n"
                "Writes OUT.vdb, OUT.json (report) and OUT_{kappa,mu}_kNN.png slices.",
                "translume solve"};
   std::string dataset_path, out, optimizer = "lbfgs", regularizer = "tk1", backend = "cpu",
