@@ -68,7 +68,7 @@ std::string Dataset::Validate() const {
   if (shape.nx < 2 || shape.ny < 2 || shape.nz < 2)
     return fmt::format("grid {} needs at least 2 nodes per axis", shape.ToString());
   if (!(spacing_mm > 0) || !std::isfinite(spacing_mm)) return "spacing_mm must be positive";
-  if (!(C > 0) || !std::isfinite(C)) return "C must be positive";
+  if (!(C >= 1) || !std::isfinite(C)) return "C must be a finite number >= 1";
   if (conditions.empty()) return "there are no conditions";
   std::set<std::string> names;
   for (const auto& c : conditions) {
@@ -120,8 +120,8 @@ Dataset ReadDataset(const std::string& path) {
   if (!(d.spacing_mm > 0) || !std::isfinite(d.spacing_mm))
     throw InputError(fmt::format("{}: field \"spacing_mm\" must be positive", f));
   d.C = Field<double>(j, "C", f);
-  if (!(d.C > 0) || !std::isfinite(d.C))
-    throw InputError(fmt::format("{}: field \"C\" must be positive", f));
+  if (!(d.C >= 1) || !std::isfinite(d.C))
+    throw InputError(fmt::format("{}: field \"C\" must be a finite number >= 1", f));
   const std::string setup = Field<std::string>(j, "setup", f);
   if (setup != "back" && setup != "front")
     throw InputError(fmt::format("{}: field \"setup\" is '{}', expected 'back' or 'front'", f, setup));

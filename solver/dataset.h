@@ -35,7 +35,7 @@ struct Dataset {
 
 // Reads DIR/dataset.json (`path` may name the folder or the json file). Image paths are relative
 // to the folder. Throws InputError naming the file and the field on anything wrong: unknown
-// format, missing or mistyped fields, grid < 2 nodes per axis, non-positive spacing or C, an
+// format, missing or mistyped fields, grid < 2 nodes per axis, non-positive spacing, C < 1, an
 // unknown setup, duplicate condition names, missing images, wrong image size or channel count
 // (q, L: 3 channels; mask: 1), non-finite values, negative q, mask outside [0, 1].
 Dataset ReadDataset(const std::string& path);

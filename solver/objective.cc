@@ -175,7 +175,7 @@ double Regularize(const GridShape& s, const double* v, double scale, const Regul
     for (int64_t j = 0; j < ny; ++j)
       for (int64_t i = 0; i < nx; ++i) {
         const int64_t p = i + nx * (j + ny * k);
-        double g = 0, dr;
+        double g = 0, dr = 0;
         auto edge = [&](int64_t q, bool lower) {
           const double val = Rho(o, (v[p] - v[q]) * inv, &dr);
           if (lower) R += val;

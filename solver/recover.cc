@@ -26,9 +26,8 @@ double Since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-// The objective over all channels on the log-parameters. In homogeneous mode x has 6 entries
-// (log kappa_c, log mu_c per channel), broadcast to every node; the gradient is the sum over
-// nodes.
+// The objective over all channels on the log-parameters (layout in recover.h), and the
+// homogeneous fit that starts it.
 class RecoveryProblem {
  public:
   RecoveryProblem(const Dataset& d, const RecoveryOptions& o) : d_(d), o_(o), n_(d.shape.size()) {
@@ -45,12 +44,11 @@ class RecoveryProblem {
     threads_ = o.threads_per_channel > 0 ? o.threads_per_channel : std::max(1, NumThreads() / 3);
   }
 
-  void set_homogeneous(bool h) { homogeneous_ = h; }
   void set_scales(const std::array<double, 3>& k, const std::array<double, 3>& m) {
     kappa_scale_ = k;
     mu_scale_ = m;
   }
-  int64_t num_parameters() const { return homogeneous_ ? 6 : 6 * n_; }
+  int64_t num_parameters() const { return 6 * n_; }
   int64_t solves() const {
     int64_t s = 0;
     for (const auto& c : channels_) s += c->solves();
@@ -173,41 +171,26 @@ class RecoveryProblem {
   double EvaluateChannel(int c, const double* x, double* grad) {
     std::vector<double>& k = kappa_[c];
     std::vector<double>& m = mu_[c];
-    if (homogeneous_) {
-      std::fill(k.begin(), k.end(), std::exp(x[2 * c]));
-      std::fill(m.begin(), m.end(), std::exp(x[2 * c + 1]));
-    } else {
-      const double* xk = x + 2 * c * n_;
-      const double* xm = xk + n_;
-      for (int64_t p = 0; p < n_; ++p) {
-        k[p] = std::exp(xk[p]);
-        m[p] = std::exp(xm[p]);
-      }
+    const double* xk = x + 2 * c * n_;
+    const double* xm = xk + n_;
+    for (int64_t p = 0; p < n_; ++p) {
+      k[p] = std::exp(xk[p]);
+      m[p] = std::exp(xm[p]);
     }
     double* gk = grad ? gk_[c].data() : nullptr;
     double* gm = grad ? gm_[c].data() : nullptr;
     double f = channels_[c]->Evaluate(k.data(), m.data(), gk, gm);
-    if (!homogeneous_ && o_.lambda > 0) {
+    if (o_.lambda > 0) {
       f += o_.lambda * Regularize(d_.shape, k.data(), kappa_scale_[c], o_.regularizer, o_.lambda, gk);
       if (o_.regularize_mu)
         f += o_.lambda * Regularize(d_.shape, m.data(), mu_scale_[c], o_.regularizer, o_.lambda, gm);
     }
     if (grad) {
       // Chain rule through kappa = exp(x), and the 1/3 of the channel mean.
-      if (homogeneous_) {
-        double sk = 0, sm = 0;
-        for (int64_t p = 0; p < n_; ++p) {
-          sk += gk[p] * k[p];
-          sm += gm[p] * m[p];
-        }
-        grad[2 * c] = sk / 3.0;
-        grad[2 * c + 1] = sm / 3.0;
-      } else {
-        double* g = grad + 2 * c * n_;
-        for (int64_t p = 0; p < n_; ++p) {
-          g[p] = gk[p] * k[p] / 3.0;
-          g[n_ + p] = gm[p] * m[p] / 3.0;
-        }
+      double* g = grad + 2 * c * n_;
+      for (int64_t p = 0; p < n_; ++p) {
+        g[p] = gk[p] * k[p] / 3.0;
+        g[n_ + p] = gm[p] * m[p] / 3.0;
       }
     }
     return f;
@@ -217,7 +200,6 @@ class RecoveryProblem {
   const RecoveryOptions& o_;
   int64_t n_;
   int threads_ = 1;
-  bool homogeneous_ = false;
   std::array<std::unique_ptr<ChannelObjective>, 3> channels_;
   std::array<std::vector<double>, 3> kappa_, mu_, gk_, gm_;
   std::array<double, 3> kappa_scale_{1, 1, 1}, mu_scale_{1, 1, 1};
@@ -502,7 +484,6 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
 
   if (state->x.empty()) {
     // Homogeneous initialisation: 6 unknowns, same objective on constant volumes.
-    problem.set_homogeneous(true);
     std::vector<double> h(6);
     for (int c = 0; c < 3; ++c) {
       h[2 * c] = std::log(o.homogeneous_kappa);
@@ -518,7 +499,6 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
     }
     sum.homogeneous_seconds = Since(t0);
     sum.homogeneous_solves = problem.solves();
-    problem.set_homogeneous(false);
   }
   TL_CHECK(int64_t(state->x.size()) == 6 * n);
   problem.set_scales(state->kappa_scale, state->mu_scale);

@@ -185,7 +185,7 @@ int RunBench(int argc, char** argv) {
   bool full = false;
   std::string rec_grid;
   rec->add_flag("--json", json, "Print JSON instead of a table");
-  rec->add_flag("--full", full, "64x48x16 grids (slow) instead of the default 24x18x6");
+  rec->add_flag("--full", full, "64x48x16 grids (slow) instead of the default 24x18x8");
   rec->add_option("--grid", rec_grid, "Recovery grid NXxNYxNZ (overrides --full)");
   rec->add_option("--presets", ro.presets, "Presets")->delimiter(',');
   rec->add_option("--spacing", ro.spacing_mm, "Node spacing h in mm")->capture_default_str();
