@@ -33,8 +33,11 @@ class GlMultigridSolver {
   // Bytes one stencil application must move at least: x, cx, cy, cz, diag read, y written.
   int64_t ApplyBytes() const;
 
- private:
+  // The device state, for the other gl sources (gl_internal.h).
   struct Impl;
+  Impl& impl() { return *impl_; }
+
+ private:
   std::unique_ptr<Impl> impl_;
 };
 

@@ -26,6 +26,25 @@ double TensorGrid::Width(int axis, int64_t i) const {
   return w;
 }
 
+namespace {
+
+// Visits every node with its dual-box widths, planes in parallel:
+// f(i, j, k, p, wx, wy, wz) with p the linear index.
+template <typename F>
+void ForEachNode(const TensorGrid& g, F&& f) {
+  const GridShape& s = g.shape;
+#pragma omp parallel for schedule(static)
+  for (int64_t k = 0; k < s.nz; ++k) {
+    const double wz = g.Width(2, k);
+    for (int64_t j = 0; j < s.ny; ++j) {
+      const double wy = g.Width(1, j);
+      for (int64_t i = 0; i < s.nx; ++i) f(i, j, k, i + s.nx * (j + s.ny * k), g.Width(0, i), wy, wz);
+    }
+  }
+}
+
+}  // namespace
+
 template <typename T>
 void AssembleStencil(const TensorGrid& g, const T* kappa, const T* mu, double C,
                      Stencil<T>* st) {
@@ -38,41 +57,21 @@ void AssembleStencil(const TensorGrid& g, const T* kappa, const T* mu, double C,
   st->diag.assign(s.size(), T(0));
   const double robin = 1.0 / (2.0 * C);
   // Conductances first (each face once), then the diagonal from them.
-#pragma omp parallel for schedule(static)
-  for (int64_t k = 0; k < nz; ++k) {
-    const double wz = g.Width(2, k);
-    for (int64_t j = 0; j < ny; ++j) {
-      const double wy = g.Width(1, j);
-      for (int64_t i = 0; i < nx; ++i) {
-        const double wx = g.Width(0, i);
-        const int64_t p = i + nx * (j + ny * k);
-        if (i + 1 < nx) st->cx[p] = FaceConductance<T>(wy * wz / g.Gap(0, i), kappa[p], kappa[p + 1]);
-        if (j + 1 < ny) st->cy[p] = FaceConductance<T>(wx * wz / g.Gap(1, j), kappa[p], kappa[p + nx]);
-        if (k + 1 < nz) st->cz[p] = FaceConductance<T>(wx * wy / g.Gap(2, k), kappa[p], kappa[p + nxy]);
-      }
-    }
-  }
-#pragma omp parallel for schedule(static)
-  for (int64_t k = 0; k < nz; ++k) {
-    const double wz = g.Width(2, k);
-    const int bz = (k == 0) + (k == nz - 1);
-    for (int64_t j = 0; j < ny; ++j) {
-      const double wy = g.Width(1, j);
-      const int by = (j == 0) + (j == ny - 1);
-      for (int64_t i = 0; i < nx; ++i) {
-        const double wx = g.Width(0, i);
-        const int bx = (i == 0) + (i == nx - 1);
-        const int64_t p = i + nx * (j + ny * k);
-        double d = wx * wy * wz * double(mu[p]) +
-                   robin * (bx * wy * wz + by * wx * wz + bz * wx * wy);
-        T c = st->cx[p] + st->cy[p] + st->cz[p];
-        if (i > 0) c += st->cx[p - 1];
-        if (j > 0) c += st->cy[p - nx];
-        if (k > 0) c += st->cz[p - nxy];
-        st->diag[p] = T(d) + c;
-      }
-    }
-  }
+  ForEachNode(g, [&](int64_t i, int64_t j, int64_t k, int64_t p, double wx, double wy, double wz) {
+    if (i + 1 < nx) st->cx[p] = FaceConductance<T>(wy * wz / g.Gap(0, i), kappa[p], kappa[p + 1]);
+    if (j + 1 < ny) st->cy[p] = FaceConductance<T>(wx * wz / g.Gap(1, j), kappa[p], kappa[p + nx]);
+    if (k + 1 < nz) st->cz[p] = FaceConductance<T>(wx * wy / g.Gap(2, k), kappa[p], kappa[p + nxy]);
+  });
+  ForEachNode(g, [&](int64_t i, int64_t j, int64_t k, int64_t p, double wx, double wy, double wz) {
+    const int bx = (i == 0) + (i == nx - 1), by = (j == 0) + (j == ny - 1),
+              bz = (k == 0) + (k == nz - 1);
+    double d = wx * wy * wz * double(mu[p]) + robin * (bx * wy * wz + by * wx * wz + bz * wx * wy);
+    T c = st->cx[p] + st->cy[p] + st->cz[p];
+    if (i > 0) c += st->cx[p - 1];
+    if (j > 0) c += st->cy[p - nx];
+    if (k > 0) c += st->cz[p - nxy];
+    st->diag[p] = T(d) + c;
+  });
 }
 
 namespace {
@@ -133,11 +132,35 @@ void LitFaceSource(const TensorGrid& g, int64_t k_lit, double C, const float* q,
       b[s.index(i, j, k_lit)] = T(g.Width(0, i) * g.Width(1, j) * robin * q[i + s.nx * j]);
 }
 
+template <typename T>
+void AccumulateOperatorGradient(const TensorGrid& g, const T* phi, const T* psi, double scale,
+                                T* grad_kappa, T* grad_mu) {
+  const GridShape& s = g.shape;
+  const int64_t nx = s.nx, ny = s.ny, nz = s.nz, nxy = nx * ny;
+  ForEachNode(g, [&](int64_t i, int64_t j, int64_t k, int64_t p, double wx, double wy, double wz) {
+    // One face between p and q with area / gap `aog`: dc_pq/dkappa_p (psi_p - psi_q)(phi_p - phi_q).
+    auto face = [&](int64_t q, double aog) {
+      const double dc = double(FaceConductance<T>(aog, T(1), T(0)));
+      return dc * (double(psi[p]) - double(psi[q])) * (double(phi[p]) - double(phi[q]));
+    };
+    double gk = 0;
+    if (i > 0) gk += face(p - 1, wy * wz / g.Gap(0, i - 1));
+    if (i + 1 < nx) gk += face(p + 1, wy * wz / g.Gap(0, i));
+    if (j > 0) gk += face(p - nx, wx * wz / g.Gap(1, j - 1));
+    if (j + 1 < ny) gk += face(p + nx, wx * wz / g.Gap(1, j));
+    if (k > 0) gk += face(p - nxy, wx * wy / g.Gap(2, k - 1));
+    if (k + 1 < nz) gk += face(p + nxy, wx * wy / g.Gap(2, k));
+    grad_kappa[p] += T(scale * gk);
+    grad_mu[p] += T(scale * wx * wy * wz * double(psi[p]) * double(phi[p]));
+  });
+}
+
 #define TL_INSTANTIATE(T)                                                                     \
   template void AssembleStencil<T>(const TensorGrid&, const T*, const T*, double, Stencil<T>*); \
   template void ApplyStencil<T>(const Stencil<T>&, const T*, T*);                             \
   template void StencilResidual<T, T>(const Stencil<T>&, const T*, const T*, T*);           \
-  template void LitFaceSource<T>(const TensorGrid&, int64_t, double, const float*, T*);
+  template void LitFaceSource<T>(const TensorGrid&, int64_t, double, const float*, T*);      \
+  template void AccumulateOperatorGradient<T>(const TensorGrid&, const T*, const T*, double, T*, T*);
 TL_INSTANTIATE(float)
 TL_INSTANTIATE(double)
 #undef TL_INSTANTIATE

@@ -62,4 +62,17 @@ void StencilResidual(const Stencil<T>& A, const T* b, const X* x, T* r);
 template <typename T>
 void LitFaceSource(const TensorGrid& grid, int64_t k_lit, double C, const float* q, T* b);
 
+// The derivative of the operator, written with FaceConductance so that it is exactly the
+// derivative of AssembleStencil. Adds, for every node p,
+//   grad_kappa[p] += scale * sum_{faces (p,q)} dc_pq/dkappa_p (psi_p - psi_q)(phi_p - phi_q)
+//   grad_mu[p]    += scale * V_p psi_p phi_p
+// with dc_pq/dkappa_p = FaceConductance(A_pq / gap, 1, 0) = A_pq / (2 gap) and V_p the product
+// of the node's dual-box widths: d(psi^T A phi)/dkappa_p and d(psi^T A phi)/dmu_p. The Robin
+// terms and the source b do not depend on kappa or mu. With A phi = b and A psi = dJ/dphi,
+// scale = -1 gives dJ/dkappa and dJ/dmu (the discrete adjoint of the paper's Appendix A).
+// Arrays hold grid.shape.size() values; multithreaded over planes (gather form, no races).
+template <typename T>
+void AccumulateOperatorGradient(const TensorGrid& grid, const T* phi, const T* psi, double scale,
+                                T* grad_kappa, T* grad_mu);
+
 }  // namespace translume

@@ -6,8 +6,11 @@
 #include <array>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
 #include <string>
 
+#include "solver/dataset.h"
 #include "solver/image_io.h"
 #include "solver/material_io.h"
 
@@ -119,6 +122,77 @@ TEST_F(Cli, InfoSizesAGridAndRefusesWhatDoesNotFit) {
   EXPECT_FALSE(fs::exists(P("huge.vdb")));
   EXPECT_EQ(Translume("--help").status, 0);
   EXPECT_EQ(Translume("forward --help").status, 0);
+}
+
+TEST_F(Cli, SimulateSolveEvaluateAndResume) {
+  ASSERT_EQ(Translume("synth --preset wax --grid 12x10x4 -o " + P("m.vdb")).status, 0);
+  CommandRun r = Translume("simulate " + P("m.vdb") + " --lights 2x2 --holdout 3 --noise 0.01 -o " + P("ds"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const Dataset d = ReadDataset(P("ds"));
+  EXPECT_EQ(d.conditions.size(), 4u);
+  EXPECT_EQ(ReadDataset(P("ds/holdout")).conditions.size(), 3u);
+  r = Translume("solve " + P("ds") + " -o " + P("rec.vdb") + " --max-iterations 8 --checkpoint " + P("ck.bin"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("homogeneous fit:"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("iter    8"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::exists(P("rec.vdb")));
+  EXPECT_TRUE(fs::exists(P("rec_kappa_k00.png")));
+  EXPECT_TRUE(fs::exists(P("rec_mu_k03.png")));
+  std::ifstream report(P("rec.json"));
+  const auto j = nlohmann::json::parse(report);
+  EXPECT_EQ(j["history"].size(), 8u);
+  EXPECT_EQ(j["condition_fit_error"].size(), 4u);
+  // Resume: continues at iteration 9.
+  r = Translume("solve " + P("ds/dataset.json") + " -o " + P("rec.vdb") + " --max-iterations 10 --optimizer paper --checkpoint " + P("ck.bin"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("resuming"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("iter    9"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("iter    1 "), std::string::npos) << r.output;
+  r = Translume("evaluate " + P("rec.vdb") + " --truth " + P("m.vdb") + " --dataset " + P("ds") + " --json");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto e = nlohmann::json::parse(r.output);
+  EXPECT_GT(e["holdout_error"].get<double>(), 0);
+  EXPECT_LT(e["holdout_error"].get<double>(), 0.05);
+  EXPECT_EQ(e["kappa_layer_error"].size(), 4u);
+  r = Translume("evaluate " + P("rec.vdb") + " --dataset " + P("ds"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("fit E"), std::string::npos);
+}
+
+TEST_F(Cli, InverseCommandsRejectBadArguments) {
+  ASSERT_EQ(Translume("synth --preset wax --grid 8x6x3 -o " + P("m.vdb")).status, 0);
+  ASSERT_EQ(Translume("synth --preset wax --grid 8x6x4 -o " + P("m4.vdb")).status, 0);
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --oversample 0 -o " + P("ds")), "oversample");
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --lights 0x4 -o " + P("ds")), "0x4");
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --setup side -o " + P("ds")), "side");
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --noise -1 -o " + P("ds")), "noise");
+  EXPECT_FALSE(fs::exists(P("ds")));
+  ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + P("ds")).status, 0);
+  ExpectOneLineError(Translume("solve " + P("nope") + " -o " + P("r.vdb")), "no such file");
+  ExpectOneLineError(Translume("solve " + P("ds") + " --optimizer adam -o " + P("r.vdb")), "adam");
+  ExpectOneLineError(Translume("solve " + P("ds") + " --regularizer l1 -o " + P("r.vdb")), "l1");
+  ExpectOneLineError(Translume("solve " + P("ds") + " --lambda -1 -o " + P("r.vdb")), "lambda");
+  ExpectOneLineError(Translume("solve " + P("ds") + " --backend gl -o " + P("r.vdb")), "gl");
+  ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("r.png")), ".vdb");
+  ExpectOneLineError(Translume("solve " + P("ds") + " --init " + P("m4.vdb") + " -o " + P("r.vdb")), "8x6x4");
+  EXPECT_FALSE(fs::exists(P("r.vdb")));
+  ExpectOneLineError(Translume("evaluate " + P("m4.vdb") + " --dataset " + P("ds")), "8x6x4");
+  EXPECT_EQ(Translume("solve --help").status, 0);
+  EXPECT_EQ(Translume("bench recovery --help").status, 0);
+}
+
+TEST_F(Cli, SolveStopsCleanlyOnSigint) {
+  ASSERT_EQ(Translume("synth --preset marble --grid 24x20x6 -o " + P("m.vdb")).status, 0);
+  ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 4x4 -o " + P("ds")).status, 0);
+  // A run that would take very long, interrupted after 3 s.
+  const CommandRun r = Translume("solve " + P("ds") + " -o " + P("r.vdb") +
+                                 " --max-iterations 1000000 --tolerance 1e-15 & pid=$!; sleep 3; "
+                                 "kill -INT $pid; wait $pid; echo exit=$?");
+  EXPECT_NE(r.output.find("exit=130"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("best material so far"), std::string::npos) << r.output;
+  const Material m = ReadMaterial(P("r.vdb"));
+  EXPECT_EQ(m.shape, (GridShape{24, 20, 6}));
+  EXPECT_TRUE(fs::exists(P("r.json")));
 }
 
 }  // namespace

@@ -15,6 +15,14 @@ int RunBench(int argc, char** argv);
 int RunDemo(int argc, char** argv);
 int RunCalibrate(int argc, char** argv);  // calibrate camera|projector|response|white
 int RunHdr(int argc, char** argv);
+int RunSimulate(int argc, char** argv);
+int RunSolve(int argc, char** argv);
+int RunEvaluate(int argc, char** argv);
+
+// `bench forward` (tools/bench_commands.cc, solver core only): registers the subcommand, whose
+// callback runs the benchmark, on a `bench` app.
+void AddBenchForward(CLI::App& bench);
+void PrintBenchProgress(const std::string& line);
 
 // Options every subcommand takes (--threads).
 void AddCommonOptions(CLI::App& app);

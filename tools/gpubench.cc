@@ -26,7 +26,13 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    return translume::RunBench(argc - 1, argv + 1);
+    CLI::App app{"translume-gpubench bench: the forward benchmark of `translume bench`",
+                 "translume-gpubench bench"};
+    app.require_subcommand(1);
+    translume::AddBenchForward(app);
+    translume::AddCommonOptions(app);
+    translume::ParseOrHelp(app, argc - 1, argv + 1);
+    return 0;
   } catch (const CLI::ParseError& e) {
     std::fprintf(stderr, "translume-gpubench: %s\n", e.what());
     return 2;

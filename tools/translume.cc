@@ -22,9 +22,12 @@ const Command kCommands[] = {
     {"demo", translume::RunDemo, "Run the main job on the embedded default sample"},
     {"synth", translume::RunSynth, "Write a synthetic material volume (.vdb)"},
     {"forward", translume::RunForward, "Simulate the front-face radiance of a material under a light"},
-    {"bench", translume::RunBench, "Benchmarks: bench forward"},
+    {"simulate", translume::RunSimulate, "Simulate a capture of a material into a dataset"},
+    {"solve", translume::RunSolve, "Recover kappa and mu from a dataset (the inverse problem)"},
+    {"evaluate", translume::RunEvaluate, "Held-out relighting and parameter errors of a recovery"},
     {"calibrate", translume::RunCalibrate, "Calibrate camera, projector, response, white balance"},
     {"hdr", translume::RunHdr, "Merge an exposure stack into a linear HDR image (.exr)"},
+    {"bench", translume::RunBench, "Benchmarks: bench forward, bench recovery"},
     {"info", translume::RunInfo, "Version, build, backends, threads, memory estimates"},
 };
 

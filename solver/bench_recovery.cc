@@ -1,0 +1,187 @@
+// SPDX-License-Identifier: MIT
+#include "solver/bench_recovery.h"
+
+#include <algorithm>
+#include <chrono>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "solver/evaluate.h"
+#include "solver/light.h"
+#include "solver/simulate.h"
+#include "solver/synthetic.h"
+
+namespace translume {
+namespace {
+
+double Since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+struct Case {
+  Material truth;
+  SimulatedData data;
+  double simulate_seconds = 0;
+};
+
+Case MakeCase(const RecoveryBenchOptions& o, const std::string& preset, Setup setup, double noise) {
+  Case c;
+  SynthOptions so;
+  so.preset = preset;
+  so.shape = o.shape;
+  so.spacing_mm = o.spacing_mm;
+  c.truth = SynthesizeMaterial(so);
+  SimulateOptions sim;
+  sim.lights = RegionLights("4x4");
+  sim.setup = setup;
+  sim.noise = noise;
+  sim.holdout = o.holdout;
+  const auto t0 = std::chrono::steady_clock::now();
+  c.data = SimulateDataset(c.truth, sim);
+  c.simulate_seconds = Since(t0);
+  return c;
+}
+
+RecoveryBenchRow RunCase(const Case& c, const RecoveryOptions& ro, const std::string& preset,
+                         Setup setup, double noise, RecoverySummary* summary_out) {
+  RecoveryState st;
+  const RecoverySummary s = Recover(c.data.training, ro, &st);
+  const Material rec = MaterialFromState(c.data.training, st);
+  MultigridOptions mg;
+  mg.tolerance = 1e-9;
+  mg.max_iterations = 300;
+  const EvaluationReport ev = EvaluateRecovery(rec, &c.truth, c.data.training, c.data.holdout, mg);
+  RecoveryBenchRow r;
+  r.preset = preset;
+  r.setup = setup;
+  r.noise = noise;
+  r.shape = c.truth.shape;
+  r.optimizer = OptimizerName(ro.optimizer);
+  r.seconds = s.seconds;
+  r.simulate_seconds = c.simulate_seconds;
+  r.iterations = s.iterations;
+  r.solves = s.solves;
+  r.objective = s.final_objective;
+  r.fit_error = ev.fit_error;
+  r.holdout_error = ev.holdout_error;
+  r.truth_holdout_error = ev.truth_holdout_error;
+  r.kappa_layer_error = ev.kappa_layer_error;
+  r.mu_layer_error = ev.mu_layer_error;
+  if (summary_out) *summary_out = s;
+  return r;
+}
+
+std::string Layers(const std::vector<double>& v) {
+  std::string s;
+  for (size_t k = 0; k < v.size(); ++k) s += fmt::format("{}{:.2f}", k ? " " : "", v[k]);
+  return s;
+}
+
+}  // namespace
+
+RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
+                                     void (*progress)(const std::string&)) {
+  RecoveryBenchResult out;
+  for (const auto& preset : o.presets)
+    for (Setup setup : o.setups)
+      for (double noise : o.noises) {
+        const Case c = MakeCase(o, preset, setup, noise);
+        RecoveryOptions ro = o.recovery;
+        if (noise > 0) ro.lambda = o.noisy_lambda;
+        RecoveryBenchRow r = RunCase(c, ro, preset, setup, noise, nullptr);
+        if (progress)
+          progress(fmt::format("{} {}-lit noise {:g}: held-out E {:.2e} (truth {:.2e}), fit E {:.2e}, "
+                               "{} iterations, {} solves, {:.1f} s", preset, SetupName(setup),
+                               noise, r.holdout_error, r.truth_holdout_error, r.fit_error,
+                               r.iterations, r.solves, r.seconds));
+        out.rows.push_back(std::move(r));
+      }
+  if (o.compare_optimizers && !o.presets.empty()) {
+    // Same data, same homogeneous start; compare the heterogeneous phases.
+    const Case c = MakeCase(o, o.presets[0], Setup::kBack, 0.0);
+    RecoveryOptions paper = o.recovery;
+    paper.optimizer = OptimizerKind::kPaper;
+    paper.max_iterations = o.paper_iterations;
+    RecoverySummary ps, ls;
+    RecoveryBenchRow pr = RunCase(c, paper, o.presets[0], Setup::kBack, 0.0, &ps);
+    RecoveryOptions lbfgs = o.recovery;
+    lbfgs.optimizer = OptimizerKind::kLbfgs;
+    RunCase(c, lbfgs, o.presets[0], Setup::kBack, 0.0, &ls);
+    OptimizerComparison& cmp = out.comparison;
+    cmp.ran = true;
+    cmp.paper_objective = ps.final_objective;
+    cmp.paper_solves = ps.solves - ps.homogeneous_solves;
+    cmp.paper_seconds = ps.seconds - ps.homogeneous_seconds;
+    cmp.paper_iterations = ps.iterations;
+    for (const auto& h : ls.history)
+      if (h.objective <= ps.final_objective) {
+        cmp.lbfgs_reached = true;
+        cmp.lbfgs_solves = h.solves - ls.homogeneous_solves;
+        cmp.lbfgs_seconds = h.seconds - ls.homogeneous_seconds;
+        cmp.lbfgs_iterations = h.iteration;
+        break;
+      }
+    if (progress)
+      progress(fmt::format("paper optimiser: objective {:.3e} after {} iterations, {} solves; "
+                           "lbfgs {} it after {} solves", cmp.paper_objective, cmp.paper_iterations,
+                           cmp.paper_solves, cmp.lbfgs_reached ? "reached" : "did NOT reach",
+                           cmp.lbfgs_solves));
+    pr.optimizer = "paper";
+    out.rows.push_back(std::move(pr));
+  }
+  return out;
+}
+
+std::string RecoveryBenchTable(const RecoveryBenchResult& res) {
+  std::string s = fmt::format("| {:<10} | {:<5} | {:>5} | {:<9} | {:<9} | {:>7} | {:>5} | {:>6} | {:>9} | {:>9} | {:>9} | {:<24} | {:<24} |\n",
+                              "preset", "setup", "noise", "grid", "optimizer", "time s", "iters", "solves",
+                              "fit E", "held-out E", "truth E", "kappa err per layer k", "mu err per layer k");
+  s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const auto& r : res.rows)
+    s += fmt::format("| {:<10} | {:<5} | {:>5g} | {:<9} | {:<9} | {:>7.1f} | {:>5} | {:>6} | {:>9.2e} | {:>9.2e} | {:>9.2e} | {:<24} | {:<24} |\n",
+                     r.preset, SetupName(r.setup), r.noise, r.shape.ToString(), r.optimizer, r.seconds,
+                     r.iterations, r.solves, r.fit_error, r.holdout_error, r.truth_holdout_error,
+                     Layers(r.kappa_layer_error), Layers(r.mu_layer_error));
+  const auto& c = res.comparison;
+  if (c.ran) {
+    s += fmt::format("\npaper optimiser (PR-CG + golden section): objective {:.4e} after {} iterations, "
+                     "{} solves, {:.1f} s (heterogeneous phase)\n", c.paper_objective, c.paper_iterations,
+                     c.paper_solves, c.paper_seconds);
+    if (c.lbfgs_reached)
+      s += fmt::format("lbfgs reached it at iteration {}: {} solves, {:.1f} s -> {:.3f} of the solves, "
+                       "{:.3f} of the time\n", c.lbfgs_iterations, c.lbfgs_solves, c.lbfgs_seconds,
+                       double(c.lbfgs_solves) / std::max<int64_t>(1, c.paper_solves),
+                       c.lbfgs_seconds / std::max(1e-9, c.paper_seconds));
+    else
+      s += "lbfgs did NOT reach the paper optimiser's objective\n";
+  }
+  return s;
+}
+
+std::string RecoveryBenchJson(const RecoveryBenchResult& res) {
+  nlohmann::json j;
+  j["cases"] = nlohmann::json::array();
+  for (const auto& r : res.rows)
+    j["cases"].push_back({{"preset", r.preset}, {"setup", SetupName(r.setup)}, {"noise", r.noise},
+                          {"grid", r.shape.ToString()}, {"optimizer", r.optimizer},
+                          {"seconds", r.seconds}, {"simulate_seconds", r.simulate_seconds},
+                          {"iterations", r.iterations}, {"solves", r.solves},
+                          {"objective", r.objective}, {"fit_error", r.fit_error},
+                          {"holdout_error", r.holdout_error},
+                          {"truth_holdout_error", r.truth_holdout_error},
+                          {"kappa_layer_error", r.kappa_layer_error},
+                          {"mu_layer_error", r.mu_layer_error}});
+  const auto& c = res.comparison;
+  if (c.ran)
+    j["optimizer_comparison"] = {{"paper_objective", c.paper_objective},
+                                 {"paper_iterations", c.paper_iterations},
+                                 {"paper_solves", c.paper_solves},
+                                 {"paper_seconds", c.paper_seconds},
+                                 {"lbfgs_reached", c.lbfgs_reached},
+                                 {"lbfgs_iterations", c.lbfgs_iterations},
+                                 {"lbfgs_solves", c.lbfgs_solves},
+                                 {"lbfgs_seconds", c.lbfgs_seconds}};
+  return j.dump(2);
+}
+
+}  // namespace translume

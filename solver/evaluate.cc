@@ -1,0 +1,127 @@
+// SPDX-License-Identifier: MIT
+#include "solver/evaluate.h"
+
+#include <cmath>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "solver/simulate.h"
+#include "solver/status.h"
+
+namespace translume {
+namespace {
+
+std::vector<FacePattern> Lights(const Dataset& d) {
+  std::vector<FacePattern> q;
+  for (const auto& c : d.conditions) q.push_back(c.q);
+  return q;
+}
+
+std::vector<FacePattern> Measured(const Dataset& d) {
+  std::vector<FacePattern> L;
+  for (const auto& c : d.conditions) L.push_back(c.L);
+  return L;
+}
+
+std::vector<std::vector<float>> Masks(const Dataset& d) {
+  std::vector<std::vector<float>> w;
+  for (const auto& c : d.conditions) w.push_back(c.mask);
+  return w;
+}
+
+void CheckGrid(const Material& m, const Dataset& d, const char* what) {
+  if (!(m.shape == d.shape))
+    throw InputError(fmt::format("{}: material grid {} differs from the dataset grid {}", what,
+                                 m.shape.ToString(), d.shape.ToString()));
+}
+
+}  // namespace
+
+double RelightingError(const std::vector<FacePattern>& a, const std::vector<FacePattern>& b,
+                       const std::vector<std::vector<float>>& masks) {
+  TL_CHECK(a.size() == b.size());
+  double num = 0, den = 0;
+  for (size_t m = 0; m < a.size(); ++m)
+    for (int c = 0; c < 3; ++c) {
+      TL_CHECK(a[m][c].size() == b[m][c].size());
+      for (size_t p = 0; p < a[m][c].size(); ++p) {
+        const double w = masks.empty() ? 1.0 : masks[m][p];
+        num += w * std::pow(double(a[m][c][p]) - double(b[m][c][p]), 2);
+        den += w * std::pow(double(b[m][c][p]), 2);
+      }
+    }
+  return den > 0 ? num / den : 0.0;
+}
+
+void LayerErrors(const Material& rec, const Material& truth, std::vector<double>* kappa,
+                 std::vector<double>* mu) {
+  TL_CHECK(rec.shape == truth.shape);
+  const GridShape& s = truth.shape;
+  for (auto [out, r, t] : {std::tuple{kappa, &rec.kappa, &truth.kappa}, std::tuple{mu, &rec.mu, &truth.mu}}) {
+    out->assign(s.nz, 0.0);
+    for (int64_t k = 0; k < s.nz; ++k) {
+      double num = 0, den = 0;
+      for (int c = 0; c < 3; ++c)
+        for (int64_t f = 0; f < s.face_size(); ++f) {
+          const int64_t p = f + s.face_size() * k;
+          num += std::pow(double((*r)[c][p]) - double((*t)[c][p]), 2);
+          den += std::pow(double((*t)[c][p]), 2);
+        }
+      (*out)[k] = std::sqrt(num / den);
+    }
+  }
+}
+
+EvaluationReport EvaluateRecovery(const Material& rec, const Material* truth,
+                                  const Dataset& training, const Dataset& holdout,
+                                  const MultigridOptions& mg) {
+  CheckGrid(rec, training, "recovered");
+  EvaluationReport r;
+  const std::vector<FacePattern> rec_train = RenderFrontFace(rec, training.setup, Lights(training), mg);
+  r.fit_error = RelightingError(rec_train, Measured(training), Masks(training));
+  if (!truth) return r;
+  CheckGrid(*truth, training, "--truth");
+  LayerErrors(rec, *truth, &r.kappa_layer_error, &r.mu_layer_error);
+  r.training_error = RelightingError(
+      rec_train, RenderFrontFace(*truth, training.setup, Lights(training), mg), Masks(training));
+  if (holdout.conditions.empty()) return r;
+  const auto q = Lights(holdout);
+  const auto w = Masks(holdout);
+  const auto a = RenderFrontFace(rec, holdout.setup, q, mg);
+  const auto b = RenderFrontFace(*truth, holdout.setup, q, mg);
+  r.holdout_error = RelightingError(a, b, w);
+  for (size_t m = 0; m < q.size(); ++m)
+    r.holdout_condition_error.push_back(RelightingError({a[m]}, {b[m]}, {w[m]}));
+  r.truth_holdout_error = RelightingError(b, Measured(holdout), w);
+  return r;
+}
+
+std::string EvaluationTable(const EvaluationReport& r) {
+  auto num = [](double v) { return v < 0 ? std::string("-") : fmt::format("{:.3e}", v); };
+  std::string s;
+  s += fmt::format("held-out relighting E   {}\n", num(r.holdout_error));
+  s += fmt::format("training relighting E   {}\n", num(r.training_error));
+  s += fmt::format("fit E (vs data)         {}\n", num(r.fit_error));
+  s += fmt::format("truth's own held-out E  {}   (discretisation + noise floor)\n", num(r.truth_holdout_error));
+  if (!r.kappa_layer_error.empty()) {
+    s += "depth k   kappa rel. L2   mu rel. L2\n";
+    for (size_t k = 0; k < r.kappa_layer_error.size(); ++k)
+      s += fmt::format("{:7d}   {:13.3e}   {:10.3e}\n", k, r.kappa_layer_error[k], r.mu_layer_error[k]);
+  }
+  return s;
+}
+
+std::string EvaluationJson(const EvaluationReport& r) {
+  nlohmann::json j;
+  auto opt = [](double v) { return v < 0 ? nlohmann::json(nullptr) : nlohmann::json(v); };
+  j["holdout_error"] = opt(r.holdout_error);
+  j["holdout_condition_error"] = r.holdout_condition_error;
+  j["training_error"] = opt(r.training_error);
+  j["fit_error"] = opt(r.fit_error);
+  j["truth_holdout_error"] = opt(r.truth_holdout_error);
+  j["kappa_layer_error"] = r.kappa_layer_error;
+  j["mu_layer_error"] = r.mu_layer_error;
+  return j.dump(2);
+}
+
+}  // namespace translume

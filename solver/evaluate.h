@@ -1,0 +1,46 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "solver/dataset.h"
+#include "solver/material.h"
+#include "solver/multigrid.h"
+
+namespace translume {
+
+// Relighting error of SPEC section 5 over conditions m, channels and front-face nodes p:
+//   E = sum w_mp (a_mp - b_mp)^2 / sum w_mp b_mp^2
+// (b: the reference; w: masks, one per condition, nx*ny values; empty masks mean all 1).
+double RelightingError(const std::vector<FacePattern>& a, const std::vector<FacePattern>& b,
+                       const std::vector<std::vector<float>>& masks = {});
+
+// Relative L2 error per depth layer k (RGB together):
+//   e_k = sqrt(sum_{i,j,c} (v_rec - v_true)^2 / sum_{i,j,c} v_true^2), for v = kappa and mu.
+void LayerErrors(const Material& recovered, const Material& truth, std::vector<double>* kappa,
+                 std::vector<double>* mu);
+
+struct EvaluationReport {
+  // Recovered vs true material, both rendered on the recovery grid, under the held-out
+  // conditions (holdout_error) and the training conditions (training_error).
+  double holdout_error = -1, training_error = -1;
+  std::vector<double> holdout_condition_error;
+  // Recovered material vs the dataset's measured L (what the fit minimised).
+  double fit_error = -1;
+  // The truth rendered on the recovery grid vs the held-out data (the discretisation floor
+  // when the data was oversampled; noise adds to it).
+  double truth_holdout_error = -1;
+  std::vector<double> kappa_layer_error, mu_layer_error;
+};
+
+// Evaluates a recovery. `holdout` may have no conditions (its errors stay -1); `truth` may be
+// null (only the fit error is computed). Throws InputError on a grid mismatch.
+EvaluationReport EvaluateRecovery(const Material& recovered, const Material* truth,
+                                  const Dataset& training, const Dataset& holdout,
+                                  const MultigridOptions& multigrid);
+
+std::string EvaluationTable(const EvaluationReport& report);
+std::string EvaluationJson(const EvaluationReport& report);
+
+}  // namespace translume

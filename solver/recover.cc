@@ -1,0 +1,607 @@
+// SPDX-License-Identifier: MIT
+#include "solver/recover.h"
+
+#include <ceres/gradient_problem.h>
+#include <ceres/gradient_problem_solver.h>
+#include <omp.h>
+
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <fmt/format.h>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "solver/atomic_file.h"
+#include "solver/status.h"
+#include "solver/threads.h"
+
+namespace translume {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double Since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// The objective over all channels on the log-parameters (layout in recover.h), and the
+// homogeneous fit that starts it.
+class RecoveryProblem {
+ public:
+  RecoveryProblem(const Dataset& d, const RecoveryOptions& o) : d_(d), o_(o), n_(d.shape.size()) {
+    MultigridOptions mg;
+    mg.tolerance = o.solve_tolerance;
+    mg.max_iterations = 500;
+    for (int c = 0; c < 3; ++c) {
+      channels_[c] = o.backend == Backend::kGl ? MakeGlChannelObjective(d, c, mg)
+                                               : MakeCpuChannelObjective(d, c, mg);
+      kappa_[c].resize(n_);
+      mu_[c].resize(n_);
+      gk_[c].resize(n_);
+      gm_[c].resize(n_);
+    }
+    threads_ = o.threads_per_channel > 0 ? o.threads_per_channel : std::max(1, NumThreads() / 3);
+  }
+
+  void set_scales(const std::array<double, 3>& k, const std::array<double, 3>& m) {
+    kappa_scale_ = k;
+    mu_scale_ = m;
+  }
+  int64_t num_parameters() const { return 6 * n_; }
+  int64_t solves() const {
+    int64_t s = 0;
+    for (const auto& c : channels_) s += c->solves();
+    return s;
+  }
+
+  // f(x) and, if grad is non-null, df/dx.
+  double Evaluate(const double* x, double* grad) {
+    std::array<double, 3> f{};
+    ForEachChannel([&](int c) { f[c] = EvaluateChannel(c, x, grad); });
+    return (f[0] + f[1] + f[2]) / 3.0;
+  }
+
+  // Levenberg-Marquardt on the homogeneous problem of each channel, (log kappa, log mu)
+  // = (h[2c], h[2c+1]), channels in parallel. The residuals' 2-column Jacobian comes from forward
+  // differences in log space (2 extra evaluations of M forward solves per iteration); the fit is
+  // quadratically convergent where first-order methods crawl along the kappa-mu valley.
+  void FitHomogeneous(int max_iterations, std::vector<double>* h) {
+    ForEachChannel([&](int c) { FitChannel(c, max_iterations, &(*h)[2 * c], &(*h)[2 * c + 1]); });
+  }
+
+  // Fit error of the last evaluation: total and per condition (RGB together).
+  double FitError(std::vector<double>* per_condition) const {
+    const size_t M = d_.conditions.size();
+    per_condition->assign(M, 0.0);
+    double num = 0, den = 0;
+    for (size_t m = 0; m < M; ++m) {
+      double a = 0, b = 0;
+      for (const auto& c : channels_) {
+        a += c->condition_misfit()[m];
+        b += c->condition_norm()[m];
+      }
+      (*per_condition)[m] = b > 0 ? a / b : 0.0;
+      num += a;
+      den += b;
+    }
+    return den > 0 ? num / den : 0.0;
+  }
+
+ private:
+  // Runs body(c) for the 3 channels in 3 threads, each with threads_ OpenMP threads; rethrows
+  // the first exception.
+  template <typename F>
+  void ForEachChannel(F&& body) {
+    if (o_.backend == Backend::kGl) {
+      // The GL context is current on this thread only; the GPU runs the channels in turn.
+      for (int c = 0; c < 3; ++c) body(c);
+      return;
+    }
+    std::array<std::exception_ptr, 3> errors;
+    auto run = [&](int c) {
+      try {
+        omp_set_num_threads(threads_);
+        body(c);
+      } catch (...) {
+        errors[c] = std::current_exception();
+      }
+    };
+    std::thread t1(run, 1), t2(run, 2);
+    run(0);
+    t1.join();
+    t2.join();
+    for (auto& e : errors)
+      if (e) std::rethrow_exception(e);
+  }
+
+  // J of channel c on the constant volume exp(lk), exp(lm); the residuals into r.
+  double EvaluateConstant(int c, double lk, double lm, std::vector<double>* r) {
+    std::fill(kappa_[c].begin(), kappa_[c].end(), std::exp(lk));
+    std::fill(mu_[c].begin(), mu_[c].end(), std::exp(lm));
+    const double J = channels_[c]->Evaluate(kappa_[c].data(), mu_[c].data(), nullptr, nullptr);
+    channels_[c]->Residuals(r);
+    return J;
+  }
+
+  void FitChannel(int c, int max_iterations, double* lk, double* lm) {
+    constexpr double kStep = 1e-4;
+    std::vector<double> r0, r1, r2, rt;
+    double f0 = EvaluateConstant(c, *lk, *lm, &r0);
+    double damping = 1e-3;
+    for (int it = 0; it < max_iterations && f0 > 0; ++it) {
+      EvaluateConstant(c, *lk + kStep, *lm, &r1);
+      EvaluateConstant(c, *lk, *lm + kStep, &r2);
+      double a11 = 0, a12 = 0, a22 = 0, g1 = 0, g2 = 0;
+      for (size_t i = 0; i < r0.size(); ++i) {
+        const double j1 = (r1[i] - r0[i]) / kStep, j2 = (r2[i] - r0[i]) / kStep;
+        a11 += j1 * j1;
+        a12 += j1 * j2;
+        a22 += j2 * j2;
+        g1 += j1 * r0[i];
+        g2 += j2 * r0[i];
+      }
+      bool accepted = false;
+      double step = 0;
+      for (int tries = 0; tries < 12 && !accepted; ++tries) {
+        const double b11 = a11 * (1 + damping), b22 = a22 * (1 + damping);
+        const double det = b11 * b22 - a12 * a12;
+        if (!(det > 0)) {
+          damping *= 4;
+          continue;
+        }
+        // Steps longer than 1 in log space are clipped: the model is only local.
+        double dk = (-g1 * b22 + g2 * a12) / det, dm = (-g2 * b11 + g1 * a12) / det;
+        const double len = std::max(std::abs(dk), std::abs(dm));
+        if (len > 1) { dk /= len; dm /= len; }
+        const double ft = EvaluateConstant(c, *lk + dk, *lm + dm, &rt);
+        if (ft < f0) {
+          *lk += dk;
+          *lm += dm;
+          step = std::max(std::abs(dk), std::abs(dm));
+          const double decrease = f0 - ft;
+          f0 = ft;
+          r0.swap(rt);
+          damping = std::max(damping / 3, 1e-9);
+          accepted = true;
+          if (decrease <= 1e-12 * ft) step = 0;
+        } else {
+          damping *= 4;
+        }
+      }
+      if (!accepted || step < 1e-7) break;
+    }
+  }
+
+  double EvaluateChannel(int c, const double* x, double* grad) {
+    std::vector<double>& k = kappa_[c];
+    std::vector<double>& m = mu_[c];
+    const double* xk = x + 2 * c * n_;
+    const double* xm = xk + n_;
+    for (int64_t p = 0; p < n_; ++p) {
+      k[p] = std::exp(xk[p]);
+      m[p] = std::exp(xm[p]);
+    }
+    double* gk = grad ? gk_[c].data() : nullptr;
+    double* gm = grad ? gm_[c].data() : nullptr;
+    double f = channels_[c]->Evaluate(k.data(), m.data(), gk, gm);
+    if (o_.lambda > 0) {
+      f += o_.lambda * Regularize(d_.shape, k.data(), kappa_scale_[c], o_.regularizer, o_.lambda, gk);
+      if (o_.regularize_mu)
+        f += o_.lambda * Regularize(d_.shape, m.data(), mu_scale_[c], o_.regularizer, o_.lambda, gm);
+    }
+    if (grad) {
+      // Chain rule through kappa = exp(x), and the 1/3 of the channel mean.
+      double* g = grad + 2 * c * n_;
+      for (int64_t p = 0; p < n_; ++p) {
+        g[p] = gk[p] * k[p] / 3.0;
+        g[n_ + p] = gm[p] * m[p] / 3.0;
+      }
+    }
+    return f;
+  }
+
+  const Dataset& d_;
+  const RecoveryOptions& o_;
+  int64_t n_;
+  int threads_ = 1;
+  std::array<std::unique_ptr<ChannelObjective>, 3> channels_;
+  std::array<std::vector<double>, 3> kappa_, mu_, gk_, gm_;
+  std::array<double, 3> kappa_scale_{1, 1, 1}, mu_scale_{1, 1, 1};
+};
+
+double Norm(const std::vector<double>& v) {
+  double s = 0;
+  for (double a : v) s += a * a;
+  return std::sqrt(s);
+}
+
+// What an optimiser reports after each iteration; returns false to stop.
+using IterationHook = std::function<bool(int iteration, double f, double gnorm)>;
+
+struct OptimizerResult {
+  RecoveryTermination termination = RecoveryTermination::kFailed;
+  std::string message;
+  int iterations = 0;
+  double initial = 0, final = 0;
+};
+
+class CeresFunction : public ceres::FirstOrderFunction {
+ public:
+  explicit CeresFunction(RecoveryProblem* p) : p_(p) {}
+  bool Evaluate(const double* x, double* cost, double* grad) const override {
+    *cost = p_->Evaluate(x, grad);
+    return std::isfinite(*cost);
+  }
+  int NumParameters() const override { return int(p_->num_parameters()); }
+
+ private:
+  RecoveryProblem* p_;
+};
+
+class CeresHook : public ceres::IterationCallback {
+ public:
+  explicit CeresHook(const IterationHook& hook) : hook_(hook) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& s) override {
+    if (s.iteration == 0) return ceres::SOLVER_CONTINUE;
+    if (hook_ && !hook_(s.iteration, s.cost, s.gradient_norm)) {
+      stopped = true;
+      return ceres::SOLVER_TERMINATE_SUCCESSFULLY;
+    }
+    return ceres::SOLVER_CONTINUE;
+  }
+  bool stopped = false;
+
+ private:
+  const IterationHook& hook_;
+};
+
+OptimizerResult RunCeres(RecoveryProblem* problem, OptimizerKind kind, int max_iterations,
+                         double tolerance, std::vector<double>* x, const IterationHook& hook) {
+  ceres::GradientProblem gp(new CeresFunction(problem));
+  ceres::GradientProblemSolver::Options so;
+  so.line_search_direction_type =
+      kind == OptimizerKind::kNcg ? ceres::NONLINEAR_CONJUGATE_GRADIENT : ceres::LBFGS;
+  so.nonlinear_conjugate_gradient_type = ceres::POLAK_RIBIERE;
+  so.line_search_type = ceres::WOLFE;
+  so.max_num_iterations = max_iterations;
+  so.function_tolerance = tolerance;
+  so.gradient_tolerance = 1e-16;
+  so.parameter_tolerance = 1e-14;
+  so.max_num_line_search_step_size_iterations = 30;
+  // Scale the initial inverse Hessian by the latest curvature (Nocedal & Wright 6.20): without
+  // it every step starts from the raw gradient, which is orders of magnitude too short here.
+  so.use_approximate_eigenvalue_bfgs_scaling = true;
+  so.logging_type = ceres::SILENT;
+  so.minimizer_progress_to_stdout = false;
+  so.update_state_every_iteration = true;
+  CeresHook cb(hook);
+  so.callbacks.push_back(&cb);
+  ceres::GradientProblemSolver::Summary sum;
+  ceres::Solve(so, gp, x->data(), &sum);
+  OptimizerResult r;
+  r.iterations = int(sum.iterations.size()) - 1;
+  r.initial = sum.initial_cost;
+  r.final = sum.final_cost;
+  r.message = sum.message;
+  if (cb.stopped) r.termination = RecoveryTermination::kStopped;
+  else if (sum.termination_type == ceres::CONVERGENCE) r.termination = RecoveryTermination::kConverged;
+  else if (sum.termination_type == ceres::NO_CONVERGENCE) r.termination = RecoveryTermination::kMaxIterations;
+  else r.termination = RecoveryTermination::kFailed;
+  return r;
+}
+
+// Polak-Ribiere conjugate gradients with a golden-section line search (Wang et al. 2008,
+// Table I): bracket the minimum along the direction by golden-ratio expansion or contraction,
+// then shrink the bracket by golden sections; only the accepted point gets a gradient (adjoint
+// solves); line-search points cost forward solves only.
+OptimizerResult RunPaper(RecoveryProblem* problem, int max_iterations, double tolerance,
+                         std::vector<double>* xp, const IterationHook& hook) {
+  constexpr double kGold = 1.618033988749895, kInvGold = 0.618033988749895;
+  constexpr int kSectionSteps = 8;
+  std::vector<double>& x = *xp;
+  const size_t n = x.size();
+  std::vector<double> g(n), g_new(n), d(n), trial(n);
+  OptimizerResult r;
+  double f = problem->Evaluate(x.data(), g.data());
+  r.initial = f;
+  for (size_t i = 0; i < n; ++i) d[i] = -g[i];
+  double dmax = 0;
+  for (double v : d) dmax = std::max(dmax, std::abs(v));
+  double step = dmax > 0 ? 0.1 / dmax : 1.0;  // first trial: change a log-parameter by 0.1
+  auto at = [&](double a) {
+    for (size_t i = 0; i < n; ++i) trial[i] = x[i] + a * d[i];
+    const double v = problem->Evaluate(trial.data(), nullptr);
+    return std::isfinite(v) ? v : std::numeric_limits<double>::infinity();
+  };
+  r.termination = RecoveryTermination::kMaxIterations;
+  r.message = fmt::format("reached max_iterations = {}", max_iterations);
+  for (int it = 1; it <= max_iterations; ++it) {
+    // Bracket a < b < c with f(b) < f(a), f(b) <= f(c).
+    double a = 0, fa = f, b = step, fb = at(b), c, fc;
+    if (fb < fa) {
+      c = b + kGold * (b - a);
+      fc = at(c);
+      for (int e = 0; e < 30 && fc < fb; ++e) {
+        a = b; fa = fb; b = c; fb = fc;
+        c = b + kGold * (b - a);
+        fc = at(c);
+      }
+    } else {
+      c = b; fc = fb;
+      b = c * kInvGold * kInvGold;
+      fb = at(b);
+      for (int e = 0; e < 40 && fb >= fa; ++e) {
+        c = b; fc = fb;
+        b = c * kInvGold * kInvGold;
+        fb = at(b);
+      }
+      if (fb >= fa) {
+        r.termination = RecoveryTermination::kConverged;
+        r.message = "line search found no decrease along the search direction";
+        break;
+      }
+    }
+    // Golden sections: probe the larger side of b.
+    for (int s = 0; s < kSectionSteps; ++s) {
+      if (c - b > b - a) {
+        const double t = b + (1 - kInvGold) * (c - b), ft = at(t);
+        if (ft < fb) { a = b; fa = fb; b = t; fb = ft; } else { c = t; fc = ft; }
+      } else {
+        const double t = b - (1 - kInvGold) * (b - a), ft = at(t);
+        if (ft < fb) { c = b; fc = fb; b = t; fb = ft; } else { a = t; fa = ft; }
+      }
+    }
+    for (size_t i = 0; i < n; ++i) x[i] += b * d[i];
+    const double f_new = problem->Evaluate(x.data(), g_new.data());
+    double num = 0, den = 0;
+    for (size_t i = 0; i < n; ++i) {
+      num += g_new[i] * (g_new[i] - g[i]);
+      den += g[i] * g[i];
+    }
+    const double beta = den > 0 ? std::max(0.0, num / den) : 0.0;
+    double slope = 0;
+    for (size_t i = 0; i < n; ++i) {
+      d[i] = -g_new[i] + beta * d[i];
+      slope += d[i] * g_new[i];
+    }
+    if (slope >= 0)
+      for (size_t i = 0; i < n; ++i) d[i] = -g_new[i];
+    const double decrease = f - f_new;
+    g.swap(g_new);
+    f = f_new;
+    step = b;
+    r.iterations = it;
+    r.final = f;
+    if (hook && !hook(it, f, Norm(g))) {
+      r.termination = RecoveryTermination::kStopped;
+      r.message = "stopped by the caller";
+      break;
+    }
+    if (decrease <= tolerance * std::abs(f)) {
+      r.termination = RecoveryTermination::kConverged;
+      r.message = fmt::format("objective decrease {:.3e} <= tolerance * objective", decrease);
+      break;
+    }
+  }
+  r.final = f;
+  return r;
+}
+
+double GeometricMean(const double* logs, int64_t n) {
+  double s = 0;
+  for (int64_t p = 0; p < n; ++p) s += logs[p];
+  return std::exp(s / double(n));
+}
+
+}  // namespace
+
+OptimizerKind ParseOptimizer(const std::string& text) {
+  if (text == "lbfgs") return OptimizerKind::kLbfgs;
+  if (text == "ncg") return OptimizerKind::kNcg;
+  if (text == "paper") return OptimizerKind::kPaper;
+  throw InputError(fmt::format("--optimizer: unknown optimizer '{}' (lbfgs, ncg, paper)", text));
+}
+
+const char* OptimizerName(OptimizerKind kind) {
+  switch (kind) {
+    case OptimizerKind::kLbfgs: return "lbfgs";
+    case OptimizerKind::kNcg: return "ncg";
+    case OptimizerKind::kPaper: return "paper";
+  }
+  return "?";
+}
+
+const char* TerminationName(RecoveryTermination t) {
+  switch (t) {
+    case RecoveryTermination::kConverged: return "converged";
+    case RecoveryTermination::kMaxIterations: return "max_iterations";
+    case RecoveryTermination::kStopped: return "stopped";
+    case RecoveryTermination::kFailed: return "failed";
+  }
+  return "?";
+}
+
+std::string RecoveryOptions::Validate() const {
+  if (!(lambda >= 0) || !std::isfinite(lambda)) return fmt::format("lambda must be >= 0, got {}", lambda);
+  if (max_iterations < 0) return "max_iterations must be >= 0";
+  if (!(tolerance > 0 && tolerance < 1)) return fmt::format("tolerance must be in (0, 1), got {}", tolerance);
+  if (homogeneous_iterations < 0) return "homogeneous_iterations must be >= 0";
+  if (!(homogeneous_kappa > 0) || !(homogeneous_mu > 0)) return "the homogeneous start must be > 0";
+  if (!(solve_tolerance > 0 && solve_tolerance < 1e-3)) return "solve_tolerance must be in (0, 1e-3)";
+  if (threads_per_channel < 0) return "threads_per_channel must be >= 0";
+  return regularizer.Validate();
+}
+
+std::string RecoverySummary::BriefReport() const {
+  return fmt::format("{} ({}): {} iterations, {} solves, {:.1f} s, objective {:.4e} -> {:.4e}, "
+                     "fit E {:.3e}{}{}", TerminationName(termination), OptimizerName(optimizer),
+                     iterations, solves, seconds, initial_objective, final_objective, fit_error,
+                     message.empty() ? "" : ": ", message);
+}
+
+RecoveryState StateFromMaterial(const Dataset& d, const Material& m) {
+  if (!(m.shape == d.shape))
+    throw InputError(fmt::format("--init: material grid {} differs from the dataset grid {}",
+                                 m.shape.ToString(), d.shape.ToString()));
+  if (std::string err = m.Validate(); !err.empty()) throw InputError("--init: " + err);
+  const int64_t n = d.shape.size();
+  RecoveryState s;
+  s.x.resize(6 * n);
+  for (int c = 0; c < 3; ++c) {
+    for (int64_t p = 0; p < n; ++p) {
+      s.x[2 * c * n + p] = std::log(double(m.kappa[c][p]));
+      s.x[(2 * c + 1) * n + p] = std::log(double(m.mu[c][p]));
+    }
+    s.kappa_scale[c] = s.homogeneous_kappa[c] = GeometricMean(s.x.data() + 2 * c * n, n);
+    s.mu_scale[c] = s.homogeneous_mu[c] = GeometricMean(s.x.data() + (2 * c + 1) * n, n);
+  }
+  return s;
+}
+
+Material MaterialFromState(const Dataset& d, const RecoveryState& s, double eta) {
+  const int64_t n = d.shape.size();
+  TL_CHECK(int64_t(s.x.size()) == 6 * n);
+  Material m = Material::Constant(d.shape, d.spacing_mm, {1, 1, 1}, {1, 1, 1}, eta);
+  m.C = d.C;
+  for (int c = 0; c < 3; ++c)
+    for (int64_t p = 0; p < n; ++p) {
+      m.kappa[c][p] = float(std::exp(s.x[2 * c * n + p]));
+      m.mu[c][p] = float(std::exp(s.x[(2 * c + 1) * n + p]));
+    }
+  return m;
+}
+
+RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryState* state,
+                        const RecoveryCallback& callback) {
+  if (std::string err = o.Validate(); !err.empty()) throw InputError("recovery options: " + err);
+  if (std::string err = d.Validate(); !err.empty()) throw InputError("dataset: " + err);
+  const auto t0 = Clock::now();
+  const int64_t n = d.shape.size();
+  RecoveryProblem problem(d, o);
+  RecoverySummary sum;
+  sum.optimizer = o.optimizer;
+  const int64_t solves0 = state->solves;
+  const double seconds0 = state->seconds;
+  auto solves = [&] { return solves0 + problem.solves(); };
+  auto seconds = [&] { return seconds0 + Since(t0); };
+
+  if (state->x.empty()) {
+    // Homogeneous initialisation: 6 unknowns, same objective on constant volumes.
+    std::vector<double> h(6);
+    for (int c = 0; c < 3; ++c) {
+      h[2 * c] = std::log(o.homogeneous_kappa);
+      h[2 * c + 1] = std::log(o.homogeneous_mu);
+    }
+    if (o.homogeneous_iterations > 0) problem.FitHomogeneous(o.homogeneous_iterations, &h);
+    state->x.resize(6 * n);
+    for (int c = 0; c < 3; ++c) {
+      std::fill_n(state->x.begin() + 2 * c * n, n, h[2 * c]);
+      std::fill_n(state->x.begin() + (2 * c + 1) * n, n, h[2 * c + 1]);
+      state->kappa_scale[c] = state->homogeneous_kappa[c] = std::exp(h[2 * c]);
+      state->mu_scale[c] = state->homogeneous_mu[c] = std::exp(h[2 * c + 1]);
+    }
+    sum.homogeneous_seconds = Since(t0);
+    sum.homogeneous_solves = problem.solves();
+  }
+  TL_CHECK(int64_t(state->x.size()) == 6 * n);
+  problem.set_scales(state->kappa_scale, state->mu_scale);
+  sum.homogeneous_kappa = state->homogeneous_kappa;
+  sum.homogeneous_mu = state->homogeneous_mu;
+
+  const int first_iteration = state->iteration;
+  IterationHook hook = [&](int it, double f, double gnorm) {
+    IterationReport rep;
+    rep.iteration = first_iteration + it;
+    rep.objective = f;
+    rep.gradient_norm = gnorm;
+    rep.solves = solves();
+    rep.seconds = seconds();
+    state->iteration = rep.iteration;
+    state->solves = rep.solves;
+    state->seconds = rep.seconds;
+    state->history.push_back(rep);
+    return callback ? callback(rep, *state) : true;
+  };
+  const int remaining = std::max(0, o.max_iterations - first_iteration);
+  OptimizerResult r;
+  if (remaining == 0) {
+    r.termination = RecoveryTermination::kMaxIterations;
+    r.message = "no iterations left";
+    r.initial = r.final = problem.Evaluate(state->x.data(), nullptr);
+  } else if (o.optimizer == OptimizerKind::kPaper) {
+    r = RunPaper(&problem, remaining, o.tolerance, &state->x, hook);
+  } else {
+    r = RunCeres(&problem, o.optimizer, remaining, o.tolerance, &state->x, hook);
+  }
+  // Final evaluation at the result: fit errors per condition (warm-started, cheap).
+  sum.final_objective = problem.Evaluate(state->x.data(), nullptr);
+  sum.fit_error = problem.FitError(&sum.condition_fit_error);
+  sum.termination = r.termination;
+  sum.message = r.message;
+  sum.initial_objective = r.initial;
+  sum.iterations = state->iteration;
+  sum.solves = state->solves = solves();
+  sum.seconds = state->seconds = seconds();
+  sum.history = state->history;
+  return sum;
+}
+
+void WriteCheckpoint(const std::string& path, const Dataset& d, const RecoveryState& s) {
+  nlohmann::json j;
+  j["format"] = "translume-checkpoint/1";
+  j["grid"] = {d.shape.nx, d.shape.ny, d.shape.nz};
+  j["x"] = s.x;
+  j["kappa_scale"] = s.kappa_scale;
+  j["mu_scale"] = s.mu_scale;
+  j["homogeneous_kappa"] = s.homogeneous_kappa;
+  j["homogeneous_mu"] = s.homogeneous_mu;
+  j["iteration"] = s.iteration;
+  j["solves"] = s.solves;
+  j["seconds"] = s.seconds;
+  nlohmann::json h = nlohmann::json::array();
+  for (const auto& r : s.history)
+    h.push_back({r.iteration, r.objective, r.gradient_norm, r.solves, r.seconds});
+  j["history"] = h;
+  const std::vector<uint8_t> bytes = nlohmann::json::to_cbor(j);
+  WriteAtomically(path, [&](const std::string& tmp) {
+    std::ofstream out(tmp, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+    if (!out) throw InputError(fmt::format("{}: cannot write checkpoint", path));
+  });
+}
+
+RecoveryState ReadCheckpoint(const std::string& path, const Dataset& d) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(fmt::format("{}: cannot open checkpoint", path));
+  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), {});
+  RecoveryState s;
+  try {
+    const nlohmann::json j = nlohmann::json::from_cbor(bytes);
+    if (j.at("format") != "translume-checkpoint/1")
+      throw InputError(fmt::format("{}: not a translume checkpoint", path));
+    const auto grid = j.at("grid").get<std::vector<int64_t>>();
+    if (grid != std::vector<int64_t>{d.shape.nx, d.shape.ny, d.shape.nz})
+      throw InputError(fmt::format("{}: checkpoint grid differs from the dataset grid {}", path,
+                                   d.shape.ToString()));
+    s.x = j.at("x").get<std::vector<double>>();
+    if (int64_t(s.x.size()) != 6 * d.shape.size())
+      throw InputError(fmt::format("{}: checkpoint has the wrong number of parameters", path));
+    s.kappa_scale = j.at("kappa_scale").get<std::array<double, 3>>();
+    s.mu_scale = j.at("mu_scale").get<std::array<double, 3>>();
+    s.homogeneous_kappa = j.at("homogeneous_kappa").get<std::array<double, 3>>();
+    s.homogeneous_mu = j.at("homogeneous_mu").get<std::array<double, 3>>();
+    s.iteration = j.at("iteration").get<int>();
+    s.solves = j.at("solves").get<int64_t>();
+    s.seconds = j.at("seconds").get<double>();
+    for (const auto& h : j.at("history"))
+      s.history.push_back({h[0].get<int>(), h[1].get<double>(), h[2].get<double>(),
+                           h[3].get<int64_t>(), h[4].get<double>()});
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError(fmt::format("{}: corrupt checkpoint ({})", path, e.what()));
+  }
+  return s;
+}
+
+}  // namespace translume

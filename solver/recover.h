@@ -1,0 +1,113 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "solver/dataset.h"
+#include "solver/forward.h"
+#include "solver/material.h"
+#include "solver/objective.h"
+
+namespace translume {
+
+// The inverse problem of SPEC section 4, all three channels at once. The unknowns are the
+// log-parameters x (so kappa, mu > 0 at every iterate), laid out channel by channel:
+//   x[(2 c) n + p] = log kappa_c[p],  x[(2 c + 1) n + p] = log mu_c[p],  n = nodes, c = R, G, B.
+// The objective is the mean over channels of the per-channel objectives
+//   f_c = J_c(kappa_c, mu_c) + lambda R(kappa_c; s_kappa_c) [+ lambda R(mu_c; s_mu_c)]
+// (J_c: ChannelObjective, R: Regularize with reference scales s = the starting material's
+// geometric means). Channels are independent; each evaluation runs them in 3 threads.
+
+enum class OptimizerKind { kLbfgs, kNcg, kPaper };
+OptimizerKind ParseOptimizer(const std::string& text);  // lbfgs | ncg | paper
+const char* OptimizerName(OptimizerKind kind);
+
+struct RecoveryOptions {
+  // lbfgs / ncg: Ceres GradientProblemSolver (Wolfe line search; ncg = Polak-Ribiere).
+  // paper: Polak-Ribiere CG with golden-section line search (Wang et al. 2008, Table I).
+  OptimizerKind optimizer = OptimizerKind::kLbfgs;
+  Backend backend = Backend::kCpu;
+  double lambda = 1e-6;
+  RegularizerOptions regularizer;
+  bool regularize_mu = false;
+  int max_iterations = 300;
+  // Stop when an iteration lowers the objective by less than tolerance * objective.
+  double tolerance = 1e-7;
+  // First fit one (kappa, mu) per channel (6 unknowns), then the heterogeneous problem.
+  int homogeneous_iterations = 40;
+  double homogeneous_kappa = 0.1, homogeneous_mu = 0.01;  // its starting point (mm, 1/mm)
+  // Relative residual of every forward and adjoint solve.
+  double solve_tolerance = 1e-8;
+  // OpenMP threads inside each channel's solver; 0: max(1, NumThreads() / 3).
+  int threads_per_channel = 0;
+
+  std::string Validate() const;
+};
+
+struct IterationReport {
+  int iteration = 0;
+  double objective = 0, gradient_norm = 0;
+  int64_t solves = 0;    // cumulative, forward + adjoint, all channels
+  double seconds = 0;    // cumulative
+};
+
+enum class RecoveryTermination { kConverged, kMaxIterations, kStopped, kFailed };
+const char* TerminationName(RecoveryTermination t);
+
+// Where a recovery starts: empty x -> homogeneous fit first. Filled from a material (--init) or
+// a checkpoint (resume: counters and history continue).
+struct RecoveryState {
+  std::vector<double> x;
+  std::array<double, 3> kappa_scale{}, mu_scale{};  // regulariser reference scales
+  std::array<double, 3> homogeneous_kappa{}, homogeneous_mu{};
+  int iteration = 0;
+  int64_t solves = 0;
+  double seconds = 0;
+  std::vector<IterationReport> history;
+};
+
+struct RecoverySummary {
+  RecoveryTermination termination = RecoveryTermination::kFailed;
+  std::string message;
+  OptimizerKind optimizer = OptimizerKind::kLbfgs;
+  int iterations = 0;
+  int64_t solves = 0;
+  double seconds = 0, homogeneous_seconds = 0;
+  int64_t homogeneous_solves = 0;  // of `solves`, spent in the homogeneous fit
+  double initial_objective = 0, final_objective = 0;
+  std::array<double, 3> homogeneous_kappa{}, homogeneous_mu{};
+  std::vector<IterationReport> history;
+  // Fit error on the training conditions at the result: E over everything and per condition,
+  // E = sum w (L^R - L)^2 / sum w L^2 (RGB together).
+  double fit_error = 0;
+  std::vector<double> condition_fit_error;
+  std::string BriefReport() const;
+};
+
+// Progress hook: called after every iteration with the report and the current state (x is
+// the current, best, iterate). Return false to stop (the result is then that iterate).
+using RecoveryCallback = std::function<bool(const IterationReport&, const RecoveryState&)>;
+
+// Starting state from a material on the dataset's grid (--init). Throws InputError on a
+// grid mismatch.
+RecoveryState StateFromMaterial(const Dataset& dataset, const Material& material);
+// The material of a state (values rounded to float).
+Material MaterialFromState(const Dataset& dataset, const RecoveryState& state, double eta = 1.3);
+
+// Runs the recovery from `state` (updated in place to the final iterate). Throws InputError on
+// invalid options or data.
+RecoverySummary Recover(const Dataset& dataset, const RecoveryOptions& options,
+                        RecoveryState* state, const RecoveryCallback& callback = {});
+
+// Checkpoint file: CBOR (nlohmann) of {"format": "translume-checkpoint/1", grid, x (doubles,
+// exact), scales, counters, history}. Written atomically. Reading throws InputError naming the
+// file on a wrong format or a grid different from `dataset`'s.
+void WriteCheckpoint(const std::string& path, const Dataset& dataset, const RecoveryState& state);
+RecoveryState ReadCheckpoint(const std::string& path, const Dataset& dataset);
+
+}  // namespace translume

@@ -1,0 +1,139 @@
+// SPDX-License-Identifier: MIT
+#include "solver/recover.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "solver/evaluate.h"
+#include "solver/light.h"
+#include "solver/simulate.h"
+#include "solver/status.h"
+#include "solver/synthetic.h"
+
+namespace translume {
+namespace {
+
+// The recovery tests run on every backend (gl on Mesa llvmpipe where there is no GPU).
+class RecoverOnBackend : public ::testing::TestWithParam<Backend> {};
+
+TEST_P(RecoverOnBackend, HomogeneousVolumeToOnePerMille) {
+  const Material truth = Material::Constant({12, 10, 5}, 0.5, {0.25f, 0.15f, 0.08f}, {0.01f, 0.03f, 0.06f});
+  SimulateOptions so;
+  so.lights = RegionLights("2x2");
+  so.oversample = 1;
+  const Dataset d = SimulateDataset(truth, so).training;
+  RecoveryOptions ro;
+  ro.backend = GetParam();
+  ro.max_iterations = 0;  // the homogeneous fit alone
+  RecoveryState st;
+  const RecoverySummary s = Recover(d, ro, &st);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(s.homogeneous_kappa[c] / truth.kappa[c][0], 1.0, 1e-3) << c;
+    EXPECT_NEAR(s.homogeneous_mu[c] / truth.mu[c][0], 1.0, 1e-3) << c;
+  }
+  EXPECT_LT(s.fit_error, 1e-8);
+}
+
+// A small heterogeneous recovery from oversampled noise-free data, checked on held-out spots.
+TEST_P(RecoverOnBackend, HeterogeneousVolumeRelightsHeldOutSpots) {
+  SynthOptions syn;
+  syn.preset = "wax";
+  syn.shape = {16, 12, 5};
+  syn.spacing_mm = 0.5;
+  const Material truth = SynthesizeMaterial(syn);
+  SimulateOptions so;
+  so.lights = RegionLights("4x4");
+  so.holdout = 8;
+  const SimulatedData data = SimulateDataset(truth, so);
+  RecoveryOptions ro;
+  ro.backend = GetParam();
+  ro.max_iterations = 30;
+  RecoveryState st;
+  const RecoverySummary s = Recover(data.training, ro, &st);
+  std::printf("%s\n", s.BriefReport().c_str());
+  const Material rec = MaterialFromState(data.training, st);
+  std::vector<FacePattern> q;
+  for (const auto& c : data.holdout.conditions) q.push_back(c.q);
+  MultigridOptions mg;
+  mg.tolerance = 1e-10;
+  const double E = RelightingError(RenderFrontFace(rec, Setup::kBack, q, mg),
+                                   RenderFrontFace(truth, Setup::kBack, q, mg));
+  std::printf("held-out E %.3e, fit E %.3e\n", E, s.fit_error);
+  EXPECT_LT(E, 1e-3);
+  EXPECT_LT(s.final_objective, s.initial_objective);
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, RecoverOnBackend, ::testing::Values(Backend::kCpu, Backend::kGl),
+                         [](const auto& info) { return info.param == Backend::kCpu ? "cpu" : "gl"; });
+
+// Stopping after 15 iterations, writing a checkpoint, reading it back and resuming reaches the
+// same result as one uninterrupted run (both to convergence; the resumed L-BFGS starts with an
+// empty history, so the iterates differ on the way).
+TEST(Recover, CheckpointResumeMatchesUninterruptedRun) {
+  SynthOptions syn;
+  syn.preset = "layered";
+  syn.shape = {10, 8, 4};
+  const Material truth = SynthesizeMaterial(syn);
+  SimulateOptions so;
+  so.lights = RegionLights("2x2");
+  so.oversample = 1;
+  const Dataset d = SimulateDataset(truth, so).training;
+  RecoveryOptions ro;
+  ro.lambda = 1e-3;
+  ro.regularize_mu = true;
+  ro.max_iterations = 600;
+  ro.tolerance = 1e-10;
+  RecoveryState a;
+  const RecoverySummary sa = Recover(d, ro, &a);
+  RecoveryState b;
+  Recover(d, ro, &b, [](const IterationReport& r, const RecoveryState&) { return r.iteration < 15; });
+  EXPECT_EQ(b.iteration, 15);
+  const std::string path = (std::filesystem::temp_directory_path() / "translume_checkpoint_test.bin").string();
+  WriteCheckpoint(path, d, b);
+  RecoveryState c = ReadCheckpoint(path, d);
+  std::filesystem::remove(path);
+  EXPECT_EQ(c.x, b.x);
+  EXPECT_EQ(c.history.size(), 15u);
+  const RecoverySummary sc = Recover(d, ro, &c);
+  std::printf("uninterrupted: %s\nresumed: %s\n", sa.BriefReport().c_str(), sc.BriefReport().c_str());
+  EXPECT_EQ(c.history.front().iteration, 1);
+  EXPECT_GT(c.history.back().iteration, 15);
+  EXPECT_NEAR(sc.final_objective / sa.final_objective, 1.0, 1e-3);
+  const Material ma = MaterialFromState(d, a), mc = MaterialFromState(d, c);
+  std::vector<double> ek, em;
+  LayerErrors(mc, ma, &ek, &em);
+  for (size_t k = 0; k < ek.size(); ++k) {
+    EXPECT_LT(ek[k], 2e-2) << k;
+    EXPECT_LT(em[k], 2e-2) << k;
+  }
+  // And they relight the sample the same way.
+  std::vector<FacePattern> q;
+  for (const auto& cond : d.conditions) q.push_back(cond.q);
+  MultigridOptions mg;
+  mg.tolerance = 1e-10;
+  EXPECT_LT(RelightingError(RenderFrontFace(mc, d.setup, q, mg), RenderFrontFace(ma, d.setup, q, mg)), 1e-6);
+  EXPECT_THROW(ReadCheckpoint("/nonexistent/ck.bin", d), InputError);
+}
+
+TEST(Recover, PaperOptimizerAndNcgLowerTheObjective) {
+  const Material truth = Material::Constant({8, 6, 4}, 0.5, {0.2f, 0.15f, 0.1f}, {0.02f, 0.03f, 0.05f});
+  SimulateOptions so;
+  so.lights = RegionLights("2x2");
+  const Dataset d = SimulateDataset(truth, so).training;
+  for (OptimizerKind kind : {OptimizerKind::kPaper, OptimizerKind::kNcg}) {
+    RecoveryOptions ro;
+    ro.optimizer = kind;
+    ro.max_iterations = 5;
+    ro.homogeneous_iterations = 0;  // start far from the truth
+    RecoveryState st;
+    const RecoverySummary s = Recover(d, ro, &st);
+    EXPECT_LT(s.final_objective, 0.5 * s.initial_objective) << OptimizerName(kind);
+    EXPECT_EQ(s.iterations, 5) << s.BriefReport();
+  }
+  EXPECT_THROW(ParseOptimizer("adam"), InputError);
+}
+
+}  // namespace
+}  // namespace translume

@@ -1,0 +1,179 @@
+// SPDX-License-Identifier: MIT
+#include "solver/simulate.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fmt/format.h>
+#include <random>
+#include <thread>
+#include <atomic>
+#include <exception>
+#include <omp.h>
+
+#include "solver/status.h"
+#include "solver/threads.h"
+
+namespace translume {
+
+Material RefineMaterial(const Material& m, int K) {
+  TL_CHECK(K >= 1);
+  if (K == 1) return m;
+  const GridShape& s = m.shape;
+  Material f = m;
+  f.shape = {(s.nx - 1) * K + 1, (s.ny - 1) * K + 1, (s.nz - 1) * K + 1};
+  f.spacing_mm = m.spacing_mm / K;
+  // Per fine index along an axis: the lower coarse node and the weight of the upper one.
+  auto axis = [K](int64_t n_fine, int64_t n_coarse, std::vector<int64_t>* lo, std::vector<double>* w) {
+    lo->resize(n_fine);
+    w->resize(n_fine);
+    for (int64_t i = 0; i < n_fine; ++i) {
+      (*lo)[i] = std::min(i / K, n_coarse - 2);
+      (*w)[i] = double(i - (*lo)[i] * K) / K;
+    }
+  };
+  std::array<std::vector<int64_t>, 3> lo;
+  std::array<std::vector<double>, 3> w;
+  for (int a = 0; a < 3; ++a) axis(f.shape.n(a), s.n(a), &lo[a], &w[a]);
+  for (int c = 0; c < 3; ++c) {
+    for (auto* field : {&f.kappa, &f.mu}) {
+      const std::vector<float>& src = (field == &f.kappa ? m.kappa : m.mu)[c];
+      std::vector<float>& dst = (*field)[c];
+      dst.assign(f.shape.size(), 0.0f);
+#pragma omp parallel for schedule(static)
+      for (int64_t k = 0; k < f.shape.nz; ++k)
+        for (int64_t j = 0; j < f.shape.ny; ++j)
+          for (int64_t i = 0; i < f.shape.nx; ++i) {
+            double v = 0;
+            for (int corner = 0; corner < 8; ++corner) {
+              const int dx = corner & 1, dy = (corner >> 1) & 1, dz = (corner >> 2) & 1;
+              const double wt = (dx ? w[0][i] : 1 - w[0][i]) * (dy ? w[1][j] : 1 - w[1][j]) *
+                                (dz ? w[2][k] : 1 - w[2][k]);
+              if (wt != 0) v += wt * src[s.index(lo[0][i] + dx, lo[1][j] + dy, lo[2][k] + dz)];
+            }
+            dst[f.shape.index(i, j, k)] = float(v);
+          }
+    }
+  }
+  return f;
+}
+
+std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
+                                         const std::vector<FacePattern>& lights,
+                                         const MultigridOptions& multigrid) {
+  ForwardOptions fo;
+  fo.setup = setup;
+  fo.multigrid = multigrid;
+  std::vector<FacePattern> out(lights.size());
+  // Conditions in parallel, one OpenMP thread each: independent solves scale better than
+  // threads inside one solve, and small grids do not suffer from OpenMP barriers.
+  std::atomic<size_t> next{0};
+  std::vector<std::exception_ptr> errors(lights.size());
+  auto worker = [&] {
+    omp_set_num_threads(1);
+    for (size_t l = next++; l < lights.size(); l = next++) {
+      try {
+        ForwardResult r = SolveForward(material, lights[l], fo);
+        for (const auto& sum : r.summaries)
+          if (!sum.converged) throw InputError("forward solve did not converge: " + sum.BriefReport());
+        out[l] = std::move(r.radiance);
+      } catch (...) {
+        errors[l] = std::current_exception();
+      }
+    }
+  };
+  const int workers = std::max(1, std::min<int>(NumThreads(), int(lights.size())));
+  std::vector<std::thread> pool;
+  for (int t = 1; t < workers; ++t) pool.emplace_back(worker);
+  worker();
+  for (auto& t : pool) t.join();
+  for (auto& e : errors)
+    if (e) std::rethrow_exception(e);
+  return out;
+}
+
+std::vector<float> MeasurementMask(const GridShape& s, Setup setup, const FacePattern& q,
+                                   int margin) {
+  std::vector<float> mask(s.face_size(), 1.0f);
+  if (setup == Setup::kBack) return mask;
+  for (int64_t j = 0; j < s.ny; ++j)
+    for (int64_t i = 0; i < s.nx; ++i) {
+      const int64_t p = i + s.nx * j;
+      if (q[0][p] <= 0 && q[1][p] <= 0 && q[2][p] <= 0) continue;
+      for (int64_t jj = std::max<int64_t>(0, j - margin); jj <= std::min(s.ny - 1, j + margin); ++jj)
+        for (int64_t ii = std::max<int64_t>(0, i - margin); ii <= std::min(s.nx - 1, i + margin); ++ii)
+          mask[ii + s.nx * jj] = 0.0f;
+    }
+  return mask;
+}
+
+std::string SimulateOptions::Validate() const {
+  if (lights.empty()) return "at least one light is needed";
+  if (!(noise >= 0) || !std::isfinite(noise)) return fmt::format("noise must be >= 0, got {}", noise);
+  if (oversample < 1 || oversample > 8) return fmt::format("oversample must be in [1, 8], got {}", oversample);
+  if (holdout < 0) return "holdout must be >= 0";
+  if (!(tolerance > 0 && tolerance < 1)) return "tolerance must be in (0, 1)";
+  if (mask_margin < 0) return "mask_margin must be >= 0";
+  return "";
+}
+
+namespace {
+
+// Simulates `lights` into a dataset with conditions named prefix + index.
+Dataset Simulate(const Material& m, const Material& fine, const SimulateOptions& o,
+                 const std::vector<LightSpec>& lights, const std::string& prefix,
+                 std::mt19937_64* rng) {
+  Dataset d;
+  d.shape = m.shape;
+  d.spacing_mm = m.spacing_mm;
+  d.C = m.C;
+  d.setup = o.setup;
+  std::vector<FacePattern> fine_q;
+  for (const auto& l : lights) fine_q.push_back(GreyPattern(RasterizeLight(l, fine.shape, fine.spacing_mm)));
+  MultigridOptions mg;
+  mg.tolerance = o.tolerance;
+  mg.max_iterations = 200;
+  const std::vector<FacePattern> fine_L = RenderFrontFace(fine, o.setup, fine_q, mg);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  const int K = o.oversample;
+  for (size_t l = 0; l < lights.size(); ++l) {
+    DatasetCondition c;
+    c.name = fmt::format("{}{:02d}", prefix, l);
+    c.q = GreyPattern(RasterizeLight(lights[l], m.shape, m.spacing_mm));
+    for (int ch = 0; ch < 3; ++ch) {
+      c.L[ch].resize(m.shape.face_size());
+      for (int64_t j = 0; j < m.shape.ny; ++j)
+        for (int64_t i = 0; i < m.shape.nx; ++i) {
+          double v = fine_L[l][ch][i * K + fine.shape.nx * (j * K)];
+          if (o.noise > 0) v *= 1.0 + o.noise * gauss(*rng);
+          c.L[ch][i + m.shape.nx * j] = float(v);
+        }
+    }
+    c.mask = MeasurementMask(m.shape, o.setup, c.q, o.mask_margin);
+    d.conditions.push_back(std::move(c));
+  }
+  return d;
+}
+
+}  // namespace
+
+SimulatedData SimulateDataset(const Material& material, const SimulateOptions& o) {
+  if (std::string err = o.Validate(); !err.empty()) throw InputError("simulate: " + err);
+  if (std::string err = material.Validate(); !err.empty()) throw InputError("material: " + err);
+  const Material fine = RefineMaterial(material, o.oversample);
+  std::mt19937_64 rng(o.seed);
+  SimulatedData out;
+  out.training = Simulate(material, fine, o, o.lights, "c", &rng);
+  if (o.holdout > 0) {
+    const double h = material.spacing_mm;
+    const double w = (material.shape.nx - 1) * h, ht = (material.shape.ny - 1) * h;
+    std::uniform_real_distribution<double> ux(0.0, w), uy(0.0, ht);
+    for (int i = 0; i < o.holdout; ++i) {
+      const double x = ux(rng), y = uy(rng);
+      out.holdout_lights.push_back(LightSpec::Parse(fmt::format("spot:{:.4f},{:.4f},{:.4f}", x, y, 3 * h)));
+    }
+    out.holdout = Simulate(material, fine, o, out.holdout_lights, "h", &rng);
+  }
+  return out;
+}
+
+}  // namespace translume

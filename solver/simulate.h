@@ -1,0 +1,55 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "solver/dataset.h"
+#include "solver/light.h"
+#include "solver/material.h"
+#include "solver/multigrid.h"
+
+namespace translume {
+
+// The material on a grid K times finer per axis: (n - 1) K + 1 nodes per axis, spacing h / K,
+// kappa and mu trilinearly interpolated between the original nodes (which it keeps exactly).
+Material RefineMaterial(const Material& material, int K);
+
+// Front-face radiance of `material` under each light pattern (L = (phi - q_front) / (2 pi),
+// SPEC section 3), solved on the material's own grid.
+std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
+                                         const std::vector<FacePattern>& lights,
+                                         const MultigridOptions& multigrid);
+
+// Front-lit mask: 0 at every front-face node within `margin` nodes (Chebyshev distance) of a
+// node with q > 0 in any channel, 1 elsewhere. All 1 for the back-lit setup.
+std::vector<float> MeasurementMask(const GridShape& shape, Setup setup, const FacePattern& q,
+                                   int margin = 2);
+
+struct SimulateOptions {
+  std::vector<LightSpec> lights;  // the training conditions (e.g. RegionLights("4x4"))
+  Setup setup = Setup::kBack;
+  double noise = 0;         // relative Gaussian noise sigma per pixel and channel (0.01 = 1 %)
+  int oversample = 2;       // forward solves on a grid this many times finer per axis
+  int holdout = 0;          // extra held-out conditions: random spots on the lit face
+  uint64_t seed = 1;        // noise and holdout spot positions
+  double tolerance = 1e-9;  // relative residual of every forward solve
+  int mask_margin = 2;      // front-lit: nodes masked around the lit region
+
+  std::string Validate() const;
+};
+
+struct SimulatedData {
+  Dataset training;
+  Dataset holdout;  // no conditions when options.holdout == 0
+  std::vector<LightSpec> holdout_lights;
+};
+
+// Simulates a capture of `material` (the recovery grid): forward solves on the refined grid
+// (RefineMaterial with options.oversample), front-face radiance sampled back at the recovery
+// nodes (fine node (i K, j K)), then noise. q in the dataset is the light rasterised on the
+// recovery grid. Holdout spots have random centres on the lit face and radius 3 h.
+SimulatedData SimulateDataset(const Material& material, const SimulateOptions& options);
+
+}  // namespace translume

@@ -1,0 +1,268 @@
+// SPDX-License-Identifier: MIT
+// Subcommands of the inverse problem: simulate, solve, evaluate.
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <fmt/format.h>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <optional>
+
+#include "solver/atomic_file.h"
+#include "solver/dataset.h"
+#include "solver/evaluate.h"
+#include "solver/image_io.h"
+#include "solver/light.h"
+#include "solver/material_io.h"
+#include "solver/memory.h"
+#include "solver/recover.h"
+#include "solver/simulate.h"
+#include "solver/status.h"
+#include "solver/threads.h"
+#include "tools/commands.h"
+
+namespace translume {
+namespace {
+
+namespace fs = std::filesystem;
+
+volatile std::sig_atomic_t g_interrupted = 0;
+// First Ctrl-C: finish the current iteration, then write the best material so far. A second
+// one ends the process at once (the default action).
+void OnSigint(int) {
+  if (g_interrupted) {
+    std::signal(SIGINT, SIG_DFL);
+    std::raise(SIGINT);
+  }
+  g_interrupted = 1;
+}
+
+// 8-bit PNG slices of kappa and mu at depths 0, nz/4, nz/2, 3nz/4 and nz-1, RGB = channels,
+// each quantity scaled by its maximum over the volume: PREFIX_kappa_kNN.png, PREFIX_mu_kNN.png.
+std::vector<std::string> WriteSlices(const std::string& prefix, const Material& m) {
+  const GridShape& s = m.shape;
+  std::vector<int64_t> depths = {0, s.nz / 4, s.nz / 2, 3 * s.nz / 4, s.nz - 1};
+  depths.erase(std::unique(depths.begin(), depths.end()), depths.end());
+  std::vector<std::string> written;
+  for (auto [name, field] : {std::pair{"kappa", &m.kappa}, std::pair{"mu", &m.mu}}) {
+    float top = 0;
+    for (const auto& ch : *field) top = std::max(top, *std::max_element(ch.begin(), ch.end()));
+    for (int64_t k : depths) {
+      std::array<std::vector<float>, 3> planes;
+      for (int c = 0; c < 3; ++c) {
+        planes[c].resize(s.face_size());
+        for (int64_t f = 0; f < s.face_size(); ++f)
+          planes[c][f] = (*field)[c][f + s.face_size() * k] / top;
+      }
+      const std::string path = fmt::format("{}_{}_k{:02d}.png", prefix, name, k);
+      WriteImage(path, ImageFromPlanes(int(s.nx), int(s.ny),
+                                       {planes[0].data(), planes[1].data(), planes[2].data()}));
+      written.push_back(path);
+    }
+  }
+  return written;
+}
+
+std::string FormatSeconds(double s) {
+  if (s < 120) return fmt::format("{:.1f} s", s);
+  if (s < 7200) return fmt::format("{:.1f} min", s / 60);
+  return fmt::format("{:.1f} h", s / 3600);
+}
+
+}  // namespace
+
+int RunSimulate(int argc, char** argv) {
+  CLI::App app{"Simulate a capture of a material into a node-space dataset (docs/formats.md):\n"
+               "region lights on the lit face, forward solves on a grid K times finer per axis\n"
+               "(no inverse crime), radiance sampled back at the material's nodes, optional\n"
+               "relative Gaussian noise and held-out spot lights in DATASET/holdout/.",
+               "translume simulate"};
+  std::string material_path, lights = "4x4", setup = "back", out;
+  SimulateOptions o;
+  app.add_option("material", material_path, "Material file (.vdb): the truth, on the recovery grid")->required();
+  app.add_option("--lights", lights, "Training lights: NxN regions of the lit face")->capture_default_str();
+  app.add_option("--setup", setup, "back (lit back face) or front")->capture_default_str();
+  app.add_option("--noise", o.noise, "Relative Gaussian noise sigma per pixel (0.01 = 1 %)")->capture_default_str();
+  app.add_option("--oversample", o.oversample, "Forward grid refinement factor per axis")->capture_default_str();
+  app.add_option("--holdout", o.holdout, "Held-out spot conditions to write into DATASET/holdout/")->capture_default_str();
+  app.add_option("--seed", o.seed, "Noise and holdout seed")->capture_default_str();
+  app.add_option("-o,--output", out, "Output dataset folder")->required();
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  o.lights = RegionLights(lights);
+  o.setup = ParseSetup(setup);
+  if (std::string err = o.Validate(); !err.empty()) throw InputError("simulate: " + err);
+  const Material m = ReadMaterial(material_path);
+  const auto t0 = std::chrono::steady_clock::now();
+  const SimulatedData data = SimulateDataset(m, o);
+  WriteDataset(out, data.training);
+  if (!data.holdout.conditions.empty()) WriteDataset((fs::path(out) / "holdout").string(), data.holdout);
+  std::printf("wrote %s: %zu conditions (%s, %s-lit), grid %s, oversampled %dx, noise %g, "
+              "%zu held-out, %.1f s\n", (fs::path(out) / "dataset.json").c_str(),
+              data.training.conditions.size(), lights.c_str(), SetupName(o.setup),
+              m.shape.ToString().c_str(), o.oversample, o.noise, data.holdout.conditions.size(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  return 0;
+}
+
+int RunSolve(int argc, char** argv) {
+  CLI::App app{"Recover per-node kappa and mu (RGB) from a node-space dataset (SPEC section 4):\n"
+               "homogeneous fit first, then the heterogeneous fit in log(kappa), log(mu).\n"
+               "Ctrl-C stops after the current iteration and writes the best material so far\n"
+               "(exit status 130); a second Ctrl-C ends at once.\n"
+               "Writes OUT.vdb, OUT.json (report) and OUT_{kappa,mu}_kNN.png slices.",
+               "translume solve"};
+  std::string dataset_path, out, optimizer = "lbfgs", regularizer = "tk1", backend = "cpu",
+              checkpoint, init;
+  RecoveryOptions o;
+  app.add_option("dataset", dataset_path, "DATASET/ or DATASET/dataset.json")->required();
+  app.add_option("-o,--output", out, "Output material (.vdb)")->required();
+  app.add_option("--optimizer", optimizer, "lbfgs, ncg or paper")->capture_default_str();
+  app.add_option("--lambda", o.lambda, "Regularisation weight")->capture_default_str();
+  app.add_option("--regularizer", regularizer, "tk1, tv or huber")->capture_default_str();
+  app.add_flag("--regularize-mu", o.regularize_mu, "Regularise mu too");
+  app.add_option("--max-iterations", o.max_iterations, "Iterations of the heterogeneous fit")->capture_default_str();
+  app.add_option("--tolerance", o.tolerance, "Stop when an iteration lowers the objective by less than this fraction")->capture_default_str();
+  app.add_option("--backend", backend, "cpu")->capture_default_str();
+  app.add_option("--checkpoint", checkpoint, "Checkpoint file: resumed from if it exists, updated while running");
+  app.add_option("--init", init, "Start from this material (.vdb) instead of the homogeneous fit");
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  if (fs::path(out).extension() != ".vdb") throw InputError(fmt::format("-o {}: the output must end in .vdb", out));
+  o.optimizer = ParseOptimizer(optimizer);
+  o.regularizer.kind = ParseRegularizer(regularizer);
+  o.backend = ParseBackend(backend);
+  if (std::string err = o.Validate(); !err.empty()) throw InputError("solve: " + err);
+  const Dataset d = ReadDataset(dataset_path);
+  CheckFitsInMemory(EstimateMemory(d.shape, int(d.conditions.size()), Precision::kDouble).recovery_bytes,
+                    fmt::format("a recovery on the {} grid with {} conditions", d.shape.ToString(),
+                                d.conditions.size()));
+  RecoveryState state;
+  if (!checkpoint.empty() && fs::exists(checkpoint)) {
+    state = ReadCheckpoint(checkpoint, d);
+    std::printf("resuming from %s at iteration %d (%lld solves, %s)\n", checkpoint.c_str(),
+                state.iteration, (long long)state.solves, FormatSeconds(state.seconds).c_str());
+  } else if (!init.empty()) {
+    state = StateFromMaterial(d, ReadMaterial(init));
+  }
+  std::printf("solve: %s, grid %s, %zu conditions, %s-lit, optimizer %s, lambda %g (%s%s), "
+              "%d threads\n", dataset_path.c_str(), d.shape.ToString().c_str(),
+              d.conditions.size(), SetupName(d.setup), optimizer.c_str(), o.lambda,
+              regularizer.c_str(), o.regularize_mu ? " on kappa and mu" : " on kappa",
+              NumThreads());
+  if (state.x.empty()) std::printf("homogeneous fit first (6 unknowns)...\n");
+  std::fflush(stdout);
+  const bool tty = isatty(fileno(stdout));
+  g_interrupted = 0;
+  auto previous = std::signal(SIGINT, OnSigint);
+  auto last_checkpoint = std::chrono::steady_clock::now();
+  bool printed_homogeneous = !state.x.empty();
+  auto callback = [&](const IterationReport& r, const RecoveryState& s) {
+    if (!printed_homogeneous) {
+      printed_homogeneous = true;
+      std::printf("homogeneous fit: kappa %.4g %.4g %.4g mm, mu %.4g %.4g %.4g /mm\n",
+                  s.homogeneous_kappa[0], s.homogeneous_kappa[1], s.homogeneous_kappa[2],
+                  s.homogeneous_mu[0], s.homogeneous_mu[1], s.homogeneous_mu[2]);
+    }
+    const double per_iteration = r.seconds / std::max(1, r.iteration);
+    const double left = per_iteration * std::max(0, o.max_iterations - r.iteration);
+    std::printf("%siter %4d  objective %.4e  |grad| %.3e  solves %lld  elapsed %s  left <= %s%s",
+                tty ? "\r" : "", r.iteration, r.objective, r.gradient_norm, (long long)r.solves,
+                FormatSeconds(r.seconds).c_str(), FormatSeconds(left).c_str(), tty ? "   " : "\n");
+    std::fflush(stdout);
+    if (!checkpoint.empty() &&
+        std::chrono::steady_clock::now() - last_checkpoint > std::chrono::seconds(10)) {
+      WriteCheckpoint(checkpoint, d, s);
+      last_checkpoint = std::chrono::steady_clock::now();
+    }
+    return g_interrupted == 0;
+  };
+  RecoverySummary sum;
+  try {
+    sum = Recover(d, o, &state, callback);
+  } catch (...) {
+    std::signal(SIGINT, previous);
+    throw;
+  }
+  std::signal(SIGINT, previous);
+  if (tty) std::printf("\n");
+  const bool interrupted = g_interrupted != 0;
+  if (!checkpoint.empty()) WriteCheckpoint(checkpoint, d, state);
+  const Material m = MaterialFromState(d, state);
+  WriteMaterial(out, m);
+  std::printf("%s\n", sum.BriefReport().c_str());
+  const fs::path base = fs::path(out).replace_extension("");
+  const auto slices = WriteSlices(base.string(), m);
+  nlohmann::json j;
+  j["dataset"] = dataset_path;
+  j["output"] = out;
+  j["grid"] = {d.shape.nx, d.shape.ny, d.shape.nz};
+  j["optimizer"] = OptimizerName(o.optimizer);
+  j["lambda"] = o.lambda;
+  j["regularizer"] = RegularizerName(o.regularizer.kind);
+  j["regularize_mu"] = o.regularize_mu;
+  j["termination"] = TerminationName(sum.termination);
+  j["interrupted"] = interrupted;
+  j["message"] = sum.message;
+  j["iterations"] = sum.iterations;
+  j["solves"] = sum.solves;
+  j["seconds"] = sum.seconds;
+  j["homogeneous_seconds"] = sum.homogeneous_seconds;
+  j["homogeneous_kappa"] = sum.homogeneous_kappa;
+  j["homogeneous_mu"] = sum.homogeneous_mu;
+  j["initial_objective"] = sum.initial_objective;
+  j["final_objective"] = sum.final_objective;
+  j["fit_error"] = sum.fit_error;
+  nlohmann::json per = nlohmann::json::object();
+  for (size_t m2 = 0; m2 < d.conditions.size(); ++m2) per[d.conditions[m2].name] = sum.condition_fit_error[m2];
+  j["condition_fit_error"] = per;
+  nlohmann::json hist = nlohmann::json::array();
+  for (const auto& r : sum.history)
+    hist.push_back({{"iteration", r.iteration}, {"objective", r.objective},
+                    {"gradient_norm", r.gradient_norm}, {"solves", r.solves}, {"seconds", r.seconds}});
+  j["history"] = hist;
+  j["slices"] = slices;
+  const std::string report = base.string() + ".json";
+  WriteAtomically(report, [&](const std::string& tmp) {
+    std::ofstream f(tmp);
+    f << j.dump(2) << "\n";
+    if (!f) throw InputError(fmt::format("{}: cannot write the report", report));
+  });
+  std::printf("wrote %s, %s and %zu slices (%s_*.png)%s\n", out.c_str(), report.c_str(),
+              slices.size(), base.c_str(), interrupted ? "; interrupted: this is the best material so far" : "");
+  return interrupted ? 130 : 0;
+}
+
+int RunEvaluate(int argc, char** argv) {
+  CLI::App app{"Evaluate a recovered material (SPEC section 5): held-out relighting error over\n"
+               "DATASET/holdout, fit error on the training conditions, relative L2 error of\n"
+               "kappa and mu per depth layer.", "translume evaluate"};
+  std::string rec_path, truth_path, dataset_path;
+  bool json = false;
+  app.add_option("recovered", rec_path, "Recovered material (.vdb)")->required();
+  app.add_option("--truth", truth_path, "True material (.vdb) on the recovery grid");
+  app.add_option("--dataset", dataset_path, "The dataset folder (with holdout/ for held-out errors)")->required();
+  app.add_flag("--json", json, "Print JSON instead of a table");
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  const Dataset training = ReadDataset(dataset_path);
+  fs::path hdir = fs::is_directory(dataset_path) ? fs::path(dataset_path) : fs::path(dataset_path).parent_path();
+  hdir /= "holdout";
+  const Dataset holdout = fs::exists(hdir / "dataset.json") ? ReadDataset(hdir.string()) : Dataset{};
+  const Material rec = ReadMaterial(rec_path);
+  std::optional<Material> truth;
+  if (!truth_path.empty()) truth = ReadMaterial(truth_path);
+  MultigridOptions mg;
+  mg.tolerance = 1e-9;
+  mg.max_iterations = 300;
+  const EvaluationReport r = EvaluateRecovery(rec, truth ? &*truth : nullptr, training, holdout, mg);
+  std::printf("%s\n", (json ? EvaluationJson(r) : EvaluationTable(r)).c_str());
+  return 0;
+}
+
+}  // namespace translume
