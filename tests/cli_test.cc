@@ -172,7 +172,7 @@ TEST_F(Cli, InverseCommandsRejectBadArguments) {
   ExpectOneLineError(Translume("solve " + P("ds") + " --optimizer adam -o " + P("r.vdb")), "adam");
   ExpectOneLineError(Translume("solve " + P("ds") + " --regularizer l1 -o " + P("r.vdb")), "l1");
   ExpectOneLineError(Translume("solve " + P("ds") + " --lambda -1 -o " + P("r.vdb")), "lambda");
-  ExpectOneLineError(Translume("solve " + P("ds") + " --backend gl -o " + P("r.vdb")), "gl");
+  ExpectOneLineError(Translume("solve " + P("ds") + " --backend metal -o " + P("r.vdb")), "metal");
   ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("r.png")), ".vdb");
   ExpectOneLineError(Translume("solve " + P("ds") + " --init " + P("m4.vdb") + " -o " + P("r.vdb")), "8x6x4");
   EXPECT_FALSE(fs::exists(P("r.vdb")));

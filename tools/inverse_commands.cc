@@ -128,7 +128,7 @@ int RunSolve(int argc, char** argv) {
   app.add_flag("--regularize-mu", o.regularize_mu, "Regularise mu too");
   app.add_option("--max-iterations", o.max_iterations, "Iterations of the heterogeneous fit")->capture_default_str();
   app.add_option("--tolerance", o.tolerance, "Stop when an iteration lowers the objective by less than this fraction")->capture_default_str();
-  app.add_option("--backend", backend, "cpu")->capture_default_str();
+  app.add_option("--backend", backend, "cpu or gl (OpenGL compute shaders; docs/gpu.md)")->capture_default_str();
   app.add_option("--checkpoint", checkpoint, "Checkpoint file: resumed from if it exists, updated while running");
   app.add_option("--init", init, "Start from this material (.vdb) instead of the homogeneous fit");
   AddCommonOptions(app);
