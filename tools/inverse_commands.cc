@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 
+#include "solver/gl_context.h"
 #include "solver/atomic_file.h"
 #include "solver/dataset.h"
 #include "solver/evaluate.h"
@@ -137,6 +138,7 @@ int RunSolve(int argc, char** argv) {
   o.optimizer = ParseOptimizer(optimizer);
   o.regularizer.kind = ParseRegularizer(regularizer);
   o.backend = ParseBackend(backend);
+  if (o.backend == Backend::kGl) GlContext::Get();  // fail before any output
   if (std::string err = o.Validate(); !err.empty()) throw InputError("solve: " + err);
   const Dataset d = ReadDataset(dataset_path);
   CheckFitsInMemory(EstimateMemory(d.shape, int(d.conditions.size()), Precision::kDouble).recovery_bytes,
