@@ -96,6 +96,15 @@ TEST_F(Cli, BadArgumentsGiveOneLineAndNoOutput) {
   EXPECT_EQ(files, 1);
 }
 
+TEST_F(Cli, DemoRunsThePipelineAndSaysWhereTheOutputsAre) {
+  const CommandRun r = Translume("demo --grid 12x10x5 --max-iterations 20 -o " + P("demo"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("held-out relighting error E ="), std::string::npos) << r.output;
+  for (const char* f : {"truth.vdb", "recovered.vdb", "dataset/dataset.json",
+                        "dataset/holdout/dataset.json", "preview/recovered_uniform.png"})
+    EXPECT_TRUE(fs::exists(P("demo/") + f)) << f;
+}
+
 TEST_F(Cli, GlPlatformsCanBeForcedAndBadOnesAreNamed) {
   CommandRun r = Translume("info --gl", "TRANSLUME_GL=osmesa");
   ASSERT_EQ(r.status, 0) << r.output;
