@@ -24,7 +24,7 @@ class CpuRelaxer : public JacobiRelaxer {
     const int64_t na = int64_t(active.size());
     for (int it = 0; it < iterations; ++it) {
       const float* p = phi->data();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (na > 50000)
       for (int64_t a = 0; a < na; ++a) {
         const int64_t n = active[a];
         const int32_t* nb = &S.nb[n * 6];

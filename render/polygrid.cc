@@ -235,7 +235,7 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   // Remaining interior nodes: Laplacian smoothing, then variance minimisation.
   for (int it = 0; it < options.smooth_iterations; ++it) {
     std::vector<Vec3> next = pg.position;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (pg.num_interior > 50000)
     for (int64_t i = 0; i < pg.num_interior; ++i) {
       if (!free_node[i]) continue;
       Vec3 mean = Vec3::Zero();
@@ -267,7 +267,7 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   // Laplacian weights (Appendix B) and the boundary links.
   pg.weights.assign(N, {0, 0, 0, 0, 0, 0});
   int64_t fallback = 0;
-#pragma omp parallel for schedule(static) reduction(+ : fallback)
+#pragma omp parallel for schedule(static) reduction(+ : fallback) if (pg.num_interior > 50000)
   for (int64_t i = 0; i < pg.num_interior; ++i) {
     std::array<Vec3, 6> off;
     for (int j = 0; j < 6; ++j) off[j] = pg.position[pg.neighbours[i][j]] - pg.position[i];

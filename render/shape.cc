@@ -50,6 +50,15 @@ TriangleMesh ParametricMesh(int nu, int nv, bool v_periodic,
   return m;
 }
 
+// Flips every triangle if the enclosed signed volume is negative (inward-facing triangles).
+void OrientOutward(TriangleMesh* m) {
+  double volume = 0;
+  for (const auto& t : m->triangles)
+    volume += m->vertices[t[0]].dot(m->vertices[t[1]].cross(m->vertices[t[2]])) / 6;
+  if (volume < 0)
+    for (auto& t : m->triangles) std::swap(t[1], t[2]);
+}
+
 class SphereShape : public Shape {
  public:
   SphereShape(double radius, double bump, int tess) : r_(radius), bump_(bump) {
@@ -58,6 +67,7 @@ class SphereShape : public Shape {
       const Vec3 d(std::sin(v) * std::cos(u), std::sin(v) * std::sin(u), std::cos(v));
       return Vec3(Radius(d) * d);
     });
+    OrientOutward(&mesh_);
     mesh_.Bounds(&lo, &hi);
   }
   double Radius(const Vec3& d) const {
@@ -94,6 +104,7 @@ class TorusShape : public Shape {
       return Vec3((R_ + r_ * std::cos(v)) * std::cos(u), (R_ + r_ * std::cos(v)) * std::sin(u),
                   r_ * std::sin(v));
     });
+    OrientOutward(&mesh_);
     mesh_.Bounds(&lo, &hi);
   }
   // Closest point: through the nearest point of the core circle.
@@ -175,6 +186,7 @@ class MeshShape : public Shape {
   MeshShape(TriangleMesh mesh, const std::string& name) {
     mesh_ = std::move(mesh);
     name_ = name;
+    OrientOutward(&mesh_);
     mesh_.Bounds(&lo, &hi);
     normals_ = mesh_.VertexNormals();
   }

@@ -13,6 +13,8 @@ int RunForward(int argc, char** argv);
 int RunInfo(int argc, char** argv);
 int RunBench(int argc, char** argv);
 int RunDemo(int argc, char** argv);
+int RunRender(int argc, char** argv);
+int RunEdit(int argc, char** argv);
 
 // Options every subcommand takes (--threads).
 void AddCommonOptions(CLI::App& app);

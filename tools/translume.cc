@@ -22,6 +22,8 @@ const Command kCommands[] = {
     {"demo", translume::RunDemo, "Run the main job on the embedded default sample"},
     {"synth", translume::RunSynth, "Write a synthetic material volume (.vdb)"},
     {"forward", translume::RunForward, "Simulate the front-face radiance of a material under a light"},
+    {"render", translume::RunRender, "Render a material on a shape (polygrid diffusion, Section 5)"},
+    {"edit", translume::RunEdit, "Edit a material: scale/add kappa, mu in a mask and depth range"},
     {"bench", translume::RunBench, "Benchmarks: bench forward"},
     {"info", translume::RunInfo, "Version, build, backends, threads, memory estimates"},
 };

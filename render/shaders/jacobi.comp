@@ -7,7 +7,7 @@ layout(std430, binding = 0) readonly buffer Nb { int nb[]; };
 layout(std430, binding = 1) readonly buffer W { float w[]; };
 layout(std430, binding = 2) readonly buffer S { float s[]; };
 layout(std430, binding = 3) readonly buffer D { float inv_diag[]; };
-layout(std430, binding = 4) readonly buffer Active { int active[]; };
+layout(std430, binding = 4) readonly buffer Active { int active_nodes[]; };
 layout(std430, binding = 5) readonly buffer Src { float src[]; };
 layout(std430, binding = 6) writeonly buffer Dst { float dst[]; };
 layout(location = 0) uniform int count;
@@ -15,7 +15,7 @@ layout(location = 0) uniform int count;
 void main() {
   int a = int(gl_WorkGroupID.y * gl_NumWorkGroups.x * 256u + gl_GlobalInvocationID.x);
   if (a >= count) return;
-  int n = active[a];
+  int n = active_nodes[a];
   int nbr[6];
   for (int k = 0; k < 6; ++k) nbr[k] = nb[n * 6 + k];
   for (int c = 0; c < 3; ++c) {
