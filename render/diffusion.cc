@@ -2,7 +2,7 @@
 #include "render/diffusion.h"
 
 #include <Eigen/Sparse>
-#include <Eigen/SparseLU>
+#include <Eigen/IterativeLinearSolvers>
 #include <algorithm>
 #include <cmath>
 
@@ -108,7 +108,7 @@ BoundaryLight BoundaryRadiance(const Polygrid& pg, const NodeMaterial& m, const 
   return L;
 }
 
-std::vector<float> SolveDirect(const JacobiSystem& S, int channels) {
+std::vector<float> SolveReference(const JacobiSystem& S, int channels) {
   std::vector<float> phi(S.size * 3, 0.f);
   for (int c = 0; c < channels; ++c) {
     std::vector<Eigen::Triplet<double>> t;
@@ -123,10 +123,13 @@ std::vector<float> SolveDirect(const JacobiSystem& S, int channels) {
     }
     Eigen::SparseMatrix<double> A(S.size, S.size);
     A.setFromTriplets(t.begin(), t.end());
-    Eigen::SparseLU<Eigen::SparseMatrix<double>> lu;
-    lu.compute(A);
-    TL_CHECK_MSG(lu.info() == Eigen::Success, "polygrid system is singular");
-    const Eigen::VectorXd x = lu.solve(b);
+    Eigen::BiCGSTAB<Eigen::SparseMatrix<double>, Eigen::IncompleteLUT<double>> solver;
+    solver.setTolerance(1e-12);
+    solver.setMaxIterations(2000);
+    solver.compute(A);
+    TL_CHECK_MSG(solver.info() == Eigen::Success, "polygrid system: ILUT failed");
+    const Eigen::VectorXd x = solver.solve(b);
+    TL_CHECK_MSG(solver.info() == Eigen::Success, "polygrid system: BiCGSTAB did not converge");
     for (int64_t n = 0; n < S.size; ++n) phi[n * 3 + c] = float(x[n]);
   }
   return phi;

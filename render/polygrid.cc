@@ -67,7 +67,8 @@ std::string PolygridOptions::Validate() const {
   if (resolution > 257) return "the polygrid resolution must be <= 257 nodes per cube edge";
   if (!(first_layer_fraction > 0 && first_layer_fraction < 0.5))
     return "first_layer_fraction must be in (0, 0.5)";
-  if (boundary_relax_iterations < 0 || smooth_iterations < 0 || variance_iterations < 0)
+  if (boundary_relax_iterations < 0 || smooth_iterations < 0 || variance_iterations < 0 ||
+      align_passes < 0)
     return "iteration counts must be >= 0";
   return "";
 }
@@ -198,51 +199,98 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   std::vector<char> free_node(pg.num_interior, 1);
   std::vector<std::vector<int32_t>> blinks(pg.num_interior);
   for (int64_t b = pg.num_interior; b < N; ++b) blinks[pg.neighbours[b][0]].push_back(int32_t(b));
+  std::vector<char> split(N, 0);
+  for (int64_t b = pg.num_interior; b < N; ++b) split[b] = surface_count[Key(pg.lattice[b], 0)] > 1;
   for (int64_t i = 0; i < pg.num_interior; ++i) {
-    const auto& bl = blinks[i];
-    if (bl.empty()) continue;
+    if (blinks[i].empty()) continue;
     free_node[i] = 0;
-    if (bl.size() == 1) {
-      const int32_t b = bl[0];
-      Vec3 u = -pg.normal[b - pg.num_interior];
-      if (surface_count[Key(pg.lattice[b], 0)] > 1) {
-        // A split concave node: lean along the lattice link so that the interior nodes of the
-        // split copies do not coincide.
-        u = (u + (lattice_position[i] - lattice_position[b]).normalized()).normalized();
-      }
-      pg.position[i] = pg.position[b] + d * u;
-      continue;
+    if (blinks[i].size() > 1) continue;
+    const int32_t b = blinks[i][0];
+    Vec3 u = -pg.normal[b - pg.num_interior];
+    if (split[b]) {
+      // A split concave node: lean along the lattice link so that the interior nodes of the
+      // split copies do not coincide.
+      u = (u + (lattice_position[i] - lattice_position[b]).normalized()).normalized();
     }
-    Vec3 x = Vec3::Zero();
-    for (int32_t b : bl) x += (pg.position[b] - d * pg.normal[b - pg.num_interior]) / double(bl.size());
-    for (int pass = 0; pass < 3; ++pass) {
-      const double eps = 1e-6;
-      Eigen::Matrix3d A = eps * Eigen::Matrix3d::Identity();
-      Vec3 r = eps * x;
-      for (int32_t b : bl) {
-        const Vec3& n = pg.normal[b - pg.num_interior];
-        A += n * n.transpose();
-        r += n * (n.dot(pg.position[b]) - d);
-      }
-      x = A.ldlt().solve(r);
-      for (int32_t b : bl)
-        shape.Project(x + d * pg.normal[b - pg.num_interior], &pg.position[b],
-                      &pg.normal[b - pg.num_interior]);
-    }
-    pg.position[i] = x;
+    pg.position[i] = pg.position[b] + d * u;
   }
-
-  // Remaining interior nodes: Laplacian smoothing, then variance minimisation.
-  for (int it = 0; it < options.smooth_iterations; ++it) {
-    std::vector<Vec3> next = pg.position;
-#pragma omp parallel for schedule(static) if (pg.num_interior > 50000)
+  auto place_edge_nodes = [&] {
     for (int64_t i = 0; i < pg.num_interior; ++i) {
-      if (!free_node[i]) continue;
-      Vec3 mean = Vec3::Zero();
-      for (int j = 0; j < 6; ++j) mean += pg.position[pg.neighbours[i][j]];
-      next[i] = mean / 6;
+      const auto& bl = blinks[i];
+      if (bl.size() < 2) continue;
+      // Along the edge (the least-squares null space) the node follows the interior nodes
+      // opposite its links, so the edge continues the grid lines of the faces.
+      Vec3 x = Vec3::Zero();
+      for (int32_t b : bl) {
+        const int32_t o = pg.neighbours[i][pg.link_dir[b - pg.num_interior] ^ 1];
+        x += (o < pg.num_interior ? pg.position[o] : Vec3(pg.position[b] - d * pg.normal[b - pg.num_interior])) /
+             double(bl.size());
+      }
+      // Only a crease (normals more than 30 degrees apart, e.g. a box edge) has well-posed
+      // plane constraints; on a smooth part of the surface the boundary nodes stay and the node
+      // takes the mean of its d-offset points (sliding would merge the boundary nodes).
+      double min_dot = 1;
+      for (int32_t b1 : bl)
+        for (int32_t b2 : bl)
+          min_dot = std::min(min_dot, pg.normal[b1 - pg.num_interior].dot(pg.normal[b2 - pg.num_interior]));
+      if (min_dot > 0.866) {
+        Vec3 mean = Vec3::Zero();
+        for (int32_t b : bl) mean += (pg.position[b] - d * pg.normal[b - pg.num_interior]) / double(bl.size());
+        pg.position[i] = mean;
+        continue;
+      }
+      for (int pass = 0; pass < 3; ++pass) {
+        const double eps = 1e-6;
+        Eigen::Matrix3d A = eps * Eigen::Matrix3d::Identity();
+        Vec3 r = eps * x;
+        for (int32_t b : bl) {
+          const Vec3& n = pg.normal[b - pg.num_interior];
+          A += n * n.transpose();
+          r += n * (n.dot(pg.position[b]) - d);
+        }
+        x = A.ldlt().solve(r);
+        for (int32_t b : bl)
+          shape.Project(x + d * pg.normal[b - pg.num_interior], &pg.position[b],
+                        &pg.normal[b - pg.num_interior]);
+      }
+      pg.position[i] = x;
     }
-    pg.position.swap(next);
+  };
+  auto smooth = [&](int iterations) {
+    for (int it = 0; it < iterations; ++it) {
+      std::vector<Vec3> next = pg.position;
+#pragma omp parallel for schedule(static) if (pg.num_interior > 50000)
+      for (int64_t i = 0; i < pg.num_interior; ++i) {
+        if (!free_node[i]) continue;
+        Vec3 mean = Vec3::Zero();
+        for (int j = 0; j < 6; ++j) mean += pg.position[pg.neighbours[i][j]];
+        next[i] = mean / 6;
+      }
+      pg.position.swap(next);
+    }
+  };
+  // Alignment: a boundary node and its first interior node follow the grid line of the free
+  // interior node behind them (that node's surface point, and d inside it), so
+  // boundary links continue the interior grid lines along the normal.
+  auto align = [&] {
+    for (int64_t i = 0; i < pg.num_interior; ++i) {
+      if (blinks[i].size() != 1 || split[blinks[i][0]]) continue;
+      const int32_t b = blinks[i][0];
+      const int32_t f = pg.neighbours[i][pg.link_dir[b - pg.num_interior] ^ 1];
+      if (f >= pg.num_interior || !free_node[f]) continue;
+      // Onto b's tangent plane first, so the projection stays on b's side of the surface.
+      Vec3& n = pg.normal[b - pg.num_interior];
+      const Vec3 on_plane = pg.position[f] + n.dot(pg.position[b] - pg.position[f]) * n;
+      shape.Project(on_plane, &pg.position[b], &n);
+      pg.position[i] = pg.position[b] - d * n;
+    }
+  };
+  place_edge_nodes();
+  smooth(options.smooth_iterations);
+  for (int pass = 0; pass < options.align_passes; ++pass) {
+    align();
+    place_edge_nodes();
+    smooth(options.smooth_iterations / 2);
   }
   std::vector<Vec3> grad;
   double f = VarianceObjective(pg, free_node, &grad);

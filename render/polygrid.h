@@ -24,6 +24,10 @@ struct PolygridOptions {
   // gradient steps on sum_i Var({|v_i - v_j|}) over the free nodes.
   int smooth_iterations = 300;
   int variance_iterations = 100;
+  // Passes that align each boundary node and its first interior node with the grid line of the
+  // free interior node behind them (then re-smooth): links along the normal, grid lines
+  // continued to the surface. On a box this gives a tensor-product grid.
+  int align_passes = 10;
 
   std::string Validate() const;
 };
