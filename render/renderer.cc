@@ -222,7 +222,8 @@ Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
   const TriangleMesh& mesh = shape->mesh();
   I.vertex_normals = mesh.VertexNormals();
   I.centre = (shape->lo + shape->hi) / 2;
-  I.radius = (shape->hi - shape->lo).norm() / 2;
+  I.radius = 0;  // bounding sphere about the box centre
+  for (const Vec3& v : mesh.vertices) I.radius = std::max(I.radius, (v - I.centre).norm());
   const Polygrid& pg = (*levels)[0];
   const int64_t nb = pg.num_boundary();
   I.near_idx.resize(mesh.vertices.size());
@@ -340,7 +341,7 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
   const int ss = o.supersample, W = o.width * ss, H = o.height * ss;
   const double az = (o.azimuth_deg + turn_deg) * kPi / 180, el = o.elevation_deg * kPi / 180;
   const double t = std::tan(o.fov_deg * kPi / 360);
-  const double dist = I.radius / std::sin(o.fov_deg * kPi / 360) * 1.05;
+  const double dist = I.radius / std::sin(o.fov_deg * kPi / 360) * 1.15;
   const Vec3 eye = I.centre + dist * Vec3(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
   const View cam = View::LookAt(eye, I.centre, W, H, false, 1 / t);
   Raster r;
