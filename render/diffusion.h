@@ -43,7 +43,8 @@ BoundaryLight BoundaryRadiance(const Polygrid& pg, const NodeMaterial& m, const 
                                const std::vector<float>& phi_prime);
 
 // The reference solution for tests, in double: BiCGSTAB preconditioned by incomplete LU to a
-// relative residual of 1e-12; phi'[n * 3 + c] for the first `channels` channels (others 0).
+// relative residual of 1e-12 (sparse LU if that fails); phi'[n * 3 + c] for the first
+// `channels` channels (the others are left 0).
 std::vector<float> SolveReference(const JacobiSystem& system, int channels = 3);
 
 // Where the relaxation runs.

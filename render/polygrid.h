@@ -20,9 +20,10 @@ struct PolygridOptions {
   // First interior nodes sit at d = first_layer_fraction * (mean boundary spacing) along the
   // inward normal (the paper: one tenth).
   double first_layer_fraction = 0.1;
-  // Placement of the remaining interior nodes: Laplacian smoothing (the initial guess), then
-  // gradient steps on sum_i Var({|v_i - v_j|}) over the free nodes.
-  int smooth_iterations = 300;
+  // Placement of the remaining interior nodes: Laplacian smoothing (the initial guess; at most
+  // this many over-relaxed Gauss-Seidel sweeps, stopping when converged), then gradient steps on
+  // sum_i Var({|v_i - v_j|}) over the free nodes.
+  int smooth_iterations = 2000;
   int variance_iterations = 100;
   // Passes that align each boundary node and its first interior node with the grid line of the
   // free interior node behind them (then re-smooth): links along the normal, grid lines

@@ -170,11 +170,12 @@ TEST(Polygrid, BadInputsGiveClearErrors) {
 // The polygrid of a box (one cube, undistorted) against the regular-grid forward solver of
 // SPEC section 3 on the same box, same homogeneous material, back face lit uniformly: the
 // front-face radiance agrees (relative L2 over the face nodes away from the rim).
-double BoxEquivalenceError(int n, double h, float kappa, float mu) {
+double BoxEquivalenceError(int n, double h, float kappa, float mu, double fraction = 0.1) {
   const double L = (n - 1) * h;
   const auto box = MakeBoxShape(Vec3(L, L, L));
   PolygridOptions o;
   o.resolution = n;
+  o.first_layer_fraction = fraction;
   const Polygrid pg = BuildPolygrid(BuiltinPolycube("box"), *box, o);
   NodeMaterial m;
   for (int c = 0; c < 3; ++c) {
