@@ -100,9 +100,12 @@ RenderLight RenderLight::Parse(const std::string& text) {
   RenderLight l;
   const auto colon = text.find(':');
   const std::string kind = text.substr(0, colon);
-  if (kind == "env")
-    throw InputError("--light " + text + ": environment-map lighting is not implemented yet "
-                     "(use dir:X,Y,Z or point:X,Y,Z)");
+  if (kind == "env") {
+    l.kind = Kind::kEnvironment;
+    l.path = colon == std::string::npos ? "" : text.substr(colon + 1);
+    if (l.path.empty()) throw InputError("--light " + text + ": expected env:FILE (a lat-long HDR image)");
+    return l;
+  }
   if (colon == std::string::npos || (kind != "dir" && kind != "point"))
     throw InputError("--light " + text + ": expected dir:X,Y,Z or point:X,Y,Z");
   l.kind = kind == "dir" ? Kind::kDirectional : Kind::kPoint;
@@ -129,6 +132,8 @@ std::string RenderOptions::Validate() const {
     return "specular and surface reflectance must be >= 0, roughness > 0";
   if (model != "polygrid" && model != "dipole") return "the model must be polygrid or dipole";
   if (shadow_map_size < 16) return "the shadow map must be >= 16 pixels";
+  if (environment_directions < 1 || environment_directions > 4096)
+    return "environment_directions must be 1..4096";
   return "";
 }
 
@@ -171,6 +176,37 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
   return L;
 }
 
+std::vector<std::pair<Vec3, std::array<double, 3>>> EnvironmentSamples(const Image& env, int count) {
+  if (env.width < 2 || env.height < 1 || env.channels < 1)
+    throw InputError("--light env: the environment image is empty");
+  std::vector<std::pair<Vec3, std::array<double, 3>>> out(count);
+  const double golden = kPi * (3 - std::sqrt(5.0));
+  for (int k = 0; k < count; ++k) {
+    const double z = 1 - (k + 0.5) * 2.0 / count, r = std::sqrt(std::max(0.0, 1 - z * z));
+    out[k].first = Vec3(r * std::cos(golden * k), r * std::sin(golden * k), z);
+    out[k].second = {0, 0, 0};
+  }
+  // Each pixel's radiance times its solid angle goes to the nearest direction (a Voronoi
+  // partition of the sphere), so sum_k E_k is the integral of the map over the sphere.
+  for (int y = 0; y < env.height; ++y) {
+    const double theta = kPi * (y + 0.5) / env.height;
+    const double domega = (2 * kPi / env.width) * (kPi / env.height) * std::sin(theta);
+    for (int x = 0; x < env.width; ++x) {
+      const double phi = 2 * kPi * (x + 0.5) / env.width;
+      const Vec3 d(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta));
+      int best = 0;
+      double best_dot = -2;
+      for (int k = 0; k < count; ++k)
+        if (const double dd = d.dot(out[k].first); dd > best_dot) best_dot = dd, best = k;
+      for (int c = 0; c < 3; ++c) {
+        const float v = env.at(x, y, std::min(c, env.channels - 1));
+        if (std::isfinite(v) && v > 0) out[best].second[c] += v * domega;
+      }
+    }
+  }
+  return out;
+}
+
 double ToneMap(Image* image, double exposure) {
   double scale = std::pow(2.0, exposure);
   if (exposure <= 0) {
@@ -204,6 +240,9 @@ struct Renderer::Impl {
   std::vector<std::array<float, 4>> near_w;
   Vec3 centre;
   double radius;
+  // The environment's direction samples, computed once per environment image.
+  const Image* env_source = nullptr;
+  std::vector<std::pair<Vec3, std::array<double, 3>>> env;
 };
 
 Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
@@ -261,33 +300,61 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
   RenderLight light = light_in;
   light.v = rot(light.v);
 
-  // Pass 1: incident light at the boundary nodes of every level, shadow-map visibility.
+  // Pass 1: incident light at the boundary nodes of every level, shadow-map visibility. Every
+  // light is a list of samples: one for dir and point lights, one per direction for an
+  // environment map (EnvironmentSamples).
   auto t0 = std::chrono::steady_clock::now();
-  const int S = o.shadow_map_size;
-  View light_view;
-  if (light.kind == RenderLight::Kind::kDirectional)
-    light_view = View::LookAt(I.centre + 3 * I.radius * light.v, I.centre, S, S, true, 1 / I.radius);
-  else
-    light_view = View::LookAt(light.v, I.centre, S, S, false,
-                              1 / std::tan(std::asin(std::min(0.99, I.radius / std::max(1e-9, (light.v - I.centre).norm())))));
-  Raster shadow;
-  shadow.Draw(light_view, I.shape->mesh());
-  const double bias = 0.03 * I.radius;
-  auto incident = [&](const Vec3& p, const Vec3& n, double* cos_i) {
-    Vec3 l;
-    double e = 1;
-    if (light.kind == RenderLight::Kind::kDirectional) {
-      l = light.v;
-    } else {
-      l = light.v - p;
-      e = (light.v - I.centre).squaredNorm() / std::max(1e-12, l.squaredNorm());
-      l.normalize();
+  struct Sample {
+    bool point = false;
+    Vec3 v;                       // direction towards the light, or the point light's position
+    std::array<double, 3> E{};    // irradiance at normal incidence (RGB)
+    View view;
+    Raster shadow;
+  };
+  std::vector<Sample> samples;
+  if (light.kind == RenderLight::Kind::kEnvironment) {
+    if (I.env_source != light.environment.get()) {
+      I.env = EnvironmentSamples(*light.environment, o.environment_directions);
+      I.env_source = light.environment.get();
     }
-    *cos_i = n.dot(l);
+    for (const auto& [dir, E] : I.env) {
+      Sample smp;
+      smp.v = rot(dir);
+      smp.E = E;
+      samples.push_back(smp);
+    }
+  } else {
+    Sample smp;
+    smp.point = light.kind == RenderLight::Kind::kPoint;
+    smp.v = light.v;
+    smp.E = {1, 1, 1};
+    samples.push_back(smp);
+  }
+  const int S = samples.size() > 1 ? std::max(16, o.shadow_map_size / 4) : o.shadow_map_size;
+  for (Sample& smp : samples) {
+    if (!smp.point)
+      smp.view = View::LookAt(I.centre + 3 * I.radius * smp.v, I.centre, S, S, true, 1 / I.radius);
+    else
+      smp.view = View::LookAt(smp.v, I.centre, S, S, false,
+                              1 / std::tan(std::asin(std::min(0.99, I.radius / std::max(1e-9, (smp.v - I.centre).norm())))));
+    smp.shadow.Draw(smp.view, I.shape->mesh());
+  }
+  const double bias = 0.03 * I.radius;
+  // Irradiance factor (falloff x visibility) of sample `smp` at p, and cos_i.
+  auto incident = [&](const Sample& smp, const Vec3& p, const Vec3& n, double* cos_i, Vec3* l) {
+    double e = 1;
+    if (!smp.point) {
+      *l = smp.v;
+    } else {
+      *l = smp.v - p;
+      e = (smp.v - I.centre).squaredNorm() / std::max(1e-12, l->squaredNorm());
+      l->normalize();
+    }
+    *cos_i = n.dot(*l);
     if (*cos_i <= 0) return 0.0;
-    const Vec3 s = light_view.Project(p);
-    const int x = int(s.x()), y = int(s.y());
-    if (x >= 0 && y >= 0 && x < S && y < S && s.z() > shadow.depth[size_t(y) * S + x] + bias)
+    const Vec3 sp = smp.view.Project(p);
+    const int x = int(sp.x()), y = int(sp.y());
+    if (x >= 0 && y >= 0 && x < S && y < S && sp.z() > smp.shadow.depth[size_t(y) * S + x] + bias)
       return 0.0;
     return e;
   };
@@ -295,11 +362,18 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
   for (size_t l = 0; l < I.levels->size(); ++l) {
     const Polygrid& pg = (*I.levels)[l];
     for (int c = 0; c < 3; ++c) q[l][c].assign(pg.num_boundary(), 0.f);
+#pragma omp parallel for schedule(static) if (pg.num_boundary() > 20000)
     for (int64_t b = 0; b < pg.num_boundary(); ++b) {
-      double cos_i;
-      const double e = incident(pg.position[pg.num_interior + b], pg.normal[b], &cos_i);
-      const double v = e * cos_i * FresnelTransmittance(cos_i, o.eta);
-      for (int c = 0; c < 3; ++c) q[l][c][b] = float(v);
+      double acc[3] = {0, 0, 0};
+      for (const Sample& smp : samples) {
+        double cos_i;
+        Vec3 dir;
+        const double e = incident(smp, pg.position[pg.num_interior + b], pg.normal[b], &cos_i, &dir);
+        if (e == 0) continue;
+        const double v = e * cos_i * FresnelTransmittance(cos_i, o.eta);
+        for (int c = 0; c < 3; ++c) acc[c] += v * smp.E[c];
+      }
+      for (int c = 0; c < 3; ++c) q[l][c][b] = float(acc[c]);
     }
   }
   times_.incident = Seconds(t0);
@@ -364,20 +438,23 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
       const Vec3 view = (eye - p).normalized();
       const double cos_o = std::max(0.0, n.dot(view));
       const double ft = FresnelTransmittance(cos_o, o.eta);
-      double cos_i;
-      const double e = incident(p, n, &cos_i);
-      double surface = 0;
-      if (e > 0 && cos_i > 0 && cos_o > 0) {
-        const Vec3 l = light.kind == RenderLight::Kind::kDirectional ? light.v : Vec3((light.v - p).normalized());
-        const Vec3 hv = (l + view).normalized();
-        const double cd = std::clamp(n.dot(hv), 1e-6, 1.0);
-        const double tan2 = (1 - cd * cd) / (cd * cd);
-        const double ward = o.specular * std::exp(-tan2 / alpha2) / (4 * kPi * alpha2 * std::sqrt(cos_i * cos_o));
-        surface = (ward + o.surface_reflectance / kPi) * e * cos_i;
+      double surface[3] = {0, 0, 0};
+      if (cos_o > 0 && (o.specular > 0 || o.surface_reflectance > 0)) {
+        for (const Sample& smp : samples) {
+          double cos_i;
+          Vec3 l;
+          const double e = incident(smp, p, n, &cos_i, &l);
+          if (e == 0) continue;
+          const Vec3 hv = (l + view).normalized();
+          const double cd = std::clamp(n.dot(hv), 1e-6, 1.0);
+          const double tan2 = (1 - cd * cd) / (cd * cd);
+          const double ward = o.specular * std::exp(-tan2 / alpha2) / (4 * kPi * alpha2 * std::sqrt(cos_i * cos_o));
+          for (int c = 0; c < 3; ++c) surface[c] += (ward + o.surface_reflectance / kPi) * e * cos_i * smp.E[c];
+        }
       }
       for (int c = 0; c < 3; ++c) {
         const double ms = w0 * vrad[tr[0]][c] + w1 * vrad[tr[1]][c] + w2 * vrad[tr[2]][c];
-        const double value = (ft * ms + surface) / (ss * ss);
+        const double value = (ft * ms + surface[c]) / (ss * ss);
 #pragma omp atomic
         img.data[(size_t(y / ss) * o.width + x / ss) * 3 + c] += float(value);
       }

@@ -15,13 +15,23 @@ namespace translume {
 // A light for the incident-light pass (Section 5, first pass), z up:
 //   dir:X,Y,Z    directional light from direction (X, Y, Z) (towards the light), irradiance 1
 //   point:X,Y,Z  point light at (X, Y, Z) mm, irradiance 1 at the object's centre, 1/r^2
-// Visibility from a shadow map (orthographic for dir, perspective for point). Environment maps
-// are not implemented: `env:` is refused with a clear error.
+//   env:FILE     an environment map: a latitude-longitude HDR image (row 0 looks up +z, column
+//                x at azimuth 2 pi (x + 0.5) / width from +x towards +y), loaded by the caller
+//                into `environment` (this library does no file IO)
+// Visibility from shadow maps: orthographic for dir, perspective for point; for env, one
+// orthographic map per direction sample (RenderOptions::environment_directions), so each node's
+// irradiance sums only the unoccluded directions (ambient-occlusion visibility).
 struct RenderLight {
-  enum class Kind { kDirectional, kPoint } kind = Kind::kDirectional;
+  enum class Kind { kDirectional, kPoint, kEnvironment } kind = Kind::kDirectional;
   Vec3 v = Vec3(1, 1, 1);
+  std::string path;                          // env: the file named in the spec
+  std::shared_ptr<const Image> environment;  // env: the image
   static RenderLight Parse(const std::string& text);
 };
+
+// The environment as `count` directions (a Fibonacci sphere) with the irradiance each carries:
+// E_k = sum of L(pixel) dOmega(pixel) over the pixels nearest to direction k (RGB).
+std::vector<std::pair<Vec3, std::array<double, 3>>> EnvironmentSamples(const Image& env, int count);
 
 struct RenderOptions {
   int width = 256, height = 256;
@@ -32,7 +42,8 @@ struct RenderOptions {
   double surface_reflectance = 0.0;         // optional Lambertian rho_d
   // "polygrid" (diffusion) or "dipole" (Jensen et al. 2001 BSSRDF, homogeneous materials).
   std::string model = "polygrid";
-  int shadow_map_size = 512;
+  int shadow_map_size = 512;  // environment maps use a quarter of it per direction
+  int environment_directions = 64;
 
   std::string Validate() const;
 };

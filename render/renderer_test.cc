@@ -138,10 +138,59 @@ TEST(Render, MeshShapeRendersAndBadLightsAreRefused) {
   double sum = 0;
   for (float v : img.data) sum += v;
   EXPECT_GT(sum, 0);
-  EXPECT_THROW(RenderLight::Parse("env:sky.exr"), InputError);
+  EXPECT_EQ(RenderLight::Parse("env:sky.exr").path, "sky.exr");
+  EXPECT_THROW(RenderLight::Parse("env:"), InputError);
   EXPECT_THROW(RenderLight::Parse("dir:1,2"), InputError);
   EXPECT_THROW(RenderLight::Parse("spot:1,2,3"), InputError);
   EXPECT_THROW(RenderLight::Parse("dir:0,0,0"), InputError);
+}
+
+// A white environment: every node of a convex sphere gets the same irradiance (the hemisphere's
+// integral of cos F_t); on the torus the nodes facing into the hole see less sky (occlusion).
+TEST(Render, EnvironmentLightingWithOcclusion) {
+  auto white = std::make_shared<Image>();
+  white->width = 64;
+  white->height = 32;
+  white->channels = 3;
+  white->data.assign(64 * 32 * 3, 1.f);
+  const auto samples = EnvironmentSamples(*white, 64);
+  double total = 0;
+  for (const auto& s : samples) total += s.second[0];
+  EXPECT_NEAR(total, 4 * kPi, 1e-2);  // midpoint rule over 32 rows
+  RenderLight env = RenderLight::Parse("env:white.exr");
+  env.environment = white;
+  RenderOptions ro;
+  ro.width = ro.height = 16;
+  for (const std::string name : {"sphere", "torus"}) {
+    const auto shape = MakeBuiltinShape(name, 20, 24);
+    PolygridOptions po;
+    po.resolution = 5;
+    const auto levels = BuildPolygridHierarchy(BuiltinPolycube(name), *shape, po, 1);
+    std::vector<NodeMaterial> mats = {ConstantNodeMaterial(levels[0], {0.2f, 0.2f, 0.2f}, {0.02f, 0.02f, 0.02f})};
+    Renderer r(shape.get(), &levels, mats, ReflectionParameterC(1.3), DiffusionOptions{}, ro);
+    r.Render(env);
+    const auto& q = r.boundary_light()[0];
+    const Polygrid& pg = levels[0];
+    double inner = 0, outer = 0, lo = 1e9, hi = 0;
+    int ni = 0, no = 0;
+    for (int64_t b = 0; b < pg.num_boundary(); ++b) {
+      lo = std::min(lo, double(q[b]));
+      hi = std::max(hi, double(q[b]));
+      const Vec3& p = pg.position[pg.num_interior + b];
+      const Vec3 radial(p.x(), p.y(), 0);
+      if (std::abs(pg.normal[b].z()) > 0.5 || radial.norm() == 0) continue;
+      (pg.normal[b].dot(radial.normalized()) < 0 ? (++ni, inner) : (++no, outer)) += q[b];
+    }
+    if (name == "sphere") {
+      std::printf("[env] white sky on a sphere: q in [%.3f, %.3f]\n", lo, hi);
+      EXPECT_GT(lo, 0.85 * hi);
+      EXPECT_GT(lo, 2.0);  // pi * (1 - diffuse Fresnel reflectance) ~ 2.9
+    } else {
+      std::printf("[env] white sky on a torus: mean q facing the hole %.3f, facing out %.3f\n",
+                  inner / ni, outer / no);
+      EXPECT_LT(inner / ni, 0.8 * outer / no);
+    }
+  }
 }
 
 }  // namespace

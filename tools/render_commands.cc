@@ -96,7 +96,7 @@ int RunRender(int argc, char** argv) {
   app.add_option("--iterations", iterations, "Relaxation steps per level, coarsest first")->capture_default_str();
   app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all)");
   app.add_option("--backend", backend, "Diffusion on cpu or gl (compute shaders)")->capture_default_str();
-  app.add_option("--light", light, "dir:X,Y,Z | point:X,Y,Z (mm)")->capture_default_str();
+  app.add_option("--light", light, "dir:X,Y,Z | point:X,Y,Z (mm) | env:FILE.exr (lat-long)")->capture_default_str();
   app.add_option("--camera", camera, "AZIMUTH,ELEVATION in degrees (default 30,25)");
   app.add_option("--image", image, "Output size WxH")->capture_default_str();
   app.add_option("--supersample", ro.supersample, "Samples per pixel per axis")->capture_default_str();
@@ -121,7 +121,8 @@ int RunRender(int argc, char** argv) {
   if (turntable < 1) throw InputError("--turntable: must be >= 1");
   if (levels < 1) throw InputError("--levels: must be >= 1");
   if (std::string err = ro.Validate(); !err.empty()) throw InputError("render: " + err);
-  const RenderLight L = RenderLight::Parse(light);
+  RenderLight L = RenderLight::Parse(light);
+  if (L.kind == RenderLight::Kind::kEnvironment) L.environment = std::make_shared<Image>(ReadImage(L.path));
 
   std::unique_ptr<Shape> shape;
   Polycube pc;
