@@ -440,7 +440,10 @@ std::unique_ptr<Shape> MakeBuiltinShape(const std::string& name, double size_mm,
   if (!(size_mm > 0)) throw InputError("--size: must be > 0 mm");
   const double unit = size_mm / 3;  // slab and torus are 3 units wide
   if (name == "sphere") return std::make_unique<SphereShape>(size_mm / 2, 0.0, tessellation);
-  if (name == "blob") return std::make_unique<SphereShape>(size_mm / 2 / 1.15, 0.15, tessellation);
+  if (name == "blob") {
+    const SphereShape unit(1.0, 0.15, tessellation);  // measure, then scale to size_mm
+    return std::make_unique<SphereShape>(size_mm / (unit.hi - unit.lo).maxCoeff(), 0.15, tessellation);
+  }
   if (name == "torus") return std::make_unique<TorusShape>(unit, unit / 2, tessellation);
   if (name == "slab") {
     return std::make_unique<BoxShape>(Vec3(3 * unit, 3 * unit, unit), 24, "slab");
