@@ -163,8 +163,12 @@ const std::vector<float>& PolygridDiffusion::Solve(const std::vector<BoundaryLig
   const std::vector<Polygrid>& L = *levels_;
   const int nl = int(L.size());
   TL_CHECK(int(q.size()) == nl);
-  auto at = [](const std::vector<int>& v, int i, int fallback) {
-    return v.empty() ? fallback : i < int(v.size()) ? v[i] : v.back();
+  // Per-level lists are coarsest first; a list longer than the hierarchy drops its coarsest
+  // entries (so the last entry is always the finest level's), a shorter one repeats its last.
+  auto at = [nl](const std::vector<int>& v, int step, int fallback) {
+    if (v.empty()) return fallback;
+    const int i = step + std::max(0, int(v.size()) - nl);
+    return i < int(v.size()) ? v[i] : v.back();
   };
   last_iterations_ = 0;
   if (options_.frame_coherence && have_previous_) {

@@ -65,7 +65,8 @@ class JacobiRelaxer {
 // The hierarchical, adaptive scheme of Section 5.3.
 struct DiffusionOptions {
   DiffusionBackend backend = DiffusionBackend::kCpu;
-  // Relaxation steps per level, COARSEST first; missing entries repeat the last one.
+  // Relaxation steps per level, COARSEST first; missing entries repeat the last one; with more
+  // entries than levels the coarsest entries are dropped (the last is always the finest's).
   std::vector<int> iterations = {200, 100, 100};
   // Adaptive depth per level, COARSEST first: after prolongation, only nodes within this many
   // layers of the boundary are updated on that level (the deeper ones stay at the coarse

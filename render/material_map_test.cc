@@ -31,7 +31,9 @@ TEST(MaterialMap, ShellDepthAndCoreFill) {
   for (int64_t n = 0; n < pg.size(); ++n) {
     const double k = std::min(pg.depth_mm[n] / 1.0, 2.0);  // clamped: the core repeats layer 2
     EXPECT_NEAR(nm.kappa[0][n], 0.1 + 0.01 * k, 1e-5) << n;
-    if (pg.is_boundary(n)) EXPECT_NEAR(nm.kappa[1][n], 0.1, 1e-6);
+    if (pg.is_boundary(n)) {
+      EXPECT_NEAR(nm.kappa[1][n], 0.1, 1e-6);
+    }
     EXPECT_GT(nm.mu[2][n], 0);
   }
   // The centre node of the 8 mm cube lies 4 mm deep: the deepest layer.

@@ -74,7 +74,9 @@ TEST(Polygrid, SingleCubeBoxCountsAndGeometry) {
       // Nodes that share a lattice coordinate share the world coordinate (to the smoothing's
       // convergence).
       const int64_t k = pg.neighbours[i][2 * ((a + 1) % 3) + 1];
-      if (k < pg.num_interior) EXPECT_NEAR(pg.position[i][a], pg.position[k][a], 2e-3) << i;
+      if (k < pg.num_interior) {
+        EXPECT_NEAR(pg.position[i][a], pg.position[k][a], 2e-3) << i;
+      }
     }
 }
 

@@ -21,7 +21,7 @@ double Seconds(std::chrono::steady_clock::time_point t0) {
 
 // A pinhole (perspective) or orthographic view: camera-space x right, y up, z forward.
 struct View {
-  Vec3 eye, right, up, forward;
+  Vec3 eye = Vec3::Zero(), right = Vec3::UnitX(), up = Vec3::UnitY(), forward = Vec3::UnitZ();
   bool ortho = false;
   double scale = 1;  // perspective: 1 / tan(fov / 2); ortho: 1 / half-width (mm)
   int width = 0, height = 0;

@@ -153,6 +153,14 @@ int RunRender(int argc, char** argv) {
   std::printf("render: %s on %s, polygrid %zu cubes x %d^3 (%lld nodes, %lld boundary), %zu levels, "
               "built in %.2f s\n", material.c_str(), shape->name().c_str(), pc.cubes.size(), resolution,
               (long long)grids[0].size(), (long long)grids[0].num_boundary(), grids.size(), build_s);
+  if (ro.model == "dipole") {
+    bool homogeneous = true;
+    for (int ch = 0; ch < 3; ++ch)
+      for (size_t n = 1; n < mats[0].kappa[ch].size(); ++n)
+        homogeneous &= mats[0].kappa[ch][n] == mats[0].kappa[ch][0] && mats[0].mu[ch][n] == mats[0].mu[ch][0];
+    if (!homogeneous)
+      std::printf("note: --model dipole is for homogeneous materials; using the mean kappa and mu\n");
+  }
   Renderer renderer(shape.get(), &grids, std::move(mats), C, dopt, ro);
   for (int f = 0; f < turntable; ++f) {
     const auto tf = std::chrono::steady_clock::now();
