@@ -181,6 +181,9 @@ class BoxShape : public Shape {
   }
 };
 
+// Closest-point queries on a mesh, accelerated by a uniform grid of triangle bounding boxes:
+// cells are searched in rings of growing Chebyshev radius around the query's cell until no
+// unvisited cell can hold a closer point.
 class MeshShape : public Shape {
  public:
   MeshShape(TriangleMesh mesh, const std::string& name) {
@@ -189,24 +192,72 @@ class MeshShape : public Shape {
     OrientOutward(&mesh_);
     mesh_.Bounds(&lo, &hi);
     normals_ = mesh_.VertexNormals();
+    const Vec3 ext = (hi - lo).cwiseMax(Vec3::Constant(1e-9));
+    const double per_axis = std::clamp(std::cbrt(double(mesh_.triangles.size()) / 2), 1.0, 128.0);
+    const double cell = ext.maxCoeff() / per_axis;
+    for (int a = 0; a < 3; ++a) dims_[a] = std::max(1, int(std::ceil(ext[a] / cell)));
+    cell_ = ext.cwiseQuotient(Vec3(dims_[0], dims_[1], dims_[2]));
+    cells_.assign(size_t(dims_[0]) * dims_[1] * dims_[2], {});
+    for (size_t t = 0; t < mesh_.triangles.size(); ++t) {
+      Vec3 tlo = Vec3::Constant(1e300), thi = Vec3::Constant(-1e300);
+      for (int c = 0; c < 3; ++c) {
+        tlo = tlo.cwiseMin(mesh_.vertices[mesh_.triangles[t][c]]);
+        thi = thi.cwiseMax(mesh_.vertices[mesh_.triangles[t][c]]);
+      }
+      const auto c0 = CellOf(tlo), c1 = CellOf(thi);
+      for (int z = c0[2]; z <= c1[2]; ++z)
+        for (int y = c0[1]; y <= c1[1]; ++y)
+          for (int x = c0[0]; x <= c1[0]; ++x) cells_[Index(x, y, z)].push_back(int32_t(t));
+    }
   }
   void Project(const Vec3& p, Vec3* s, Vec3* n) const override {
     double best = 1e300;
-    for (const auto& t : mesh_.triangles) {
-      double u, v, w;
-      const Vec3 c = ClosestPointOnTriangle(p, mesh_.vertices[t[0]], mesh_.vertices[t[1]],
-                                            mesh_.vertices[t[2]], &u, &v, &w);
-      const double d = (c - p).squaredNorm();
-      if (d < best) {
-        best = d;
-        *s = c;
-        *n = (u * normals_[t[0]] + v * normals_[t[1]] + w * normals_[t[2]]).normalized();
-      }
+    const auto c = CellOf(p);
+    // Distance from p to its (clamped) cell: unvisited cells of ring r + 1 are at least
+    // r * min(cell) - that far away.
+    Vec3 cmin, cmax;
+    for (int a = 0; a < 3; ++a) {
+      cmin[a] = lo[a] + c[a] * cell_[a];
+      cmax[a] = cmin[a] + cell_[a];
+    }
+    const double outside = (p - p.cwiseMax(cmin).cwiseMin(cmax)).norm();
+    const int max_r = std::max({dims_[0], dims_[1], dims_[2]});
+    for (int r = 0; r <= max_r; ++r) {
+      for (int z = c[2] - r; z <= c[2] + r; ++z)
+        for (int y = c[1] - r; y <= c[1] + r; ++y)
+          for (int x = c[0] - r; x <= c[0] + r; ++x) {
+            if (std::max({std::abs(x - c[0]), std::abs(y - c[1]), std::abs(z - c[2])}) != r) continue;
+            if (x < 0 || y < 0 || z < 0 || x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) continue;
+            for (int32_t t : cells_[Index(x, y, z)]) {
+              const auto& tri = mesh_.triangles[t];
+              double u, v, w;
+              const Vec3 q = ClosestPointOnTriangle(p, mesh_.vertices[tri[0]], mesh_.vertices[tri[1]],
+                                                    mesh_.vertices[tri[2]], &u, &v, &w);
+              const double d = (q - p).squaredNorm();
+              if (d < best) {
+                best = d;
+                *s = q;
+                *n = (u * normals_[tri[0]] + v * normals_[tri[1]] + w * normals_[tri[2]]).normalized();
+              }
+            }
+          }
+      const double bound = r * cell_.minCoeff() - outside;
+      if (best < 1e300 && bound > 0 && std::sqrt(best) <= bound) break;
     }
   }
 
  private:
+  std::array<int, 3> CellOf(const Vec3& p) const {
+    std::array<int, 3> c;
+    for (int a = 0; a < 3; ++a) c[a] = std::clamp(int(std::floor((p[a] - lo[a]) / cell_[a])), 0, dims_[a] - 1);
+    return c;
+  }
+  size_t Index(int x, int y, int z) const { return x + size_t(dims_[0]) * (y + size_t(dims_[1]) * z); }
+
   std::vector<Vec3> normals_;
+  std::array<int, 3> dims_ = {1, 1, 1};
+  Vec3 cell_ = Vec3::Ones();
+  std::vector<std::vector<int32_t>> cells_;
 };
 
 [[noreturn]] void MeshError(const std::string& path, const std::string& what) {

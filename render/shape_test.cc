@@ -31,7 +31,9 @@ TEST(Shape, BuiltinsAreClosedAndProjectOntoThemselves) {
       Vec3 p, n;
       s->Project(s->mesh().vertices[v], &p, &n);
       EXPECT_NEAR(n.norm(), 1, 1e-9);
-      if (name != "blob") EXPECT_NEAR((p - s->mesh().vertices[v]).norm(), 0, 1e-9);
+      if (name != "blob") {
+        EXPECT_NEAR((p - s->mesh().vertices[v]).norm(), 0, 1e-9);
+      }
     }
   }
   EXPECT_THROW(MakeBuiltinShape("cone", 10), InputError);
@@ -78,6 +80,25 @@ TEST(Shape, BadMeshesGiveClearErrors) {
   expect_error(Write("tl_range.obj", kTet + "f 1 3 9\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"), "out of range");
   expect_error(Write("tl_mesh.stl", "solid"), "unknown mesh format");
   expect_error((fs::temp_directory_path() / "tl_missing.obj").string(), "cannot open");
+}
+
+TEST(Shape, MeshProjectionMatchesBruteForce) {
+  const auto blob = MakeBuiltinShape("blob", 20, 24);
+  const auto mesh = MakeMeshShape(blob->mesh(), "blob.obj", 0);
+  const TriangleMesh& m = mesh->mesh();
+  uint32_t state = 12345;
+  auto uniform = [&] { state = state * 1664525u + 1013904223u; return (state >> 8) / double(1 << 24); };
+  for (int i = 0; i < 200; ++i) {
+    const Vec3 p(30 * uniform() - 15, 30 * uniform() - 15, 30 * uniform() - 15);
+    Vec3 s, n;
+    mesh->Project(p, &s, &n);
+    double best = 1e300;
+    for (const auto& t : m.triangles) {
+      double u, v, w;
+      best = std::min(best, (ClosestPointOnTriangle(p, m.vertices[t[0]], m.vertices[t[1]], m.vertices[t[2]], &u, &v, &w) - p).norm());
+    }
+    EXPECT_NEAR((s - p).norm(), best, 1e-9) << i;
+  }
 }
 
 TEST(Shape, ClosestPointOnTriangle) {
