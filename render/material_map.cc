@@ -62,6 +62,21 @@ NodeMaterial MapShellMaterial(const Polygrid& pg, const Material& material,
   return m;
 }
 
+std::vector<NodeMaterial> RestrictMaterialHierarchy(const std::vector<Polygrid>& levels,
+                                                    NodeMaterial finest) {
+  std::vector<NodeMaterial> out;
+  out.push_back(std::move(finest));
+  for (size_t l = 1; l < levels.size(); ++l) {
+    NodeMaterial m;
+    for (int c = 0; c < 3; ++c) {
+      RestrictPolygrid(levels[l - 1], out.back().kappa[c], levels[l], &m.kappa[c]);
+      RestrictPolygrid(levels[l - 1], out.back().mu[c], levels[l], &m.mu[c]);
+    }
+    out.push_back(std::move(m));
+  }
+  return out;
+}
+
 NodeMaterial ConstantNodeMaterial(const Polygrid& pg, const std::array<float, 3>& kappa,
                                   const std::array<float, 3>& mu) {
   NodeMaterial m;

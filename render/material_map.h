@@ -25,6 +25,11 @@ struct ShellMappingOptions {
 NodeMaterial MapShellMaterial(const Polygrid& pg, const Material& material,
                               const ShellMappingOptions& options);
 
+// Materials for every level of a hierarchy (finest first) from the finest level's: each coarser
+// level averages its children (RestrictPolygrid), as in Section 5.3.
+std::vector<NodeMaterial> RestrictMaterialHierarchy(const std::vector<Polygrid>& levels,
+                                                    NodeMaterial finest);
+
 // One constant material everywhere.
 NodeMaterial ConstantNodeMaterial(const Polygrid& pg, const std::array<float, 3>& kappa,
                                   const std::array<float, 3>& mu);

@@ -420,3 +420,40 @@ void ProlongPolygrid(const Polygrid& coarse, const std::vector<float>& coarse_va
 }
 
 }  // namespace translume
+
+namespace translume {
+
+void RestrictPolygrid(const Polygrid& fine, const std::vector<float>& fine_values,
+                      const Polygrid& coarse, std::vector<float>* coarse_values) {
+  TL_CHECK(int64_t(fine_values.size()) == fine.size());
+  TL_CHECK(fine.resolution - 1 == 2 * (coarse.resolution - 1));
+  // Fine nodes by lattice node (CSR: boundary nodes may share a lattice node).
+  Lattice lat{fine.lattice_extent};
+  std::vector<int32_t> start(lat.size() + 1, 0), nodes(fine.size());
+  for (int64_t n = 0; n < fine.size(); ++n) ++start[lat.index(fine.lattice[n]) + 1];
+  for (int64_t k = 0; k < lat.size(); ++k) start[k + 1] += start[k];
+  std::vector<int32_t> fill(start.begin(), start.end() - 1);
+  for (int64_t n = 0; n < fine.size(); ++n) nodes[fill[lat.index(fine.lattice[n])]++] = int32_t(n);
+  coarse_values->assign(coarse.size(), 0.f);
+  for (int64_t n = 0; n < coarse.size(); ++n) {
+    const bool boundary = coarse.is_boundary(n);
+    double acc = 0, wsum = 0;
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const std::array<int, 3> g = {2 * coarse.lattice[n][0] + dx, 2 * coarse.lattice[n][1] + dy,
+                                        2 * coarse.lattice[n][2] + dz};
+          if (!lat.inside(g)) continue;
+          const double w = (1 - std::abs(dx) / 2.0) * (1 - std::abs(dy) / 2.0) * (1 - std::abs(dz) / 2.0);
+          const int64_t k = lat.index(g);
+          for (int32_t i = start[k]; i < start[k + 1]; ++i) {
+            if (fine.is_boundary(nodes[i]) != boundary) continue;
+            acc += w * fine_values[nodes[i]];
+            wsum += w;
+          }
+        }
+    (*coarse_values)[n] = wsum > 0 ? float(acc / wsum) : 0.f;
+  }
+}
+
+}  // namespace translume

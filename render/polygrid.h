@@ -91,4 +91,11 @@ std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Sha
 void ProlongPolygrid(const Polygrid& coarse, const std::vector<float>& coarse_values,
                      const Polygrid& fine, std::vector<float>* fine_values);
 
+// The other way (Section 5.3: a coarse node's material is the average over its children): a
+// coarse node at lattice g takes the weighted mean of the fine nodes of its own kind (interior
+// or boundary) at lattice 2g + d, d in {-1, 0, 1}^3, weights prod_a (1 - |d_a| / 2),
+// normalised over the children that exist.
+void RestrictPolygrid(const Polygrid& fine, const std::vector<float>& fine_values,
+                      const Polygrid& coarse, std::vector<float>* coarse_values);
+
 }  // namespace translume

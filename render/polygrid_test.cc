@@ -125,6 +125,13 @@ TEST(Polygrid, HierarchyProlongsConstants) {
   std::vector<float> coarse(levels[1].size(), 2.5f), fine;
   ProlongPolygrid(levels[1], coarse, levels[0], &fine);
   for (float v : fine) EXPECT_FLOAT_EQ(v, 2.5f);
+  // Restriction averages children of the same kind: constants stay, and a field that is 1 on
+  // the boundary and 0 inside stays so on the coarse level.
+  std::vector<float> kind(levels[0].size()), coarse_kind;
+  for (int64_t n = 0; n < levels[0].size(); ++n) kind[n] = levels[0].is_boundary(n) ? 1.f : 0.f;
+  RestrictPolygrid(levels[0], kind, levels[1], &coarse_kind);
+  for (int64_t n = 0; n < levels[1].size(); ++n)
+    EXPECT_FLOAT_EQ(coarse_kind[n], levels[1].is_boundary(n) ? 1.f : 0.f) << n;
 }
 
 // The polygrid of a box (one cube, undistorted) against the regular-grid forward solver of

@@ -36,22 +36,25 @@ std::string FramePath(const std::string& path, int frame, int frames) {
 // MATERIAL: a .vdb file, procedural:NAME, or homogeneous:KAPPA,MU (mm, 1/mm, grey).
 std::vector<NodeMaterial> LoadNodeMaterials(const std::string& spec, const std::vector<Polygrid>& levels,
                                             const ShellMappingOptions& mapping, double* C) {
-  std::vector<NodeMaterial> out;
   *C = ReflectionParameterC(1.3);
+  const Polygrid& finest = levels[0];
+  NodeMaterial m;
   if (spec.rfind("procedural:", 0) == 0) {
-    for (const Polygrid& pg : levels) out.push_back(ProceduralNodeMaterial(pg, spec.substr(11)));
+    m = ProceduralNodeMaterial(finest, spec.substr(11));
   } else if (spec.rfind("homogeneous:", 0) == 0) {
-    float k = 0, m = 0;
+    float k = 0, u = 0;
     char comma = 0;
-    if (std::sscanf(spec.c_str() + 12, "%f%c%f", &k, &comma, &m) != 3 || comma != ',' || !(k > 0) ||
-        !(m > 0))
+    if (std::sscanf(spec.c_str() + 12, "%f%c%f", &k, &comma, &u) != 3 || comma != ',' || !(k > 0) ||
+        !(u > 0))
       throw InputError("material " + spec + ": expected homogeneous:KAPPA,MU with both > 0");
-    for (const Polygrid& pg : levels) out.push_back(ConstantNodeMaterial(pg, {k, k, k}, {m, m, m}));
+    m = ConstantNodeMaterial(finest, {k, k, k}, {u, u, u});
   } else {
     const Material mat = ReadMaterial(spec);
     *C = mat.C;
-    for (const Polygrid& pg : levels) out.push_back(MapShellMaterial(pg, mat, mapping));
+    m = MapShellMaterial(finest, mat, mapping);
   }
+  // Coarser levels average their children (Section 5.3).
+  const std::vector<NodeMaterial> out = RestrictMaterialHierarchy(levels, std::move(m));
   return out;
 }
 

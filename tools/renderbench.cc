@@ -60,8 +60,8 @@ int main(int argc, char** argv) {
         PolygridOptions po;
         po.resolution = res;
         const auto levels = BuildPolygridHierarchy(pc, *shape, po, 3);
-        std::vector<NodeMaterial> mats;
-        for (const Polygrid& pg : levels) mats.push_back(ProceduralNodeMaterial(pg, "marble"));
+        const std::vector<NodeMaterial> mats =
+            RestrictMaterialHierarchy(levels, ProceduralNodeMaterial(levels[0], "marble"));
         RenderOptions ro;
         ro.width = ro.height = size;
         ro.supersample = 1;
