@@ -86,7 +86,7 @@ int RunRender(int argc, char** argv) {
                "translume render"};
   std::string material, shape_name = "sphere", polycube_path, light = "dir:1,0.3,0.6", out,
               camera, image = "256x256", iterations = "200,100,100", depth, backend = "cpu";
-  double size_mm = 20, exposure = 0, map_scale = 1;
+  double size_mm = 20, exposure = 0, map_scale = 1, first_layer = 0.1;
   int resolution = 17, levels = 3, turntable = 1;
   bool coherence = false, clamp = false;
   RenderOptions ro;
@@ -96,6 +96,8 @@ int RunRender(int argc, char** argv) {
   app.add_option("--size", size_mm, "Largest extent of the object, mm")->capture_default_str();
   app.add_option("--resolution", resolution, "Polygrid nodes per cube edge")->capture_default_str();
   app.add_option("--levels", levels, "Hierarchy levels (Section 5.3)")->capture_default_str();
+  app.add_option("--first-layer", first_layer, "First interior nodes at this fraction of the boundary spacing")
+      ->capture_default_str();
   app.add_option("--iterations", iterations, "Relaxation steps per level, coarsest first")->capture_default_str();
   app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all)");
   app.add_option("--backend", backend, "Diffusion on cpu or gl (compute shaders)")->capture_default_str();
@@ -139,6 +141,7 @@ int RunRender(int argc, char** argv) {
   }
   PolygridOptions po;
   po.resolution = resolution;
+  po.first_layer_fraction = first_layer;
   auto t0 = std::chrono::steady_clock::now();
   const std::vector<Polygrid> grids = BuildPolygridHierarchy(pc, *shape, po, levels);
   const double build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
