@@ -44,6 +44,9 @@ struct PolygridOptions {
 // and are removed; a node on a concave edge or corner, linked to two or three interior nodes,
 // is split into as many boundary nodes (same surface point, each with its own link). So every
 // boundary node connects to exactly one interior node, and every interior node to six nodes.
+// Node placement (projection, evening out, first layer at d, the crease rule for interior nodes
+// with two or three boundary links, alignment, smoothing, variance minimisation): see
+// BuildPolygrid and docs/render.md.
 struct Polygrid {
   int resolution = 0;
   std::array<int, 3> lattice_extent = {0, 0, 0};  // lattice nodes per axis
