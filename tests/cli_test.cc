@@ -204,5 +204,40 @@ TEST_F(Cli, SolveStopsCleanlyOnSigint) {
   EXPECT_TRUE(fs::exists(P("r.json")));
 }
 
+// translume render / edit (issue 7, docs/render.md).
+TEST_F(Cli, RenderAndEdit) {
+  ASSERT_EQ(Translume("synth --preset marble --grid 24x24x6 --spacing 0.5 -o " + P("m.vdb")).status, 0);
+  CommandRun r = Translume("render " + P("m.vdb") + " --shape sphere --resolution 9 --levels 2 "
+                           "--image 40x30 --turntable 2 --coherence -o " + P("s.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const char* f : {"s_000.png", "s_001.png"}) {
+    const Image img = ReadImage(P(f));
+    EXPECT_EQ(img.width, 40);
+    EXPECT_EQ(img.height, 30);
+  }
+  r = Translume("render homogeneous:0.2,0.02 --shape torus --resolution 5 --model dipole --image 16x16 -o " + P("t.exr"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = Translume("edit " + P("m.vdb") + " --scale kappa=2 --add mu=0.01 --depth 0:2 -o " + P("e.vdb"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const Material a = ReadMaterial(P("m.vdb")), b = ReadMaterial(P("e.vdb"));
+  EXPECT_FLOAT_EQ(b.kappa[0][0], 2 * a.kappa[0][0]);
+  EXPECT_FLOAT_EQ(b.kappa[0][a.shape.index(0, 0, 5)], a.kappa[0][a.shape.index(0, 0, 5)]);
+
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --shape cone -o " + P("x.png")), "cone");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --light sun:1 -o " + P("x.png")), "--light");
+  { std::FILE* f = std::fopen(P("open.obj").c_str(), "w");
+    std::fputs("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\n", f);
+    std::fclose(f); }
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --shape " + P("open.obj") + " -o " + P("x.png")), "open");
+  { std::FILE* f = std::fopen(P("bad.cubes").c_str(), "w");
+    std::fputs("0 0 0\n5 5 5\n", f);
+    std::fclose(f); }
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --polycube " + P("bad.cubes") + " -o " + P("x.png")),
+                     "face-connected");
+  ExpectOneLineError(Translume("edit " + P("m.vdb") + " --add mu=-1 -o " + P("x.vdb")), "mu");
+  EXPECT_FALSE(fs::exists(P("x.png")));
+  EXPECT_FALSE(fs::exists(P("x.vdb")));
+}
+
 }  // namespace
 }  // namespace translume

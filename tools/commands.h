@@ -23,6 +23,8 @@ int RunEvaluate(int argc, char** argv);
 // callback runs the benchmark, on a `bench` app.
 void AddBenchForward(CLI::App& bench);
 void PrintBenchProgress(const std::string& line);
+int RunRender(int argc, char** argv);
+int RunEdit(int argc, char** argv);
 
 // Options every subcommand takes (--threads).
 void AddCommonOptions(CLI::App& app);

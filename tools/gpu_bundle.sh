@@ -4,19 +4,23 @@
 # the few shared libraries it needs beyond glibc and libstdc++, and the GLVND EGL loader. It runs
 # on a machine that has only an NVIDIA driver (docs/gpu.md):
 #
-#   bash tools/gpu_bundle.sh [BUILD_DIR] [OUT_DIR]      # default: build, gpu-bundle
+#   bash tools/gpu_bundle.sh [BUILD_DIR] [OUT_DIR] [TARGET]  # default: build, gpu-bundle,
+#                                                            # translume-gpubench
 #   gpu-bundle/run.sh gl-info
 #   gpu-bundle/run.sh bench forward --backend gl
+# TARGET=translume-renderbench bundles the renderer's frame-rate benchmark instead.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 build=${1:-$root/build}
 out=${2:-$root/gpu-bundle}
-cmake --build "$build" --target translume-gpubench
+target=${3:-translume-gpubench}
+cmake --build "$build" --target "$target"
 rm -rf "$out"
 mkdir -p "$out/lib"
-cp "$build/tools/translume-gpubench" "$out/"
+cp "$build/tools/$target" "$out/"
+echo "$target" > "$out/target"
 # Everything the binary links except the C runtime, which every Linux has.
-for lib in $(ldd "$out/translume-gpubench" | awk '/=>/ {print $3}'); do
+for lib in $(ldd "$out/$target" | awk '/=>/ {print $3}'); do
   case "$(basename "$lib")" in
     libc.so*|libm.so*|ld-linux*|libpthread.so*|libdl.so*|librt.so*) ;;
     *) cp -L "$lib" "$out/lib/" ;;
@@ -42,7 +46,7 @@ if [ -z "${__EGL_VENDOR_LIBRARY_FILENAMES:-}" ] && ! ls /usr/share/glvnd/egl_ven
     [ -e "$f" ] && export __EGL_VENDOR_LIBRARY_FILENAMES="$f" && break
   done
 fi
-exec "$here/translume-gpubench" "$@"
+exec "$here/$(cat "$here/target")" "$@"
 RUN
 chmod +x "$out/run.sh"
 du -sh "$out"

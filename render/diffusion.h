@@ -1,0 +1,106 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "render/polygrid.h"
+
+namespace translume {
+
+// kappa (mm) and mu (1/mm) at every polygrid node, per RGB channel: kappa[c][node].
+struct NodeMaterial {
+  std::array<std::vector<float>, 3> kappa, mu;
+};
+
+// The polygrid diffusion equations (Wang et al. 2008, Equation (9)) in the relaxation form of
+// Section 5.2 with phi' = kappa phi, written for every node n and channel c as
+//   phi'_n <- (s_n + sum_k w_nk phi'_{nb_nk}) * inv_diag_n
+// Interior node i:   w_k = w_ji (Appendix B), s = 0,  1/inv_diag = mu_i / kappa_i + sum_j w_ji
+// Boundary node b linked to interior j at distance d:
+//   w_0 = 2 C kappa_b^2,  s = q_b kappa_b kappa_j d,  1/inv_diag = kappa_j d + 2 C kappa_b kappa_j
+// Layouts: nb[n * 6 + k] (unused slots point at n with weight 0), w[(n * 3 + c) * 6 + k],
+// s[n * 3 + c], inv_diag[n * 3 + c], and phi'[n * 3 + c].
+struct JacobiSystem {
+  int64_t size = 0;
+  std::vector<int32_t> nb;
+  std::vector<float> w, s, inv_diag;
+};
+
+// q: incoming light at the boundary nodes, q[c][b - num_interior] (the SPEC's q: the Robin
+// boundary phi + 2 C kappa dphi/dn = q).
+using BoundaryLight = std::array<std::vector<float>, 3>;
+
+JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double C,
+                               const BoundaryLight& q);
+
+// Outgoing multiple-scattering radiance at the boundary nodes (Section 5.2, without the Fresnel
+// factor, applied at shading): L_b = (phi'_b - q_b kappa_b) / (2 pi kappa_b) = (phi_b - q_b) / (2 pi).
+BoundaryLight BoundaryRadiance(const Polygrid& pg, const NodeMaterial& m, const BoundaryLight& q,
+                               const std::vector<float>& phi_prime);
+
+// The reference solution for tests, in double: BiCGSTAB preconditioned by incomplete LU to a
+// relative residual of 1e-12 (sparse LU if that fails); phi'[n * 3 + c] for the first
+// `channels` channels (the others are left 0).
+std::vector<float> SolveReference(const JacobiSystem& system, int channels = 3);
+
+// Where the relaxation runs.
+enum class DiffusionBackend { kCpu, kGl };
+DiffusionBackend ParseDiffusionBackend(const std::string& text);
+
+// `iterations` relaxation steps on the nodes in `active` (the others keep their values), from
+// and into phi'. One implementation per backend with the same arithmetic (float).
+class JacobiRelaxer {
+ public:
+  virtual ~JacobiRelaxer() = default;
+  virtual void Load(const JacobiSystem& system) = 0;
+  virtual void Relax(const std::vector<int32_t>& active, int iterations,
+                     std::vector<float>* phi_prime) = 0;
+  static std::unique_ptr<JacobiRelaxer> Create(DiffusionBackend backend);
+};
+
+// The hierarchical, adaptive scheme of Section 5.3.
+struct DiffusionOptions {
+  DiffusionBackend backend = DiffusionBackend::kCpu;
+  // Relaxation steps per level, COARSEST first; missing entries repeat the last one; with more
+  // entries than levels the coarsest entries are dropped (the last is always the finest's).
+  std::vector<int> iterations = {200, 100, 100};
+  // Adaptive depth per level, COARSEST first: after prolongation, only nodes within this many
+  // layers of the boundary are updated on that level (the deeper ones stay at the coarse
+  // solution, Fig. 8). -1 (or missing): all nodes. The coarsest level always updates all.
+  std::vector<int> depth = {};
+  // Start from the last frame's finest solution (skipping the coarse levels) when one exists.
+  bool frame_coherence = false;
+  // Frame-coherent frames run this many steps on the finest level.
+  int coherent_iterations = 50;
+
+  std::string Validate() const;
+};
+
+// Per-level material and light, finest level first (as BuildPolygridHierarchy returns).
+class PolygridDiffusion {
+ public:
+  PolygridDiffusion(const std::vector<Polygrid>* levels, std::vector<NodeMaterial> materials,
+                    double C, const DiffusionOptions& options);
+  // Solves for phi' on every level, given q on each level's boundary nodes (finest first), and
+  // returns the finest level's phi' (n * 3 + c).
+  const std::vector<float>& Solve(const std::vector<BoundaryLight>& q);
+  const std::vector<NodeMaterial>& materials() const { return materials_; }
+  int last_iterations() const { return last_iterations_; }
+  void ResetCoherence() { have_previous_ = false; }
+
+ private:
+  const std::vector<Polygrid>* levels_;
+  std::vector<NodeMaterial> materials_;
+  double C_;
+  DiffusionOptions options_;
+  std::unique_ptr<JacobiRelaxer> relaxer_;
+  std::vector<float> phi_;
+  bool have_previous_ = false;
+  int last_iterations_ = 0;
+};
+
+}  // namespace translume

@@ -1,0 +1,80 @@
+// SPDX-License-Identifier: MIT
+#include "render/edit.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fmt/format.h>
+
+#include "solver/status.h"
+
+namespace translume {
+
+std::string EditOptions::Validate() const {
+  for (double v : {scale_kappa, scale_mu, add_kappa, add_mu})
+    if (!std::isfinite(v)) return "multipliers and added values must be finite";
+  if (scale_kappa < 0 || scale_mu < 0) return "multipliers must be >= 0";
+  if (depth_begin < 0 || (depth_end >= 0 && depth_end < depth_begin))
+    return "the depth range A:B needs 0 <= A <= B";
+  return "";
+}
+
+void EditOptions::ParseTerm(const std::string& text, bool add) {
+  const std::string flag = add ? "--add" : "--scale";
+  const auto eq = text.find('=');
+  if (eq == std::string::npos) throw InputError(flag + " " + text + ": expected kappa=VALUE or mu=VALUE");
+  const std::string name = text.substr(0, eq);
+  double value = 0;
+  try {
+    size_t used = 0;
+    value = std::stod(text.substr(eq + 1), &used);
+    if (used != text.size() - eq - 1) throw std::invalid_argument("trailing");
+  } catch (const std::exception&) {
+    throw InputError(flag + " " + text + ": '" + text.substr(eq + 1) + "' is not a number");
+  }
+  if (name == "kappa") (add ? add_kappa : scale_kappa) = value;
+  else if (name == "mu") (add ? add_mu : scale_mu) = value;
+  else throw InputError(flag + " " + text + ": unknown parameter '" + name + "' (expected kappa or mu)");
+}
+
+void EditOptions::ParseDepth(const std::string& text) {
+  int a = 0, b = 0;
+  char colon = 0;
+  if (std::sscanf(text.c_str(), "%d%c%d", &a, &colon, &b) != 3 || colon != ':')
+    throw InputError("--depth " + text + ": expected A:B (node layers)");
+  depth_begin = a;
+  depth_end = b;
+}
+
+Material EditMaterial(const Material& material, const EditOptions& o, const Image* mask) {
+  if (std::string err = o.Validate(); !err.empty()) throw InputError("edit: " + err);
+  Material m = material;
+  const GridShape& s = m.shape;
+  const int64_t k_end = o.depth_end < 0 ? s.nz - 1 : std::min<int64_t>(o.depth_end, s.nz - 1);
+  for (int64_t k = o.depth_begin; k <= k_end; ++k)
+    for (int64_t j = 0; j < s.ny; ++j)
+      for (int64_t i = 0; i < s.nx; ++i) {
+        double w = 1;
+        if (mask) {
+          const int px = std::min<int>(mask->width - 1, int((i + 0.5) * mask->width / s.nx));
+          const int py = std::min<int>(mask->height - 1, int((j + 0.5) * mask->height / s.ny));
+          if (mask->channels >= 3)
+            w = 0.2126 * mask->at(px, py, 0) + 0.7152 * mask->at(px, py, 1) + 0.0722 * mask->at(px, py, 2);
+          else
+            w = mask->at(px, py, 0);
+          w = std::clamp(w, 0.0, 1.0);
+        }
+        const int64_t n = s.index(i, j, k);
+        for (int c = 0; c < 3; ++c) {
+          float& kv = m.kappa[c][n];
+          float& mv = m.mu[c][n];
+          kv = float(kv + w * (o.scale_kappa * kv + o.add_kappa - kv));
+          mv = float(mv + w * (o.scale_mu * mv + o.add_mu - mv));
+          if (!(kv > 0) || !(mv > 0) || !std::isfinite(kv) || !std::isfinite(mv))
+            throw InputError(fmt::format("edit: node ({}, {}, {}) channel {} would get kappa {} mm, "
+                                         "mu {} /mm; both must stay > 0", i, j, k, c, kv, mv));
+        }
+      }
+  return m;
+}
+
+}  // namespace translume

@@ -1,0 +1,47 @@
+// SPDX-License-Identifier: MIT
+#include "render/edit.h"
+
+#include <gtest/gtest.h>
+
+#include "solver/status.h"
+
+namespace translume {
+namespace {
+
+TEST(Edit, ScaleAddMaskAndDepth) {
+  const Material m = Material::Constant({4, 2, 3}, 0.5, {0.2f, 0.2f, 0.2f}, {0.01f, 0.02f, 0.03f});
+  EditOptions o;
+  o.ParseTerm("kappa=2", false);
+  o.ParseTerm("mu=0.01", true);
+  o.ParseDepth("1:1");
+  Image mask;
+  mask.width = 2;
+  mask.height = 1;
+  mask.channels = 1;
+  mask.data = {1.f, 0.5f};  // left half full edit, right half half-way
+  const Material e = EditMaterial(m, o, &mask);
+  // Layer 0 and 2 untouched; layer 1: left v' = 2 kappa, mu + 0.01; right half-way.
+  EXPECT_FLOAT_EQ(e.kappa[0][m.shape.index(0, 0, 0)], 0.2f);
+  EXPECT_FLOAT_EQ(e.kappa[0][m.shape.index(0, 0, 1)], 0.4f);
+  EXPECT_FLOAT_EQ(e.mu[2][m.shape.index(1, 1, 1)], 0.04f);
+  EXPECT_FLOAT_EQ(e.kappa[1][m.shape.index(3, 0, 1)], 0.3f);
+  EXPECT_FLOAT_EQ(e.mu[0][m.shape.index(3, 1, 1)], 0.015f);
+  EXPECT_FLOAT_EQ(e.kappa[0][m.shape.index(3, 0, 2)], 0.2f);
+}
+
+TEST(Edit, BadEditsAreRefused) {
+  EditOptions o;
+  EXPECT_THROW(o.ParseTerm("sigma=2", false), InputError);
+  EXPECT_THROW(o.ParseTerm("kappa=two", false), InputError);
+  EXPECT_THROW(o.ParseTerm("kappa", true), InputError);
+  EXPECT_THROW(o.ParseDepth("3"), InputError);
+  o.ParseDepth("3:1");
+  EXPECT_FALSE(o.Validate().empty());
+  const Material m = Material::Constant({2, 2, 2}, 0.5, {0.2f, 0.2f, 0.2f}, {0.01f, 0.01f, 0.01f});
+  EditOptions neg;
+  neg.ParseTerm("mu=-0.5", true);
+  EXPECT_THROW(EditMaterial(m, neg), InputError);
+}
+
+}  // namespace
+}  // namespace translume

@@ -1,0 +1,27 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <array>
+
+#include "render/shape.h"
+
+namespace translume {
+
+// The six Laplacian weights of a polygrid node (Wang et al. 2008, Appendix B). offsets[j] =
+// v_j - v_0 (mm) for the neighbours in the order -x, +x, -y, +y, -z, +z of the polycube
+// lattice. A local frame (x', y', z') is taken along the node's grid directions (x' along
+// v_+x - v_-x, y' from v_+y - v_-y made orthogonal, z' = x' x y'); in it, Equation (10) without
+// the mixed terms gives the 6x6 system M (df/dx', d2f/dx'2, df/dy', d2f/dy'2, df/dz', d2f/dz'2)
+// = (f(v_j) - f(v_0)), W = M^-1, and
+//   w_j = W_{2j} + W_{4j} + W_{6j}     (1-based rows: the second derivatives),
+// so that  Laplacian f(v_0) ~= sum_j w_j (f(v_j) - f(v_0)). Units 1/mm^2.
+// On an undistorted grid of spacings (hx, hy, hz) this is the 7-point stencil 1/h_a^2. Returns
+// false (weights untouched) when M is singular or a weight is not positive and finite.
+bool LaplacianWeights(const std::array<Vec3, 6>& offsets, std::array<double, 6>* weights,
+                      bool local_frame = true);
+
+// The per-axis three-point weights 2 / (l_j (l_j + l_opposite)) on the neighbour distances:
+// the fallback for nodes whose 6x6 system is singular or gives a non-positive weight.
+std::array<double, 6> AxisLaplacianWeights(const std::array<Vec3, 6>& offsets);
+
+}  // namespace translume

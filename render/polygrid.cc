@@ -1,0 +1,459 @@
+// SPDX-License-Identifier: MIT
+#include "render/polygrid.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <deque>
+#include <fmt/format.h>
+#include <unordered_map>
+
+#include "render/laplacian.h"
+#include "solver/status.h"
+
+namespace translume {
+namespace {
+
+// Dense lattice index helpers.
+struct Lattice {
+  std::array<int, 3> n;  // nodes per axis
+  int64_t size() const { return int64_t(n[0]) * n[1] * n[2]; }
+  bool inside(const std::array<int, 3>& g) const {
+    return g[0] >= 0 && g[1] >= 0 && g[2] >= 0 && g[0] < n[0] && g[1] < n[1] && g[2] < n[2];
+  }
+  int64_t index(const std::array<int, 3>& g) const {
+    return g[0] + int64_t(n[0]) * (g[1] + int64_t(n[1]) * g[2]);
+  }
+};
+
+int64_t Key(const std::array<int, 3>& g, int dir) {
+  return ((int64_t(g[0]) * 4096 + g[1]) * 4096 + g[2]) * 8 + dir;
+}
+
+// Sum over the interior (free) nodes of the variance of their six edge lengths.
+double VarianceObjective(const Polygrid& pg, const std::vector<char>& free_node,
+                         std::vector<Vec3>* gradient) {
+  double f = 0;
+  if (gradient) gradient->assign(pg.size(), Vec3::Zero());
+  for (int64_t i = 0; i < pg.num_interior; ++i) {
+    if (!free_node[i]) continue;
+    double l[6], m = 0;
+    Vec3 dir[6];
+    for (int j = 0; j < 6; ++j) {
+      const Vec3 e = pg.position[i] - pg.position[pg.neighbours[i][j]];
+      l[j] = e.norm();
+      dir[j] = l[j] > 0 ? Vec3(e / l[j]) : Vec3::Zero();
+      m += l[j] / 6;
+    }
+    for (int j = 0; j < 6; ++j) {
+      const double r = l[j] - m;
+      f += r * r / 6;
+      if (gradient) {
+        // d Var / d l_j = 2 (l_j - m) / 6 (the mean's derivative sums to zero).
+        const Vec3 g = (2 * r / 6) * dir[j];
+        (*gradient)[i] += g;
+        const int32_t k = pg.neighbours[i][j];
+        if (k < pg.num_interior && free_node[k]) (*gradient)[k] -= g;
+      }
+    }
+  }
+  return f;
+}
+
+}  // namespace
+
+std::string PolygridOptions::Validate() const {
+  if (resolution < 3) return "the polygrid resolution must be >= 3 nodes per cube edge";
+  if (resolution > 257) return "the polygrid resolution must be <= 257 nodes per cube edge";
+  if (!(first_layer_fraction > 0 && first_layer_fraction < 0.5))
+    return "first_layer_fraction must be in (0, 0.5)";
+  if (boundary_relax_iterations < 0 || smooth_iterations < 0 || variance_iterations < 0 ||
+      align_passes < 0)
+    return "iteration counts must be >= 0";
+  return "";
+}
+
+std::array<double, 2> Polygrid::SurfaceUV(int64_t b) const {
+  const int axis = link_dir[b - num_interior] / 2;
+  const auto& g = lattice[b];
+  return {double(g[axis == 0 ? 1 : 0]), double(g[axis == 2 ? 1 : 2])};
+}
+
+Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
+                       const PolygridOptions& options) {
+  if (std::string err = options.Validate(); !err.empty()) throw InputError("polygrid: " + err);
+  if (std::string err = polycube.Validate(); !err.empty()) throw InputError("polycube: " + err);
+  Polygrid pg;
+  const int m = options.resolution - 1;
+  const std::array<int, 3> cubes = polycube.Extent();
+  Lattice lat;
+  for (int a = 0; a < 3; ++a) lat.n[a] = cubes[a] * m + 1;
+  pg.resolution = options.resolution;
+  pg.lattice_extent = lat.n;
+  std::vector<char> occupied(int64_t(cubes[0]) * cubes[1] * cubes[2], 0);
+  for (const auto& c : polycube.cubes) occupied[c[0] + cubes[0] * (c[1] + cubes[1] * c[2])] = 1;
+  auto cube_at = [&](int x, int y, int z) {
+    if (x < 0 || y < 0 || z < 0 || x >= cubes[0] || y >= cubes[1] || z >= cubes[2]) return false;
+    return bool(occupied[x + cubes[0] * (y + cubes[1] * z)]);
+  };
+  // A lattice node is interior iff every cube around it is in the polycube.
+  auto is_interior = [&](const std::array<int, 3>& g) {
+    if (!lat.inside(g)) return false;
+    int lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+      hi[a] = g[a] / m;
+      lo[a] = g[a] % m == 0 ? hi[a] - 1 : hi[a];
+    }
+    for (int x = lo[0]; x <= hi[0]; ++x)
+      for (int y = lo[1]; y <= hi[1]; ++y)
+        for (int z = lo[2]; z <= hi[2]; ++z)
+          if (!cube_at(x, y, z)) return false;
+    return true;
+  };
+  std::vector<int32_t> interior_at(lat.size(), -1);
+  for (int z = 0; z < lat.n[2]; ++z)
+    for (int y = 0; y < lat.n[1]; ++y)
+      for (int x = 0; x < lat.n[0]; ++x)
+        if (is_interior({x, y, z})) {
+          interior_at[lat.index({x, y, z})] = int32_t(pg.lattice.size());
+          pg.lattice.push_back({x, y, z});
+        }
+  pg.num_interior = int64_t(pg.lattice.size());
+  if (pg.num_interior == 0)
+    throw InputError("polycube: no interior node at resolution " +
+                     std::to_string(options.resolution));
+  if (pg.num_interior > (int64_t(1) << 30)) throw InputError("polygrid: too many nodes");
+  pg.neighbours.assign(pg.num_interior, {-1, -1, -1, -1, -1, -1});
+  std::unordered_map<int64_t, int32_t> boundary_at;  // (lattice, link dir) -> node
+  std::unordered_map<int64_t, int> surface_count;    // lattice node -> boundary nodes there
+  for (int64_t i = 0; i < pg.num_interior; ++i)
+    for (int dir = 0; dir < 6; ++dir) {
+      auto g = pg.lattice[i];
+      g[dir / 2] += dir % 2 ? 1 : -1;
+      const int32_t k = interior_at[lat.index(g)];
+      if (k >= 0) {
+        pg.neighbours[i][dir] = k;
+        continue;
+      }
+      const int32_t b = int32_t(pg.lattice.size());
+      pg.lattice.push_back(g);
+      pg.neighbours.push_back({int32_t(i), -1, -1, -1, -1, -1});
+      pg.neighbours[i][dir] = b;
+      pg.link_dir.push_back(dir);
+      boundary_at[Key(g, dir)] = b;
+      ++surface_count[Key(g, 0)];
+    }
+  const int64_t N = int64_t(pg.lattice.size());
+  // The polycube stretched onto the shape's bounding box.
+  pg.position.resize(N);
+  for (int64_t n = 0; n < N; ++n)
+    for (int a = 0; a < 3; ++a)
+      pg.position[n][a] = shape.lo[a] + (shape.hi[a] - shape.lo[a]) * pg.lattice[n][a] / (lat.n[a] - 1);
+  const std::vector<Vec3> lattice_position = pg.position;
+
+  // Boundary nodes: project, then even out within each face.
+  pg.normal.resize(N - pg.num_interior);
+  for (int64_t b = pg.num_interior; b < N; ++b)
+    shape.Project(pg.position[b], &pg.position[b], &pg.normal[b - pg.num_interior]);
+  std::vector<std::vector<int32_t>> face_nbrs(N - pg.num_interior);
+  for (int64_t b = pg.num_interior; b < N; ++b) {
+    const int dir = pg.link_dir[b - pg.num_interior];
+    for (int a = 0; a < 3; ++a) {
+      if (a == dir / 2) continue;
+      for (int s : {-1, 1}) {
+        auto g = pg.lattice[b];
+        g[a] += s;
+        if (auto it = boundary_at.find(Key(g, dir)); it != boundary_at.end())
+          face_nbrs[b - pg.num_interior].push_back(it->second);
+      }
+    }
+  }
+  for (int it = 0; it < options.boundary_relax_iterations; ++it) {
+    std::vector<Vec3> next = pg.position;
+    for (int64_t b = pg.num_interior; b < N; ++b) {
+      const auto& nb = face_nbrs[b - pg.num_interior];
+      if (nb.size() < 4) continue;  // the rim of a face stays where it was projected
+      Vec3 mean = Vec3::Zero();
+      for (int32_t k : nb) mean += pg.position[k] / double(nb.size());
+      shape.Project(0.5 * (pg.position[b] + mean), &next[b], &pg.normal[b - pg.num_interior]);
+    }
+    pg.position.swap(next);
+  }
+  double spacing_sum = 0;
+  int64_t spacing_count = 0;
+  for (int64_t b = pg.num_interior; b < N; ++b)
+    for (int32_t k : face_nbrs[b - pg.num_interior]) {
+      spacing_sum += (pg.position[b] - pg.position[k]).norm();
+      ++spacing_count;
+    }
+  pg.mean_boundary_spacing = spacing_count ? spacing_sum / spacing_count
+                                           : (shape.hi - shape.lo).norm() / lat.n[0];
+  const double d = options.first_layer_fraction * pg.mean_boundary_spacing;
+  pg.first_layer_distance = d;
+
+  // First interior nodes: at distance d along the inward normal of their boundary node.
+  // Corner and edge fix: an interior node linked to two or three boundary nodes (a convex edge
+  // or corner of the polycube) goes where it is at distance d from every one of their tangent
+  // planes (least squares), and each of those boundary nodes slides on the surface to the
+  // point at distance d along its normal from it, so every link is again a normal of length d.
+  std::vector<char> free_node(pg.num_interior, 1);
+  std::vector<std::vector<int32_t>> blinks(pg.num_interior);
+  for (int64_t b = pg.num_interior; b < N; ++b) blinks[pg.neighbours[b][0]].push_back(int32_t(b));
+  std::vector<char> split(N, 0);
+  for (int64_t b = pg.num_interior; b < N; ++b) split[b] = surface_count[Key(pg.lattice[b], 0)] > 1;
+  for (int64_t i = 0; i < pg.num_interior; ++i) {
+    if (blinks[i].empty()) continue;
+    free_node[i] = 0;
+    if (blinks[i].size() > 1) continue;
+    const int32_t b = blinks[i][0];
+    Vec3 u = -pg.normal[b - pg.num_interior];
+    if (split[b]) {
+      // A split concave node: lean along the lattice link so that the interior nodes of the
+      // split copies do not coincide.
+      u = (u + (lattice_position[i] - lattice_position[b]).normalized()).normalized();
+    }
+    pg.position[i] = pg.position[b] + d * u;
+  }
+  auto place_edge_nodes = [&] {
+    for (int64_t i = 0; i < pg.num_interior; ++i) {
+      const auto& bl = blinks[i];
+      if (bl.size() < 2) continue;
+      // Along the edge (the least-squares null space) the node follows the interior nodes
+      // opposite its links, so the edge continues the grid lines of the faces.
+      Vec3 x = Vec3::Zero();
+      for (int32_t b : bl) {
+        const int32_t o = pg.neighbours[i][pg.link_dir[b - pg.num_interior] ^ 1];
+        x += (o < pg.num_interior ? pg.position[o] : Vec3(pg.position[b] - d * pg.normal[b - pg.num_interior])) /
+             double(bl.size());
+      }
+      // Only a crease (normals more than 30 degrees apart, e.g. a box edge) has well-posed
+      // plane constraints; on a smooth part of the surface the boundary nodes stay and the node
+      // takes the mean of its d-offset points (sliding would merge the boundary nodes).
+      double min_dot = 1;
+      for (int32_t b1 : bl)
+        for (int32_t b2 : bl)
+          min_dot = std::min(min_dot, pg.normal[b1 - pg.num_interior].dot(pg.normal[b2 - pg.num_interior]));
+      if (min_dot > 0.866) {
+        Vec3 mean = Vec3::Zero();
+        for (int32_t b : bl) mean += (pg.position[b] - d * pg.normal[b - pg.num_interior]) / double(bl.size());
+        pg.position[i] = mean;
+        continue;
+      }
+      for (int pass = 0; pass < 3; ++pass) {
+        const double eps = 1e-6;
+        Eigen::Matrix3d A = eps * Eigen::Matrix3d::Identity();
+        Vec3 r = eps * x;
+        for (int32_t b : bl) {
+          const Vec3& n = pg.normal[b - pg.num_interior];
+          A += n * n.transpose();
+          r += n * (n.dot(pg.position[b]) - d);
+        }
+        x = A.ldlt().solve(r);
+        for (int32_t b : bl)
+          shape.Project(x + d * pg.normal[b - pg.num_interior], &pg.position[b],
+                        &pg.normal[b - pg.num_interior]);
+      }
+      pg.position[i] = x;
+    }
+  };
+  // Laplacian smoothing of the free nodes: in-place Gauss-Seidel with over-relaxation (omega
+  // 1.7), until no node moves more than 1e-6 of the boundary spacing or `iterations` sweeps.
+  auto smooth = [&](int iterations) {
+    const double tol = 1e-6 * pg.mean_boundary_spacing;
+    for (int it = 0; it < iterations; ++it) {
+      double moved = 0;
+      for (int64_t i = 0; i < pg.num_interior; ++i) {
+        if (!free_node[i]) continue;
+        Vec3 mean = Vec3::Zero();
+        for (int j = 0; j < 6; ++j) mean += pg.position[pg.neighbours[i][j]];
+        const Vec3 step = 1.7 * (mean / 6 - pg.position[i]);
+        pg.position[i] += step;
+        moved = std::max(moved, step.norm());
+      }
+      if (moved < tol) break;
+    }
+  };
+  // Alignment: a boundary node and its first interior node follow the grid line of the free
+  // interior node behind them (that node's surface point, and d inside it), so
+  // boundary links continue the interior grid lines along the normal.
+  auto align = [&] {
+    for (int64_t i = 0; i < pg.num_interior; ++i) {
+      if (blinks[i].size() != 1 || split[blinks[i][0]]) continue;
+      const int32_t b = blinks[i][0];
+      const int32_t f = pg.neighbours[i][pg.link_dir[b - pg.num_interior] ^ 1];
+      if (f >= pg.num_interior || !free_node[f]) continue;
+      // Onto b's tangent plane first, so the projection stays on b's side of the surface.
+      Vec3& n = pg.normal[b - pg.num_interior];
+      const Vec3 on_plane = pg.position[f] + n.dot(pg.position[b] - pg.position[f]) * n;
+      shape.Project(on_plane, &pg.position[b], &n);
+      pg.position[i] = pg.position[b] - d * n;
+    }
+  };
+  place_edge_nodes();
+  smooth(options.smooth_iterations);
+  for (int pass = 0; pass < options.align_passes; ++pass) {
+    align();
+    place_edge_nodes();
+    smooth(std::min(200, options.smooth_iterations));  // warm-started
+  }
+  std::vector<Vec3> grad;
+  double f = VarianceObjective(pg, free_node, &grad);
+  double step = 0.5;
+  for (int it = 0; it < options.variance_iterations && f > 0; ++it) {
+    const std::vector<Vec3> saved = pg.position;
+    for (int64_t i = 0; i < pg.num_interior; ++i)
+      if (free_node[i]) pg.position[i] -= step * grad[i];
+    std::vector<Vec3> g2;
+    const double f2 = VarianceObjective(pg, free_node, &g2);
+    if (f2 < f) {
+      f = f2;
+      grad.swap(g2);
+      step *= 1.2;
+    } else {
+      pg.position = saved;
+      step *= 0.5;
+      if (step < 1e-8) break;
+    }
+  }
+
+  // Laplacian weights (Appendix B) and the boundary links.
+  pg.weights.assign(N, {0, 0, 0, 0, 0, 0});
+  int64_t fallback = 0;
+#pragma omp parallel for schedule(static) reduction(+ : fallback) if (pg.num_interior > 50000)
+  for (int64_t i = 0; i < pg.num_interior; ++i) {
+    std::array<Vec3, 6> off;
+    for (int j = 0; j < 6; ++j) off[j] = pg.position[pg.neighbours[i][j]] - pg.position[i];
+    std::array<double, 6> w;
+    if (!LaplacianWeights(off, &w)) {
+      w = AxisLaplacianWeights(off);
+      ++fallback;
+    }
+    for (int j = 0; j < 6; ++j) pg.weights[i][j] = float(w[j]);
+  }
+  pg.fallback_weights = fallback;
+  pg.link_length.resize(N - pg.num_interior);
+  for (int64_t b = pg.num_interior; b < N; ++b)
+    pg.link_length[b - pg.num_interior] = (pg.position[b] - pg.position[pg.neighbours[b][0]]).norm();
+
+  // Layers, shell sources and depths: breadth-first from the boundary.
+  pg.layer.assign(N, -1);
+  pg.source.assign(N, -1);
+  std::deque<int32_t> queue;
+  for (int64_t b = pg.num_interior; b < N; ++b) {
+    pg.layer[b] = 0;
+    pg.source[b] = int32_t(b);
+    queue.push_back(int32_t(b));
+  }
+  while (!queue.empty()) {
+    const int32_t x = queue.front();
+    queue.pop_front();
+    for (int j = 0; j < 6; ++j) {
+      const int32_t k = pg.neighbours[x][j];
+      if (k < 0 || pg.is_boundary(k)) continue;
+      if (pg.layer[k] < 0) {
+        pg.layer[k] = pg.layer[x] + 1;
+        pg.source[k] = pg.source[x];
+        queue.push_back(k);
+      } else if (pg.layer[k] == pg.layer[x] + 1 &&
+                 (pg.position[k] - pg.position[pg.source[x]]).squaredNorm() <
+                     (pg.position[k] - pg.position[pg.source[k]]).squaredNorm()) {
+        pg.source[k] = pg.source[x];
+      }
+    }
+  }
+  pg.depth_mm.resize(N);
+  for (int64_t n = 0; n < N; ++n) pg.depth_mm[n] = (pg.position[n] - pg.position[pg.source[n]]).norm();
+  return pg;
+}
+
+std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Shape& shape,
+                                             const PolygridOptions& options, int max_levels) {
+  std::vector<Polygrid> levels;
+  PolygridOptions o = options;
+  while (int(levels.size()) < std::max(1, max_levels)) {
+    levels.push_back(BuildPolygrid(polycube, shape, o));
+    const int m = o.resolution - 1;
+    if (m % 2 != 0 || m / 2 + 1 < 3) break;
+    o.resolution = m / 2 + 1;
+  }
+  return levels;
+}
+
+void ProlongPolygrid(const Polygrid& coarse, const std::vector<float>& coarse_values,
+                     const Polygrid& fine, std::vector<float>* fine_values) {
+  TL_CHECK(int64_t(coarse_values.size()) == coarse.size());
+  TL_CHECK(fine.resolution - 1 == 2 * (coarse.resolution - 1));
+  Lattice lat{coarse.lattice_extent};
+  std::vector<float> sum(lat.size(), 0.f);
+  std::vector<float> count(lat.size(), 0.f);
+  for (int64_t n = 0; n < coarse.size(); ++n) {
+    const int64_t k = lat.index(coarse.lattice[n]);
+    sum[k] += coarse_values[n];
+    count[k] += 1;
+  }
+  fine_values->assign(fine.size(), 0.f);
+  for (int64_t n = 0; n < fine.size(); ++n) {
+    const auto& g = fine.lattice[n];
+    int base[3];
+    double t[3];
+    for (int a = 0; a < 3; ++a) {
+      base[a] = g[a] / 2;
+      t[a] = g[a] % 2 ? 0.5 : 0.0;
+    }
+    double acc = 0, wsum = 0;
+    for (int c = 0; c < 8; ++c) {
+      std::array<int, 3> q;
+      double w = 1;
+      for (int a = 0; a < 3; ++a) {
+        const int bit = (c >> a) & 1;
+        q[a] = base[a] + bit;
+        w *= bit ? t[a] : 1 - t[a];
+      }
+      if (w == 0 || !lat.inside(q)) continue;
+      const int64_t k = lat.index(q);
+      if (count[k] == 0) continue;
+      acc += w * sum[k] / count[k];
+      wsum += w;
+    }
+    (*fine_values)[n] = wsum > 0 ? float(acc / wsum) : 0.f;
+  }
+}
+
+}  // namespace translume
+
+namespace translume {
+
+void RestrictPolygrid(const Polygrid& fine, const std::vector<float>& fine_values,
+                      const Polygrid& coarse, std::vector<float>* coarse_values) {
+  TL_CHECK(int64_t(fine_values.size()) == fine.size());
+  TL_CHECK(fine.resolution - 1 == 2 * (coarse.resolution - 1));
+  // Fine nodes by lattice node (CSR: boundary nodes may share a lattice node).
+  Lattice lat{fine.lattice_extent};
+  std::vector<int32_t> start(lat.size() + 1, 0), nodes(fine.size());
+  for (int64_t n = 0; n < fine.size(); ++n) ++start[lat.index(fine.lattice[n]) + 1];
+  for (int64_t k = 0; k < lat.size(); ++k) start[k + 1] += start[k];
+  std::vector<int32_t> fill(start.begin(), start.end() - 1);
+  for (int64_t n = 0; n < fine.size(); ++n) nodes[fill[lat.index(fine.lattice[n])]++] = int32_t(n);
+  coarse_values->assign(coarse.size(), 0.f);
+  for (int64_t n = 0; n < coarse.size(); ++n) {
+    const bool boundary = coarse.is_boundary(n);
+    double acc = 0, wsum = 0;
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const std::array<int, 3> g = {2 * coarse.lattice[n][0] + dx, 2 * coarse.lattice[n][1] + dy,
+                                        2 * coarse.lattice[n][2] + dz};
+          if (!lat.inside(g)) continue;
+          const double w = (1 - std::abs(dx) / 2.0) * (1 - std::abs(dy) / 2.0) * (1 - std::abs(dz) / 2.0);
+          const int64_t k = lat.index(g);
+          for (int32_t i = start[k]; i < start[k + 1]; ++i) {
+            if (fine.is_boundary(nodes[i]) != boundary) continue;
+            acc += w * fine_values[nodes[i]];
+            wsum += w;
+          }
+        }
+    (*coarse_values)[n] = wsum > 0 ? float(acc / wsum) : 0.f;
+  }
+}
+
+}  // namespace translume

@@ -1,0 +1,104 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "render/polycube.h"
+#include "render/shape.h"
+
+namespace translume {
+
+struct PolygridOptions {
+  // Nodes per cube edge (the same in every cube, Section 5.1); >= 3.
+  int resolution = 9;
+  // Iterations that even out the projected boundary nodes (Turk 1992-style relaxation: move
+  // half-way to the mean of the 4 same-face neighbours, re-project).
+  int boundary_relax_iterations = 5;
+  // First interior nodes sit at d = first_layer_fraction * (mean boundary spacing) along the
+  // inward normal (the paper: one tenth).
+  double first_layer_fraction = 0.1;
+  // Placement of the remaining interior nodes: Laplacian smoothing (the initial guess; at most
+  // this many over-relaxed Gauss-Seidel sweeps, stopping when converged), then gradient steps on
+  // sum_i Var({|v_i - v_j|}) over the free nodes.
+  int smooth_iterations = 2000;
+  int variance_iterations = 100;
+  // Passes that align each boundary node and its first interior node with the grid line of the
+  // free interior node behind them (then re-smooth): links along the normal, grid lines
+  // continued to the surface. On a box this gives a tensor-product grid.
+  int align_passes = 10;
+
+  std::string Validate() const;
+};
+
+// A polygrid (Wang et al. 2008, Section 5.1): nodes on the lattice of a polycube (every cube a
+// regular grid of `resolution`^3 nodes, shared faces joined), mapped into a shape.
+//
+// Nodes [0, num_interior) are interior: each has exactly six neighbours, in the order -x, +x,
+// -y, +y, -z, +z of the lattice. Nodes [num_interior, size) are boundary nodes on the surface;
+// each is linked to exactly ONE interior node (neighbours[b][0]; the other five are -1).
+// Corner and edge fix: a lattice node on the polycube surface becomes one boundary node per
+// link to an interior node. Convex edge and corner lattice nodes have no interior neighbour
+// and are removed; a node on a concave edge or corner, linked to two or three interior nodes,
+// is split into as many boundary nodes (same surface point, each with its own link). So every
+// boundary node connects to exactly one interior node, and every interior node to six nodes.
+// Node placement (projection, evening out, first layer at d, the crease rule for interior nodes
+// with two or three boundary links, alignment, smoothing, variance minimisation): see
+// BuildPolygrid and docs/render.md.
+struct Polygrid {
+  int resolution = 0;
+  std::array<int, 3> lattice_extent = {0, 0, 0};  // lattice nodes per axis
+  int64_t num_interior = 0;
+  std::vector<Vec3> position;                     // mm
+  std::vector<std::array<int, 3>> lattice;        // lattice coordinates (boundary: surface node)
+  std::vector<std::array<int32_t, 6>> neighbours;
+  std::vector<std::array<float, 6>> weights;      // interior: Laplacian weights w_ji, 1/mm^2
+  // Boundary nodes (index b - num_interior): outward unit normal, link direction (0..5, the
+  // direction from the interior node to the boundary node), and d_ji = |v_b - v_j| (mm).
+  std::vector<Vec3> normal;
+  std::vector<int> link_dir;
+  std::vector<double> link_length;
+  // Every node: hops to the nearest boundary node (0 on the boundary), the boundary node it
+  // was reached from (the shell mapping's surface point), and its depth |v - v_src| (mm).
+  std::vector<int> layer;
+  std::vector<int32_t> source;
+  std::vector<double> depth_mm;
+  double mean_boundary_spacing = 0;  // mm
+  double first_layer_distance = 0;   // d, mm
+  int64_t fallback_weights = 0;      // nodes whose 6x6 system failed (axis weights used)
+
+  int64_t size() const { return int64_t(position.size()); }
+  int64_t num_boundary() const { return size() - num_interior; }
+  bool is_boundary(int64_t n) const { return n >= num_interior; }
+  // Surface coordinates (u, v) of boundary node b in lattice units: the two lattice axes of
+  // its polycube face (the axes other than link_dir / 2, in increasing order).
+  std::array<double, 2> SurfaceUV(int64_t b) const;
+};
+
+// Builds the polygrid of `shape` from `polycube`, stretched onto the shape's bounding box.
+// Throws InputError on bad options or a polycube whose grid has no interior node.
+Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
+                       const PolygridOptions& options);
+
+// Levels for the hierarchical scheme (Section 5.3), finest first: resolution n, (n-1)/2+1, ...
+// while (n-1) is even and the coarser resolution is >= 3, at most max_levels.
+std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Shape& shape,
+                                             const PolygridOptions& options, int max_levels);
+
+// Interpolates node values from a coarse level to a fine one (resolution 2(nc-1)+1) through the
+// shared lattice: a coarse lattice node's value is its interior node's, or the mean of its
+// boundary nodes; a fine node takes the trilinear interpolation at lattice position g/2 over the
+// coarse lattice nodes that exist, renormalised.
+void ProlongPolygrid(const Polygrid& coarse, const std::vector<float>& coarse_values,
+                     const Polygrid& fine, std::vector<float>* fine_values);
+
+// The other way (Section 5.3: a coarse node's material is the average over its children): a
+// coarse node at lattice g takes the weighted mean of the fine nodes of its own kind (interior
+// or boundary) at lattice 2g + d, d in {-1, 0, 1}^3, weights prod_a (1 - |d_a| / 2),
+// normalised over the children that exist.
+void RestrictPolygrid(const Polygrid& fine, const std::vector<float>& fine_values,
+                      const Polygrid& coarse, std::vector<float>* coarse_values);
+
+}  // namespace translume

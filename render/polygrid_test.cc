@@ -1,0 +1,200 @@
+// SPDX-License-Identifier: MIT
+#include "render/polygrid.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+
+#include "render/diffusion.h"
+#include "solver/forward.h"
+#include "solver/status.h"
+
+namespace translume {
+namespace {
+
+void ExpectWellFormed(const Polygrid& pg) {
+  ASSERT_GT(pg.num_interior, 0);
+  std::vector<int> boundary_links(pg.size(), 0);
+  for (int64_t i = 0; i < pg.num_interior; ++i)
+    for (int j = 0; j < 6; ++j) {
+      const int32_t k = pg.neighbours[i][j];
+      ASSERT_GE(k, 0);
+      ASSERT_LT(k, pg.size());
+      if (pg.is_boundary(k)) {
+        ++boundary_links[k];
+        EXPECT_EQ(pg.neighbours[k][0], i);
+      }
+      EXPECT_TRUE(std::isfinite(pg.weights[i][j]));
+      EXPECT_GT(pg.weights[i][j], 0);
+    }
+  for (int64_t b = pg.num_interior; b < pg.size(); ++b) {
+    EXPECT_EQ(boundary_links[b], 1) << "boundary node " << b;
+    for (int j = 1; j < 6; ++j) EXPECT_EQ(pg.neighbours[b][j], -1);
+    // The first interior node sits at d along the inward normal when it has this one boundary
+    // link; with two or three (polycube edges and corners on a smooth surface) it takes the mean
+    // of the d-offset points, somewhat closer.
+    const int32_t i = pg.neighbours[b][0];
+    int links = 0;
+    for (int j = 0; j < 6; ++j) links += pg.is_boundary(pg.neighbours[i][j]);
+    const double len = pg.link_length[b - pg.num_interior];
+    if (links == 1) {
+      EXPECT_NEAR(len, pg.first_layer_distance, 1e-6 * pg.first_layer_distance);
+    } else {
+      EXPECT_GT(len, 0.2 * pg.first_layer_distance);
+      EXPECT_LT(len, pg.mean_boundary_spacing);
+    }
+    EXPECT_EQ(pg.layer[b], 0);
+  }
+}
+
+TEST(Polygrid, SingleCubeBoxCountsAndGeometry) {
+  const auto box = MakeBoxShape(Vec3(4, 4, 4));
+  PolygridOptions o;
+  o.resolution = 9;
+  const Polygrid pg = BuildPolygrid(BuiltinPolycube("box"), *box, o);
+  EXPECT_EQ(pg.num_interior, 7 * 7 * 7);
+  EXPECT_EQ(pg.num_boundary(), 6 * 7 * 7);  // convex edge and corner nodes removed
+  ExpectWellFormed(pg);
+  EXPECT_NEAR(pg.first_layer_distance, 0.1 * pg.mean_boundary_spacing, 1e-12);
+  // A box gives a tensor-product grid: boundary nodes on the faces, every link along the face
+  // normal with length d, the grid lines continued to the surface, every 6x6 system regular.
+  EXPECT_EQ(pg.fallback_weights, 0);
+  for (int64_t b = pg.num_interior; b < pg.size(); ++b) {
+    const int dir = pg.link_dir[b - pg.num_interior], axis = dir / 2;
+    EXPECT_NEAR(std::abs(pg.position[b][axis]), 2.0, 1e-9);
+    const Vec3 link = pg.position[b] - pg.position[pg.neighbours[b][0]];
+    EXPECT_NEAR(link[axis], dir % 2 ? pg.first_layer_distance : -pg.first_layer_distance, 1e-6);
+    EXPECT_NEAR(link.norm(), pg.first_layer_distance, 1e-6);
+  }
+  for (int64_t i = 0; i < pg.num_interior; ++i)
+    for (int a = 0; a < 3; ++a) {
+      // Nodes that share a lattice coordinate share the world coordinate (to the smoothing's
+      // convergence).
+      const int64_t k = pg.neighbours[i][2 * ((a + 1) % 3) + 1];
+      if (k < pg.num_interior) {
+        EXPECT_NEAR(pg.position[i][a], pg.position[k][a], 2e-3) << i;
+      }
+    }
+}
+
+TEST(Polygrid, BuiltinShapesAreWellFormed) {
+  for (const std::string name : {"sphere", "blob", "torus", "slab"}) {
+    SCOPED_TRACE(name);
+    const auto shape = MakeBuiltinShape(name, 20);
+    PolygridOptions o;
+    o.resolution = 9;
+    const Polygrid pg = BuildPolygrid(BuiltinPolycube(name), *shape, o);
+    ExpectWellFormed(pg);
+    // Boundary nodes are on the surface.
+    for (int64_t b = pg.num_interior; b < pg.size(); b += 7) {
+      Vec3 s, n;
+      shape->Project(pg.position[b], &s, &n);
+      EXPECT_NEAR((s - pg.position[b]).norm(), 0, 1e-6 * 20);
+    }
+    std::printf("[polygrid] %s: %lld interior + %lld boundary nodes, spacing %.3f mm, d %.4f mm, "
+                "%lld nodes with axis-fallback weights\n",
+                name.c_str(), (long long)pg.num_interior, (long long)pg.num_boundary(),
+                pg.mean_boundary_spacing, pg.first_layer_distance, (long long)pg.fallback_weights);
+  }
+}
+
+TEST(Polygrid, TorusSplitsConcaveNodes) {
+  const auto shape = MakeBuiltinShape("torus", 30);
+  PolygridOptions o;
+  o.resolution = 5;
+  const Polygrid pg = BuildPolygrid(BuiltinPolycube("torus"), *shape, o);
+  std::map<std::array<int, 3>, int> per_lattice;
+  for (int64_t b = pg.num_interior; b < pg.size(); ++b) ++per_lattice[pg.lattice[b]];
+  int split = 0;
+  for (const auto& [g, n] : per_lattice) split += n > 1;
+  EXPECT_GT(split, 0);  // the four concave edges around the hole
+  ExpectWellFormed(pg);
+}
+
+TEST(Polygrid, HierarchyProlongsConstants) {
+  const auto shape = MakeBuiltinShape("sphere", 10);
+  PolygridOptions o;
+  o.resolution = 9;
+  const auto levels = BuildPolygridHierarchy(BuiltinPolycube("sphere"), *shape, o, 3);
+  ASSERT_EQ(levels.size(), 3u);
+  EXPECT_EQ(levels[1].resolution, 5);
+  EXPECT_EQ(levels[2].resolution, 3);
+  std::vector<float> coarse(levels[1].size(), 2.5f), fine;
+  ProlongPolygrid(levels[1], coarse, levels[0], &fine);
+  for (float v : fine) EXPECT_FLOAT_EQ(v, 2.5f);
+  // Restriction averages children of the same kind: constants stay, and a field that is 1 on
+  // the boundary and 0 inside stays so on the coarse level.
+  std::vector<float> kind(levels[0].size()), coarse_kind;
+  for (int64_t n = 0; n < levels[0].size(); ++n) kind[n] = levels[0].is_boundary(n) ? 1.f : 0.f;
+  RestrictPolygrid(levels[0], kind, levels[1], &coarse_kind);
+  for (int64_t n = 0; n < levels[1].size(); ++n)
+    EXPECT_FLOAT_EQ(coarse_kind[n], levels[1].is_boundary(n) ? 1.f : 0.f) << n;
+}
+
+// The polygrid of a box (one cube, undistorted) against the regular-grid forward solver of
+// SPEC section 3 on the same box, same homogeneous material, back face lit uniformly: the
+// front-face radiance agrees (relative L2 over the face nodes away from the rim).
+double BoxEquivalenceError(int n, double h, float kappa, float mu, double fraction = 0.1) {
+  const double L = (n - 1) * h;
+  const auto box = MakeBoxShape(Vec3(L, L, L));
+  PolygridOptions o;
+  o.resolution = n;
+  o.first_layer_fraction = fraction;
+  const Polygrid pg = BuildPolygrid(BuiltinPolycube("box"), *box, o);
+  NodeMaterial m;
+  for (int c = 0; c < 3; ++c) {
+    m.kappa[c].assign(pg.size(), kappa);
+    m.mu[c].assign(pg.size(), mu);
+  }
+  const double C = ReflectionParameterC(1.3);
+  BoundaryLight q;
+  for (int c = 0; c < 3; ++c) {
+    q[c].assign(pg.num_boundary(), 0.f);
+    for (int64_t b = 0; b < pg.num_boundary(); ++b)
+      if (pg.link_dir[b] == 5) q[c][b] = 1.f;  // the +z (back) face
+  }
+  const JacobiSystem S = BuildJacobiSystem(pg, m, C, q);
+  const BoundaryLight Lpg = BoundaryRadiance(pg, m, q, SolveReference(S, 1));
+
+  const Material mat = Material::Constant({n, n, n}, h, {kappa, kappa, kappa}, {mu, mu, mu});
+  ForwardOptions fo;
+  fo.multigrid.tolerance = 1e-10;
+  fo.multigrid.max_iterations = 400;
+  const ForwardResult r = SolveForward(mat, GreyPattern(std::vector<float>(n * n, 1.f)), fo);
+  double num = 0, den = 0;
+  for (int64_t b = 0; b < pg.num_boundary(); ++b) {
+    if (pg.link_dir[b] != 4) continue;  // the -z (front) face, lattice k = 0
+    const auto& g = pg.lattice[pg.num_interior + b];
+    if (g[0] < 2 || g[1] < 2 || g[0] > n - 3 || g[1] > n - 3) continue;
+    // The regular solver's radiance, bilinear at the polygrid node's (x, y).
+    const Vec3& p = pg.position[pg.num_interior + b];
+    const double fx = (p.x() + L / 2) / h, fy = (p.y() + L / 2) / h;
+    const int i0 = std::min(n - 2, int(fx)), j0 = std::min(n - 2, int(fy));
+    const double tx = fx - i0, ty = fy - j0;
+    auto R = [&](int i, int j) { return double(r.radiance[0][i + n * j]); };
+    const double ref = (1 - ty) * ((1 - tx) * R(i0, j0) + tx * R(i0 + 1, j0)) +
+                       ty * ((1 - tx) * R(i0, j0 + 1) + tx * R(i0 + 1, j0 + 1));
+    num += (Lpg[0][b] - ref) * (Lpg[0][b] - ref);
+    den += ref * ref;
+  }
+  return std::sqrt(num / den);
+}
+
+TEST(Polygrid, SingleCubeBoxMatchesRegularGridSolver) {
+  const double e9 = BoxEquivalenceError(9, 0.5, 0.4f, 0.05f);
+  const double e17 = BoxEquivalenceError(17, 0.25, 0.4f, 0.05f);
+  const double e33 = BoxEquivalenceError(33, 0.125, 0.4f, 0.05f);
+  std::printf("[box equivalence] 4 mm cube, kappa 0.4 mm, mu 0.05/mm: relative L2 difference "
+              "%.3e (9^3), %.3e (17^3), %.3e (33^3)\n", e9, e17, e33);
+  EXPECT_LT(e33, e17);
+  EXPECT_LT(e17, e9);
+  // Measured (docs/benchmarks.md): first-order convergence towards the regular-grid result;
+  // the 1e-3 target of issue 7 is NOT met at these sizes.
+  EXPECT_LT(e33, 0.05);
+}
+
+}  // namespace
+}  // namespace translume

@@ -1,0 +1,466 @@
+// SPDX-License-Identifier: MIT
+#include "render/renderer.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+#include "solver/status.h"
+
+namespace translume {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+double Seconds(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// A pinhole (perspective) or orthographic view: camera-space x right, y up, z forward.
+struct View {
+  Vec3 eye = Vec3::Zero(), right = Vec3::UnitX(), up = Vec3::UnitY(), forward = Vec3::UnitZ();
+  bool ortho = false;
+  double scale = 1;  // perspective: 1 / tan(fov / 2); ortho: 1 / half-width (mm)
+  int width = 0, height = 0;
+
+  static View LookAt(const Vec3& eye, const Vec3& target, int w, int h, bool ortho, double scale) {
+    View v;
+    v.eye = eye;
+    v.forward = (target - eye).normalized();
+    Vec3 up_hint = std::abs(v.forward.z()) > 0.99 ? Vec3(0, 1, 0) : Vec3(0, 0, 1);
+    v.right = v.forward.cross(up_hint).normalized();
+    v.up = v.right.cross(v.forward);
+    v.ortho = ortho;
+    v.scale = scale;
+    v.width = w;
+    v.height = h;
+    return v;
+  }
+  // Screen x, y in pixels and depth (mm along forward).
+  Vec3 Project(const Vec3& p) const {
+    const Vec3 d = p - eye;
+    const double x = d.dot(right), y = d.dot(up), z = d.dot(forward);
+    const double aspect = double(width) / height;
+    const double k = ortho ? scale : scale / std::max(z, 1e-9);
+    return Vec3(0.5 * width * (1 + x * k / aspect), 0.5 * height * (1 - y * k), z);
+  }
+};
+
+// Z-buffer rasterisation: per pixel the nearest triangle and its screen-space barycentrics.
+struct Raster {
+  int width = 0, height = 0;
+  std::vector<float> depth;
+  std::vector<int32_t> tri;
+  std::vector<float> b1, b2;
+
+  void Draw(const View& view, const TriangleMesh& mesh) {
+    width = view.width;
+    height = view.height;
+    depth.assign(size_t(width) * height, 1e30f);
+    tri.assign(depth.size(), -1);
+    b1.assign(depth.size(), 0.f);
+    b2.assign(depth.size(), 0.f);
+    std::vector<Vec3> s(mesh.vertices.size());
+    for (size_t i = 0; i < s.size(); ++i) s[i] = view.Project(mesh.vertices[i]);
+    for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+      const Vec3 &a = s[mesh.triangles[t][0]], &b = s[mesh.triangles[t][1]], &c = s[mesh.triangles[t][2]];
+      if (a.z() <= 0 || b.z() <= 0 || c.z() <= 0) continue;
+      const double area = (b.x() - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (b.y() - a.y());
+      if (std::abs(area) < 1e-12) continue;
+      const int x0 = std::max(0, int(std::floor(std::min({a.x(), b.x(), c.x()}))));
+      const int x1 = std::min(width - 1, int(std::ceil(std::max({a.x(), b.x(), c.x()}))));
+      const int y0 = std::max(0, int(std::floor(std::min({a.y(), b.y(), c.y()}))));
+      const int y1 = std::min(height - 1, int(std::ceil(std::max({a.y(), b.y(), c.y()}))));
+      for (int y = y0; y <= y1; ++y)
+        for (int x = x0; x <= x1; ++x) {
+          const double px = x + 0.5, py = y + 0.5;
+          const double w1 = ((px - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (py - a.y())) / area;
+          const double w2 = ((b.x() - a.x()) * (py - a.y()) - (px - a.x()) * (b.y() - a.y())) / area;
+          const double w0 = 1 - w1 - w2;
+          if (w0 < 0 || w1 < 0 || w2 < 0) continue;
+          const double z = w0 * a.z() + w1 * b.z() + w2 * c.z();
+          const size_t i = size_t(y) * width + x;
+          if (z < depth[i]) {
+            depth[i] = float(z);
+            tri[i] = int32_t(t);
+            b1[i] = float(w1);
+            b2[i] = float(w2);
+          }
+        }
+    }
+  }
+};
+
+}  // namespace
+
+RenderLight RenderLight::Parse(const std::string& text) {
+  RenderLight l;
+  const auto colon = text.find(':');
+  const std::string kind = text.substr(0, colon);
+  if (kind == "env") {
+    l.kind = Kind::kEnvironment;
+    l.path = colon == std::string::npos ? "" : text.substr(colon + 1);
+    if (l.path.empty()) throw InputError("--light " + text + ": expected env:FILE (a lat-long HDR image)");
+    return l;
+  }
+  if (colon == std::string::npos || (kind != "dir" && kind != "point"))
+    throw InputError("--light " + text + ": expected dir:X,Y,Z or point:X,Y,Z");
+  l.kind = kind == "dir" ? Kind::kDirectional : Kind::kPoint;
+  std::istringstream in(text.substr(colon + 1));
+  char c1 = 0, c2 = 0;
+  std::string rest;
+  if (!(in >> l.v.x() >> c1 >> l.v.y() >> c2 >> l.v.z()) || c1 != ',' || c2 != ',' || (in >> rest) ||
+      !l.v.allFinite())
+    throw InputError("--light " + text + ": expected three numbers X,Y,Z");
+  if (l.kind == Kind::kDirectional) {
+    if (l.v.norm() == 0) throw InputError("--light " + text + ": the direction must be non-zero");
+    l.v.normalize();
+  }
+  return l;
+}
+
+std::string RenderOptions::Validate() const {
+  if (width < 1 || height < 1 || width > 16384 || height > 16384)
+    return "the image size must be 1..16384 pixels per side";
+  if (supersample < 1 || supersample > 8) return "supersample must be 1..8";
+  if (!(fov_deg > 1 && fov_deg < 170)) return "the field of view must be in (1, 170) degrees";
+  if (!(eta >= 1)) return "eta must be >= 1";
+  if (specular < 0 || !(roughness > 0) || surface_reflectance < 0)
+    return "specular and surface reflectance must be >= 0, roughness > 0";
+  if (model != "polygrid" && model != "dipole") return "the model must be polygrid or dipole";
+  if (shadow_map_size < 16) return "the shadow map must be >= 16 pixels";
+  if (environment_directions < 1 || environment_directions > 4096)
+    return "environment_directions must be 1..4096";
+  return "";
+}
+
+double FresnelTransmittance(double cos_i, double eta) {
+  cos_i = std::clamp(cos_i, 0.0, 1.0);
+  const double sin_t2 = (1 - cos_i * cos_i) / (eta * eta);
+  if (sin_t2 >= 1) return 0;
+  const double cos_t = std::sqrt(1 - sin_t2);
+  const double rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+  const double rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+  return 1 - 0.5 * (rs * rs + rp * rp);
+}
+
+BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kappa,
+                             const std::array<float, 3>& mu, double C, const BoundaryLight& q) {
+  const int64_t nb = pg.num_boundary();
+  const double area = pg.mean_boundary_spacing * pg.mean_boundary_spacing;
+  BoundaryLight L;
+  for (int c = 0; c < 3; ++c) {
+    const double sa = mu[c], ss = std::max(1e-6, 1 / (3.0 * kappa[c]) - mu[c]);
+    const double st = sa + ss, alpha = ss / st, tr = std::sqrt(sa / kappa[c]);
+    const double zr = 1 / st, zv = zr * (1 + 4 * C / 3);
+    L[c].assign(nb, 0.f);
+#pragma omp parallel for schedule(static)
+    for (int64_t b = 0; b < nb; ++b) {
+      const Vec3& x = pg.position[pg.num_interior + b];
+      double acc = 0;
+      for (int64_t s = 0; s < nb; ++s) {
+        if (q[c][s] == 0) continue;
+        const double r2 = (x - pg.position[pg.num_interior + s]).squaredNorm();
+        const double dr = std::sqrt(r2 + zr * zr), dv = std::sqrt(r2 + zv * zv);
+        const double rd = alpha / (4 * kPi) *
+                          (zr * (tr * dr + 1) * std::exp(-tr * dr) / (dr * dr * dr) +
+                           zv * (tr * dv + 1) * std::exp(-tr * dv) / (dv * dv * dv));
+        acc += rd * q[c][s] * area;
+      }
+      L[c][b] = float(acc / kPi);
+    }
+  }
+  return L;
+}
+
+std::vector<std::pair<Vec3, std::array<double, 3>>> EnvironmentSamples(const Image& env, int count) {
+  if (env.width < 2 || env.height < 1 || env.channels < 1)
+    throw InputError("--light env: the environment image is empty");
+  std::vector<std::pair<Vec3, std::array<double, 3>>> out(count);
+  const double golden = kPi * (3 - std::sqrt(5.0));
+  for (int k = 0; k < count; ++k) {
+    const double z = 1 - (k + 0.5) * 2.0 / count, r = std::sqrt(std::max(0.0, 1 - z * z));
+    out[k].first = Vec3(r * std::cos(golden * k), r * std::sin(golden * k), z);
+    out[k].second = {0, 0, 0};
+  }
+  // Each pixel's radiance times its solid angle goes to the nearest direction (a Voronoi
+  // partition of the sphere), so sum_k E_k is the integral of the map over the sphere.
+  for (int y = 0; y < env.height; ++y) {
+    const double theta = kPi * (y + 0.5) / env.height;
+    const double domega = (2 * kPi / env.width) * (kPi / env.height) * std::sin(theta);
+    for (int x = 0; x < env.width; ++x) {
+      const double phi = 2 * kPi * (x + 0.5) / env.width;
+      const Vec3 d(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta));
+      int best = 0;
+      double best_dot = -2;
+      for (int k = 0; k < count; ++k)
+        if (const double dd = d.dot(out[k].first); dd > best_dot) best_dot = dd, best = k;
+      for (int c = 0; c < 3; ++c) {
+        const float v = env.at(x, y, std::min(c, env.channels - 1));
+        if (std::isfinite(v) && v > 0) out[best].second[c] += v * domega;
+      }
+    }
+  }
+  return out;
+}
+
+double ToneMap(Image* image, double exposure) {
+  double scale = std::pow(2.0, exposure);
+  if (exposure <= 0) {
+    std::vector<float> v;
+    for (float x : image->data)
+      if (x > 0) v.push_back(x);
+    scale = 1;
+    if (!v.empty()) {
+      const size_t k = std::min(v.size() - 1, size_t(0.99 * v.size()));
+      std::nth_element(v.begin(), v.begin() + k, v.end());
+      if (v[k] > 0) scale = 0.8 / v[k];
+    }
+  }
+  for (float& x : image->data) {
+    const double y = std::clamp(x * scale, 0.0, 1.0);
+    x = float(y <= 0.0031308 ? 12.92 * y : 1.055 * std::pow(y, 1 / 2.4) - 0.055);
+  }
+  return scale;
+}
+
+struct Renderer::Impl {
+  const Shape* shape;
+  const std::vector<Polygrid>* levels;
+  std::vector<NodeMaterial> materials;
+  double C;
+  RenderOptions o;
+  std::unique_ptr<PolygridDiffusion> diffusion;
+  std::vector<Vec3> vertex_normals;
+  // Mesh vertex -> 4 nearest boundary nodes of the finest level and inverse-distance weights.
+  std::vector<std::array<int32_t, 4>> near_idx;
+  std::vector<std::array<float, 4>> near_w;
+  Vec3 centre;
+  double radius;
+  // The environment's direction samples, computed once per environment image.
+  const Image* env_source = nullptr;
+  std::vector<std::pair<Vec3, std::array<double, 3>>> env;
+};
+
+Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
+                   std::vector<NodeMaterial> materials, double C, const DiffusionOptions& diffusion,
+                   const RenderOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  if (std::string err = options.Validate(); !err.empty()) throw InputError("render: " + err);
+  Impl& I = *impl_;
+  I.shape = shape;
+  I.levels = levels;
+  I.materials = materials;
+  I.C = C;
+  I.o = options;
+  if (options.model == "polygrid")
+    I.diffusion = std::make_unique<PolygridDiffusion>(levels, std::move(materials), C, diffusion);
+  const TriangleMesh& mesh = shape->mesh();
+  I.vertex_normals = mesh.VertexNormals();
+  I.centre = (shape->lo + shape->hi) / 2;
+  I.radius = 0;  // bounding sphere about the box centre
+  for (const Vec3& v : mesh.vertices) I.radius = std::max(I.radius, (v - I.centre).norm());
+  const Polygrid& pg = (*levels)[0];
+  const int64_t nb = pg.num_boundary();
+  I.near_idx.resize(mesh.vertices.size());
+  I.near_w.resize(mesh.vertices.size());
+#pragma omp parallel for schedule(dynamic, 64)
+  for (int64_t v = 0; v < int64_t(mesh.vertices.size()); ++v) {
+    std::array<std::pair<double, int32_t>, 4> best;
+    best.fill({1e300, 0});
+    for (int64_t b = 0; b < nb; ++b) {
+      const double d2 = (mesh.vertices[v] - pg.position[pg.num_interior + b]).squaredNorm();
+      if (d2 >= best[3].first) continue;
+      best[3] = {d2, int32_t(b)};
+      std::sort(best.begin(), best.end());
+    }
+    double wsum = 0;
+    for (int k = 0; k < 4; ++k) {
+      const double w = 1 / (best[k].first + 1e-6 * pg.mean_boundary_spacing * pg.mean_boundary_spacing);
+      I.near_idx[v][k] = best[k].second;
+      I.near_w[v][k] = float(w);
+      wsum += w;
+    }
+    for (int k = 0; k < 4; ++k) I.near_w[v][k] = float(I.near_w[v][k] / wsum);
+  }
+}
+
+Renderer::~Renderer() = default;
+
+Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
+  Impl& I = *impl_;
+  const RenderOptions& o = I.o;
+  const auto rot = [&](const Vec3& v) {
+    const double a = turn_deg * kPi / 180;
+    return Vec3(std::cos(a) * v.x() - std::sin(a) * v.y(), std::sin(a) * v.x() + std::cos(a) * v.y(), v.z());
+  };
+  RenderLight light = light_in;
+  light.v = rot(light.v);
+
+  // Pass 1: incident light at the boundary nodes of every level, shadow-map visibility. Every
+  // light is a list of samples: one for dir and point lights, one per direction for an
+  // environment map (EnvironmentSamples).
+  auto t0 = std::chrono::steady_clock::now();
+  struct Sample {
+    bool point = false;
+    Vec3 v;                       // direction towards the light, or the point light's position
+    std::array<double, 3> E{};    // irradiance at normal incidence (RGB)
+    View view;
+    Raster shadow;
+  };
+  std::vector<Sample> samples;
+  if (light.kind == RenderLight::Kind::kEnvironment) {
+    if (I.env_source != light.environment.get()) {
+      I.env = EnvironmentSamples(*light.environment, o.environment_directions);
+      I.env_source = light.environment.get();
+    }
+    for (const auto& [dir, E] : I.env) {
+      Sample smp;
+      smp.v = rot(dir);
+      smp.E = E;
+      samples.push_back(smp);
+    }
+  } else {
+    Sample smp;
+    smp.point = light.kind == RenderLight::Kind::kPoint;
+    smp.v = light.v;
+    smp.E = {1, 1, 1};
+    samples.push_back(smp);
+  }
+  const int S = samples.size() > 1 ? std::max(16, o.shadow_map_size / 4) : o.shadow_map_size;
+  for (Sample& smp : samples) {
+    if (!smp.point)
+      smp.view = View::LookAt(I.centre + 3 * I.radius * smp.v, I.centre, S, S, true, 1 / I.radius);
+    else
+      smp.view = View::LookAt(smp.v, I.centre, S, S, false,
+                              1 / std::tan(std::asin(std::min(0.99, I.radius / std::max(1e-9, (smp.v - I.centre).norm())))));
+    smp.shadow.Draw(smp.view, I.shape->mesh());
+  }
+  const double bias = 0.03 * I.radius;
+  // Irradiance factor (falloff x visibility) of sample `smp` at p, and cos_i.
+  auto incident = [&](const Sample& smp, const Vec3& p, const Vec3& n, double* cos_i, Vec3* l) {
+    double e = 1;
+    if (!smp.point) {
+      *l = smp.v;
+    } else {
+      *l = smp.v - p;
+      e = (smp.v - I.centre).squaredNorm() / std::max(1e-12, l->squaredNorm());
+      l->normalize();
+    }
+    *cos_i = n.dot(*l);
+    if (*cos_i <= 0) return 0.0;
+    const Vec3 sp = smp.view.Project(p);
+    const int x = int(sp.x()), y = int(sp.y());
+    if (x >= 0 && y >= 0 && x < S && y < S && sp.z() > smp.shadow.depth[size_t(y) * S + x] + bias)
+      return 0.0;
+    return e;
+  };
+  std::vector<BoundaryLight> q(I.levels->size());
+  for (size_t l = 0; l < I.levels->size(); ++l) {
+    const Polygrid& pg = (*I.levels)[l];
+    for (int c = 0; c < 3; ++c) q[l][c].assign(pg.num_boundary(), 0.f);
+#pragma omp parallel for schedule(static) if (pg.num_boundary() > 20000)
+    for (int64_t b = 0; b < pg.num_boundary(); ++b) {
+      double acc[3] = {0, 0, 0};
+      for (const Sample& smp : samples) {
+        double cos_i;
+        Vec3 dir;
+        const double e = incident(smp, pg.position[pg.num_interior + b], pg.normal[b], &cos_i, &dir);
+        if (e == 0) continue;
+        const double v = e * cos_i * FresnelTransmittance(cos_i, o.eta);
+        for (int c = 0; c < 3; ++c) acc[c] += v * smp.E[c];
+      }
+      for (int c = 0; c < 3; ++c) q[l][c][b] = float(acc[c]);
+    }
+  }
+  times_.incident = Seconds(t0);
+
+  // Pass 2: diffusion (or the dipole baseline).
+  t0 = std::chrono::steady_clock::now();
+  const Polygrid& pg = (*I.levels)[0];
+  if (I.diffusion) {
+    const std::vector<float>& phi = I.diffusion->Solve(q);
+    // Shading uses L = phi / (2 pi): the SPEC's (phi - q) / (2 pi) where unlit (q = 0), without
+    // subtracting q where lit. The paper's net-flux form (phi - q) / (2 pi) is negative under the
+    // light (SPEC section 3), which would render lit regions black.
+    BoundaryLight none;
+    for (int c = 0; c < 3; ++c) none[c].assign(pg.num_boundary(), 0.f);
+    radiance_ = BoundaryRadiance(pg, I.materials[0], none, phi);
+  } else {
+    std::array<float, 3> k, m;
+    for (int c = 0; c < 3; ++c) {
+      double ks = 0, ms = 0;
+      for (int64_t n = 0; n < pg.size(); ++n) ks += I.materials[0].kappa[c][n], ms += I.materials[0].mu[c][n];
+      k[c] = float(ks / pg.size());
+      m[c] = float(ms / pg.size());
+    }
+    radiance_ = DipoleRadiance(pg, k, m, I.C, q[0]);
+  }
+  q_finest_ = q[0];
+  times_.diffusion = Seconds(t0);
+
+  // Pass 3: shading, supersampled.
+  t0 = std::chrono::steady_clock::now();
+  const TriangleMesh& mesh = I.shape->mesh();
+  std::vector<std::array<float, 3>> vrad(mesh.vertices.size());
+  for (size_t v = 0; v < mesh.vertices.size(); ++v)
+    for (int c = 0; c < 3; ++c) {
+      double acc = 0;
+      for (int k = 0; k < 4; ++k) acc += I.near_w[v][k] * radiance_[c][I.near_idx[v][k]];
+      vrad[v][c] = float(acc);
+    }
+  const int ss = o.supersample, W = o.width * ss, H = o.height * ss;
+  const double az = (o.azimuth_deg + turn_deg) * kPi / 180, el = o.elevation_deg * kPi / 180;
+  const double t = std::tan(o.fov_deg * kPi / 360);
+  const double dist = I.radius / std::sin(o.fov_deg * kPi / 360) * 1.15;
+  const Vec3 eye = I.centre + dist * Vec3(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
+  const View cam = View::LookAt(eye, I.centre, W, H, false, 1 / t);
+  Raster r;
+  r.Draw(cam, mesh);
+  Image img;
+  img.width = o.width;
+  img.height = o.height;
+  img.channels = 3;
+  img.data.assign(size_t(o.width) * o.height * 3, 0.f);
+  const double alpha2 = o.roughness * o.roughness;
+#pragma omp parallel for schedule(dynamic, 4)
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const size_t i = size_t(y) * W + x;
+      if (r.tri[i] < 0) continue;
+      const auto& tr = mesh.triangles[r.tri[i]];
+      const double w1 = r.b1[i], w2 = r.b2[i], w0 = 1 - w1 - w2;
+      const Vec3 p = w0 * mesh.vertices[tr[0]] + w1 * mesh.vertices[tr[1]] + w2 * mesh.vertices[tr[2]];
+      Vec3 n = (w0 * I.vertex_normals[tr[0]] + w1 * I.vertex_normals[tr[1]] + w2 * I.vertex_normals[tr[2]]).normalized();
+      const Vec3 view = (eye - p).normalized();
+      const double cos_o = std::max(0.0, n.dot(view));
+      const double ft = FresnelTransmittance(cos_o, o.eta);
+      double surface[3] = {0, 0, 0};
+      if (cos_o > 0 && (o.specular > 0 || o.surface_reflectance > 0)) {
+        for (const Sample& smp : samples) {
+          double cos_i;
+          Vec3 l;
+          const double e = incident(smp, p, n, &cos_i, &l);
+          if (e == 0) continue;
+          const Vec3 hv = (l + view).normalized();
+          const double cd = std::clamp(n.dot(hv), 1e-6, 1.0);
+          const double tan2 = (1 - cd * cd) / (cd * cd);
+          const double ward = o.specular * std::exp(-tan2 / alpha2) / (4 * kPi * alpha2 * std::sqrt(cos_i * cos_o));
+          for (int c = 0; c < 3; ++c) surface[c] += (ward + o.surface_reflectance / kPi) * e * cos_i * smp.E[c];
+        }
+      }
+      for (int c = 0; c < 3; ++c) {
+        const double ms = w0 * vrad[tr[0]][c] + w1 * vrad[tr[1]][c] + w2 * vrad[tr[2]][c];
+        const double value = (ft * ms + surface[c]) / (ss * ss);
+#pragma omp atomic
+        img.data[(size_t(y / ss) * o.width + x / ss) * 3 + c] += float(value);
+      }
+    }
+  times_.shading = Seconds(t0);
+  return img;
+}
+
+}  // namespace translume

@@ -1,0 +1,93 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "render/diffusion.h"
+#include "render/polygrid.h"
+#include "render/shape.h"
+#include "solver/image.h"
+
+namespace translume {
+
+// A light for the incident-light pass (Section 5, first pass), z up:
+//   dir:X,Y,Z    directional light from direction (X, Y, Z) (towards the light), irradiance 1
+//   point:X,Y,Z  point light at (X, Y, Z) mm, irradiance 1 at the object's centre, 1/r^2
+//   env:FILE     an environment map: a latitude-longitude HDR image (row 0 looks up +z, column
+//                x at azimuth 2 pi (x + 0.5) / width from +x towards +y), loaded by the caller
+//                into `environment` (this library does no file IO)
+// Visibility from shadow maps: orthographic for dir, perspective for point; for env, one
+// orthographic map per direction sample (RenderOptions::environment_directions), so each node's
+// irradiance sums only the unoccluded directions (ambient-occlusion visibility).
+struct RenderLight {
+  enum class Kind { kDirectional, kPoint, kEnvironment } kind = Kind::kDirectional;
+  Vec3 v = Vec3(1, 1, 1);
+  std::string path;                          // env: the file named in the spec
+  std::shared_ptr<const Image> environment;  // env: the image
+  static RenderLight Parse(const std::string& text);
+};
+
+// The environment as `count` directions (a Fibonacci sphere) with the irradiance each carries:
+// E_k = sum of L(pixel) dOmega(pixel) over the pixels nearest to direction k (RGB).
+std::vector<std::pair<Vec3, std::array<double, 3>>> EnvironmentSamples(const Image& env, int count);
+
+struct RenderOptions {
+  int width = 256, height = 256;
+  int supersample = 2;           // s x s samples per pixel, box-filtered (antialiasing)
+  double azimuth_deg = 30, elevation_deg = 25, fov_deg = 30;  // orbit camera around the centre
+  double eta = 1.3;              // for the Fresnel transmittance F_t
+  double specular = 0.04, roughness = 0.3;  // Ward isotropic rho_s, alpha
+  double surface_reflectance = 0.0;         // optional Lambertian rho_d
+  // "polygrid" (diffusion) or "dipole" (Jensen et al. 2001 BSSRDF, homogeneous materials).
+  std::string model = "polygrid";
+  int shadow_map_size = 512;  // environment maps use a quarter of it per direction
+  int environment_directions = 64;
+
+  std::string Validate() const;
+};
+
+// Pass timings of the last frame, seconds.
+struct FrameTimes {
+  double incident = 0, diffusion = 0, shading = 0;
+};
+
+// Renders a shape with a polygrid hierarchy (finest first) and its per-level material.
+class Renderer {
+ public:
+  Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
+           std::vector<NodeMaterial> materials, double C, const DiffusionOptions& diffusion,
+           const RenderOptions& options);
+  ~Renderer();
+  // Linear RGB radiance image (width x height, 3 channels). `turn_deg` rotates camera and light
+  // together about the z axis (a turntable, so the light moves relative to the object).
+  Image Render(const RenderLight& light, double turn_deg = 0);
+  const FrameTimes& times() const { return times_; }
+  // Incident light q and outgoing radiance L at the finest level's boundary nodes (last frame).
+  const BoundaryLight& boundary_light() const { return q_finest_; }
+  const BoundaryLight& boundary_radiance() const { return radiance_; }
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  FrameTimes times_;
+  BoundaryLight q_finest_, radiance_;
+};
+
+// Multiple-scattering radiance at the boundary nodes from the dipole BSSRDF (Jensen et al.
+// 2001): L_b = (1 / pi) sum_b' R_d(|x_b - x_b'|) q_b' A with A = (mean boundary spacing)^2, for
+// a homogeneous material (kappa, mu per channel): sigma_a = mu, sigma_s' = 1 / (3 kappa) - mu,
+// sigma_tr = sqrt(mu / kappa), z_r = 1 / sigma_t', z_v = z_r (1 + 4 C / 3).
+BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kappa,
+                             const std::array<float, 3>& mu, double C, const BoundaryLight& q);
+
+// Tone map for 8-bit output: scale so that the 99th percentile of the non-zero pixels is 0.8
+// (exposure <= 0) or by 2^exposure, then the sRGB curve. Returns the scale used.
+double ToneMap(Image* image, double exposure);
+
+// Fresnel transmittance 1 - F_r for unpolarised light entering a dielectric of relative index
+// eta at incidence cosine cos_i.
+double FresnelTransmittance(double cos_i, double eta);
+
+}  // namespace translume

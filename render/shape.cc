@@ -1,0 +1,521 @@
+// SPDX-License-Identifier: MIT
+#include "render/shape.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <sstream>
+
+#include "solver/atomic_file.h"
+#include "solver/status.h"
+
+namespace translume {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// A parametric grid of (nu + 1) x (nv + 1) points, u periodic (wrapping), v either periodic
+// (torus) or pole-to-pole (sphere: rows 0 and nv collapse to one vertex each).
+TriangleMesh ParametricMesh(int nu, int nv, bool v_periodic,
+                            const std::function<Vec3(double, double)>& f) {
+  TriangleMesh m;
+  std::vector<std::vector<int>> id(nv + 1, std::vector<int>(nu, -1));
+  for (int j = 0; j <= nv; ++j) {
+    if (v_periodic && j == nv) {
+      id[j] = id[0];
+      continue;
+    }
+    const bool pole = !v_periodic && (j == 0 || j == nv);
+    for (int i = 0; i < nu; ++i) {
+      if (pole && i > 0) {
+        id[j][i] = id[j][0];
+        continue;
+      }
+      id[j][i] = int(m.vertices.size());
+      m.vertices.push_back(f(2 * kPi * i / nu, (v_periodic ? 2 * kPi : kPi) * j / nv));
+    }
+  }
+  for (int j = 0; j < nv; ++j)
+    for (int i = 0; i < nu; ++i) {
+      const int a = id[j][i], b = id[j][(i + 1) % nu], c = id[j + 1][(i + 1) % nu],
+                d = id[j + 1][i];
+      if (a != b) m.triangles.push_back({a, c, b});
+      if (c != d) m.triangles.push_back({a, d, c});
+    }
+  return m;
+}
+
+// Flips every triangle if the enclosed signed volume is negative (inward-facing triangles).
+void OrientOutward(TriangleMesh* m) {
+  double volume = 0;
+  for (const auto& t : m->triangles)
+    volume += m->vertices[t[0]].dot(m->vertices[t[1]].cross(m->vertices[t[2]])) / 6;
+  if (volume < 0)
+    for (auto& t : m->triangles) std::swap(t[1], t[2]);
+}
+
+class SphereShape : public Shape {
+ public:
+  SphereShape(double radius, double bump, int tess) : r_(radius), bump_(bump) {
+    name_ = bump > 0 ? "blob" : "sphere";
+    mesh_ = ParametricMesh(2 * tess, tess, false, [&](double u, double v) {
+      const Vec3 d(std::sin(v) * std::cos(u), std::sin(v) * std::sin(u), std::cos(v));
+      return Vec3(Radius(d) * d);
+    });
+    OrientOutward(&mesh_);
+    mesh_.Bounds(&lo, &hi);
+  }
+  double Radius(const Vec3& d) const {
+    return r_ * (1 + bump_ * std::sin(3 * d.x()) * std::sin(2 * d.y() + 1) * std::cos(2 * d.z()));
+  }
+  // Radial projection; the normal is the gradient of |p| - r(p / |p|).
+  void Project(const Vec3& p, Vec3* s, Vec3* n) const override {
+    const Vec3 d = p.norm() > 1e-12 ? Vec3(p.normalized()) : Vec3(0, 0, 1);
+    *s = Radius(d) * d;
+    if (bump_ == 0) {
+      *n = d;
+      return;
+    }
+    const double e = 1e-5 * r_;
+    Vec3 g;
+    for (int a = 0; a < 3; ++a) {
+      Vec3 dp = Vec3::Zero();
+      dp[a] = e;
+      const Vec3 p1 = *s + dp, p0 = *s - dp;
+      g[a] = (p1.norm() - Radius(p1.normalized()) - p0.norm() + Radius(p0.normalized())) / (2 * e);
+    }
+    *n = g.normalized();
+  }
+
+ private:
+  double r_, bump_;
+};
+
+class TorusShape : public Shape {
+ public:
+  TorusShape(double ring, double tube, int tess) : R_(ring), r_(tube) {
+    name_ = "torus";
+    mesh_ = ParametricMesh(2 * tess, tess, true, [&](double u, double v) {
+      return Vec3((R_ + r_ * std::cos(v)) * std::cos(u), (R_ + r_ * std::cos(v)) * std::sin(u),
+                  r_ * std::sin(v));
+    });
+    OrientOutward(&mesh_);
+    mesh_.Bounds(&lo, &hi);
+  }
+  // Closest point: through the nearest point of the core circle.
+  void Project(const Vec3& p, Vec3* s, Vec3* n) const override {
+    Vec3 q(p.x(), p.y(), 0);
+    q = q.norm() > 1e-12 ? Vec3(R_ * q.normalized()) : Vec3(R_, 0, 0);
+    Vec3 d = p - q;
+    d = d.norm() > 1e-12 ? Vec3(d.normalized()) : Vec3(q.normalized());
+    *s = q + r_ * d;
+    *n = d;
+  }
+
+ private:
+  double R_, r_;
+};
+
+class BoxShape : public Shape {
+ public:
+  BoxShape(const Vec3& extent, int tess, const std::string& name) {
+    name_ = name;
+    hi = extent / 2;
+    lo = -hi;
+    // Six faces, each a tess x tess grid (vertices shared along the box edges).
+    std::map<std::array<int, 3>, int> ids;
+    auto vid = [&](std::array<int, 3> g) {
+      auto [it, fresh] = ids.emplace(g, int(mesh_.vertices.size()));
+      if (fresh) {
+        Vec3 v;
+        for (int a = 0; a < 3; ++a) v[a] = lo[a] + (hi[a] - lo[a]) * g[a] / tess;
+        mesh_.vertices.push_back(v);
+      }
+      return it->second;
+    };
+    for (int axis = 0; axis < 3; ++axis)
+      for (int side = 0; side < 2; ++side) {
+        const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+        for (int i = 0; i < tess; ++i)
+          for (int j = 0; j < tess; ++j) {
+            std::array<int, 3> g[4];
+            const int di[4] = {0, 1, 1, 0}, dj[4] = {0, 0, 1, 1};
+            for (int c = 0; c < 4; ++c) {
+              g[c][axis] = side * tess;
+              g[c][a1] = i + di[c];
+              g[c][a2] = j + dj[c];
+            }
+            int q[4];
+            for (int c = 0; c < 4; ++c) q[c] = vid(g[c]);
+            // (a1, a2, axis) is right-handed, so CCW in (a1, a2) faces +axis.
+            if (side == 1) {
+              mesh_.triangles.push_back({q[0], q[1], q[2]});
+              mesh_.triangles.push_back({q[0], q[2], q[3]});
+            } else {
+              mesh_.triangles.push_back({q[0], q[2], q[1]});
+              mesh_.triangles.push_back({q[0], q[3], q[2]});
+            }
+          }
+      }
+  }
+  // Closest point on the box surface: clamp outside; inside, push to the nearest face.
+  void Project(const Vec3& p, Vec3* s, Vec3* n) const override {
+    Vec3 c = p.cwiseMax(lo).cwiseMin(hi);
+    int best = 0;
+    double best_d = 1e300;
+    for (int a = 0; a < 3; ++a)
+      for (int side = 0; side < 2; ++side) {
+        const double d = std::abs(c[a] - (side ? hi[a] : lo[a]));
+        if (d < best_d) best_d = d, best = 2 * a + side;
+      }
+    const int a = best / 2;
+    c[a] = best % 2 ? hi[a] : lo[a];
+    *s = c;
+    *n = Vec3::Zero();
+    (*n)[a] = best % 2 ? 1 : -1;
+  }
+};
+
+// Closest-point queries on a mesh, accelerated by a uniform grid of triangle bounding boxes:
+// cells are searched in rings of growing Chebyshev radius around the query's cell until no
+// unvisited cell can hold a closer point.
+class MeshShape : public Shape {
+ public:
+  MeshShape(TriangleMesh mesh, const std::string& name) {
+    mesh_ = std::move(mesh);
+    name_ = name;
+    OrientOutward(&mesh_);
+    mesh_.Bounds(&lo, &hi);
+    normals_ = mesh_.VertexNormals();
+    const Vec3 ext = (hi - lo).cwiseMax(Vec3::Constant(1e-9));
+    const double per_axis = std::clamp(std::cbrt(double(mesh_.triangles.size()) / 2), 1.0, 128.0);
+    const double cell = ext.maxCoeff() / per_axis;
+    for (int a = 0; a < 3; ++a) dims_[a] = std::max(1, int(std::ceil(ext[a] / cell)));
+    cell_ = ext.cwiseQuotient(Vec3(dims_[0], dims_[1], dims_[2]));
+    cells_.assign(size_t(dims_[0]) * dims_[1] * dims_[2], {});
+    for (size_t t = 0; t < mesh_.triangles.size(); ++t) {
+      Vec3 tlo = Vec3::Constant(1e300), thi = Vec3::Constant(-1e300);
+      for (int c = 0; c < 3; ++c) {
+        tlo = tlo.cwiseMin(mesh_.vertices[mesh_.triangles[t][c]]);
+        thi = thi.cwiseMax(mesh_.vertices[mesh_.triangles[t][c]]);
+      }
+      const auto c0 = CellOf(tlo), c1 = CellOf(thi);
+      for (int z = c0[2]; z <= c1[2]; ++z)
+        for (int y = c0[1]; y <= c1[1]; ++y)
+          for (int x = c0[0]; x <= c1[0]; ++x) cells_[Index(x, y, z)].push_back(int32_t(t));
+    }
+  }
+  void Project(const Vec3& p, Vec3* s, Vec3* n) const override {
+    double best = 1e300;
+    const auto c = CellOf(p);
+    // Distance from p to its (clamped) cell: unvisited cells of ring r + 1 are at least
+    // r * min(cell) - that far away.
+    Vec3 cmin, cmax;
+    for (int a = 0; a < 3; ++a) {
+      cmin[a] = lo[a] + c[a] * cell_[a];
+      cmax[a] = cmin[a] + cell_[a];
+    }
+    const double outside = (p - p.cwiseMax(cmin).cwiseMin(cmax)).norm();
+    const int max_r = std::max({dims_[0], dims_[1], dims_[2]});
+    for (int r = 0; r <= max_r; ++r) {
+      for (int z = c[2] - r; z <= c[2] + r; ++z)
+        for (int y = c[1] - r; y <= c[1] + r; ++y)
+          for (int x = c[0] - r; x <= c[0] + r; ++x) {
+            if (std::max({std::abs(x - c[0]), std::abs(y - c[1]), std::abs(z - c[2])}) != r) continue;
+            if (x < 0 || y < 0 || z < 0 || x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) continue;
+            for (int32_t t : cells_[Index(x, y, z)]) {
+              const auto& tri = mesh_.triangles[t];
+              double u, v, w;
+              const Vec3 q = ClosestPointOnTriangle(p, mesh_.vertices[tri[0]], mesh_.vertices[tri[1]],
+                                                    mesh_.vertices[tri[2]], &u, &v, &w);
+              const double d = (q - p).squaredNorm();
+              if (d < best) {
+                best = d;
+                *s = q;
+                *n = (u * normals_[tri[0]] + v * normals_[tri[1]] + w * normals_[tri[2]]).normalized();
+              }
+            }
+          }
+      const double bound = r * cell_.minCoeff() - outside;
+      if (best < 1e300 && bound > 0 && std::sqrt(best) <= bound) break;
+    }
+  }
+
+ private:
+  std::array<int, 3> CellOf(const Vec3& p) const {
+    std::array<int, 3> c;
+    for (int a = 0; a < 3; ++a) c[a] = std::clamp(int(std::floor((p[a] - lo[a]) / cell_[a])), 0, dims_[a] - 1);
+    return c;
+  }
+  size_t Index(int x, int y, int z) const { return x + size_t(dims_[0]) * (y + size_t(dims_[1]) * z); }
+
+  std::vector<Vec3> normals_;
+  std::array<int, 3> dims_ = {1, 1, 1};
+  Vec3 cell_ = Vec3::Ones();
+  std::vector<std::vector<int32_t>> cells_;
+};
+
+[[noreturn]] void MeshError(const std::string& path, const std::string& what) {
+  throw InputError(path + ": " + what);
+}
+
+TriangleMesh ReadObj(const std::string& path, std::istream& in) {
+  TriangleMesh m;
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    std::istringstream ls(line);
+    std::string tag;
+    if (!(ls >> tag) || tag[0] == '#') continue;
+    if (tag == "v") {
+      Vec3 v;
+      if (!(ls >> v.x() >> v.y() >> v.z()))
+        MeshError(path, "line " + std::to_string(line_no) + ": bad vertex");
+      m.vertices.push_back(v);
+    } else if (tag == "f") {
+      std::vector<int> f;
+      std::string tok;
+      while (ls >> tok) {
+        int idx = 0;
+        try {
+          idx = std::stoi(tok.substr(0, tok.find('/')));
+        } catch (...) {
+          MeshError(path, "line " + std::to_string(line_no) + ": bad face index '" + tok + "'");
+        }
+        f.push_back(idx < 0 ? int(m.vertices.size()) + idx : idx - 1);
+      }
+      if (f.size() < 3) MeshError(path, "line " + std::to_string(line_no) + ": face with < 3 vertices");
+      for (size_t i = 1; i + 1 < f.size(); ++i) m.triangles.push_back({f[0], f[i], f[i + 1]});
+    }
+  }
+  return m;
+}
+
+// PLY: the vertex x/y/z properties and the face vertex_indices list.
+TriangleMesh ReadPly(const std::string& path, std::istream& in) {
+  std::string line, word;
+  std::getline(in, line);
+  if (line.rfind("ply", 0) != 0) MeshError(path, "not a PLY file (no 'ply' magic)");
+  bool binary = false;
+  struct Prop { std::string type, name, count_type; bool list = false; };
+  struct Element { std::string name; int64_t count = 0; std::vector<Prop> props; };
+  std::vector<Element> elements;
+  while (std::getline(in, line)) {
+    std::istringstream ls(line);
+    ls >> word;
+    if (word == "format") {
+      ls >> word;
+      if (word == "binary_little_endian") binary = true;
+      else if (word != "ascii") MeshError(path, "unsupported PLY format '" + word + "'");
+    } else if (word == "element") {
+      Element e;
+      ls >> e.name >> e.count;
+      elements.push_back(e);
+    } else if (word == "property") {
+      if (elements.empty()) MeshError(path, "PLY property before any element");
+      Prop p;
+      ls >> p.type;
+      if (p.type == "list") {
+        p.list = true;
+        ls >> p.count_type >> p.type;
+      }
+      ls >> p.name;
+      elements.back().props.push_back(p);
+    } else if (word == "end_header") {
+      break;
+    }
+  }
+  auto read_value = [&](const std::string& type) -> double {
+    if (!binary) {
+      double v;
+      if (!(in >> v)) MeshError(path, "PLY data ends early");
+      return v;
+    }
+    auto get = [&](auto x) {
+      in.read(reinterpret_cast<char*>(&x), sizeof(x));
+      if (!in) MeshError(path, "PLY data ends early");
+      return double(x);
+    };
+    if (type == "char" || type == "int8") return get(int8_t());
+    if (type == "uchar" || type == "uint8") return get(uint8_t());
+    if (type == "short" || type == "int16") return get(int16_t());
+    if (type == "ushort" || type == "uint16") return get(uint16_t());
+    if (type == "int" || type == "int32") return get(int32_t());
+    if (type == "uint" || type == "uint32") return get(uint32_t());
+    if (type == "float" || type == "float32") return get(float());
+    if (type == "double" || type == "float64") return get(double());
+    MeshError(path, "unsupported PLY property type '" + type + "'");
+  };
+  TriangleMesh m;
+  for (const Element& e : elements) {
+    for (int64_t r = 0; r < e.count; ++r) {
+      Vec3 v = Vec3::Zero();
+      for (const Prop& p : e.props) {
+        if (p.list) {
+          const int n = int(read_value(p.count_type));
+          std::vector<int> f(n);
+          for (int i = 0; i < n; ++i) f[i] = int(read_value(p.type));
+          if (e.name == "face" && (p.name == "vertex_indices" || p.name == "vertex_index")) {
+            if (n < 3) MeshError(path, "face with < 3 vertices");
+            for (int i = 1; i + 1 < n; ++i) m.triangles.push_back({f[0], f[i], f[i + 1]});
+          }
+        } else {
+          const double x = read_value(p.type);
+          if (e.name == "vertex" && p.name.size() == 1 && p.name[0] >= 'x' && p.name[0] <= 'z')
+            v[p.name[0] - 'x'] = x;
+        }
+      }
+      if (e.name == "vertex") m.vertices.push_back(v);
+    }
+  }
+  return m;
+}
+
+}  // namespace
+
+std::string TriangleMesh::Validate() const {
+  if (triangles.size() < 4) return "a closed mesh needs at least 4 triangles";
+  std::map<std::pair<int, int>, int> directed;
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    const auto& tri = triangles[t];
+    for (int c = 0; c < 3; ++c)
+      if (tri[c] < 0 || tri[c] >= int(vertices.size()))
+        return "triangle " + std::to_string(t) + " has vertex index out of range";
+    if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2])
+      return "triangle " + std::to_string(t) + " is degenerate (repeated vertex)";
+    for (int c = 0; c < 3; ++c) ++directed[{tri[c], tri[(c + 1) % 3]}];
+  }
+  for (const auto& [e, n] : directed) {
+    const auto it = directed.find({e.second, e.first});
+    const int back = it == directed.end() ? 0 : it->second;
+    if (n + back > 2)
+      return "non-manifold edge " + std::to_string(e.first) + "-" + std::to_string(e.second) +
+             " (shared by " + std::to_string(n + back) + " triangles)";
+    if (back == 0 && n == 1)
+      return "the mesh is open: edge " + std::to_string(e.first) + "-" +
+             std::to_string(e.second) + " belongs to one triangle only";
+    if (n > 1)
+      return "inconsistent triangle orientation at edge " + std::to_string(e.first) + "-" +
+             std::to_string(e.second);
+  }
+  return "";
+}
+
+void TriangleMesh::Bounds(Vec3* lo, Vec3* hi) const {
+  *lo = Vec3::Constant(1e300);
+  *hi = Vec3::Constant(-1e300);
+  for (const Vec3& v : vertices) {
+    *lo = lo->cwiseMin(v);
+    *hi = hi->cwiseMax(v);
+  }
+}
+
+std::vector<Vec3> TriangleMesh::VertexNormals() const {
+  std::vector<Vec3> n(vertices.size(), Vec3::Zero());
+  for (const auto& t : triangles) {
+    const Vec3 fn = (vertices[t[1]] - vertices[t[0]]).cross(vertices[t[2]] - vertices[t[0]]);
+    for (int c = 0; c < 3; ++c) n[t[c]] += fn;
+  }
+  for (Vec3& v : n) v = v.norm() > 0 ? Vec3(v.normalized()) : Vec3(0, 0, 1);
+  return n;
+}
+
+TriangleMesh ReadMesh(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path + ": cannot open the mesh file");
+  const auto dot = path.rfind('.');
+  std::string ext = dot == std::string::npos ? "" : path.substr(dot);
+  std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
+  TriangleMesh m;
+  if (ext == ".obj") m = ReadObj(path, in);
+  else if (ext == ".ply") m = ReadPly(path, in);
+  else throw InputError(path + ": unknown mesh format (expected .obj or .ply)");
+  if (std::string err = m.Validate(); !err.empty()) throw InputError(path + ": " + err);
+  return m;
+}
+
+void WriteObj(const std::string& path, const TriangleMesh& mesh) {
+  std::string s;
+  for (const Vec3& v : mesh.vertices)
+    s += "v " + std::to_string(v.x()) + " " + std::to_string(v.y()) + " " + std::to_string(v.z()) + "\n";
+  for (const auto& t : mesh.triangles)
+    s += "f " + std::to_string(t[0] + 1) + " " + std::to_string(t[1] + 1) + " " +
+         std::to_string(t[2] + 1) + "\n";
+  std::ofstream(path) << s;
+}
+
+Vec3 ClosestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c,
+                            double* u, double* v, double* w) {
+  // Barycentric coordinates of the projection onto the plane.
+  const Vec3 e0 = b - a, e1 = c - a, d = p - a;
+  const double d00 = e0.dot(e0), d01 = e0.dot(e1), d11 = e1.dot(e1);
+  const double d20 = d.dot(e0), d21 = d.dot(e1);
+  const double den = d00 * d11 - d01 * d01;
+  if (den > 0) {
+    const double bv = (d11 * d20 - d01 * d21) / den, bw = (d00 * d21 - d01 * d20) / den;
+    if (bv >= 0 && bw >= 0 && bv + bw <= 1) {
+      *u = 1 - bv - bw, *v = bv, *w = bw;
+      return a + bv * e0 + bw * e1;
+    }
+  }
+  // Outside: the closest of the three edges.
+  const Vec3* pts[3] = {&a, &b, &c};
+  double best = 1e300;
+  Vec3 out = a;
+  for (int e = 0; e < 3; ++e) {
+    const Vec3 &s0 = *pts[e], &s1 = *pts[(e + 1) % 3];
+    const Vec3 seg = s1 - s0;
+    const double len2 = seg.squaredNorm();
+    const double t = len2 > 0 ? std::clamp((p - s0).dot(seg) / len2, 0.0, 1.0) : 0.0;
+    const Vec3 q = s0 + t * seg;
+    if ((q - p).squaredNorm() < best) {
+      best = (q - p).squaredNorm();
+      out = q;
+      double bc[3] = {0, 0, 0};
+      bc[e] = 1 - t;
+      bc[(e + 1) % 3] = t;
+      *u = bc[0], *v = bc[1], *w = bc[2];
+    }
+  }
+  return out;
+}
+
+std::unique_ptr<Shape> MakeBuiltinShape(const std::string& name, double size_mm,
+                                        int tessellation) {
+  if (!(size_mm > 0)) throw InputError("--size: must be > 0 mm");
+  const double unit = size_mm / 3;  // slab and torus are 3 units wide
+  if (name == "sphere") return std::make_unique<SphereShape>(size_mm / 2, 0.0, tessellation);
+  if (name == "blob") {
+    const SphereShape unit(1.0, 0.15, tessellation);  // measure, then scale to size_mm
+    return std::make_unique<SphereShape>(size_mm / (unit.hi - unit.lo).maxCoeff(), 0.15, tessellation);
+  }
+  if (name == "torus") return std::make_unique<TorusShape>(unit, unit / 2, tessellation);
+  if (name == "slab") {
+    return std::make_unique<BoxShape>(Vec3(3 * unit, 3 * unit, unit), 24, "slab");
+  }
+  throw InputError("--shape: unknown shape '" + name +
+                   "' (expected slab, sphere, torus, blob, or a mesh file .obj/.ply)");
+}
+
+std::unique_ptr<Shape> MakeBoxShape(const Vec3& extent_mm, int tessellation) {
+  return std::make_unique<BoxShape>(extent_mm, tessellation, "box");
+}
+
+std::unique_ptr<Shape> MakeMeshShape(TriangleMesh mesh, const std::string& name,
+                                     double size_mm) {
+  if (std::string err = mesh.Validate(); !err.empty()) throw InputError(name + ": " + err);
+  Vec3 lo, hi;
+  mesh.Bounds(&lo, &hi);
+  const Vec3 centre = (lo + hi) / 2;
+  const double scale = size_mm > 0 ? size_mm / (hi - lo).maxCoeff() : 1.0;
+  for (Vec3& v : mesh.vertices) v = (v - centre) * scale;
+  return std::make_unique<MeshShape>(std::move(mesh), name);
+}
+
+}  // namespace translume

@@ -1,0 +1,72 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace translume {
+
+using Vec3 = Eigen::Vector3d;
+
+// A triangle mesh in mm. Triangles are counter-clockwise seen from outside.
+struct TriangleMesh {
+  std::vector<Vec3> vertices;
+  std::vector<std::array<int, 3>> triangles;
+
+  // Empty if the mesh is a closed 2-manifold (every undirected edge shared by exactly two
+  // triangles, used once in each direction), else the first broken constraint: too few
+  // triangles, an index out of range, a degenerate triangle, an open (boundary) edge, a
+  // non-manifold edge (three or more triangles) or inconsistent orientation.
+  std::string Validate() const;
+  void Bounds(Vec3* lo, Vec3* hi) const;
+  // Area-weighted vertex normals (unit length).
+  std::vector<Vec3> VertexNormals() const;
+};
+
+// Reads a Wavefront OBJ ("v" and "f" records; polygons are fan-triangulated; "f a/b/c" and
+// negative indices accepted) or a PLY (ascii or binary_little_endian; vertex x, y, z and a face
+// vertex_indices list) by extension, and validates it. Throws InputError naming the file and
+// the problem.
+TriangleMesh ReadMesh(const std::string& path);
+void WriteObj(const std::string& path, const TriangleMesh& mesh);
+
+// A closed surface for the polygrid: the projection used to place boundary nodes (Section 5.1)
+// and a triangle mesh for the final shading pass.
+class Shape {
+ public:
+  virtual ~Shape() = default;
+  // Maps p to a point on the surface and returns the outward unit normal there. Built-in shapes
+  // use an analytic projection (radial for star-shaped ones, closest point otherwise), meshes
+  // the closest point with interpolated vertex normals.
+  virtual void Project(const Vec3& p, Vec3* surface, Vec3* normal) const = 0;
+  const TriangleMesh& mesh() const { return mesh_; }
+  const std::string& name() const { return name_; }
+  // Axis-aligned box that the polycube is stretched onto (mm).
+  Vec3 lo, hi;
+
+ protected:
+  TriangleMesh mesh_;
+  std::string name_;
+};
+
+// Built-in shapes, centred at the origin, sized so that the largest extent is `size_mm`:
+//   slab   a box of 3 x 3 x 1 units           sphere  a ball
+//   torus  ring radius 1, tube radius 0.5 units (a hole; extent 3 x 3 x 1 units)
+//   blob   a ball with a smooth radial bump r(d) = R (1 + 0.15 sin(3 d.x) sin(2 d.y + 1) cos(2 d.z))
+//   box    an axis-aligned box with the given extents (used by tests: `size` per axis)
+// `tessellation` sets the render mesh's resolution. Throws InputError on an unknown name.
+std::unique_ptr<Shape> MakeBuiltinShape(const std::string& name, double size_mm,
+                                        int tessellation = 48);
+std::unique_ptr<Shape> MakeBoxShape(const Vec3& extent_mm, int tessellation = 8);
+// A validated mesh, scaled and centred so that its largest extent is size_mm (<= 0: as is).
+std::unique_ptr<Shape> MakeMeshShape(TriangleMesh mesh, const std::string& name,
+                                     double size_mm);
+
+// The closest point to p on triangle (a, b, c).
+Vec3 ClosestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c,
+                            double* u, double* v, double* w);
+
+}  // namespace translume

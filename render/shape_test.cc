@@ -1,0 +1,114 @@
+// SPDX-License-Identifier: MIT
+#include "render/shape.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+
+#include "solver/status.h"
+
+namespace translume {
+namespace {
+
+namespace fs = std::filesystem;
+const std::string kTet = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n";
+
+std::string Write(const std::string& name, const std::string& text) {
+  const std::string path = (fs::temp_directory_path() / name).string();
+  std::ofstream(path, std::ios::binary) << text;
+  return path;
+}
+
+TEST(Shape, BuiltinsAreClosedAndProjectOntoThemselves) {
+  for (const std::string name : {"sphere", "torus", "slab", "blob"}) {
+    SCOPED_TRACE(name);
+    const auto s = MakeBuiltinShape(name, 12, 16);
+    EXPECT_EQ(s->mesh().Validate(), "");
+    EXPECT_NEAR((s->hi - s->lo).maxCoeff(), 12, 0.2);
+    for (size_t v = 0; v < s->mesh().vertices.size(); v += 17) {
+      Vec3 p, n;
+      s->Project(s->mesh().vertices[v], &p, &n);
+      EXPECT_NEAR(n.norm(), 1, 1e-9);
+      if (name != "blob") {
+        EXPECT_NEAR((p - s->mesh().vertices[v]).norm(), 0, 1e-9);
+      }
+    }
+  }
+  EXPECT_THROW(MakeBuiltinShape("cone", 10), InputError);
+  EXPECT_THROW(MakeBuiltinShape("sphere", -1), InputError);
+}
+
+TEST(Shape, ObjAndPlyMeshes) {
+  const auto closed = ReadMesh(Write("tl_closed.obj", kTet + "f 1 3 2\nf 1 2 4\nf 2/1 3/1 4/1\nf -4 -1 -2\n"));
+  EXPECT_EQ(closed.triangles.size(), 4u);
+  const std::string header =
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 4\nproperty list uchar int vertex_indices\nend_header\n";
+  const auto ascii = ReadMesh(Write("tl_tet.ply", header +
+      "0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 0 3 2\n"));
+  EXPECT_EQ(ascii.triangles.size(), 4u);
+  std::string bin = header;
+  bin.replace(bin.find("ascii"), 5, "binary_little_endian");
+  const float xyz[12] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1};
+  bin.append(reinterpret_cast<const char*>(xyz), sizeof(xyz));
+  const int32_t faces[4][3] = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}};
+  for (const auto& f : faces) {
+    bin.push_back(char(3));
+    bin.append(reinterpret_cast<const char*>(f), sizeof(f));
+  }
+  const auto binary = ReadMesh(Write("tl_tet_bin.ply", bin));
+  EXPECT_EQ(binary.vertices[3], Vec3(0, 0, 1));
+  EXPECT_EQ(binary.triangles, ascii.triangles);
+}
+
+TEST(Shape, BadMeshesGiveClearErrors) {
+  auto expect_error = [](const std::string& path, const std::string& what) {
+    try {
+      ReadMesh(path);
+      FAIL() << path;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+    }
+  };
+  expect_error(Write("tl_open.obj", kTet + "f 1 3 2\nf 1 2 4\nf 2 3 4\n"), "open");
+  expect_error(Write("tl_nonmanifold.obj",
+                     kTet + "v 1 1 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\nf 2 3 5\n"), "non-manifold");
+  expect_error(Write("tl_flipped.obj", kTet + "f 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 3 4\n"), "orientation");
+  expect_error(Write("tl_range.obj", kTet + "f 1 3 9\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"), "out of range");
+  expect_error(Write("tl_mesh.stl", "solid"), "unknown mesh format");
+  expect_error((fs::temp_directory_path() / "tl_missing.obj").string(), "cannot open");
+}
+
+TEST(Shape, MeshProjectionMatchesBruteForce) {
+  const auto blob = MakeBuiltinShape("blob", 20, 24);
+  const auto mesh = MakeMeshShape(blob->mesh(), "blob.obj", 0);
+  const TriangleMesh& m = mesh->mesh();
+  uint32_t state = 12345;
+  auto uniform = [&] { state = state * 1664525u + 1013904223u; return (state >> 8) / double(1 << 24); };
+  for (int i = 0; i < 200; ++i) {
+    const Vec3 p(30 * uniform() - 15, 30 * uniform() - 15, 30 * uniform() - 15);
+    Vec3 s, n;
+    mesh->Project(p, &s, &n);
+    double best = 1e300;
+    for (const auto& t : m.triangles) {
+      double u, v, w;
+      best = std::min(best, (ClosestPointOnTriangle(p, m.vertices[t[0]], m.vertices[t[1]], m.vertices[t[2]], &u, &v, &w) - p).norm());
+    }
+    EXPECT_NEAR((s - p).norm(), best, 1e-9) << i;
+  }
+}
+
+TEST(Shape, ClosestPointOnTriangle) {
+  double u, v, w;
+  const Vec3 a(0, 0, 0), b(1, 0, 0), c(0, 1, 0);
+  EXPECT_TRUE(ClosestPointOnTriangle(Vec3(0.2, 0.3, 5), a, b, c, &u, &v, &w).isApprox(Vec3(0.2, 0.3, 0)));
+  EXPECT_NEAR(u + v + w, 1, 1e-12);
+  EXPECT_TRUE(ClosestPointOnTriangle(Vec3(2, -1, 1), a, b, c, &u, &v, &w).isApprox(Vec3(1, 0, 0)));
+  EXPECT_TRUE(ClosestPointOnTriangle(Vec3(1, 1, 0), a, b, c, &u, &v, &w).isApprox(Vec3(0.5, 0.5, 0)));
+}
+
+}  // namespace
+}  // namespace translume

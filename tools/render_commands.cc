@@ -1,0 +1,222 @@
+// SPDX-License-Identifier: MIT
+// translume render / translume edit: the polygrid preview renderer and material editing
+// (Wang et al. 2008, Section 5; docs/render.md).
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fmt/format.h>
+#include <memory>
+
+#include "render/edit.h"
+#include "render/material_map.h"
+#include "render/polygrid.h"
+#include "render/renderer.h"
+#include "solver/image_io.h"
+#include "solver/material_io.h"
+#include "solver/status.h"
+#include "tools/commands.h"
+
+namespace translume {
+namespace {
+
+std::string Extension(const std::string& path) {
+  const auto dot = path.rfind('.');
+  std::string ext = dot == std::string::npos ? "" : path.substr(dot);
+  std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
+  return ext;
+}
+
+// OUT.png -> OUT_007.png for turntable frames.
+std::string FramePath(const std::string& path, int frame, int frames) {
+  if (frames <= 1) return path;
+  const auto dot = path.rfind('.');
+  return path.substr(0, dot) + fmt::format("_{:03d}", frame) + path.substr(dot);
+}
+
+// MATERIAL: a .vdb file, procedural:NAME, or homogeneous:KAPPA,MU (mm, 1/mm, grey).
+std::vector<NodeMaterial> LoadNodeMaterials(const std::string& spec, const std::vector<Polygrid>& levels,
+                                            const ShellMappingOptions& mapping, double* C) {
+  *C = ReflectionParameterC(1.3);
+  const Polygrid& finest = levels[0];
+  NodeMaterial m;
+  if (spec.rfind("procedural:", 0) == 0) {
+    m = ProceduralNodeMaterial(finest, spec.substr(11));
+  } else if (spec.rfind("homogeneous:", 0) == 0) {
+    float k = 0, u = 0;
+    char comma = 0;
+    if (std::sscanf(spec.c_str() + 12, "%f%c%f", &k, &comma, &u) != 3 || comma != ',' || !(k > 0) ||
+        !(u > 0))
+      throw InputError("material " + spec + ": expected homogeneous:KAPPA,MU with both > 0");
+    m = ConstantNodeMaterial(finest, {k, k, k}, {u, u, u});
+  } else {
+    const Material mat = ReadMaterial(spec);
+    *C = mat.C;
+    m = MapShellMaterial(finest, mat, mapping);
+  }
+  // Coarser levels average their children (Section 5.3).
+  const std::vector<NodeMaterial> out = RestrictMaterialHierarchy(levels, std::move(m));
+  return out;
+}
+
+std::vector<int> ParseIntList(const std::string& text, const char* flag) {
+  std::vector<int> v;
+  size_t pos = 0;
+  while (pos <= text.size()) {
+    const size_t comma = std::min(text.find(',', pos), text.size());
+    try {
+      size_t used = 0;
+      const std::string tok = text.substr(pos, comma - pos);
+      v.push_back(std::stoi(tok, &used));
+      if (used != tok.size()) throw std::invalid_argument("trailing");
+    } catch (const std::exception&) {
+      throw InputError(std::string(flag) + " " + text + ": expected comma-separated integers");
+    }
+    pos = comma + 1;
+  }
+  return v;
+}
+
+}  // namespace
+
+int RunRender(int argc, char** argv) {
+  CLI::App app{"Render a material on a shape with the polygrid diffusion renderer (Wang et al.\n"
+               "2008, Section 5). MATERIAL: a .vdb file (mapped as a shell), procedural:marble,\n"
+               "procedural:layers, or homogeneous:KAPPA,MU. Shapes: slab, sphere, torus, blob, or\n"
+               "a closed mesh (.obj, .ply) with an optional --polycube file.",
+               "translume render"};
+  std::string material, shape_name = "sphere", polycube_path, light = "dir:1,0.3,0.6", out,
+              camera, image = "256x256", iterations = "200,100,100", depth, backend = "cpu";
+  double size_mm = 20, exposure = 0, map_scale = 1, first_layer = 0.1;
+  int resolution = 17, levels = 3, turntable = 1;
+  bool coherence = false, clamp = false;
+  RenderOptions ro;
+  app.add_option("material", material, "Material")->required();
+  app.add_option("--shape", shape_name, "slab|sphere|torus|blob|MESH.obj|MESH.ply")->capture_default_str();
+  app.add_option("--polycube", polycube_path, "Polycube file (docs/render.md); default: the shape's");
+  app.add_option("--size", size_mm, "Largest extent of the object, mm")->capture_default_str();
+  app.add_option("--resolution", resolution, "Polygrid nodes per cube edge")->capture_default_str();
+  app.add_option("--levels", levels, "Hierarchy levels (Section 5.3)")->capture_default_str();
+  app.add_option("--first-layer", first_layer, "First interior nodes at this fraction of the boundary spacing")
+      ->capture_default_str();
+  app.add_option("--iterations", iterations, "Relaxation steps per level, coarsest first")->capture_default_str();
+  app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all)");
+  app.add_option("--backend", backend, "Diffusion on cpu or gl (compute shaders)")->capture_default_str();
+  app.add_option("--light", light, "dir:X,Y,Z | point:X,Y,Z (mm) | env:FILE.exr (lat-long)")->capture_default_str();
+  app.add_option("--camera", camera, "AZIMUTH,ELEVATION in degrees (default 30,25)");
+  app.add_option("--image", image, "Output size WxH")->capture_default_str();
+  app.add_option("--supersample", ro.supersample, "Samples per pixel per axis")->capture_default_str();
+  app.add_option("--turntable", turntable, "Frames of a turntable (object rotating under fixed light)")->capture_default_str();
+  app.add_flag("--coherence", coherence, "Frame coherence: start each frame from the last solution");
+  app.add_option("--model", ro.model, "polygrid or dipole (homogeneous baseline)")->capture_default_str();
+  app.add_option("--specular", ro.specular, "Ward rho_s")->capture_default_str();
+  app.add_option("--roughness", ro.roughness, "Ward alpha")->capture_default_str();
+  app.add_option("--reflectance", ro.surface_reflectance, "Lambertian surface reflectance")->capture_default_str();
+  app.add_flag("--clamp", clamp, "Clamp the material in u, v instead of tiling");
+  app.add_option("--map-scale", map_scale, "Surface mm per material mm")->capture_default_str();
+  app.add_option("--exposure", exposure, "PNG exposure in stops (0: auto)")->capture_default_str();
+  app.add_option("-o,--output", out, "Output image (.png or .exr)")->required();
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  const std::string ext = Extension(out);
+  if (ext != ".png" && ext != ".exr") throw InputError("-o " + out + ": expected a .png or .exr file");
+  if (std::sscanf(image.c_str(), "%dx%d", &ro.width, &ro.height) != 2)
+    throw InputError("--image " + image + ": expected WxH");
+  if (!camera.empty() && std::sscanf(camera.c_str(), "%lf,%lf", &ro.azimuth_deg, &ro.elevation_deg) != 2)
+    throw InputError("--camera " + camera + ": expected AZIMUTH,ELEVATION");
+  if (turntable < 1) throw InputError("--turntable: must be >= 1");
+  if (levels < 1) throw InputError("--levels: must be >= 1");
+  if (std::string err = ro.Validate(); !err.empty()) throw InputError("render: " + err);
+  RenderLight L = RenderLight::Parse(light);
+  if (L.kind == RenderLight::Kind::kEnvironment) L.environment = std::make_shared<Image>(ReadImage(L.path));
+
+  std::unique_ptr<Shape> shape;
+  Polycube pc;
+  const std::string sext = Extension(shape_name);
+  if (sext == ".obj" || sext == ".ply") {
+    shape = MakeMeshShape(ReadMesh(shape_name), shape_name, size_mm);
+    pc = polycube_path.empty() ? BuiltinPolycube("box") : ReadPolycube(polycube_path);
+  } else {
+    shape = MakeBuiltinShape(shape_name, size_mm);
+    pc = polycube_path.empty() ? BuiltinPolycube(shape_name) : ReadPolycube(polycube_path);
+  }
+  PolygridOptions po;
+  po.resolution = resolution;
+  po.first_layer_fraction = first_layer;
+  auto t0 = std::chrono::steady_clock::now();
+  const std::vector<Polygrid> grids = BuildPolygridHierarchy(pc, *shape, po, levels);
+  const double build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ShellMappingOptions mo;
+  mo.tile = !clamp;
+  mo.scale = map_scale;
+  double C = 0;
+  std::vector<NodeMaterial> mats = LoadNodeMaterials(material, grids, mo, &C);
+  DiffusionOptions dopt;
+  dopt.backend = ParseDiffusionBackend(backend);
+  dopt.iterations = ParseIntList(iterations, "--iterations");
+  if (!depth.empty()) dopt.depth = ParseIntList(depth, "--depth");
+  dopt.frame_coherence = coherence;
+  if (std::string err = dopt.Validate(); !err.empty()) throw InputError("--iterations/--depth: " + err);
+  std::printf("render: %s on %s, polygrid %zu cubes x %d^3 (%lld nodes, %lld boundary), %zu levels, "
+              "built in %.2f s\n", material.c_str(), shape->name().c_str(), pc.cubes.size(), resolution,
+              (long long)grids[0].size(), (long long)grids[0].num_boundary(), grids.size(), build_s);
+  if (ro.model == "dipole") {
+    bool homogeneous = true;
+    for (int ch = 0; ch < 3; ++ch)
+      for (size_t n = 1; n < mats[0].kappa[ch].size(); ++n)
+        homogeneous &= mats[0].kappa[ch][n] == mats[0].kappa[ch][0] && mats[0].mu[ch][n] == mats[0].mu[ch][0];
+    if (!homogeneous)
+      std::printf("note: --model dipole is for homogeneous materials; using the mean kappa and mu\n");
+  }
+  Renderer renderer(shape.get(), &grids, std::move(mats), C, dopt, ro);
+  for (int f = 0; f < turntable; ++f) {
+    const auto tf = std::chrono::steady_clock::now();
+    Image img = renderer.Render(L, 360.0 * f / turntable);
+    const double frame_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tf).count();
+    if (ext == ".png") ToneMap(&img, exposure);
+    const std::string path = FramePath(out, f, turntable);
+    WriteImage(path, img);
+    const FrameTimes& t = renderer.times();
+    if (f == 0) {
+      const auto& R = renderer.boundary_radiance()[0];
+      const auto [lo, hi] = std::minmax_element(R.begin(), R.end());
+      double sum = 0;
+      for (float v : R) sum += v;
+      std::printf("boundary radiance (red): min %.3g, mean %.3g, max %.3g\n", *lo, sum / R.size(), *hi);
+    }
+    std::printf("frame %d: incident %.1f ms, diffusion %.1f ms, shading %.1f ms (%.2f fps) -> %s\n", f,
+                1e3 * t.incident, 1e3 * t.diffusion, 1e3 * t.shading, 1 / frame_s, path.c_str());
+  }
+  return 0;
+}
+
+int RunEdit(int argc, char** argv) {
+  CLI::App app{"Edit a material (Wang et al. 2008, Section 5.4): multiply or add constants to\n"
+               "kappa and mu, within a pattern mask (image stretched over x-y) and a depth range.",
+               "translume edit"};
+  std::string material, mask, depth, out;
+  std::vector<std::string> scales, adds;
+  app.add_option("material", material, "Material file (.vdb)")->required();
+  app.add_option("--scale", scales, "kappa=S or mu=S (multiply)");
+  app.add_option("--add", adds, "kappa=A or mu=A (add, mm or 1/mm)");
+  app.add_option("--mask", mask, "Pattern mask image (luminance 0..1 weights the edit)");
+  app.add_option("--depth", depth, "Node layers A:B (inclusive) to edit");
+  app.add_option("-o,--output", out, "Output material (.vdb)")->required();
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  if (Extension(out) != ".vdb") throw InputError("-o " + out + ": expected a .vdb file");
+  EditOptions eo;
+  for (const auto& s : scales) eo.ParseTerm(s, false);
+  for (const auto& a : adds) eo.ParseTerm(a, true);
+  if (!depth.empty()) eo.ParseDepth(depth);
+  const Material m = ReadMaterial(material);
+  Image mask_image;
+  if (!mask.empty()) mask_image = ReadImage(mask);
+  const Material edited = EditMaterial(m, eo, mask.empty() ? nullptr : &mask_image);
+  WriteMaterial(out, edited);
+  std::printf("wrote %s: kappa x%g %+g mm, mu x%g %+g /mm%s%s\n", out.c_str(), eo.scale_kappa,
+              eo.add_kappa, eo.scale_mu, eo.add_mu, mask.empty() ? "" : (", mask " + mask).c_str(),
+              depth.empty() ? "" : (", layers " + depth).c_str());
+  return 0;
+}
+
+}  // namespace translume

@@ -1,0 +1,97 @@
+// SPDX-License-Identifier: MIT
+// translume-renderbench: frames per second of the polygrid renderer per shape and polygrid size
+// (the yardstick: Wang et al. 2008, Table III; SPEC section 6). Built-in shapes and the
+// procedural marble only, so the binary needs no file IO libraries and can be bundled for a
+// GPU machine (tools/gpu_bundle.sh translume-renderbench).
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <exception>
+#include <string>
+#include <vector>
+
+#include "render/material_map.h"
+#include "render/renderer.h"
+#include "solver/gl_context.h"
+#include "solver/status.h"
+
+namespace {
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace translume;
+  CLI::App app{"Polygrid renderer frame rates: three passes per frame, with and without frame "
+               "coherence, for each shape and resolution.", "translume-renderbench"};
+  std::vector<std::string> shapes = {"sphere", "torus"};
+  std::vector<int> resolutions = {9, 17};
+  std::string backend = "gl", iterations = "60,30,30";
+  int frames = 10, size = 256, coherent_iterations = 20;
+  app.add_option("--shapes", shapes, "Built-in shapes")->delimiter(',');
+  app.add_option("--resolutions", resolutions, "Nodes per cube edge")->delimiter(',');
+  app.add_option("--backend", backend, "cpu or gl")->capture_default_str();
+  app.add_option("--frames", frames, "Timed frames per configuration")->capture_default_str();
+  app.add_option("--image", size, "Square image size")->capture_default_str();
+  app.add_option("--coherent-iterations", coherent_iterations, "Finest-level steps per coherent frame")
+      ->capture_default_str();
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    DiffusionOptions d;
+    d.backend = ParseDiffusionBackend(backend);
+    d.iterations = {60, 30, 30};
+    d.coherent_iterations = coherent_iterations;
+    if (d.backend == DiffusionBackend::kGl) std::printf("%s\n", GlContext::Get().info().ToString().c_str());
+    std::printf("%-7s %-14s %8s %9s %9s %9s %8s %9s %8s\n", "shape", "polygrid", "nodes", "t1 ms",
+                "t2 ms", "t3 ms", "fps", "t2coh ms", "fps coh");
+    for (const std::string& name : shapes)
+      for (int res : resolutions) {
+        const auto shape = MakeBuiltinShape(name, 20);
+        const Polycube pc = BuiltinPolycube(name);
+        PolygridOptions po;
+        po.resolution = res;
+        const auto levels = BuildPolygridHierarchy(pc, *shape, po, 3);
+        const std::vector<NodeMaterial> mats =
+            RestrictMaterialHierarchy(levels, ProceduralNodeMaterial(levels[0], "marble"));
+        RenderOptions ro;
+        ro.width = ro.height = size;
+        ro.supersample = 1;
+        double fps[2], t1 = 0, t2[2], t3 = 0;
+        for (int coh = 0; coh < 2; ++coh) {
+          d.frame_coherence = coh;
+          Renderer r(shape.get(), &levels, mats, ReflectionParameterC(1.3), d, ro);
+          r.Render(RenderLight::Parse("dir:1,0.3,0.6"), 0);  // warm-up (shader compile, first solve)
+          std::vector<double> frame, a, b, c;
+          for (int f = 1; f <= frames; ++f) {
+            const auto t0 = std::chrono::steady_clock::now();
+            r.Render(RenderLight::Parse("dir:1,0.3,0.6"), 2.0 * f);  // the light moves 2 deg/frame
+            frame.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+            a.push_back(r.times().incident);
+            b.push_back(r.times().diffusion);
+            c.push_back(r.times().shading);
+          }
+          fps[coh] = 1 / Median(frame);
+          t2[coh] = Median(b);
+          if (!coh) t1 = Median(a), t3 = Median(c);
+        }
+        std::printf("%-7s %-14s %8lld %9.1f %9.1f %9.1f %8.2f %9.1f %8.2f\n", name.c_str(),
+                    (std::to_string(pc.cubes.size()) + "x" + std::to_string(res) + "^3").c_str(),
+                    (long long)levels[0].size(), 1e3 * t1, 1e3 * t2[0], 1e3 * t3, fps[0],
+                    1e3 * t2[1], fps[1]);
+        std::fflush(stdout);
+      }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "translume-renderbench: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
