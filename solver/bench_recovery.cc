@@ -82,7 +82,7 @@ std::string Layers(const std::vector<double>& v) {
 RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
                                      void (*progress)(const std::string&)) {
   RecoveryBenchResult out;
-  for (const auto& preset : o.presets)
+  for (const auto& preset : o.run_cases ? o.presets : std::vector<std::string>{})
     for (Setup setup : o.setups)
       for (double noise : o.noises) {
         const Case c = MakeCase(o, preset, setup, noise);

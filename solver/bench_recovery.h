@@ -26,7 +26,8 @@ struct RecoveryBenchOptions {
   double noisy_lambda = 1e-5;  // lambda for noisy cases (noise-free ones use recovery.lambda)
   // The paper optimiser next to lbfgs on the first preset, back-lit, noise-free.
   bool compare_optimizers = true;
-  int paper_iterations = 40;
+  bool run_cases = true;  // false: only the optimiser comparison
+  int paper_iterations = 80;
 };
 
 struct RecoveryBenchRow {
