@@ -87,7 +87,10 @@ RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
       for (double noise : o.noises) {
         const Case c = MakeCase(o, preset, setup, noise);
         RecoveryOptions ro = o.recovery;
-        if (noise > 0) ro.lambda = o.noisy_lambda;
+        if (noise > 0) {
+          ro.lambda = o.noisy_lambda;
+          ro.regularize_mu = o.noisy_regularize_mu;
+        }
         RecoveryBenchRow r = RunCase(c, ro, preset, setup, noise, nullptr);
         if (progress)
           progress(fmt::format("{} {}-lit noise {:g}: held-out E {:.2e} (truth {:.2e}), fit E {:.2e}, "
