@@ -82,12 +82,15 @@ std::string Layers(const std::vector<double>& v) {
 RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
                                      void (*progress)(const std::string&)) {
   RecoveryBenchResult out;
-  for (const auto& preset : o.presets)
+  for (const auto& preset : o.run_cases ? o.presets : std::vector<std::string>{})
     for (Setup setup : o.setups)
       for (double noise : o.noises) {
         const Case c = MakeCase(o, preset, setup, noise);
         RecoveryOptions ro = o.recovery;
-        if (noise > 0) ro.lambda = o.noisy_lambda;
+        if (noise > 0) {
+          ro.lambda = o.noisy_lambda;
+          ro.regularize_mu = o.noisy_regularize_mu;
+        }
         RecoveryBenchRow r = RunCase(c, ro, preset, setup, noise, nullptr);
         if (progress)
           progress(fmt::format("{} {}-lit noise {:g}: held-out E {:.2e} (truth {:.2e}), fit E {:.2e}, "

@@ -63,6 +63,15 @@ class RecoveryProblem {
     return (f[0] + f[1] + f[2]) / 3.0;
   }
 
+  // Whether every solve of the last evaluation converged (to within 100x the tolerance). Trial
+  // points far outside the physical range can stall the solver; the optimisers then treat the
+  // evaluation as failed and shorten the step.
+  bool last_evaluation_ok() const {
+    for (const auto& c : channels_)
+      if (!(c->worst_residual() <= 100 * o_.solve_tolerance)) return false;
+    return true;
+  }
+
   // Levenberg-Marquardt on the homogeneous problem of each channel, (log kappa, log mu)
   // = (h[2c], h[2c+1]), channels in parallel. The residuals' 2-column Jacobian comes from forward
   // differences in log space (2 extra evaluations of M forward solves per iteration); the fit is
@@ -232,7 +241,7 @@ class CeresFunction : public ceres::FirstOrderFunction {
   explicit CeresFunction(RecoveryProblem* p) : p_(p) {}
   bool Evaluate(const double* x, double* cost, double* grad) const override {
     *cost = p_->Evaluate(x, grad);
-    return std::isfinite(*cost);
+    return std::isfinite(*cost) && p_->last_evaluation_ok();
   }
   int NumParameters() const override { return int(p_->num_parameters()); }
 
@@ -313,7 +322,8 @@ OptimizerResult RunPaper(RecoveryProblem* problem, int max_iterations, double to
   auto at = [&](double a) {
     for (size_t i = 0; i < n; ++i) trial[i] = x[i] + a * d[i];
     const double v = problem->Evaluate(trial.data(), nullptr);
-    return std::isfinite(v) ? v : std::numeric_limits<double>::infinity();
+    return std::isfinite(v) && problem->last_evaluation_ok() ? v
+                                                             : std::numeric_limits<double>::infinity();
   };
   r.termination = RecoveryTermination::kMaxIterations;
   r.message = fmt::format("reached max_iterations = {}", max_iterations);

@@ -190,6 +190,18 @@ TEST_F(Cli, InverseCommandsRejectBadArguments) {
   EXPECT_EQ(Translume("bench recovery --help").status, 0);
 }
 
+TEST_F(Cli, BenchRecoverySmoke) {
+  const CommandRun r = Translume("bench recovery --grid 8x6x4 --presets wax --max-iterations 3 "
+                                 "--paper-iterations 2 --json");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output.substr(r.output.find('{')));
+  EXPECT_EQ(j["cases"].size(), 5u);  // back/front x 0/1 % noise, and the paper optimiser
+  EXPECT_EQ(j["cases"][0]["kappa_layer_error"].size(), 4u);
+  EXPECT_GT(j["cases"][0]["holdout_error"].get<double>(), 0);
+  EXPECT_TRUE(j.contains("optimizer_comparison"));
+  ExpectOneLineError(Translume("bench recovery --grid 8x6"), "--grid");
+}
+
 TEST_F(Cli, SolveStopsCleanlyOnSigint) {
   ASSERT_EQ(Translume("synth --preset marble --grid 24x20x6 -o " + P("m.vdb")).status, 0);
   ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 4x4 -o " + P("ds")).status, 0);

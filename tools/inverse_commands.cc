@@ -164,6 +164,8 @@ int RunSolve(int argc, char** argv) {
   auto previous = std::signal(SIGINT, OnSigint);
   auto last_checkpoint = std::chrono::steady_clock::now();
   bool printed_homogeneous = !state.x.empty();
+  double first_report = -1;
+  int first_iteration = 0;
   auto callback = [&](const IterationReport& r, const RecoveryState& s) {
     if (!printed_homogeneous) {
       printed_homogeneous = true;
@@ -171,11 +173,19 @@ int RunSolve(int argc, char** argv) {
                   s.homogeneous_kappa[0], s.homogeneous_kappa[1], s.homogeneous_kappa[2],
                   s.homogeneous_mu[0], s.homogeneous_mu[1], s.homogeneous_mu[2]);
     }
-    const double per_iteration = r.seconds / std::max(1, r.iteration);
-    const double left = per_iteration * std::max(0, o.max_iterations - r.iteration);
-    std::printf("%siter %4d  objective %.4e  |grad| %.3e  solves %lld  elapsed %s  left <= %s%s",
+    // Time left if every remaining iteration runs: the mean iteration time since the first
+    // report (so the homogeneous fit does not count).
+    if (first_report < 0) {
+      first_report = r.seconds;
+      first_iteration = r.iteration;
+    }
+    std::string left = "?";
+    if (r.iteration > first_iteration)
+      left = "<= " + FormatSeconds((r.seconds - first_report) / (r.iteration - first_iteration) *
+                                   std::max(0, o.max_iterations - r.iteration));
+    std::printf("%siter %4d  objective %.4e  |grad| %.3e  solves %lld  elapsed %s  left %s%s",
                 tty ? "\r" : "", r.iteration, r.objective, r.gradient_norm, (long long)r.solves,
-                FormatSeconds(r.seconds).c_str(), FormatSeconds(left).c_str(), tty ? "   " : "\n");
+                FormatSeconds(r.seconds).c_str(), left.c_str(), tty ? "   " : "\n");
     std::fflush(stdout);
     if (!checkpoint.empty() &&
         std::chrono::steady_clock::now() - last_checkpoint > std::chrono::seconds(10)) {

@@ -202,12 +202,15 @@ int RunBench(int argc, char** argv) {
       ->capture_default_str();
   rec->add_option("--lambda", ro.recovery.lambda, "lambda for noise-free data")->capture_default_str();
   rec->add_option("--noisy-lambda", ro.noisy_lambda, "lambda for 1 % noise")->capture_default_str();
+  bool comparison_only = false;
+  rec->add_flag("--comparison-only", comparison_only, "Only the paper-vs-lbfgs comparison");
   rec->add_option("--paper-iterations", ro.paper_iterations, "Iterations of the paper optimiser")
       ->capture_default_str();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   if (rec->parsed()) {
     if (full) ro.shape = {64, 48, 16};
+    ro.run_cases = !comparison_only;
     if (!rec_grid.empty()) ro.shape = ParseGridShape(rec_grid, "--grid");
     if (std::string err = ro.recovery.Validate(); !err.empty()) throw InputError("bench recovery: " + err);
     std::fprintf(stderr, "bench recovery: grid %s, %d threads\n", ro.shape.ToString().c_str(), NumThreads());
