@@ -12,100 +12,51 @@
 namespace translume {
 namespace {
 
-class CpuChannelObjective : public ChannelObjective {
+class CpuChannelObjective : public FrontFaceObjective {
  public:
   CpuChannelObjective(const Dataset& d, int channel, const MultigridOptions& mg)
-      : shape_(d.shape), C_(d.C), solver_(d.shape, d.spacing_mm, mg) {
-    const int64_t n = shape_.size(), nf = shape_.face_size(), M = int64_t(d.conditions.size());
-    const int64_t k_lit = LitFaceK(d.setup, shape_);
-    k_lit_ = k_lit;
+      : FrontFaceObjective(d, channel), shape_(d.shape), C_(d.C),
+        solver_(d.shape, d.spacing_mm, mg), k_lit_(LitFaceK(d.setup, d.shape)) {
+    const int64_t n = shape_.size(), M = int64_t(d.conditions.size());
     q_.resize(M);
+    for (int64_t m = 0; m < M; ++m) q_[m] = d.conditions[m].q[channel];
     b_.assign(n, 0.0);
+    rhs_.assign(n, 0.0);
     phi_.assign(M, std::vector<double>(n, 0.0));
     psi_.assign(M, std::vector<double>(n, 0.0));
-    L_.resize(M);
-    w_.resize(M);
-    q_front_.resize(M);
-    misfit_.assign(M, 0.0);
-    norm_.assign(M, 0.0);
-    rhs_.assign(n, 0.0);
-    denom_ = 0;
-    for (int64_t m = 0; m < M; ++m) {
-      const DatasetCondition& c = d.conditions[m];
-      q_[m] = c.q[channel];
-      L_[m].assign(c.L[channel].begin(), c.L[channel].end());
-      w_[m].assign(c.mask.begin(), c.mask.end());
-      q_front_[m].assign(nf, 0.0);
-      if (d.setup == Setup::kFront)
-        for (int64_t f = 0; f < nf; ++f) q_front_[m][f] = c.q[channel][f];
-      for (int64_t f = 0; f < nf; ++f) norm_[m] += w_[m][f] * L_[m][f] * L_[m][f];
-      denom_ += norm_[m];
-    }
-    if (!(denom_ > 0))
-      throw InputError(fmt::format("dataset: channel {} has no light in any measured pixel "
-                                   "(sum of mask * L^2 is 0)", "RGB"[channel]));
   }
 
   double Evaluate(const double* kappa, const double* mu, double* gk, double* gm) override {
-    const int64_t n = shape_.size(), nf = shape_.face_size();
+    const int64_t n = shape_.size();
     solver_.SetCoefficients(kappa, mu, C_);
     if (gk) {
       std::fill(gk, gk + n, 0.0);
       std::fill(gm, gm + n, 0.0);
     }
-    worst_ = 0;
+    BeginEvaluation();
     double J = 0;
     for (size_t m = 0; m < q_.size(); ++m) {
       // b is O(face) to rebuild; keeping one per condition would cost M volumes.
       LitFaceSource(solver_.grid(), k_lit_, C_, q_[m].data(), b_.data());
       Track(solver_.Solve(b_.data(), phi_[m].data()));
-      double mis = 0;
-      for (int64_t f = 0; f < nf; ++f) {
-        const double r = Misfit(m, f);
-        mis += w_[m][f] * r * r;
-        rhs_[f] = 2 * w_[m][f] * r * kToL / denom_;  // dJ/dphi on the front face (k = 0)
-      }
-      misfit_[m] = mis;
-      J += mis;
+      J += ConditionMisfit(m, rhs_.data());  // the adjoint source on the front face (k = 0)
       if (!gk) continue;
       Track(solver_.Solve(rhs_.data(), psi_[m].data()));
       AccumulateOperatorGradient(solver_.grid(), phi_[m].data(), psi_[m].data(), -1.0, gk, gm);
     }
-    return J / denom_;
+    return J / denom();
   }
-
-  void Residuals(std::vector<double>* out) const override {
-    const int64_t nf = shape_.face_size();
-    out->resize(q_.size() * nf);
-    for (size_t m = 0; m < q_.size(); ++m)
-      for (int64_t f = 0; f < nf; ++f) (*out)[m * nf + f] = std::sqrt(w_[m][f] / denom_) * Misfit(m, f);
-  }
-
-  int64_t solves() const override { return solves_; }
-  const std::vector<double>& condition_misfit() const override { return misfit_; }
-  const std::vector<double>& condition_norm() const override { return norm_; }
-  double worst_residual() const override { return worst_; }
 
  private:
-  static constexpr double kToL = 1.0 / (2 * std::numbers::pi);
-  // L^R - L at front-face node f of condition m, from the current phi (paper Eq. (3)).
-  double Misfit(size_t m, int64_t f) const {
-    return (phi_[m][f] - q_front_[m][f]) * kToL - L_[m][f];
-  }
-  void Track(const SolveSummary& s) {
-    ++solves_;
-    worst_ = std::max(worst_, s.converged ? s.final_residual : std::max(s.final_residual, 1.0));
-  }
+  const double* FrontField(size_t m) const override { return phi_[m].data(); }
 
   GridShape shape_;
   double C_;
   MultigridSolver<double> solver_;
   int64_t k_lit_ = 0;
-  std::vector<std::vector<float>> q_;                       // lit-face light per condition
-  std::vector<std::vector<double>> phi_, psi_, L_, w_, q_front_;  // kept between evaluations
-  std::vector<double> b_, rhs_, misfit_, norm_;
-  double denom_ = 0, worst_ = 0;
-  int64_t solves_ = 0;
+  std::vector<std::vector<float>> q_;                 // lit-face light per condition
+  std::vector<std::vector<double>> phi_, psi_;        // kept between evaluations
+  std::vector<double> b_, rhs_;
 };
 
 // rho(d) and rho'(d) of the regulariser kinds.
@@ -131,6 +82,58 @@ inline double Rho(const RegularizerOptions& o, double d, double* dr) {
 }
 
 }  // namespace
+
+FrontFaceObjective::FrontFaceObjective(const Dataset& d, int channel)
+    : nf_(d.shape.face_size()) {
+  const size_t M = d.conditions.size();
+  L_.resize(M);
+  w_.resize(M);
+  q_front_.resize(M);
+  misfit_.assign(M, 0.0);
+  norm_.assign(M, 0.0);
+  for (size_t m = 0; m < M; ++m) {
+    const DatasetCondition& c = d.conditions[m];
+    L_[m].assign(c.L[channel].begin(), c.L[channel].end());
+    w_[m].assign(c.mask.begin(), c.mask.end());
+    q_front_[m].assign(nf_, 0.0);
+    if (d.setup == Setup::kFront)
+      for (int64_t f = 0; f < nf_; ++f) q_front_[m][f] = c.q[channel][f];
+    for (int64_t f = 0; f < nf_; ++f) norm_[m] += w_[m][f] * L_[m][f] * L_[m][f];
+    denom_ += norm_[m];
+  }
+  if (!(denom_ > 0))
+    throw InputError(fmt::format("dataset: channel {} has no light in any measured pixel "
+                                 "(sum of mask * L^2 is 0)", "RGB"[channel]));
+}
+
+// L^R - L at front-face node f of condition m, from the current phi (paper Eq. (3)).
+double FrontFaceObjective::Misfit(size_t m, int64_t f) const {
+  constexpr double kToL = 1.0 / (2 * std::numbers::pi);
+  return (FrontField(m)[f] - q_front_[m][f]) * kToL - L_[m][f];
+}
+
+double FrontFaceObjective::ConditionMisfit(size_t m, double* adjoint_source) {
+  constexpr double kToL = 1.0 / (2 * std::numbers::pi);
+  double mis = 0;
+  for (int64_t f = 0; f < nf_; ++f) {
+    const double r = Misfit(m, f);
+    mis += w_[m][f] * r * r;
+    adjoint_source[f] = 2 * w_[m][f] * r * kToL / denom_;
+  }
+  misfit_[m] = mis;
+  return mis;
+}
+
+void FrontFaceObjective::Residuals(std::vector<double>* out) const {
+  out->resize(L_.size() * nf_);
+  for (size_t m = 0; m < L_.size(); ++m)
+    for (int64_t f = 0; f < nf_; ++f) (*out)[m * nf_ + f] = std::sqrt(w_[m][f] / denom_) * Misfit(m, f);
+}
+
+void FrontFaceObjective::Track(const SolveSummary& s) {
+  ++solves_;
+  worst_ = std::max(worst_, s.converged ? s.final_residual : std::max(s.final_residual, 1.0));
+}
 
 std::unique_ptr<ChannelObjective> MakeCpuChannelObjective(const Dataset& dataset, int channel,
                                                           const MultigridOptions& multigrid) {

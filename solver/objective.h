@@ -42,6 +42,39 @@ class ChannelObjective {
   virtual double worst_residual() const = 0;
 };
 
+// What the backends share: one channel's measured data and the data term's math on the front
+// face (paper Eq. (3)); a backend supplies the solves and FrontField.
+class FrontFaceObjective : public ChannelObjective {
+ public:
+  int64_t solves() const override { return solves_; }
+  const std::vector<double>& condition_misfit() const override { return misfit_; }
+  const std::vector<double>& condition_norm() const override { return norm_; }
+  double worst_residual() const override { return worst_; }
+  void Residuals(std::vector<double>* r) const override;
+
+ protected:
+  // Throws InputError if the channel has no light in any measured pixel.
+  FrontFaceObjective(const Dataset& dataset, int channel);
+  // The front face (k = 0, the first nx*ny values) of condition m's current forward field.
+  virtual const double* FrontField(size_t m) const = 0;
+  // Stores and returns condition m's misfit sum_p w (L^R - L)^2 (not yet divided by D); writes
+  // the adjoint source dJ/dphi = 2 w (L^R - L) / (2 pi D) at the nx*ny front-face nodes.
+  double ConditionMisfit(size_t m, double* adjoint_source);
+  // Counts a solve and keeps the worst residual of this evaluation (reset by BeginEvaluation).
+  void Track(const SolveSummary& s);
+  void BeginEvaluation() { worst_ = 0; }
+  size_t num_conditions() const { return L_.size(); }
+  double denom() const { return denom_; }
+
+ private:
+  double Misfit(size_t m, int64_t f) const;
+  int64_t nf_ = 0;
+  std::vector<std::vector<double>> L_, w_, q_front_;
+  std::vector<double> misfit_, norm_;
+  double denom_ = 0, worst_ = 0;
+  int64_t solves_ = 0;
+};
+
 // The CPU backend: one MultigridSolver<double> per channel. The solver's OpenMP loops use the
 // calling thread's OpenMP thread count (set it per channel thread).
 std::unique_ptr<ChannelObjective> MakeCpuChannelObjective(const Dataset& dataset, int channel,
