@@ -59,11 +59,24 @@ Material RefineMaterial(const Material& m, int K) {
 
 std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
                                          const std::vector<FacePattern>& lights,
-                                         const MultigridOptions& multigrid) {
+                                         const MultigridOptions& multigrid, Backend backend) {
   ForwardOptions fo;
   fo.setup = setup;
   fo.multigrid = multigrid;
+  fo.backend = backend;
   std::vector<FacePattern> out(lights.size());
+  auto check = [](const ForwardResult& r) {
+    for (const auto& sum : r.summaries)
+      if (!sum.converged) throw InputError("forward solve did not converge: " + sum.BriefReport());
+  };
+  if (backend == Backend::kGl) {
+    for (size_t l = 0; l < lights.size(); ++l) {
+      ForwardResult r = SolveForward(material, lights[l], fo);
+      check(r);
+      out[l] = std::move(r.radiance);
+    }
+    return out;
+  }
   // Conditions in parallel, one OpenMP thread each: independent solves scale better than
   // threads inside one solve, and small grids do not suffer from OpenMP barriers.
   std::atomic<size_t> next{0};
@@ -73,8 +86,7 @@ std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
     for (size_t l = next++; l < lights.size(); l = next++) {
       try {
         ForwardResult r = SolveForward(material, lights[l], fo);
-        for (const auto& sum : r.summaries)
-          if (!sum.converged) throw InputError("forward solve did not converge: " + sum.BriefReport());
+        check(r);
         out[l] = std::move(r.radiance);
       } catch (...) {
         errors[l] = std::current_exception();
@@ -132,7 +144,7 @@ Dataset Simulate(const Material& m, const Material& fine, const SimulateOptions&
   MultigridOptions mg;
   mg.tolerance = o.tolerance;
   mg.max_iterations = 200;
-  const std::vector<FacePattern> fine_L = RenderFrontFace(fine, o.setup, fine_q, mg);
+  const std::vector<FacePattern> fine_L = RenderFrontFace(fine, o.setup, fine_q, mg, o.backend);
   std::normal_distribution<double> gauss(0.0, 1.0);
   const int K = o.oversample;
   for (size_t l = 0; l < lights.size(); ++l) {

@@ -17,10 +17,12 @@ namespace translume {
 Material RefineMaterial(const Material& material, int K);
 
 // Front-face radiance of `material` under each light pattern (L = (phi - q_front) / (2 pi),
-// SPEC section 3), solved on the material's own grid.
+// SPEC section 3), solved on the material's own grid. cpu: conditions in parallel threads; gl:
+// in turn on the calling thread (the one that owns the GL context).
 std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
                                          const std::vector<FacePattern>& lights,
-                                         const MultigridOptions& multigrid);
+                                         const MultigridOptions& multigrid,
+                                         Backend backend = Backend::kCpu);
 
 // Front-lit mask: 0 at every front-face node within `margin` nodes (Chebyshev distance) of a
 // node with q > 0 in any channel, 1 elsewhere. All 1 for the back-lit setup.
@@ -36,6 +38,7 @@ struct SimulateOptions {
   uint64_t seed = 1;        // noise and holdout spot positions
   double tolerance = 1e-9;  // relative residual of every forward solve
   int mask_margin = 2;      // front-lit: nodes masked around the lit region
+  Backend backend = Backend::kCpu;  // where the forward solves run
 
   std::string Validate() const;
 };

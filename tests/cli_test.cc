@@ -117,6 +117,16 @@ TEST_F(Cli, GlPlatformsCanBeForcedAndBadOnesAreNamed) {
   r = Translume("forward " + P("m.vdb") + " --backend gl -o " + P("L.exr"), "TRANSLUME_GL=osmesa");
   EXPECT_EQ(r.status, 0) << r.output;
   EXPECT_TRUE(fs::exists(P("L.exr")));
+  // simulate and solve on the gl backend: the same data as the cpu backend writes.
+  ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 2x2 --backend gl -o " + P("dg")).status, 0);
+  ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + P("dc")).status, 0);
+  const Dataset dg = ReadDataset(P("dg")), dc = ReadDataset(P("dc"));
+  for (size_t c = 0; c < dc.conditions.size(); ++c)
+    for (size_t p = 0; p < dc.conditions[c].L[1].size(); ++p)
+      EXPECT_NEAR(dg.conditions[c].L[1][p], dc.conditions[c].L[1][p], 1e-4 * dc.conditions[c].L[1][p]);
+  r = Translume("solve " + P("dg") + " --backend gl --max-iterations 3 -o " + P("rg.vdb"));
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_TRUE(fs::exists(P("rg.vdb")));
 }
 
 TEST_F(Cli, InfoSizesAGridAndRefusesWhatDoesNotFit) {

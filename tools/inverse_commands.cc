@@ -83,7 +83,7 @@ int RunSimulate(int argc, char** argv) {
                "(no inverse crime), radiance sampled back at the material's nodes, optional\n"
                "relative Gaussian noise and held-out spot lights in DATASET/holdout/.",
                "translume simulate"};
-  std::string material_path, lights = "4x4", setup = "back", out;
+  std::string material_path, lights = "4x4", setup = "back", backend = "cpu", out;
   SimulateOptions o;
   app.add_option("material", material_path, "Material file (.vdb): the truth, on the recovery grid")->required();
   app.add_option("--lights", lights, "Training lights: NxN regions of the lit face")->capture_default_str();
@@ -92,11 +92,15 @@ int RunSimulate(int argc, char** argv) {
   app.add_option("--oversample", o.oversample, "Forward grid refinement factor per axis")->capture_default_str();
   app.add_option("--holdout", o.holdout, "Held-out spot conditions to write into DATASET/holdout/")->capture_default_str();
   app.add_option("--seed", o.seed, "Noise and holdout seed")->capture_default_str();
+  app.add_option("--backend", backend, "cpu or gl (forward solves on the GPU; docs/gpu.md)")
+      ->capture_default_str();
   app.add_option("-o,--output", out, "Output dataset folder")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   o.lights = RegionLights(lights);
   o.setup = ParseSetup(setup);
+  o.backend = ParseBackend(backend);
+  if (o.backend == Backend::kGl) GlContext::Get();  // fail before any output
   if (std::string err = o.Validate(); !err.empty()) throw InputError("simulate: " + err);
   const Material m = ReadMaterial(material_path);
   const auto t0 = std::chrono::steady_clock::now();

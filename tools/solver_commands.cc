@@ -197,6 +197,9 @@ int RunBench(int argc, char** argv) {
   rec->add_flag("--full", full, "64x48x16 grids (slow) instead of the default 24x18x8");
   rec->add_option("--grid", rec_grid, "Recovery grid NXxNYxNZ (overrides --full)");
   rec->add_option("--presets", ro.presets, "Presets")->delimiter(',');
+  std::string rec_backend = "cpu";
+  rec->add_option("--backend", rec_backend, "cpu or gl: where the recoveries' solves run")
+      ->capture_default_str();
   rec->add_option("--spacing", ro.spacing_mm, "Node spacing h in mm")->capture_default_str();
   rec->add_option("--max-iterations", ro.recovery.max_iterations, "Iterations per recovery")
       ->capture_default_str();
@@ -212,6 +215,7 @@ int RunBench(int argc, char** argv) {
     if (full) ro.shape = {64, 48, 16};
     ro.run_cases = !comparison_only;
     if (!rec_grid.empty()) ro.shape = ParseGridShape(rec_grid, "--grid");
+    ro.recovery.backend = ParseBackend(rec_backend);
     if (std::string err = ro.recovery.Validate(); !err.empty()) throw InputError("bench recovery: " + err);
     std::fprintf(stderr, "bench recovery: grid %s, %d threads\n", ro.shape.ToString().c_str(), NumThreads());
     const RecoveryBenchResult r = RunRecoveryBench(ro, PrintBenchProgress);
