@@ -256,13 +256,6 @@ void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x) {
   Level& Cl = *levels_[l + 1];
   Restrict(L, L.r.data(), Cl.b.data());
   VCycle(l + 1, Cl.b.data(), Cl.x.data());
-  if (options_.cycle_index == 2 && l + 2 < levels_.size()) {
-    // W-cycle: a second coarse correction from the coarse residual (keeps symmetry).
-    std::vector<T> r2(Cl.b.size()), x2(Cl.b.size());
-    StencilResidual(Cl.A, Cl.b.data(), Cl.x.data(), r2.data());
-    VCycle(l + 1, r2.data(), x2.data());
-    for (size_t p = 0; p < x2.size(); ++p) Cl.x[p] += x2[p];
-  }
   ProlongAdd(L, Cl.x.data(), x);
   for (int s = 0; s < options_.post_smoothing; ++s) {
     Smooth(L, b, x, 1);

@@ -19,8 +19,6 @@ struct MultigridOptions {
   int post_smoothing = 2;
   // Stop coarsening at this many nodes; the coarsest level is solved exactly (sparse Cholesky).
   int64_t coarsest_nodes = 1500;
-  // 1: V-cycle, 2: W-cycle.
-  int cycle_index = 1;
   // Double solvers only: precondition with a float V-cycle (half the memory traffic of the
   // hierarchy; CG, the residuals and the iterate stay in double, so the accuracy is unchanged).
   bool mixed_precision = true;

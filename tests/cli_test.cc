@@ -101,7 +101,8 @@ TEST_F(Cli, DemoRunsThePipelineAndSaysWhereTheOutputsAre) {
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("held-out relighting error E ="), std::string::npos) << r.output;
   for (const char* f : {"truth.vdb", "recovered.vdb", "dataset/dataset.json",
-                        "dataset/holdout/dataset.json", "preview/recovered_uniform.png"})
+                        "dataset/holdout/dataset.json", "preview/recovered_uniform.png",
+                        "preview/recovered_sphere.png"})
     EXPECT_TRUE(fs::exists(P("demo/") + f)) << f;
 }
 
