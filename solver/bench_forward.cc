@@ -109,22 +109,36 @@ PeerResult RunJacobi(const Stencil<T>& A, const std::vector<T>& b, double tol, d
   return r;
 }
 
+// The benchmark problem on `shape`: the wax preset's green channel under uniform back light.
+struct BenchProblem {
+  Material material;
+  std::vector<double> b;  // right-hand side
+  explicit BenchProblem(const GridShape& shape) {
+    SynthOptions so;
+    so.preset = "wax";
+    so.shape = shape;
+    material = SynthesizeMaterial(so);
+    const Material& m = material;
+    const std::vector<float> q = RasterizeLight(LightSpec::Parse("uniform"), shape, m.spacing_mm);
+    b.resize(shape.size());
+    LitFaceSource(TensorGrid::Uniform(shape, m.spacing_mm), shape.nz - 1, m.C, q.data(), b.data());
+  }
+  template <typename T>
+  std::vector<T> Field(const std::vector<float>& v) const { return {v.begin(), v.end()}; }
+};
+
 template <typename T>
 ForwardBenchRow BenchOne(const GridShape& shape, const ForwardBenchOptions& o,
                          void (*progress)(const std::string&)) {
-  SynthOptions so;
-  so.preset = "wax";
-  so.shape = shape;
-  const Material m = SynthesizeMaterial(so);
+  const BenchProblem problem(shape);
+  const Material& m = problem.material;
   const int64_t n = shape.size();
-  std::vector<T> kappa(m.kappa[1].begin(), m.kappa[1].end()), mu(m.mu[1].begin(), m.mu[1].end());
+  const std::vector<T> kappa = problem.Field<T>(m.kappa[1]), mu = problem.Field<T>(m.mu[1]);
   MultigridOptions mo;
   mo.tolerance = o.tolerance;
   MultigridSolver<T> solver(shape, m.spacing_mm, mo);
   solver.SetCoefficients(kappa.data(), mu.data(), m.C);
-  std::vector<T> b(n), x(n), y(n);
-  const std::vector<float> q = RasterizeLight(LightSpec::Parse("uniform"), shape, m.spacing_mm);
-  LitFaceSource(solver.grid(), shape.nz - 1, m.C, q.data(), b.data());
+  std::vector<T> b(problem.b.begin(), problem.b.end()), x(n), y(n);
 
   ForwardBenchRow row;
   row.shape = shape;
@@ -176,18 +190,14 @@ ForwardBenchRow BenchOne(const GridShape& shape, const ForwardBenchOptions& o,
 // requested, in the same process) as the peer.
 ForwardBenchRow BenchGl(const GridShape& shape, const ForwardBenchOptions& o,
                         void (*progress)(const std::string&)) {
-  SynthOptions so;
-  so.preset = "wax";
-  so.shape = shape;
-  const Material m = SynthesizeMaterial(so);
+  const BenchProblem problem(shape);
+  const Material& m = problem.material;
   const int64_t n = shape.size();
   MultigridOptions mo;
   mo.tolerance = o.tolerance;
   GlMultigridSolver solver(shape, m.spacing_mm, mo);
   solver.SetCoefficients(m.kappa[1].data(), m.mu[1].data(), m.C);
-  std::vector<float> b(n), x(n);
-  const std::vector<float> q = RasterizeLight(LightSpec::Parse("uniform"), shape, m.spacing_mm);
-  LitFaceSource(TensorGrid::Uniform(shape, m.spacing_mm), shape.nz - 1, m.C, q.data(), b.data());
+  std::vector<float> b(problem.b.begin(), problem.b.end()), x(n);
   ForwardBenchRow row;
   row.shape = shape;
   row.levels = solver.num_levels();

@@ -2,9 +2,7 @@
 // Runs `translume calibrate ...` and `translume hdr` on synthetic photos, and on bad inputs.
 #include <fmt/format.h>
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
-#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -17,6 +15,7 @@
 #include "calib/projector_calib.h"
 #include "calib/synthetic_rig.h"
 #include "calib/white.h"
+#include "tests/cli_harness.h"
 
 namespace translume {
 namespace {
@@ -24,23 +23,8 @@ namespace {
 namespace fs = std::filesystem;
 using namespace translume::calib;
 
-struct CommandRun {
-  int status = -1;
-  std::string output;  // stdout and stderr
-};
-
-CommandRun Translume(const std::string& args) {
-  CommandRun r;
-  const std::string cmd = std::string(TRANSLUME_BINARY) + " " + args + " 2>&1";
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (!pipe) return r;
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) r.output.append(buf.data(), n);
-  const int st = pclose(pipe);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  return r;
-}
+using testing_cli::CommandRun;
+using testing_cli::Translume;
 
 std::string ReadAll(const std::string& path) {
   std::ifstream f(path);
@@ -49,22 +33,12 @@ std::string ReadAll(const std::string& path) {
   return s.str();
 }
 
-class CalibCli : public ::testing::Test {
+class CalibCli : public testing_cli::CliTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("translume_calib_cli_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string P(const std::string& name) const { return (dir_ / name).string(); }
   // A failed command: exit 1 or 2, exactly one line of output naming `what`; the sentinel
   // output file is unchanged and no temporary file is left.
   void ExpectOneLineError(const CommandRun& r, const std::string& what) {
-    EXPECT_TRUE(r.status == 1 || r.status == 2) << r.output;
-    EXPECT_NE(r.output.find(what), std::string::npos) << r.output;
-    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+    CliTest::ExpectOneLineError(r, what);
     EXPECT_EQ(ReadAll(P("out.yml")), "sentinel");
     EXPECT_EQ(ReadAll(P("out.exr")), "sentinel");
     for (const auto& e : fs::recursive_directory_iterator(dir_))
@@ -87,7 +61,6 @@ class CalibCli : public ::testing::Test {
     }
     if (json) std::ofstream(P(name + "/exposures.json")) << j << "}";
   }
-  fs::path dir_;
 };
 
 cv::Mat Ramp(int w, int h) {

@@ -1,9 +1,7 @@
 // SPDX-License-Identifier: MIT
 // Runs the `translume` binary as a user would.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
-#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -11,6 +9,7 @@
 #include <string>
 
 #include "solver/dataset.h"
+#include "tests/cli_harness.h"
 #include "solver/image_io.h"
 #include "solver/material_io.h"
 
@@ -19,42 +18,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CommandRun {
-  int status = -1;
-  std::string output;  // stdout and stderr
-};
+using testing_cli::CommandRun;
+using testing_cli::Translume;
 
-CommandRun Translume(const std::string& args, const std::string& env = "") {
-  CommandRun r;
-  const std::string cmd = env + " " + std::string(TRANSLUME_BINARY) + " " + args + " 2>&1";
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (!pipe) return r;
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) r.output.append(buf.data(), n);
-  const int st = pclose(pipe);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  return r;
-}
-
-class Cli : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("translume_cli_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string P(const std::string& name) const { return (dir_ / name).string(); }
-  // A failed command: exit 1 or 2, exactly one line of output naming `what`.
-  void ExpectOneLineError(const CommandRun& r, const std::string& what) {
-    EXPECT_TRUE(r.status == 1 || r.status == 2) << r.output;
-    EXPECT_NE(r.output.find(what), std::string::npos) << r.output;
-    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
-  }
-  fs::path dir_;
-};
+class Cli : public testing_cli::CliTest {};
 
 TEST_F(Cli, SynthThenForwardWritesRadiance) {
   CommandRun r = Translume("synth --preset layered --grid 20x16x8 --spacing 0.4 -o " + P("m.vdb"));
