@@ -249,11 +249,13 @@ SolveSummary GlMultigridSolver::Impl::SolveDevice(const Buffer& b, Buffer& x) {
   Dot(r, r, 1);
   ReadResults(v, 2);
   const double bnorm = std::sqrt(v[0]);
-  auto finish = [&](bool converged, std::string message) {
-    Stencil(L, x, b, r, 0, true);
-    Dot(r, r, 0);
-    double rr;
-    ReadResults(&rr, 1);
+  // `rr`: ||b - A x||^2 if the caller has just computed it, else < 0.
+  auto finish = [&](bool converged, std::string message, double rr = -1) {
+    if (rr < 0) {
+      Stencil(L, x, b, r, 0, true);
+      Dot(r, r, 0);
+      ReadResults(&rr, 1);
+    }
     sum.final_residual = bnorm > 0 ? std::sqrt(rr) / bnorm : 0.0;
     sum.converged = converged;
     sum.message = std::move(message);
@@ -263,10 +265,10 @@ SolveSummary GlMultigridSolver::Impl::SolveDevice(const Buffer& b, Buffer& x) {
   if (bnorm == 0) {
     std::vector<double> zeros(n, 0.0);
     x.Upload(zeros.data(), n * 8);
-    return finish(true, "zero right-hand side");
+    return finish(true, "zero right-hand side", 0.0);
   }
   sum.initial_residual = std::sqrt(v[1]) / bnorm;
-  if (sum.initial_residual <= options.tolerance) return finish(true, "");
+  if (sum.initial_residual <= options.tolerance) return finish(true, "", v[1]);
   const double tol = options.tolerance * bnorm;
   int restarts = 0;
   double rz = 0;
@@ -296,8 +298,8 @@ SolveSummary GlMultigridSolver::Impl::SolveDevice(const Buffer& b, Buffer& x) {
       Dot(r, r, 0);
       double rr;
       ReadResults(&rr, 1);
-      if (std::sqrt(rr) <= tol) return finish(true, "");
-      if (++restarts > 3) return finish(false, "stagnated");
+      if (std::sqrt(rr) <= tol) return finish(true, "", rr);
+      if (++restarts > 3) return finish(false, "stagnated", rr);
       restart();
       continue;
     }

@@ -280,10 +280,14 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
     x = x_store.data();
   }
   SolveSummary sum;
-  auto finish = [&](bool converged, std::string message) {
-    StencilResidual(L0.A, b, x, r_.data());
-    const double bn = std::sqrt(Dot(b, b, n));
-    sum.final_residual = bn > 0 ? std::sqrt(Dot(r_.data(), r_.data(), n)) / bn : 0.0;
+  const double bnorm = std::sqrt(Dot(b, b, n));
+  // `true_rnorm`: ||b - A x|| if the caller has just computed it, else < 0.
+  auto finish = [&](bool converged, std::string message, double true_rnorm = -1) {
+    if (true_rnorm < 0) {
+      StencilResidual(L0.A, b, x, r_.data());
+      true_rnorm = std::sqrt(Dot(r_.data(), r_.data(), n));
+    }
+    sum.final_residual = bnorm > 0 ? true_rnorm / bnorm : 0.0;
     sum.converged = converged;
     sum.message = std::move(message);
     if constexpr (!std::is_same_v<T, double>)
@@ -291,10 +295,9 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
     sum.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return sum;
   };
-  const double bnorm = std::sqrt(Dot(b, b, n));
   if (bnorm == 0) {
     std::fill(x, x + n, 0.0);
-    return finish(true, "zero right-hand side");
+    return finish(true, "zero right-hand side", 0.0);
   }
   T* r = r_.data();
   T* z = z_.data();
@@ -303,7 +306,7 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
   StencilResidual(L0.A, b, x, r);
   double rnorm = std::sqrt(Dot(r, r, n));
   sum.initial_residual = rnorm / bnorm;
-  if (sum.initial_residual <= options_.tolerance) return finish(true, "");
+  if (sum.initial_residual <= options_.tolerance) return finish(true, "", rnorm);
   const double tol = options_.tolerance * bnorm;
   int restarts = 0;
   bool restart = true;
@@ -331,8 +334,8 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
       // The recursive residual drifts: confirm with the true one.
       StencilResidual(L0.A, b, x, r);
       rnorm = std::sqrt(Dot(r, r, n));
-      if (rnorm <= tol) return finish(true, "");
-      if (++restarts > 3) return finish(false, "stagnated");
+      if (rnorm <= tol) return finish(true, "", rnorm);
+      if (++restarts > 3) return finish(false, "stagnated", rnorm);
       restart = true;
       continue;
     }

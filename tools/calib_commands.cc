@@ -27,13 +27,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-void RequireExtension(const std::string& path, std::initializer_list<const char*> exts,
-                      const char* flag) {
-  const std::string e = fs::path(path).extension().string();
-  for (const char* x : exts)
-    if (e == x) return;
-  throw calib::CalibError(fmt::format("{} {}: the output must end in {}", flag, path, *exts.begin()));
-}
 
 // Refuses an output that would replace one of the inputs or land inside an input folder.
 void RequireNotInput(const std::string& out, const std::vector<std::string>& inputs) {

@@ -28,6 +28,13 @@ int RunEdit(int argc, char** argv);
 
 // Options every subcommand takes (--threads).
 void AddCommonOptions(CLI::App& app);
+// The lower-case extension of `path` (".png"), or "" if it has none.
+std::string Extension(const std::string& path);
+// Throws InputError "FLAG PATH: the output must end in EXT" unless `path` ends in one of `exts`
+// (case-insensitive).
+void RequireExtension(const std::string& path, std::initializer_list<const char*> exts,
+                      const char* flag);
+
 // Parses argv into app; on --help prints and returns true (caller exits 0).
 bool ParseOrHelp(CLI::App& app, int argc, char** argv);
 

@@ -138,7 +138,7 @@ int RunSolve(int argc, char** argv) {
   app.add_option("--init", init, "Start from this material (.vdb) instead of the homogeneous fit");
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  if (fs::path(out).extension() != ".vdb") throw InputError(fmt::format("-o {}: the output must end in .vdb", out));
+  RequireExtension(out, {".vdb"}, "-o");
   o.optimizer = ParseOptimizer(optimizer);
   o.regularizer.kind = ParseRegularizer(regularizer);
   o.backend = ParseBackend(backend);

@@ -19,13 +19,6 @@
 namespace translume {
 namespace {
 
-std::string Extension(const std::string& path) {
-  const auto dot = path.rfind('.');
-  std::string ext = dot == std::string::npos ? "" : path.substr(dot);
-  std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
-  return ext;
-}
-
 // OUT.png -> OUT_007.png for turntable frames.
 std::string FramePath(const std::string& path, int frame, int frames) {
   if (frames <= 1) return path;
@@ -118,7 +111,7 @@ int RunRender(int argc, char** argv) {
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   const std::string ext = Extension(out);
-  if (ext != ".png" && ext != ".exr") throw InputError("-o " + out + ": expected a .png or .exr file");
+  RequireExtension(out, {".png", ".exr"}, "-o");
   if (std::sscanf(image.c_str(), "%dx%d", &ro.width, &ro.height) != 2)
     throw InputError("--image " + image + ": expected WxH");
   if (!camera.empty() && std::sscanf(camera.c_str(), "%lf,%lf", &ro.azimuth_deg, &ro.elevation_deg) != 2)
@@ -203,7 +196,7 @@ int RunEdit(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output material (.vdb)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  if (Extension(out) != ".vdb") throw InputError("-o " + out + ": expected a .vdb file");
+  RequireExtension(out, {".vdb"}, "-o");
   EditOptions eo;
   for (const auto& s : scales) eo.ParseTerm(s, false);
   for (const auto& a : adds) eo.ParseTerm(a, true);

@@ -50,10 +50,6 @@ void WritePreview(const std::string& path, const GridShape& s, const FacePattern
   WriteImage(path, ImageFromPlanes(int(s.nx), int(s.ny), {t[0].data(), t[1].data(), t[2].data()}));
 }
 
-void RequireOutputExtension(const std::string& path, const std::string& ext, const char* flag) {
-  if (std::filesystem::path(path).extension() != ext)
-    throw InputError(fmt::format("{} {}: the output must end in {}", flag, path, ext));
-}
 
 }  // namespace
 
@@ -72,7 +68,7 @@ int RunSynth(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output material file (.vdb)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  RequireOutputExtension(out, ".vdb", "-o");
+  RequireExtension(out, {".vdb"}, "-o");
   if (!grid.empty()) o.shape = ParseGridShape(grid, "--grid");
   const GridShape shape = o.shape.size() > 0 ? o.shape : DefaultSynthShape(o.preset);
   // The material (RGB kappa, mu) plus OpenVDB's copy while writing.
@@ -101,7 +97,7 @@ int RunForward(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output radiance image (.exr)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  RequireOutputExtension(out, ".exr", "-o");
+  RequireExtension(out, {".exr"}, "-o");
   ForwardOptions fo;
   fo.setup = ParseSetup(setup);
   fo.backend = ParseBackend(backend);
