@@ -106,6 +106,7 @@ void WriteWithOiio(const std::string& path, const cv::Mat& image, OIIO::TypeDesc
   if (!out) throw CalibError(fmt::format("{}: cannot write: {}", path, FirstLine(OIIO::geterror())));
   OIIO::ImageSpec spec(c.cols, c.rows, c.channels(), type);
   if (c.channels() == 3) spec.channelnames = {"R", "G", "B"};
+  spec.attribute("png:compressionLevel", 1);  // photos: fast to write, barely larger
   if (!out->open(path, spec) || !out->write_image(type, c.data) || !out->close())
     throw CalibError(fmt::format("{}: cannot write: {}", path, FirstLine(out->geterror())));
 }
@@ -120,6 +121,11 @@ void WriteExr(const std::string& path, const cv::Mat& rgb) {
 void WriteImage8(const std::string& path, const cv::Mat& image) {
   CV_Assert(image.type() == CV_8UC1 || image.type() == CV_8UC3);
   WriteWithOiio(path, image, OIIO::TypeDesc::UINT8);
+}
+
+void WritePhoto(const std::string& path, const cv::Mat& image) {
+  CV_Assert(image.depth() == CV_8U || image.depth() == CV_16U);
+  WriteWithOiio(path, image, image.depth() == CV_8U ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16);
 }
 
 ExposureStack ReadExposureStack(const std::string& dir) {

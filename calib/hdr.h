@@ -35,6 +35,8 @@ cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds = nullptr);
 void WriteExr(const std::string& path, const cv::Mat& rgb);
 // Writes an 8-bit grey (CV_8UC1) or RGB (CV_8UC3) image; format from the extension.
 void WriteImage8(const std::string& path, const cv::Mat& image);
+// Writes an 8-bit or 16-bit grey or RGB photo (16-bit: PNG or TIFF); format from the extension.
+void WritePhoto(const std::string& path, const cv::Mat& image);
 // Reads an image as linear float RGB (CV_32FC3; integer files scaled to [0, 1]).
 cv::Mat ReadLinearRgb(const std::string& path);
 

@@ -67,7 +67,10 @@ ProjectorCalibration CalibrateProjector(const CameraCalibration& camera, const B
       pc.dropped.push_back(v.name + ": printed board not found");
       continue;
     }
-    const std::vector<cv::Point2f> c = FindChessboardGrid(v.pattern_photo, pattern.cols, pattern.rows);
+    std::vector<cv::Point2f> c = FindChessboardGrid(v.pattern_photo, pattern.cols, pattern.rows);
+    if (o.rear_projection)
+      for (size_t r = 0; r < c.size(); r += size_t(pattern.cols))
+        std::reverse(c.begin() + long(r), c.begin() + long(r) + pattern.cols);
     if (c.empty()) {
       pc.dropped.push_back(v.name + ": projected pattern not found");
       continue;

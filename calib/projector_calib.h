@@ -27,6 +27,10 @@ struct ProjectorCalibOptions {
   double outlier_min_px = 0.5;   // ... and > this
   bool fix_k3 = true;            // projector distortion: k1, k2 (and p1, p2 unless zero_tangent)
   bool zero_tangent = true;
+  // Rear projection (the back-lit setup): the projector lights the plane (a thin diffusing
+  // screen) from the side opposite the camera, so the camera sees the projected pattern
+  // mirrored left-right; each detected row of corners is reversed to match the projector's.
+  bool rear_projection = false;
   std::string Validate() const;
 };
 

@@ -358,25 +358,40 @@ std::vector<cv::Mat> SyntheticRig::RenderExposureStack(const cv::Mat& radiance,
                                                        const SyntheticResponse& response,
                                                        const StackOptions& o) {
   CV_Assert(radiance.type() == CV_32FC3);
-  std::mt19937_64 rng(o.seed);
-  std::normal_distribution<double> G(0.0, 1.0);
-  // Lookup of the response's inverse is not needed: codes are computed forward.
+  // 8-bit codes through a table of the response over 2^16 linear levels (far finer than a
+  // code step anywhere on the curve).
+  constexpr int kLevels = 65536;
+  std::vector<uint8_t> lut;
+  if (o.bits == 8) {
+    lut.resize(3 * kLevels);
+    for (int c = 0; c < 3; ++c)
+      for (int i = 0; i < kLevels; ++i)
+        lut[size_t(c * kLevels + i)] = uint8_t(std::lround(255 * response.Apply(double(i) / (kLevels - 1), c)));
+  }
   std::vector<cv::Mat> out;
-  for (double t : seconds) {
+  for (size_t e = 0; e < seconds.size(); ++e) {
+    const double t = seconds[e];
     cv::Mat img(radiance.size(), o.bits == 8 ? CV_8UC3 : CV_16UC3);
-    for (int y = 0; y < radiance.rows; ++y)
-      for (int x = 0; x < radiance.cols; ++x) {
-        const cv::Vec3f E = radiance.at<cv::Vec3f>(y, x);
-        for (int c = 0; c < 3; ++c) {
-          const double s = double(E[c]) * t;
-          const double sd = std::sqrt(o.read_noise * o.read_noise + o.shot_noise * std::max(s, 0.0));
-          const double v = std::clamp(s + sd * G(rng), 0.0, 1.0);
-          if (o.bits == 8)
-            img.at<cv::Vec3b>(y, x)[c] = uint8_t(std::lround(255 * response.Apply(v, c)));
-          else
-            img.at<cv::Vec3w>(y, x)[c] = uint16_t(std::lround(65535 * v));
+    // Rows in parallel, each with its own generator seeded from (seed, exposure, row).
+    cv::parallel_for_(cv::Range(0, radiance.rows), [&](const cv::Range& r) {
+      for (int y = r.start; y < r.end; ++y) {
+        std::mt19937_64 rng(o.seed * 0x9E3779B97F4A7C15ull + e * 0x100000001B3ull + uint64_t(y));
+        std::normal_distribution<double> G(0.0, 1.0);
+        for (int x = 0; x < radiance.cols; ++x) {
+          const cv::Vec3f E = radiance.at<cv::Vec3f>(y, x);
+          for (int c = 0; c < 3; ++c) {
+            const double s = double(E[c]) * t;
+            const double sd = std::sqrt(o.read_noise * o.read_noise + o.shot_noise * std::max(s, 0.0));
+            const double v = std::clamp(s + sd * G(rng), 0.0, 1.0);
+            const int level = int(std::lround(v * (kLevels - 1)));
+            if (o.bits == 8)
+              img.at<cv::Vec3b>(y, x)[c] = lut[size_t(c * kLevels + level)];
+            else
+              img.at<cv::Vec3w>(y, x)[c] = uint16_t(level);
+          }
         }
       }
+    });
     out.push_back(img);
   }
   return out;

@@ -28,6 +28,8 @@ struct Pose {
   cv::Vec3d t{0, 0, 0};
   cv::Vec3d Apply(const cv::Vec3d& x) const { return R * x + t; }
   Pose Inverse() const;
+  // Composition: (a_from_b * b_from_c) is a_from_c.
+  Pose operator*(const Pose& b) const { return {R * b.R, R * b.t + t}; }
   // From a Rodrigues rotation vector (radians) and a translation.
   static Pose FromRodrigues(const cv::Vec3d& rvec, const cv::Vec3d& t);
 };

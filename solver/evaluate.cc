@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "solver/evaluate.h"
 
+#include <algorithm>
 #include <cmath>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -122,6 +123,45 @@ std::string EvaluationJson(const EvaluationReport& r) {
   j["kappa_layer_error"] = r.kappa_layer_error;
   j["mu_layer_error"] = r.mu_layer_error;
   return j.dump(2);
+}
+
+DatasetMismatch CompareDatasets(const Dataset& a, const Dataset& b) {
+  if (a.shape.nx != b.shape.nx || a.shape.ny != b.shape.ny)
+    throw InputError(fmt::format("datasets differ in grid: {} vs {}", a.shape.ToString(), b.shape.ToString()));
+  DatasetMismatch r;
+  std::vector<FacePattern> La, Lb, qa, qb;
+  std::vector<std::vector<float>> w;
+  for (const DatasetCondition& cb : b.conditions) {
+    const auto it = std::find_if(a.conditions.begin(), a.conditions.end(),
+                                 [&](const DatasetCondition& c) { return c.name == cb.name; });
+    if (it == a.conditions.end()) throw InputError("condition " + cb.name + " is missing from the measured dataset");
+    std::vector<float> mask(size_t(b.shape.face_size()), 1.0f);
+    for (size_t f = 0; f < mask.size(); ++f) {
+      if (!it->mask.empty()) mask[f] *= it->mask[f];
+      if (!cb.mask.empty()) mask[f] *= cb.mask[f];
+    }
+    r.condition_L_rms.push_back(std::sqrt(RelightingError({it->L}, {cb.L}, {mask})));
+    r.condition_q_rms.push_back(std::sqrt(RelightingError({it->q}, {cb.q})));
+    La.push_back(it->L);
+    Lb.push_back(cb.L);
+    qa.push_back(it->q);
+    qb.push_back(cb.q);
+    w.push_back(mask);
+  }
+  r.L_rms = std::sqrt(RelightingError(La, Lb, w));
+  r.q_rms = std::sqrt(RelightingError(qa, qb));
+  for (size_t c = 0; c < 3; ++c) {
+    double ab = 0, bb = 0, aa = 0;
+    for (size_t m = 0; m < La.size(); ++m)
+      for (size_t f = 0; f < w[m].size(); ++f) {
+        ab += w[m][f] * double(La[m][c][f]) * Lb[m][c][f];
+        bb += w[m][f] * double(Lb[m][c][f]) * Lb[m][c][f];
+        aa += w[m][f] * double(La[m][c][f]) * La[m][c][f];
+      }
+    r.L_scale[c] = bb > 0 ? ab / bb : 0;
+    r.L_rms_after_scale[c] = bb > 0 ? std::sqrt(std::max(0.0, aa - ab * ab / bb) / bb) : 0;
+  }
+  return r;
 }
 
 }  // namespace translume

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -42,5 +43,18 @@ EvaluationReport EvaluateRecovery(const Material& recovered, const Material* tru
 
 std::string EvaluationTable(const EvaluationReport& report);
 std::string EvaluationJson(const EvaluationReport& report);
+
+// How far a dataset built from photos is from a reference one (e.g. the simulator's own
+// node-space data): relative RMS errors sqrt(sum w (a - b)^2 / sum w b^2) of L (w: the product
+// of both masks) and of q (w = 1), over the conditions of `reference`, matched by name. Throws
+// InputError naming the missing condition or a grid mismatch.
+struct DatasetMismatch {
+  double L_rms = 0, q_rms = 0;
+  std::vector<double> condition_L_rms, condition_q_rms;
+  // Per channel, the least-squares scale of measured L against the reference (1: no gain
+  // error; a white-balance or exposure error shows here) and the relative RMS left after it.
+  std::array<double, 3> L_scale{}, L_rms_after_scale{};
+};
+DatasetMismatch CompareDatasets(const Dataset& measured, const Dataset& reference);
 
 }  // namespace translume

@@ -3,6 +3,9 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include <algorithm>
+#include <array>
+#include <cmath>
 #include <filesystem>
 #include <fmt/format.h>
 
@@ -62,6 +65,41 @@ Image ImageFromPlanes(int width, int height, const std::vector<const float*>& pl
   for (size_t p = 0; p < size_t(width) * height; ++p)
     for (int c = 0; c < img.channels; ++c) img.data[p * img.channels + c] = planes[c][p];
   return img;
+}
+
+void WriteRadiancePreview(const std::string& path, const GridShape& s, const FacePattern& L, float top) {
+  std::vector<float> all;
+  for (const auto& ch : L) all.insert(all.end(), ch.begin(), ch.end());
+  std::sort(all.begin(), all.end());
+  if (!(top > 0)) top = std::max(all[size_t(0.995 * (all.size() - 1))], 1e-30f);
+  FacePattern t = L;
+  for (auto& ch : t)
+    for (float& v : ch) v = std::pow(std::clamp(v / top, 0.0f, 1.0f), 1.0f / 2.2f);
+  WriteImage(path, ImageFromPlanes(int(s.nx), int(s.ny), {t[0].data(), t[1].data(), t[2].data()}));
+}
+
+std::vector<std::string> WriteMaterialSlices(const std::string& prefix, const Material& m) {
+  const GridShape& s = m.shape;
+  std::vector<int64_t> depths = {0, s.nz / 4, s.nz / 2, 3 * s.nz / 4, s.nz - 1};
+  depths.erase(std::unique(depths.begin(), depths.end()), depths.end());
+  std::vector<std::string> written;
+  for (auto [name, field] : {std::pair{"kappa", &m.kappa}, std::pair{"mu", &m.mu}}) {
+    float top = 0;
+    for (const auto& ch : *field) top = std::max(top, *std::max_element(ch.begin(), ch.end()));
+    for (int64_t k : depths) {
+      std::array<std::vector<float>, 3> planes;
+      for (int c = 0; c < 3; ++c) {
+        planes[c].resize(s.face_size());
+        for (int64_t f = 0; f < s.face_size(); ++f)
+          planes[c][f] = (*field)[c][f + s.face_size() * k] / top;
+      }
+      const std::string path = fmt::format("{}_{}_k{:02d}.png", prefix, name, k);
+      WriteImage(path, ImageFromPlanes(int(s.nx), int(s.ny),
+                                       {planes[0].data(), planes[1].data(), planes[2].data()}));
+      written.push_back(path);
+    }
+  }
+  return written;
 }
 
 }  // namespace translume

@@ -6,7 +6,9 @@
 
 #include "solver/grid.h"
 #include "solver/image.h"
+#include "solver/forward.h"
 #include "solver/light.h"
+#include "solver/material.h"
 
 namespace translume {
 
@@ -23,5 +25,15 @@ std::vector<float> RasterizeLightFile(const LightSpec& spec, const GridShape& sh
 
 // Channel-separated planes (each width*height, row-major) to an interleaved image.
 Image ImageFromPlanes(int width, int height, const std::vector<const float*>& planes);
+
+// An 8-bit preview of front-face radiance (nx x ny, RGB): divided by `top` (<= 0: the 99.5th
+// percentile of L), clamped to [0, 1], gamma 1/2.2.
+void WriteRadiancePreview(const std::string& path, const GridShape& shape, const FacePattern& L,
+                          float top = 0);
+
+// 8-bit PNG slices of kappa and mu at depths 0, nz/4, nz/2, 3nz/4 and nz-1, RGB = channels,
+// each quantity scaled by its maximum over the volume: PREFIX_kappa_kNN.png, PREFIX_mu_kNN.png.
+// Returns the paths written.
+std::vector<std::string> WriteMaterialSlices(const std::string& prefix, const Material& material);
 
 }  // namespace translume

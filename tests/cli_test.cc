@@ -64,13 +64,25 @@ TEST_F(Cli, BadArgumentsGiveOneLineAndNoOutput) {
 }
 
 TEST_F(Cli, DemoRunsThePipelineAndSaysWhereTheOutputsAre) {
-  const CommandRun r = Translume("demo --grid 12x10x5 --max-iterations 20 -o " + P("demo"));
+  const CommandRun r = Translume("demo --grid 12x10x5 --lights 2x2 --max-iterations 20 -o " + P("demo"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("held-out relighting error E ="), std::string::npos) << r.output;
-  for (const char* f : {"truth.vdb", "recovered.vdb", "dataset/dataset.json",
-                        "dataset/holdout/dataset.json", "preview/recovered_uniform.png",
-                        "preview/recovered_sphere.png"})
+  EXPECT_NE(r.output.find("mapping from photos: L within"), std::string::npos) << r.output;
+  for (const char* f : {"capture/capture.json", "capture/truth/material.vdb", "capture/lighting/03/t09.png",
+                        "recovered.vdb", "recovered_work/dataset/dataset.json", "recovered_work/report.json",
+                        "recovered_work/previews/fit_00.png", "recovered_sphere.png"})
     EXPECT_TRUE(fs::exists(P("demo/") + f)) << f;
+}
+
+TEST_F(Cli, CapturePipelineErrorsAreOneLine) {
+  ASSERT_EQ(Translume("synth --preset marble --grid 12x10x5 -o " + P("m.vdb")).status, 0);
+  fs::create_directories(P("full"));
+  std::ofstream(P("full/x.txt")) << "x";
+  ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " -o " + P("full")),
+                     "exists and is not empty");
+  ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " --lights 3 -o " + P("c")), "3");
+  ExpectOneLineError(Translume("acquire " + P("nowhere") + " -o " + P("out.vdb")), "capture.json");
+  ExpectOneLineError(Translume("acquire " + P("full") + " -o " + P("out.exr")), "-o");
 }
 
 TEST_F(Cli, GlPlatformsCanBeForcedAndBadOnesAreNamed) {

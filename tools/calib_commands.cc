@@ -16,6 +16,7 @@
 #include "calib/camera_calib.h"
 #include "calib/error.h"
 #include "calib/hdr.h"
+#include "calib/photo_io.h"
 #include "calib/projector_calib.h"
 #include "calib/white.h"
 #include "solver/atomic_file.h"
@@ -54,73 +55,6 @@ int OneLineErrors(F&& f) {
   }
 }
 
-// An 8-bit grey version of any photo.
-cv::Mat ReadGray8(const std::string& path) {
-  cv::Mat rgb = calib::ReadRgbImage(path);
-  cv::Mat gray8;
-  if (rgb.depth() == CV_16U) rgb.convertTo(rgb, CV_8U, 1.0 / 257);
-  else if (rgb.depth() == CV_32F) rgb.convertTo(rgb, CV_8U, 255);
-  cv::cvtColor(rgb, gray8, cv::COLOR_RGB2GRAY);
-  return gray8;
-}
-
-std::vector<calib::NamedImage> ReadPhotos(const std::string& dir) {
-  if (!fs::is_directory(dir)) throw calib::CalibError(dir + ": not a folder");
-  std::vector<fs::path> files;
-  for (const auto& e : fs::directory_iterator(dir)) {
-    std::string ext = e.path().extension().string();
-    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-    if (e.is_regular_file() && (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" ||
-                                ext == ".tiff" || ext == ".bmp"))
-      files.push_back(e.path());
-  }
-  std::sort(files.begin(), files.end());
-  if (files.empty()) throw calib::CalibError(dir + ": no photos (.png, .jpg, .tif, .bmp)");
-  std::vector<calib::NamedImage> views;
-  for (const fs::path& p : files) views.push_back({p.string(), ReadGray8(p.string())});
-  return views;
-}
-
-// Plane photos: NAME_board.EXT and NAME_pattern.EXT pairs in one folder.
-std::vector<calib::PlaneView> ReadPlanes(const std::string& dir) {
-  std::vector<calib::NamedImage> photos = ReadPhotos(dir);
-  std::map<std::string, calib::PlaneView> planes;
-  for (calib::NamedImage& p : photos) {
-    const std::string stem = fs::path(p.name).stem().string();
-    const size_t us = stem.rfind('_');
-    const std::string kind = us == std::string::npos ? "" : stem.substr(us + 1);
-    if (kind != "board" && kind != "pattern")
-      throw calib::CalibError(p.name + ": plane photos must be named NAME_board.EXT or "
-                              "NAME_pattern.EXT");
-    calib::PlaneView& v = planes[stem.substr(0, us)];
-    v.name = (fs::path(dir) / stem.substr(0, us)).string();
-    (kind == "board" ? v.board_photo : v.pattern_photo) = p.image;
-  }
-  std::vector<calib::PlaneView> out;
-  for (auto& [name, v] : planes) {
-    if (v.board_photo.empty() || v.pattern_photo.empty())
-      throw calib::CalibError(fmt::format("{}: plane has no {} photo", v.name,
-                                          v.board_photo.empty() ? "_board" : "_pattern"));
-    out.push_back(v);
-  }
-  return out;
-}
-
-// "COLSxROWS:SQUARE_PX" centred on a projector of `size`.
-calib::ProjectorChessboard ParsePattern(const std::string& text, const std::string& size) {
-  std::smatch m, n;
-  static const std::regex pat(R"((\d+)x(\d+):(\d+))"), wh(R"((\d+)x(\d+))");
-  if (!std::regex_match(text, m, pat))
-    throw calib::CalibError(fmt::format("--pattern {}: expected COLSxROWS:SQUARE_PX", text));
-  if (!std::regex_match(size, n, wh))
-    throw calib::CalibError(fmt::format("--projector-size {}: expected WIDTHxHEIGHT", size));
-  const calib::ProjectorChessboard b = calib::ProjectorChessboard::Centered(
-      {std::stoi(n[1]), std::stoi(n[2])}, std::stoi(m[1]), std::stoi(m[2]), std::stoi(m[3]));
-  if (std::string why = b.Validate(); !why.empty())
-    throw calib::CalibError(fmt::format("--pattern {}: {}", text, why));
-  return b;
-}
-
 int RunCalibrateCamera(int argc, char** argv) {
   CLI::App app{"Camera intrinsics (Zhang) from photos of a printed board in a folder.\n"
                "Boards: chessboard:COLSxROWS:SQUARE_MM (inner corners) or\n"
@@ -141,7 +75,7 @@ int RunCalibrateCamera(int argc, char** argv) {
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   RequireNotInput(out, {dir});
   const calib::BoardSpec board = calib::BoardSpec::Parse(board_text);
-  const calib::CameraCalibration c = calib::CalibrateCamera(board, ReadPhotos(dir), o);
+  const calib::CameraCalibration c = calib::CalibrateCamera(board, calib::ReadPhotoFolder(dir), o);
   WriteAtomically(out, [&](const std::string& tmp) {
     calib::WriteCameraCalibration(tmp, c, board.ToString());
   });
@@ -166,12 +100,14 @@ int RunCalibrateProjector(int argc, char** argv) {
                  "corners), centred")->capture_default_str();
   app.add_option("--projector-size", size, "Projector resolution WxH")->capture_default_str();
   app.add_option("--min-planes", o.min_planes, "Fewest usable planes")->capture_default_str();
+  app.add_flag("--rear", o.rear_projection, "Rear projection (back-lit rig): the projector lights "
+               "the plane, a diffusing screen, from behind, so the camera sees the pattern mirrored");
   app.add_option("--write-pattern", write_pattern, "Write the pattern image (.png) and exit");
   app.add_option("-o,--output", out, "Output calibration (.yml)");
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   ApplyThreads();
-  const calib::ProjectorChessboard pattern = ParsePattern(pattern_text, size);
+  const calib::ProjectorChessboard pattern = calib::ParseProjectorChessboard(pattern_text, size);
   if (!write_pattern.empty()) {
     RequireExtension(write_pattern, {".png"}, "--write-pattern");
     WriteAtomically(write_pattern, [&](const std::string& tmp) {
@@ -189,7 +125,7 @@ int RunCalibrateProjector(int argc, char** argv) {
   const calib::BoardSpec board = calib::BoardSpec::Parse(board_text);
   const calib::CameraCalibration camera = calib::ReadCameraCalibration(camera_path);
   const calib::ProjectorCalibration p =
-      calib::CalibrateProjector(camera, board, pattern, ReadPlanes(dir), o);
+      calib::CalibrateProjector(camera, board, pattern, calib::ReadPlaneFolder(dir), o);
   WriteAtomically(out, [&](const std::string& tmp) {
     calib::WriteProjectorCalibration(tmp, p, camera, pattern_text + " on " + size);
   });

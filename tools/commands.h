@@ -18,6 +18,8 @@ int RunHdr(int argc, char** argv);
 int RunSimulate(int argc, char** argv);
 int RunSolve(int argc, char** argv);
 int RunEvaluate(int argc, char** argv);
+int RunSimulateCapture(int argc, char** argv);
+int RunAcquire(int argc, char** argv);
 
 // `bench forward` (tools/bench_commands.cc, solver core only): registers the subcommand, whose
 // callback runs the benchmark, on a `bench` app.

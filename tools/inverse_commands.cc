@@ -26,6 +26,7 @@
 #include "solver/status.h"
 #include "solver/threads.h"
 #include "tools/commands.h"
+#include "tools/recovery_flags.h"
 
 namespace translume {
 namespace {
@@ -43,30 +44,30 @@ void OnSigint(int) {
   g_interrupted = 1;
 }
 
-// 8-bit PNG slices of kappa and mu at depths 0, nz/4, nz/2, 3nz/4 and nz-1, RGB = channels,
-// each quantity scaled by its maximum over the volume: PREFIX_kappa_kNN.png, PREFIX_mu_kNN.png.
-std::vector<std::string> WriteSlices(const std::string& prefix, const Material& m) {
-  const GridShape& s = m.shape;
-  std::vector<int64_t> depths = {0, s.nz / 4, s.nz / 2, 3 * s.nz / 4, s.nz - 1};
-  depths.erase(std::unique(depths.begin(), depths.end()), depths.end());
-  std::vector<std::string> written;
-  for (auto [name, field] : {std::pair{"kappa", &m.kappa}, std::pair{"mu", &m.mu}}) {
-    float top = 0;
-    for (const auto& ch : *field) top = std::max(top, *std::max_element(ch.begin(), ch.end()));
-    for (int64_t k : depths) {
-      std::array<std::vector<float>, 3> planes;
-      for (int c = 0; c < 3; ++c) {
-        planes[c].resize(s.face_size());
-        for (int64_t f = 0; f < s.face_size(); ++f)
-          planes[c][f] = (*field)[c][f + s.face_size() * k] / top;
-      }
-      const std::string path = fmt::format("{}_{}_k{:02d}.png", prefix, name, k);
-      WriteImage(path, ImageFromPlanes(int(s.nx), int(s.ny),
-                                       {planes[0].data(), planes[1].data(), planes[2].data()}));
-      written.push_back(path);
-    }
-  }
-  return written;
+}  // namespace
+
+void AddRecoveryFlags(CLI::App& app, RecoveryFlags* f) {
+  app.add_option("--optimizer", f->optimizer, "lbfgs, ncg or paper")->capture_default_str();
+  app.add_option("--lambda", f->options.lambda, "Regularisation weight")->capture_default_str();
+  app.add_option("--regularizer", f->regularizer, "tk1, tv or huber")->capture_default_str();
+  app.add_flag("--regularize-mu", f->options.regularize_mu, "Regularise mu too");
+  app.add_option("--max-iterations", f->options.max_iterations, "Iterations of the heterogeneous fit")
+      ->capture_default_str();
+  app.add_option("--tolerance", f->options.tolerance,
+                 "Stop when an iteration lowers the objective by less than this fraction")
+      ->capture_default_str();
+  app.add_option("--backend", f->backend, "cpu or gl (OpenGL compute shaders; docs/gpu.md)")
+      ->capture_default_str();
+}
+
+RecoveryOptions RecoveryFlags::Options(const char* command) const {
+  RecoveryOptions o = options;
+  o.optimizer = ParseOptimizer(optimizer);
+  o.regularizer.kind = ParseRegularizer(regularizer);
+  o.backend = ParseBackend(backend);
+  if (o.backend == Backend::kGl) GlContext::Get();  // fail before any output
+  if (std::string err = o.Validate(); !err.empty()) throw InputError(std::string(command) + ": " + err);
+  return o;
 }
 
 std::string FormatSeconds(double s) {
@@ -75,7 +76,6 @@ std::string FormatSeconds(double s) {
   return fmt::format("{:.1f} h", s / 3600);
 }
 
-}  // namespace
 
 int RunSimulate(int argc, char** argv) {
   CLI::App app{"Simulate a capture of a material into a node-space dataset (docs/formats.md):\n"
@@ -122,28 +122,19 @@ int RunSolve(int argc, char** argv) {
                "(exit status 130); a second Ctrl-C ends at once.\n"
                "Writes OUT.vdb, OUT.json (report) and OUT_{kappa,mu}_kNN.png slices.",
                "translume solve"};
-  std::string dataset_path, out, optimizer = "lbfgs", regularizer = "tk1", backend = "cpu",
-              checkpoint, init;
-  RecoveryOptions o;
+  std::string dataset_path, out, checkpoint, init;
+  RecoveryFlags flags;
   app.add_option("dataset", dataset_path, "DATASET/ or DATASET/dataset.json")->required();
   app.add_option("-o,--output", out, "Output material (.vdb)")->required();
-  app.add_option("--optimizer", optimizer, "lbfgs, ncg or paper")->capture_default_str();
-  app.add_option("--lambda", o.lambda, "Regularisation weight")->capture_default_str();
-  app.add_option("--regularizer", regularizer, "tk1, tv or huber")->capture_default_str();
-  app.add_flag("--regularize-mu", o.regularize_mu, "Regularise mu too");
-  app.add_option("--max-iterations", o.max_iterations, "Iterations of the heterogeneous fit")->capture_default_str();
-  app.add_option("--tolerance", o.tolerance, "Stop when an iteration lowers the objective by less than this fraction")->capture_default_str();
-  app.add_option("--backend", backend, "cpu or gl (OpenGL compute shaders; docs/gpu.md)")->capture_default_str();
+  AddRecoveryFlags(app, &flags);
   app.add_option("--checkpoint", checkpoint, "Checkpoint file: resumed from if it exists, updated while running");
   app.add_option("--init", init, "Start from this material (.vdb) instead of the homogeneous fit");
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   RequireExtension(out, {".vdb"}, "-o");
-  o.optimizer = ParseOptimizer(optimizer);
-  o.regularizer.kind = ParseRegularizer(regularizer);
-  o.backend = ParseBackend(backend);
-  if (o.backend == Backend::kGl) GlContext::Get();  // fail before any output
-  if (std::string err = o.Validate(); !err.empty()) throw InputError("solve: " + err);
+  const RecoveryOptions o = flags.Options("solve");
+  const std::string& optimizer = flags.optimizer;
+  const std::string& regularizer = flags.regularizer;
   const Dataset d = ReadDataset(dataset_path);
   CheckFitsInMemory(EstimateMemory(d.shape, int(d.conditions.size()), Precision::kDouble).recovery_bytes,
                     fmt::format("a recovery on the {} grid with {} conditions", d.shape.ToString(),
@@ -213,7 +204,7 @@ int RunSolve(int argc, char** argv) {
   WriteMaterial(out, m);
   std::printf("%s\n", sum.BriefReport().c_str());
   const fs::path base = fs::path(out).replace_extension("");
-  const auto slices = WriteSlices(base.string(), m);
+  const auto slices = WriteMaterialSlices(base.string(), m);
   nlohmann::json j;
   j["dataset"] = dataset_path;
   j["output"] = out;
@@ -258,15 +249,25 @@ int RunEvaluate(int argc, char** argv) {
   CLI::App app{"Evaluate a recovered material (SPEC section 5): held-out relighting error over\n"
                "DATASET/holdout, fit error on the training conditions, relative L2 error of\n"
                "kappa and mu per depth layer.", "translume evaluate"};
-  std::string rec_path, truth_path, dataset_path;
+  std::string rec_path, truth_path, dataset_path, measured_path;
   bool json = false;
   app.add_option("recovered", rec_path, "Recovered material (.vdb)")->required();
   app.add_option("--truth", truth_path, "True material (.vdb) on the recovery grid");
   app.add_option("--dataset", dataset_path, "The dataset folder (with holdout/ for held-out errors)")->required();
+  app.add_option("--measured", measured_path, "A dataset built from photos (acquire's OUT_work/dataset): "
+                 "also print its relative RMS error in L and q against --dataset");
   app.add_flag("--json", json, "Print JSON instead of a table");
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   const Dataset training = ReadDataset(dataset_path);
+  if (!measured_path.empty()) {
+    const DatasetMismatch mm = CompareDatasets(ReadDataset(measured_path), training);
+    std::printf("mapping: %s vs %s: L relative RMS %.2f %%, q relative RMS %.2f %%\n",
+                measured_path.c_str(), dataset_path.c_str(), 100 * mm.L_rms, 100 * mm.q_rms);
+    std::printf("mapping: L scale per channel %.4f %.4f %.4f; relative RMS after it %.2f %% %.2f %% %.2f %%\n",
+                mm.L_scale[0], mm.L_scale[1], mm.L_scale[2], 100 * mm.L_rms_after_scale[0],
+                100 * mm.L_rms_after_scale[1], 100 * mm.L_rms_after_scale[2]);
+  }
   fs::path hdir = fs::is_directory(dataset_path) ? fs::path(dataset_path) : fs::path(dataset_path).parent_path();
   hdir /= "holdout";
   const Dataset holdout = fs::exists(hdir / "dataset.json") ? ReadDataset(hdir.string()) : Dataset{};

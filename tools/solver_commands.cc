@@ -38,19 +38,6 @@ void WriteRadiance(const std::string& path, const GridShape& s, const FacePatter
   WriteImage(path, ImageFromPlanes(int(s.nx), int(s.ny), {L[0].data(), L[1].data(), L[2].data()}));
 }
 
-// An 8-bit preview: radiance scaled so that its 99.5th percentile maps to 1, sRGB-ish gamma.
-void WritePreview(const std::string& path, const GridShape& s, const FacePattern& L) {
-  std::vector<float> all;
-  for (const auto& ch : L) all.insert(all.end(), ch.begin(), ch.end());
-  std::sort(all.begin(), all.end());
-  const float top = std::max(all[size_t(0.995 * (all.size() - 1))], 1e-30f);
-  FacePattern t = L;
-  for (auto& ch : t)
-    for (float& v : ch) v = std::pow(std::clamp(v / top, 0.0f, 1.0f), 1.0f / 2.2f);
-  WriteImage(path, ImageFromPlanes(int(s.nx), int(s.ny), {t[0].data(), t[1].data(), t[2].data()}));
-}
-
-
 }  // namespace
 
 int RunSynth(int argc, char** argv) {
@@ -221,90 +208,5 @@ int RunBench(int argc, char** argv) {
   return 0;
 }
 
-int RunDemo(int argc, char** argv) {
-  CLI::App app{"The main job on the embedded default: synthesise a marble sample, simulate a\n"
-               "capture of it (the paper's 16 back-lit regions, solved on a 2x finer grid, plus\n"
-               "16 held-out spots), recover kappa and mu from the simulated data, and report the\n"
-               "held-out relighting error against the truth, and render the recovered material on a\n"
-               "sphere with the polygrid renderer.", "translume demo"};
-  std::string out = "out/demo";
-  std::string grid = "32x24x8";
-  int iterations = 150;
-  app.add_option("-o,--output", out, "Output folder")->capture_default_str();
-  app.add_option("--grid", grid, "Recovery grid NXxNYxNZ")->capture_default_str();
-  app.add_option("--max-iterations", iterations, "Optimiser iterations")->capture_default_str();
-  AddCommonOptions(app);
-  if (ParseOrHelp(app, argc, argv)) return 0;
-  namespace fs = std::filesystem;
-  const auto t0 = std::chrono::steady_clock::now();
-  auto elapsed = [&] {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  };
-  SynthOptions so;
-  so.preset = "marble";
-  so.shape = ParseGridShape(grid, "--grid");
-  const Material truth = SynthesizeMaterial(so);
-  const std::string truth_path = (fs::path(out) / "truth.vdb").string();
-  WriteMaterial(truth_path, truth);
-  std::printf("demo: 1/4 synthesised a %s marble sample, %g mm spacing -> %s\n",
-              truth.shape.ToString().c_str(), truth.spacing_mm, truth_path.c_str());
-
-  SimulateOptions sim;
-  sim.lights = RegionLights("4x4");
-  sim.holdout = 16;
-  const SimulatedData data = SimulateDataset(truth, sim);
-  const std::string dataset_dir = (fs::path(out) / "dataset").string();
-  WriteDataset(dataset_dir, data.training);
-  WriteDataset((fs::path(dataset_dir) / "holdout").string(), data.holdout);
-  std::printf("demo: 2/4 simulated 16 back-lit regions and 16 held-out spots on a %dx finer grid "
-              "-> %s (%.1f s)\n", sim.oversample, dataset_dir.c_str(), elapsed());
-
-  RecoveryOptions ro;
-  ro.max_iterations = iterations;
-  RecoveryState state;
-  const RecoverySummary sum = Recover(data.training, ro, &state,
-                                      [&](const IterationReport& r, const RecoveryState&) {
-    if (r.iteration % 25 == 0)
-      std::printf("  iteration %4d  objective %.3e  solves %lld  %.1f s\n", r.iteration,
-                  r.objective, (long long)r.solves, elapsed());
-    std::fflush(stdout);
-    return true;
-  });
-  const Material recovered = MaterialFromState(data.training, state);
-  const std::string rec_path = (fs::path(out) / "recovered.vdb").string();
-  WriteMaterial(rec_path, recovered);
-  std::printf("demo: 3/4 recovered kappa and mu: %s -> %s\n", sum.BriefReport().c_str(),
-              rec_path.c_str());
-
-  std::vector<FacePattern> lights;
-  for (const auto& c : data.holdout.conditions) lights.push_back(c.q);
-  MultigridOptions mg;
-  mg.tolerance = 1e-9;
-  const auto L_rec = RenderFrontFace(recovered, Setup::kBack, lights, mg);
-  const auto L_true = RenderFrontFace(truth, Setup::kBack, lights, mg);
-  const double E = RelightingError(L_rec, L_true);
-  const FacePattern u = GreyPattern(RasterizeLight(LightSpec::Parse("uniform"), truth.shape,
-                                                   truth.spacing_mm));
-  const std::string prev = (fs::path(out) / "preview").string();
-  WritePreview(prev + "/truth_uniform.png", truth.shape, RenderFrontFace(truth, Setup::kBack, {u}, mg)[0]);
-  WritePreview(prev + "/recovered_uniform.png", truth.shape,
-               RenderFrontFace(recovered, Setup::kBack, {u}, mg)[0]);
-  std::printf("demo: 4/5 held-out relighting error E = %.2e (16 spots not used in the fit), "
-              "fit error %.2e\n", E, sum.fit_error);
-  // The recovered material on a sphere, through `translume render`.
-  const std::string sphere = prev + "/recovered_sphere.png";
-  std::vector<std::string> args = {"render", rec_path, "--shape", "sphere", "--image", "256x256",
-                                   "-o", sphere};
-  std::vector<char*> av;
-  for (std::string& a : args) av.push_back(a.data());
-  if (RunRender(int(av.size()), av.data()) != 0) return 1;
-  std::printf("demo: 5/5 rendered the recovered material on a sphere, %.1f s in all\n", elapsed());
-  std::printf("demo outputs:\n  truth       %s\n  dataset     %s/dataset.json (+ holdout/)\n"
-              "  recovered   %s\n  previews    %s/*.png (front face, uniform back light)\n"
-              "  rendering   %s\n",
-              truth_path.c_str(), dataset_dir.c_str(), rec_path.c_str(), prev.c_str(),
-              sphere.c_str());
-  return 0;
-}
 
 }  // namespace translume

@@ -1,0 +1,472 @@
+// SPDX-License-Identifier: MIT
+#include "acquire/acquire.h"
+
+#include <fmt/format.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "acquire/face_mapping.h"
+#include "calib/board.h"
+#include "calib/camera_calib.h"
+#include "calib/error.h"
+#include "calib/hdr.h"
+#include "calib/photo_io.h"
+#include "calib/projector_calib.h"
+#include "calib/white.h"
+#include "solver/atomic_file.h"
+#include "solver/dataset.h"
+#include "solver/evaluate.h"
+#include "solver/image_io.h"
+#include "solver/light.h"
+#include "solver/material_io.h"
+#include "solver/simulate.h"
+#include "solver/status.h"
+
+namespace translume::acquire {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+// A stage's input signature: every file under the given paths with its size and time.
+std::string Signature(const std::vector<std::string>& paths, const std::string& extra = "") {
+  std::string s = extra;
+  auto add = [&](const fs::path& p) {
+    std::error_code ec;
+    const auto t = fs::last_write_time(p, ec).time_since_epoch().count();
+    s += fmt::format("{}:{}:{};", p.string(), fs::is_regular_file(p) ? fs::file_size(p) : 0, t);
+  };
+  for (const std::string& p : paths) {
+    if (p.empty()) continue;
+    if (fs::is_directory(p)) {
+      std::vector<fs::path> files;
+      for (const auto& e : fs::recursive_directory_iterator(p))
+        if (e.is_regular_file()) files.push_back(e.path());
+      std::sort(files.begin(), files.end());
+      for (const auto& f : files) add(f);
+    } else {
+      add(p);
+    }
+  }
+  return fmt::format("{:016x}", std::hash<std::string>{}(s));
+}
+
+// The work folder's record of finished stages: {"stage": signature}.
+class StageLog {
+ public:
+  StageLog(std::string path, bool force) : path_(std::move(path)), force_(force) {
+    std::ifstream in(path_);
+    if (in) {
+      try {
+        log_ = nlohmann::json::parse(in);
+      } catch (const std::exception&) {
+        log_ = nlohmann::json::object();
+      }
+    }
+    if (!log_.is_object()) log_ = nlohmann::json::object();
+  }
+  bool Done(const std::string& stage, const std::string& sig, const std::vector<std::string>& outputs) const {
+    if (force_ || !log_.contains(stage) || log_[stage] != sig) return false;
+    for (const auto& o : outputs)
+      if (!fs::exists(o)) return false;
+    return true;
+  }
+  void Record(const std::string& stage, const std::string& sig) {
+    log_[stage] = sig;
+    WriteAtomically(path_, [&](const std::string& tmp) { std::ofstream(tmp) << log_.dump(2) << "\n"; });
+  }
+
+ private:
+  std::string path_;
+  bool force_;
+  nlohmann::json log_;
+};
+
+cv::Mat ReadHdrOrStack(const std::string& path, const calib::ResponseCurve* response) {
+  if (!fs::is_directory(path)) return calib::ReadLinearRgb(path);
+  return calib::MergeHdr(calib::ReadExposureStack(path), response).radiance;
+}
+
+DeviceIntrinsics FromCalibration(const cv::Size& size, const cv::Matx33d& K, const cv::Mat& dist) {
+  DeviceIntrinsics d;
+  d.size = size;
+  d.K = K;
+  cv::Mat d64;
+  dist.reshape(1, 1).convertTo(d64, CV_64F);
+  for (int i = 0; i < std::min(5, d64.cols); ++i) d.dist[i] = d64.at<double>(0, i);
+  return d;
+}
+
+// Side-by-side preview of measured (left) and fitted (right) radiance, one scale for both.
+void WriteComparison(const std::string& path, const GridShape& s, const FacePattern& measured,
+                     const FacePattern& fitted, const std::vector<float>& mask) {
+  const int64_t W = 2 * s.nx + 2;
+  FacePattern both;
+  float top = 0;
+  for (int c = 0; c < 3; ++c) {
+    both[size_t(c)].assign(size_t(W * s.ny), 0.0f);
+    for (int64_t j = 0; j < s.ny; ++j)
+      for (int64_t i = 0; i < s.nx; ++i) {
+        const size_t f = size_t(i + s.nx * j);
+        const float m = mask[f] > 0 ? measured[size_t(c)][f] : 0.0f;
+        both[size_t(c)][size_t(i + W * j)] = m;
+        both[size_t(c)][size_t(i + s.nx + 2 + W * j)] = fitted[size_t(c)][f];
+        top = std::max(top, m);
+      }
+  }
+  WriteRadiancePreview(path, {W, s.ny, 1}, both, top);
+}
+
+}  // namespace
+
+std::string AcquireOptions::Validate() const {
+  if (face_samples < 1 || face_samples > 32) return "face_samples must be in [1, 32]";
+  if (mask_margin < 0) return "mask_margin must be >= 0";
+  return recovery.Validate();
+}
+
+std::string WorkDir(const std::string& output_vdb) {
+  return fs::path(output_vdb).replace_extension("").string() + "_work";
+}
+
+std::string AcquireReport::Table() const {
+  std::string s = "stage                seconds\n";
+  for (const auto& [name, t] : stage_seconds)
+    s += fmt::format("  {:<18} {:8.1f}{}\n", name, t,
+                     std::find(reused.begin(), reused.end(), name) != reused.end() ? "  (reused)" : "");
+  s += fmt::format("calibration: camera RMS {:.3f} px, projector RMS {}, sample pose RMS {:.3f} px, "
+                   "white gains {:.4g} {:.4g} {:.4g}\n", camera_rms_px,
+                   projector_rms_px < 0 ? std::string("-") : fmt::format("{:.3f} px", projector_rms_px),
+                   pose_rms_px, white_gains[0], white_gains[1], white_gains[2]);
+  s += "condition  measured  saturated  masked   fit error\n";
+  for (const auto& c : conditions)
+    s += fmt::format("  {:<8} {:8d} {:10d} {:7d}   {}\n", c.name, c.measured_nodes, c.saturated_nodes,
+                     c.masked_nodes, c.fit_error < 0 ? std::string("-") : fmt::format("{:.3e}", c.fit_error));
+  return s;
+}
+
+AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const AcquireOptions& o,
+                      const std::function<void(const std::string&)>& progress_fn,
+                      const RecoveryCallback& iteration) {
+  if (std::string why = o.Validate(); !why.empty()) throw InputError("acquire: " + why);
+  AcquireReport rep;
+  rep.work_dir = WorkDir(out);
+  rep.material = out;
+  const fs::path work(rep.work_dir);
+  fs::create_directories(work);
+  StageLog log((work / "stages.json").string(), o.force);
+  auto progress = [&](const std::string& s) {
+    if (progress_fn) progress_fn(s);
+  };
+  auto t0 = Clock::now();
+  auto stage_done = [&](const std::string& name) {
+    const auto now = Clock::now();
+    rep.stage_seconds.emplace_back(name, std::chrono::duration<double>(now - t0).count());
+    t0 = now;
+  };
+  const GridShape& g = cap.grid;
+  const double h = cap.spacing_mm;
+
+  // 1. Calibration.
+  bool computed = false;  // in the current stage (else: reused from the work folder or files)
+  calib::CameraCalibration camera;
+  const std::string camera_yml = (work / "camera.yml").string();
+  if (!cap.camera.file.empty()) {
+    camera = calib::ReadCameraCalibration(cap.camera.file);
+  } else {
+    const std::string sig = Signature({cap.camera.photos}, cap.camera.board);
+    if (log.Done("camera", sig, {camera_yml})) {
+      camera = calib::ReadCameraCalibration(camera_yml);
+    } else {
+      progress(fmt::format("calibrating the camera from {} ...", cap.camera.photos));
+      const calib::BoardSpec board = calib::BoardSpec::Parse(cap.camera.board);
+      camera = calib::CalibrateCamera(board, calib::ReadPhotoFolder(cap.camera.photos));
+      WriteAtomically(camera_yml, [&](const std::string& tmp) {
+        calib::WriteCameraCalibration(tmp, camera, cap.camera.board);
+      });
+      log.Record("camera", sig);
+      computed = true;
+    }
+  }
+  rep.camera_rms_px = camera.rms;
+  progress(fmt::format("camera: {}", camera.BriefReport()));
+  const DeviceIntrinsics cam = FromCalibration(camera.image_size, camera.K, camera.dist);
+
+  std::optional<calib::ProjectorCalibration> projector;
+  if (!cap.projector.file.empty()) {
+    projector = calib::ReadProjectorCalibration(cap.projector.file);
+  } else if (!cap.projector.planes.empty()) {
+    const std::string yml = (work / "projector.yml").string();
+    const std::string sig = Signature({cap.projector.planes, camera_yml},
+                                      cap.projector.board + cap.projector.pattern +
+                                      cap.projector.projector_size + (cap.projector.rear ? "r" : ""));
+    if (log.Done("projector", sig, {yml})) {
+      projector = calib::ReadProjectorCalibration(yml);
+    } else {
+      progress(fmt::format("calibrating the projector from {} ...", cap.projector.planes));
+      calib::ProjectorCalibOptions po;
+      po.rear_projection = cap.projector.rear;
+      projector = calib::CalibrateProjector(
+          camera, calib::BoardSpec::Parse(cap.projector.board),
+          calib::ParseProjectorChessboard(cap.projector.pattern, cap.projector.projector_size),
+          calib::ReadPlaneFolder(cap.projector.planes), po);
+      WriteAtomically(yml, [&](const std::string& tmp) {
+        calib::WriteProjectorCalibration(tmp, *projector, camera,
+                                         cap.projector.pattern + " on " + cap.projector.projector_size);
+      });
+      log.Record("projector", sig);
+      computed = true;
+    }
+    progress(fmt::format("projector: {}", projector->BriefReport()));
+  }
+  if (projector) rep.projector_rms_px = projector->stereo_projector_rms;
+
+  std::optional<calib::ResponseCurve> response;
+  if (!cap.response.file.empty()) {
+    response = calib::ReadResponse(cap.response.file);
+  } else if (!cap.response.stacks.empty()) {
+    const std::string yml = (work / "response.yml").string();
+    const std::string sig = Signature(cap.response.stacks);
+    if (log.Done("response", sig, {yml})) {
+      response = calib::ReadResponse(yml);
+    } else {
+      progress("calibrating the camera response ...");
+      std::vector<calib::ExposureStack> stacks;
+      for (const auto& d : cap.response.stacks) stacks.push_back(calib::ReadExposureStack(d));
+      response = calib::CalibrateResponse(stacks);
+      WriteAtomically(yml, [&](const std::string& tmp) { calib::WriteResponse(tmp, *response); });
+      log.Record("response", sig);
+      computed = true;
+    }
+  }
+  const calib::ResponseCurve* curve = response ? &*response : nullptr;
+
+  calib::WhiteBalance white;
+  if (!cap.white.file.empty()) {
+    white = calib::ReadWhiteBalance(cap.white.file);
+  } else {
+    const std::string yml = (work / "white.yml").string();
+    const std::string sig = Signature({cap.white.white, cap.white.black, (work / "response.yml").string()},
+                                      fmt::format("{}{}", nlohmann::json(cap.white.patch).dump(),
+                                                  nlohmann::json(cap.white.albedo).dump()));
+    if (log.Done("white", sig, {yml})) {
+      white = calib::ReadWhiteBalance(yml);
+    } else {
+      progress("white balance ...");
+      const cv::Mat w = ReadHdrOrStack(cap.white.white, curve);
+      const cv::Mat b = cap.white.black.empty() ? cv::Mat() : ReadHdrOrStack(cap.white.black, curve);
+      if (w.size() != camera.image_size)
+        throw InputError(fmt::format("{}: images are {}x{} but the camera calibration is {}x{}",
+                                     cap.white.white, w.cols, w.rows, camera.image_size.width,
+                                     camera.image_size.height));
+      std::vector<cv::Point2f> patch;
+      for (const auto& p : cap.white.patch) patch.emplace_back(float(p[0]), float(p[1]));
+      white = calib::WhiteFromPatch(w, b, patch, {cap.white.albedo[0], cap.white.albedo[1], cap.white.albedo[2]});
+      WriteAtomically(yml, [&](const std::string& tmp) {
+        calib::WriteWhiteBalance(tmp, white, b.empty() ? cv::Vec3d() : cv::Vec3d(cv::mean(b).val), cap.white.black);
+      });
+      log.Record("white", sig);
+      computed = true;
+    }
+  }
+  for (int c = 0; c < 3; ++c) rep.white_gains[size_t(c)] = white.gains[c];
+  if (!computed) rep.reused.push_back("calibration");
+  computed = false;
+  stage_done("calibration");
+
+  // 2. HDR.
+  const fs::path hdr_dir = work / "hdr";
+  auto merge = [&](const std::string& name, const std::string& stack) {
+    const std::string exr = (hdr_dir / (name + ".exr")).string();
+    const std::string sig = Signature({stack, (work / "response.yml").string()});
+    if (log.Done("hdr:" + name, sig, {exr})) return calib::ReadLinearRgb(exr);
+    const calib::ExposureStack s = calib::ReadExposureStack(stack);
+    if (s.Size() != camera.image_size)
+      throw InputError(fmt::format("{}: photos are {}x{} but the camera calibration is {}x{}", stack,
+                                   s.Size().width, s.Size().height, camera.image_size.width,
+                                   camera.image_size.height));
+    if (s.IsEightBit() && !curve)
+      throw InputError(fmt::format("{}: 8-bit photos need a camera response (capture.json: response)", stack));
+    const calib::HdrImage hdr = calib::MergeHdr(s, s.IsEightBit() ? curve : nullptr);
+    WriteAtomically(exr, [&](const std::string& tmp) { calib::WriteExr(tmp, hdr.radiance); });
+    log.Record("hdr:" + name, sig);
+    computed = true;
+    return hdr.radiance;
+  };
+  std::vector<cv::Mat> hdr;
+  for (size_t m = 0; m < cap.conditions.size(); ++m) {
+    hdr.push_back(merge(cap.conditions[m].name, cap.conditions[m].stack));
+    progress(fmt::format("hdr {}/{}: {}", m + 1, cap.conditions.size(), cap.conditions[m].stack));
+  }
+  const cv::Mat black = cap.black.empty() ? cv::Mat() : merge("black", cap.black);
+  if (!computed) rep.reused.push_back("hdr");
+  stage_done("hdr");
+
+  // 3. Pose.
+  std::vector<cv::Point2d> corners;
+  if (!cap.face_corners_px.empty()) {
+    for (const auto& p : cap.face_corners_px) corners.emplace_back(p[0], p[1]);
+  } else {
+    cv::Mat sum = cv::Mat::zeros(camera.image_size, CV_32FC3);
+    for (const cv::Mat& img : hdr) {
+      cv::Mat finite = img.clone();
+      cv::patchNaNs(finite, 0);
+      for (auto it = finite.begin<cv::Vec3f>(); it != finite.end<cv::Vec3f>(); ++it)
+        for (int c = 0; c < 3; ++c)
+          if (!std::isfinite((*it)[c])) (*it)[c] = 0;
+      sum += finite;
+    }
+    corners = DetectFaceCorners(sum);
+    if (corners.empty())
+      throw InputError(fmt::format("{}: face_corners_px is \"auto\" but no four-sided sample was "
+                                   "found in the images; give the corners", cap.file));
+    progress(fmt::format("found the front face's corners: ({:.1f}, {:.1f}) ({:.1f}, {:.1f}) "
+                         "({:.1f}, {:.1f}) ({:.1f}, {:.1f})", corners[0].x, corners[0].y, corners[1].x,
+                         corners[1].y, corners[2].x, corners[2].y, corners[3].x, corners[3].y));
+  }
+  for (const auto& p : corners) rep.face_corners_px.push_back({p.x, p.y});
+  const calib::Pose camera_from_sample =
+      EstimateSamplePose(cam, corners, g, h, cap.file + ": face_corners_px", &rep.pose_rms_px);
+  stage_done("pose");
+
+  // 4. Mapping.
+  Dataset d;
+  d.shape = g;
+  d.spacing_mm = h;
+  d.C = cap.C;
+  d.setup = cap.setup;
+  const int64_t F = g.face_size();
+  for (size_t m = 0; m < cap.conditions.size(); ++m) {
+    const auto& c = cap.conditions[m];
+    cv::Mat img = hdr[m].clone();
+    if (!black.empty()) {
+      // inf - finite stays inf (saturated); the black level is never saturated in practice.
+      cv::Mat b = black.clone();
+      for (auto it = b.begin<cv::Vec3f>(); it != b.end<cv::Vec3f>(); ++it)
+        for (int k = 0; k < 3; ++k)
+          if (!std::isfinite((*it)[k])) (*it)[k] = 0;
+      img -= b;
+    }
+    const FaceSamples fsm = ResampleFrontFace(img, cam, camera_from_sample, g, h, o.face_samples);
+    DatasetCondition dc;
+    dc.name = c.name;
+    if (!c.pattern.empty()) {
+      cv::Mat pat = calib::ReadLinearRgb(c.pattern), grey;
+      cv::cvtColor(pat, grey, cv::COLOR_RGB2GRAY);
+      if (grey.size() != projector->projector_size)
+        throw InputError(fmt::format("{}: pattern is {}x{} but the projector is {}x{}", c.pattern, grey.cols,
+                                     grey.rows, projector->projector_size.width, projector->projector_size.height));
+      calib::Pose projector_from_camera;
+      projector_from_camera.R = projector->R;
+      projector_from_camera.t = projector->T;
+      dc.q = GreyPattern(ProjectPatternOnFace(grey, FromCalibration(projector->projector_size, projector->K, projector->dist),
+                                              projector_from_camera, camera_from_sample, g, h, cap.setup));
+    } else {
+      dc.q = GreyPattern(RasterizeLightFile(LightSpec::Parse(c.light), g, h));
+    }
+    dc.mask = MeasurementMask(g, cap.setup, dc.q, o.mask_margin);
+    AcquireConditionReport cr;
+    cr.name = c.name;
+    double brightest = 0;
+    for (int64_t f = 0; f < F; ++f) {
+      const bool valid = std::isfinite(fsm.value[0][size_t(f)]) && fsm.saturated[size_t(f)] == 0;
+      if (fsm.saturated[size_t(f)] > 0) ++cr.saturated_nodes;
+      for (int k = 0; k < 3; ++k) {
+        const float v = valid ? float(white.gains[k] * fsm.value[size_t(k)][size_t(f)]) : 0.0f;
+        dc.L[size_t(k)].push_back(v);
+        if (dc.mask[size_t(f)] > 0) brightest = std::max(brightest, double(v));
+      }
+      if (!valid) dc.mask[size_t(f)] = 0;
+      if (dc.mask[size_t(f)] > 0) ++cr.measured_nodes;
+      else ++cr.masked_nodes;
+      cr.q_sum += dc.q[0][size_t(f)];
+    }
+    if (cr.saturated_nodes == F)
+      throw InputError(fmt::format("{}: the sample is saturated in every exposure (add shorter exposures)", c.stack));
+    if (cr.measured_nodes == 0)
+      throw InputError(fmt::format("{}: no usable front-face node (all masked or saturated)", c.stack));
+    if (!(brightest > 0))
+      throw InputError(fmt::format("{}: the sample is black in every exposure (add longer exposures, or "
+                                   "check that the projector lights it)", c.stack));
+    if (!(cr.q_sum > 0))
+      throw InputError(fmt::format("{}: the condition puts no light on the lit face ({} misses the sample)",
+                                   c.stack, c.pattern.empty() ? c.light : c.pattern));
+    // Negative values after black subtraction are noise around zero.
+    for (auto& ch : dc.L)
+      for (float& v : ch) v = std::max(v, 0.0f);
+    rep.conditions.push_back(cr);
+    d.conditions.push_back(std::move(dc));
+  }
+  if (std::string why = d.Validate(); !why.empty()) TL_CHECK_MSG(false, why);
+  rep.dataset_dir = (work / "dataset").string();
+  WriteDataset(rep.dataset_dir, d);
+  progress(fmt::format("wrote the node-space dataset {}/dataset.json ({} conditions, grid {})",
+                       rep.dataset_dir, d.conditions.size(), g.ToString()));
+  stage_done("mapping");
+
+  // 5. Solve.
+  nlohmann::json j;
+  if (o.solve) {
+    progress("solving for kappa and mu ...");
+    RecoveryState state;
+    rep.solve = Recover(d, o.recovery, &state, iteration);
+    const Material m = MaterialFromState(d, state, cap.eta);
+    WriteMaterial(out, m);
+    for (size_t c = 0; c < rep.conditions.size(); ++c) rep.conditions[c].fit_error = rep.solve.condition_fit_error[c];
+    stage_done("solve");
+    // Previews: measured vs fitted per condition, kappa and mu slices.
+    const fs::path prev = work / "previews";
+    fs::create_directories(prev);
+    std::vector<FacePattern> q;
+    for (const auto& c : d.conditions) q.push_back(c.q);
+    MultigridOptions mg;
+    mg.tolerance = 1e-8;
+    const auto fitted = RenderFrontFace(m, d.setup, q, mg);
+    for (size_t c = 0; c < d.conditions.size(); ++c) {
+      const std::string p = (prev / fmt::format("fit_{}.png", d.conditions[c].name)).string();
+      WriteComparison(p, g, d.conditions[c].L, fitted[c], d.conditions[c].mask);
+      rep.previews.push_back(p);
+    }
+    for (const auto& p : WriteMaterialSlices((prev / "material").string(), m)) rep.previews.push_back(p);
+    stage_done("previews");
+    j["solve"] = {{"termination", TerminationName(rep.solve.termination)},
+                  {"message", rep.solve.message},
+                  {"iterations", rep.solve.iterations},
+                  {"solves", rep.solve.solves},
+                  {"fit_error", rep.solve.fit_error},
+                  {"homogeneous_kappa", rep.solve.homogeneous_kappa},
+                  {"homogeneous_mu", rep.solve.homogeneous_mu}};
+  }
+  j["capture"] = cap.file;
+  j["material"] = o.solve ? out : "";
+  j["dataset"] = rep.dataset_dir;
+  j["grid"] = {g.nx, g.ny, g.nz};
+  j["spacing_mm"] = h;
+  j["setup"] = SetupName(cap.setup);
+  j["camera_rms_px"] = rep.camera_rms_px;
+  j["projector_rms_px"] = rep.projector_rms_px;
+  j["pose_rms_px"] = rep.pose_rms_px;
+  j["face_corners_px"] = rep.face_corners_px;
+  j["white_gains"] = rep.white_gains;
+  nlohmann::json st = nlohmann::json::object();
+  for (const auto& [name, t] : rep.stage_seconds) st[name] = t;
+  j["stage_seconds"] = st;
+  j["reused"] = rep.reused;
+  nlohmann::json cs = nlohmann::json::array();
+  for (const auto& c : rep.conditions)
+    cs.push_back({{"name", c.name}, {"measured_nodes", c.measured_nodes}, {"saturated_nodes", c.saturated_nodes},
+                  {"masked_nodes", c.masked_nodes}, {"q_sum", c.q_sum}, {"fit_error", c.fit_error}});
+  j["conditions"] = cs;
+  j["previews"] = rep.previews;
+  rep.report_json = (work / "report.json").string();
+  WriteAtomically(rep.report_json, [&](const std::string& tmp) { std::ofstream(tmp) << j.dump(2) << "\n"; });
+  return rep;
+}
+
+}  // namespace translume::acquire

@@ -1,0 +1,66 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "acquire/capture.h"
+#include "solver/recover.h"
+
+namespace translume::acquire {
+
+struct AcquireOptions {
+  RecoveryOptions recovery;  // the solve (as `translume solve`)
+  bool force = false;        // recompute calibration and HDR even when the work folder has them
+  bool solve = true;         // false: stop after writing the node-space dataset
+  int face_samples = 6;      // per axis, per node dual box, at least (ResampleFrontFace)
+  int mask_margin = 2;       // front-lit: masked nodes around the directly lit ones
+  std::string Validate() const;
+};
+
+struct AcquireConditionReport {
+  std::string name;
+  int64_t measured_nodes = 0, saturated_nodes = 0, masked_nodes = 0;
+  double q_sum = 0;            // sum of q over the lit face (light delivered, in nodes)
+  double fit_error = -1;       // E of the fitted material on this condition
+};
+
+struct AcquireReport {
+  std::string work_dir, dataset_dir, material, report_json;
+  std::vector<std::pair<std::string, double>> stage_seconds;  // in order
+  std::vector<std::string> reused;                            // stages taken from the work folder
+  double camera_rms_px = -1, projector_rms_px = -1, pose_rms_px = -1;
+  std::vector<std::array<double, 2>> face_corners_px;
+  std::array<double, 3> white_gains{};
+  std::vector<AcquireConditionReport> conditions;
+  RecoverySummary solve;
+  std::vector<std::string> previews;
+  std::string Table() const;  // the short end-of-run report
+};
+
+// The work folder of an output material: OUT.vdb -> OUT_work/ (calibration files, HDR images,
+// the node-space dataset, previews, report.json).
+std::string WorkDir(const std::string& output_vdb);
+
+// From photos to material (docs/capture.md, "translume acquire"):
+//  1. calibration: camera (Zhang), projector (planes; rear projection in the back-lit setup),
+//     camera response (Debevec & Malik), white gains (white patch, projector black) - or the
+//     finished files named by capture.json;
+//  2. HDR: every condition's stack (and the sample's projector-black stack) merged;
+//  3. pose: camera_from_sample from the front face's corners (given, or found in the images);
+//  4. mapping: L = white gains * (HDR - black HDR) resampled onto the front-face nodes
+//     (area-weighted), q from each projector pattern through the projector calibration (or
+//     the light spec), masks (front-lit: lit nodes plus a margin; nodes on saturated pixels);
+//     the node-space dataset written to WORK/dataset;
+//  5. solve (Recover) -> `output_vdb`, WORK/report.json, WORK/previews/*.png (measured vs
+//     fitted front face per condition, kappa and mu slices).
+// Stages 1 and 2 reuse their results in the work folder when their inputs are unchanged (file
+// names, sizes and times) unless options.force. Every output is written under a temporary name
+// and renamed. Throws InputError naming the file and the problem for bad input.
+AcquireReport Acquire(const CaptureSpec& capture, const std::string& output_vdb,
+                      const AcquireOptions& options,
+                      const std::function<void(const std::string&)>& progress = {},
+                      const RecoveryCallback& iteration = {});
+
+}  // namespace translume::acquire

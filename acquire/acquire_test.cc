@@ -1,0 +1,227 @@
+// SPDX-License-Identifier: MIT
+#include "acquire/acquire.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "acquire/simulate_capture.h"
+#include "calib/hdr.h"
+#include "solver/dataset.h"
+#include "solver/evaluate.h"
+#include "solver/material_io.h"
+#include "solver/status.h"
+#include "solver/synthetic.h"
+
+namespace translume::acquire {
+namespace {
+
+namespace fs = std::filesystem;
+
+// A small simulated capture (a 512x384 camera and projector, 2x2 regions, 6 exposures), made
+// once and kept in the temp folder: every test process of this binary reuses it.
+std::string SmallCapture(translume::Setup setup) {
+  const fs::path dir = fs::temp_directory_path() /
+                       (std::string("translume_acquire_test_v1_") + SetupName(setup));
+  if (fs::exists(dir / "capture.json")) return dir.string();
+  SynthOptions so;
+  so.preset = "marble";
+  so.shape = {24, 18, setup == Setup::kBack ? 6 : 10};
+  const Material m = SynthesizeMaterial(so);
+  CaptureRig rig = DefaultCaptureRig(m.shape, m.spacing_mm, setup);
+  const fs::path rig_file = fs::temp_directory_path() / "translume_acquire_test_rig.json";
+  std::ofstream(rig_file) << R"({"camera": {"size": [512, 384], "K": [1500, 0, 257.1, 0, 1500.6, 190.3, 0, 0, 1]},
+                                 "projector": {"size": [512, 384]}})";
+  rig = ReadCaptureRig(rig_file.string(), m.shape, m.spacing_mm, setup);
+  SimulateCaptureOptions o;
+  o.setup = setup;
+  o.lights = 2;
+  o.holdout = 6;
+  o.exposures = 8;
+  o.camera_views = 8;
+  o.planes = 6;
+  try {
+    SimulateCapture(m, rig, o, dir.string());
+  } catch (const InputError&) {
+    if (!fs::exists(dir / "capture.json")) throw;  // another test process won the race
+  }
+  return dir.string();
+}
+
+// A private copy of a capture that a test may break.
+class AcquireTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() / (std::string("translume_acquire_") + info->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Copy(translume::Setup setup) {
+    const fs::path c = dir_ / "capture";
+    fs::copy(SmallCapture(setup), c, fs::copy_options::recursive);
+    return c.string();
+  }
+  std::string Out() const { return (dir_ / "out" / "m.vdb").string(); }
+  // Rewrites capture.json through `edit`.
+  void EditJson(const std::string& capture, const std::function<void(nlohmann::json&)>& edit) {
+    const fs::path p = fs::path(capture) / "capture.json";
+    nlohmann::json j = nlohmann::json::parse(std::ifstream(p));
+    edit(j);
+    std::ofstream(p) << j.dump(2);
+  }
+  void ExpectError(const std::string& capture, const std::string& what) {
+    AcquireOptions o;
+    o.solve = false;
+    try {
+      Acquire(ReadCapture(capture), Out(), o);
+      ADD_FAILURE() << "no error; expected one naming " << what;
+    } catch (const std::runtime_error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(what), std::string::npos) << msg;
+      EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+    }
+  }
+  fs::path dir_;
+};
+
+// Mapping targets of the capture issue: L and q from the photos within 2 % RMS of the
+// simulator's own node-space values.
+void CheckMapping(translume::Setup setup, bool auto_corners, AcquireTest* t, const std::string& capture,
+                  const std::string& out) {
+  (void)t;
+  AcquireOptions o;
+  o.solve = false;
+  const CaptureSpec cap = ReadCapture(capture);
+  if (auto_corners) EXPECT_TRUE(cap.face_corners_px.empty());
+  const AcquireReport r = Acquire(cap, out, o);
+  std::printf("%s", r.Table().c_str());
+  const Dataset measured = ReadDataset(r.dataset_dir);
+  const Dataset truth = ReadDataset((fs::path(capture) / "truth/dataset").string());
+  const DatasetMismatch mm = CompareDatasets(measured, truth);
+  std::printf("%s-lit%s: L relative RMS %.3f %%, q relative RMS %.3f %%\n", SetupName(setup),
+              auto_corners ? " (corners found automatically)" : "", 100 * mm.L_rms, 100 * mm.q_rms);
+  EXPECT_LE(mm.L_rms, 0.02);
+  EXPECT_LE(mm.q_rms, 0.02);
+  EXPECT_LE(r.pose_rms_px, 0.5);
+  EXPECT_LE(r.camera_rms_px, 0.3);
+  if (setup == Setup::kFront) {
+    for (const auto& c : r.conditions) EXPECT_GT(c.masked_nodes, 0);
+  }
+}
+
+TEST_F(AcquireTest, BackLitMappingWithinTwoPercent) {
+  const std::string c = Copy(Setup::kBack);
+  CheckMapping(Setup::kBack, false, this, c, Out());
+}
+
+TEST_F(AcquireTest, FrontLitMappingWithinTwoPercent) {
+  const std::string c = Copy(Setup::kFront);
+  CheckMapping(Setup::kFront, false, this, c, Out());
+}
+
+TEST_F(AcquireTest, AutomaticCornersWithinTwoPercent) {
+  const std::string c = Copy(Setup::kBack);
+  const auto given = ReadCapture(c).face_corners_px;
+  EditJson(c, [](nlohmann::json& j) { j["face_corners_px"] = "auto"; });
+  CheckMapping(Setup::kBack, true, this, c, Out());
+  const nlohmann::json rep = nlohmann::json::parse(std::ifstream(WorkDir(Out()) + "/report.json"));
+  for (size_t k = 0; k < 4; ++k)
+    for (size_t a = 0; a < 2; ++a)
+      EXPECT_NEAR(rep["face_corners_px"][k][a].get<double>(), given[k][a], 0.5) << "corner " << k;
+}
+
+TEST_F(AcquireTest, EndToEndHeldOutError) {
+  const std::string c = Copy(Setup::kBack);
+  AcquireOptions o;
+  o.recovery.max_iterations = 80;
+  const AcquireReport r = Acquire(ReadCapture(c), Out(), o);
+  ASSERT_TRUE(fs::exists(Out()));
+  ASSERT_TRUE(fs::exists(r.report_json));
+  EXPECT_GE(r.previews.size(), 4u + 2u);
+  for (const auto& p : r.previews) EXPECT_TRUE(fs::exists(p)) << p;
+  const Dataset truth = ReadDataset((fs::path(c) / "truth/dataset").string());
+  const Dataset holdout = ReadDataset((fs::path(c) / "truth/dataset/holdout").string());
+  const Material rec = ReadMaterial(Out());
+  const Material tru = ReadMaterial((fs::path(c) / "truth/material.vdb").string());
+  MultigridOptions mg;
+  mg.tolerance = 1e-9;
+  const EvaluationReport e = EvaluateRecovery(rec, &tru, truth, holdout, mg);
+  std::printf("held-out E %.3e (truth's own floor %.3e), fit E %.3e\n", e.holdout_error,
+              e.truth_holdout_error, r.solve.fit_error);
+  EXPECT_LE(e.holdout_error, 5e-3);
+  // A second run reuses the calibration and HDR stages.
+  AcquireOptions again;
+  again.solve = false;
+  const AcquireReport r2 = Acquire(ReadCapture(c), Out(), again);
+  EXPECT_NE(std::find(r2.reused.begin(), r2.reused.end(), "calibration"), r2.reused.end());
+  EXPECT_NE(std::find(r2.reused.begin(), r2.reused.end(), "hdr"), r2.reused.end());
+  again.force = true;
+  const AcquireReport r3 = Acquire(ReadCapture(c), Out(), again);
+  EXPECT_TRUE(r3.reused.empty());
+}
+
+TEST_F(AcquireTest, MissingStackIsNamed) {
+  const std::string c = Copy(Setup::kBack);
+  fs::remove_all(fs::path(c) / "lighting/01");
+  try {
+    ReadCapture(c);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("conditions[1].stack"), std::string::npos) << e.what();
+  }
+}
+
+// Overwrites every photo of a stack with one code value.
+void FillStack(const fs::path& stack, int code) {
+  for (const auto& e : fs::directory_iterator(stack))
+    if (e.path().extension() == ".png") {
+      const cv::Mat img = calib::ReadRgbImage(e.path().string());
+      calib::WritePhoto(e.path().string(), cv::Mat(img.size(), img.type(), cv::Scalar::all(code)));
+    }
+}
+
+TEST_F(AcquireTest, SaturatedConditionIsNamed) {
+  const std::string c = Copy(Setup::kBack);
+  FillStack(fs::path(c) / "lighting/02", 255);
+  ExpectError(c, "lighting/02: the sample is saturated in every exposure");
+}
+
+TEST_F(AcquireTest, BlackConditionIsNamed) {
+  const std::string c = Copy(Setup::kBack);
+  FillStack(fs::path(c) / "lighting/03", 0);
+  ExpectError(c, "lighting/03: the sample is black in every exposure");
+}
+
+TEST_F(AcquireTest, CornersOutsideTheImageAreNamed) {
+  const std::string c = Copy(Setup::kBack);
+  EditJson(c, [](nlohmann::json& j) { j["face_corners_px"][2] = {900.0, 200.0}; });
+  ExpectError(c, "face_corners_px: corner 2 (900.0, 200.0) is outside the 512x384 image");
+}
+
+TEST_F(AcquireTest, InconsistentImageSizesAreNamed) {
+  const std::string c = Copy(Setup::kBack);
+  const fs::path photo = fs::path(c) / "lighting/00/t03.png";
+  const cv::Mat img = calib::ReadRgbImage(photo.string());
+  calib::WritePhoto(photo.string(), img(cv::Rect(0, 0, 300, 200)).clone());
+  ExpectError(c, "lighting/00");
+}
+
+TEST_F(AcquireTest, WrongFieldIsNamed) {
+  const std::string c = Copy(Setup::kBack);
+  EditJson(c, [](nlohmann::json& j) { j["setup"] = "sideways"; });
+  try {
+    ReadCapture(c);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("capture.json: setup: expected \"back\" or \"front\""),
+              std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace translume::acquire

@@ -1,0 +1,285 @@
+// SPDX-License-Identifier: MIT
+#include "acquire/capture.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
+
+#include "solver/material.h"
+#include "solver/status.h"
+
+namespace translume::acquire {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+constexpr const char* kFormat = "translume-capture/1";
+
+// Field access that names the file and the field in every error.
+class Reader {
+ public:
+  Reader(std::string file, std::string dir) : file_(std::move(file)), dir_(std::move(dir)) {}
+
+  [[noreturn]] void Fail(const std::string& field, const std::string& why) const {
+    throw InputError(fmt::format("{}: {}: {}", file_, field, why));
+  }
+  void CheckKeys(const json& obj, const std::string& where, const std::set<std::string>& known) const {
+    for (const auto& [k, v] : obj.items())
+      if (!known.count(k)) Fail(where.empty() ? k : where + "." + k, "unknown field");
+  }
+  const json& Get(const json& obj, const std::string& key, const std::string& where) const {
+    if (!obj.contains(key)) Fail(where + key, "missing");
+    return obj.at(key);
+  }
+  std::string String(const json& v, const std::string& field) const {
+    if (!v.is_string()) Fail(field, "expected a string");
+    return v.get<std::string>();
+  }
+  double Positive(const json& v, const std::string& field) const {
+    if (!v.is_number()) Fail(field, "expected a number");
+    const double x = v.get<double>();
+    if (!(x > 0) || !std::isfinite(x)) Fail(field, fmt::format("must be positive, got {}", x));
+    return x;
+  }
+  template <size_t N>
+  std::array<double, N> Numbers(const json& v, const std::string& field) const {
+    if (!v.is_array() || v.size() != N) Fail(field, fmt::format("expected {} numbers", N));
+    std::array<double, N> out{};
+    for (size_t i = 0; i < N; ++i) {
+      if (!v[i].is_number()) Fail(field, fmt::format("expected {} numbers", N));
+      out[i] = v[i].get<double>();
+      if (!std::isfinite(out[i])) Fail(field, "not finite");
+    }
+    return out;
+  }
+  std::vector<std::array<double, 2>> Corners(const json& v, const std::string& field) const {
+    if (!v.is_array() || v.size() != 4) Fail(field, "expected 4 [x, y] pixel pairs");
+    std::vector<std::array<double, 2>> out;
+    for (const json& p : v) out.push_back(Numbers<2>(p, field));
+    return out;
+  }
+  // A path relative to the folder that must exist (a folder when `folder`).
+  std::string Path(const json& v, const std::string& field, bool folder) const {
+    const std::string rel = String(v, field);
+    const fs::path p = fs::path(dir_) / rel;
+    if (folder ? !fs::is_directory(p) : !fs::is_regular_file(p))
+      Fail(field, fmt::format("{} {} not found", folder ? "folder" : "file", p.string()));
+    return p.string();
+  }
+
+ private:
+  std::string file_, dir_;
+};
+
+}  // namespace
+
+CaptureSpec ReadCapture(const std::string& path) {
+  CaptureSpec s;
+  const bool is_dir = fs::is_directory(path);
+  s.dir = is_dir ? path : fs::path(path).parent_path().string();
+  if (s.dir.empty()) s.dir = ".";
+  s.file = is_dir ? (fs::path(path) / "capture.json").string() : path;
+  std::ifstream in(s.file);
+  if (!in) throw InputError(fmt::format("{}: cannot open (a capture folder holds capture.json)", s.file));
+  json j;
+  try {
+    j = json::parse(in);
+  } catch (const json::parse_error& e) {
+    throw InputError(fmt::format("{}: not valid JSON ({})", s.file, e.what()));
+  }
+  const Reader r(s.file, s.dir);
+  if (!j.is_object()) r.Fail("(top level)", "expected an object");
+  r.CheckKeys(j, "", {"format", "setup", "sample_mm", "spacing_mm", "grid", "eta", "C",
+                      "face_corners_px", "camera", "projector", "response", "white", "black",
+                      "conditions", "comment"});
+  if (r.String(r.Get(j, "format", ""), "format") != kFormat)
+    r.Fail("format", fmt::format("expected \"{}\"", kFormat));
+  const std::string setup = r.String(r.Get(j, "setup", ""), "setup");
+  if (setup != "back" && setup != "front") r.Fail("setup", "expected \"back\" or \"front\"");
+  s.setup = setup == "back" ? Setup::kBack : Setup::kFront;
+  s.size_mm = r.Numbers<3>(r.Get(j, "sample_mm", ""), "sample_mm");
+  for (double v : s.size_mm)
+    if (!(v > 0)) r.Fail("sample_mm", "every extent must be positive");
+  if (j.contains("spacing_mm") == j.contains("grid"))
+    r.Fail("spacing_mm", "give exactly one of spacing_mm and grid");
+  int64_t n[3];
+  if (j.contains("spacing_mm")) {
+    s.spacing_mm = r.Positive(j["spacing_mm"], "spacing_mm");
+    for (int a = 0; a < 3; ++a) {
+      const double cells = s.size_mm[size_t(a)] / s.spacing_mm;
+      if (std::abs(cells - std::round(cells)) > 1e-3 * std::max(1.0, cells))
+        r.Fail("spacing_mm", fmt::format("sample_mm[{}] = {} is not a whole number of spacings {}",
+                                         a, s.size_mm[size_t(a)], s.spacing_mm));
+      n[a] = int64_t(std::llround(cells)) + 1;
+    }
+  } else {
+    const auto g = r.Numbers<3>(j["grid"], "grid");
+    for (int a = 0; a < 3; ++a) n[a] = int64_t(g[size_t(a)]);
+    s.spacing_mm = s.size_mm[0] / double(n[0] - 1);
+    for (int a = 0; a < 3; ++a)
+      if (n[a] < 2 || std::abs(s.size_mm[size_t(a)] / double(n[a] - 1) - s.spacing_mm) > 1e-3 * s.spacing_mm)
+        r.Fail("grid", "must have >= 2 nodes per axis and equal spacing on every axis "
+                       "(sample_mm[a] / (grid[a] - 1))");
+  }
+  s.grid = {n[0], n[1], n[2]};
+  if (j.contains("eta") && j.contains("C")) r.Fail("C", "give eta or C, not both");
+  if (j.contains("eta")) s.eta = r.Positive(j["eta"], "eta");
+  s.C = j.contains("C") ? r.Positive(j["C"], "C") : ReflectionParameterC(s.eta);
+  if (s.C < 1) r.Fail("C", "must be >= 1");
+  if (j.contains("face_corners_px") && !(j["face_corners_px"].is_string() && j["face_corners_px"] == "auto"))
+    s.face_corners_px = r.Corners(j["face_corners_px"], "face_corners_px");
+
+  const json& cam = r.Get(j, "camera", "");
+  if (cam.is_string()) {
+    s.camera.file = r.Path(cam, "camera", false);
+  } else if (cam.is_object()) {
+    r.CheckKeys(cam, "camera", {"photos", "board"});
+    s.camera.photos = r.Path(r.Get(cam, "photos", "camera."), "camera.photos", true);
+    s.camera.board = r.String(r.Get(cam, "board", "camera."), "camera.board");
+  } else {
+    r.Fail("camera", "expected a calibration file or {\"photos\", \"board\"}");
+  }
+  if (j.contains("projector") && !j["projector"].is_null()) {
+    const json& p = j["projector"];
+    s.projector.rear = s.setup == Setup::kBack;
+    if (p.is_string()) {
+      s.projector.file = r.Path(p, "projector", false);
+    } else if (p.is_object()) {
+      r.CheckKeys(p, "projector", {"planes", "board", "pattern", "projector_size", "rear"});
+      s.projector.planes = r.Path(r.Get(p, "planes", "projector."), "projector.planes", true);
+      s.projector.board = r.String(r.Get(p, "board", "projector."), "projector.board");
+      if (p.contains("pattern")) s.projector.pattern = r.String(p["pattern"], "projector.pattern");
+      if (p.contains("projector_size"))
+        s.projector.projector_size = r.String(p["projector_size"], "projector.projector_size");
+      if (p.contains("rear")) {
+        if (!p["rear"].is_boolean()) r.Fail("projector.rear", "expected true or false");
+        s.projector.rear = p["rear"].get<bool>();
+      }
+    } else {
+      r.Fail("projector", "expected a calibration file or {\"planes\", \"board\", ...}");
+    }
+  }
+  const json& resp = r.Get(j, "response", "");
+  if (resp.is_string() && resp == "linear") {
+    s.response.linear = true;
+  } else if (resp.is_string()) {
+    s.response.file = r.Path(resp, "response", false);
+  } else if (resp.is_object()) {
+    r.CheckKeys(resp, "response", {"stacks"});
+    const json& st = r.Get(resp, "stacks", "response.");
+    if (!st.is_array() || st.empty()) r.Fail("response.stacks", "expected a list of folders");
+    for (const json& d : st) s.response.stacks.push_back(r.Path(d, "response.stacks", true));
+  } else {
+    r.Fail("response", "expected \"linear\", a calibration file or {\"stacks\": [...]}");
+  }
+  const json& w = r.Get(j, "white", "");
+  if (w.is_string()) {
+    s.white.file = r.Path(w, "white", false);
+  } else if (w.is_object()) {
+    r.CheckKeys(w, "white", {"white", "black", "patch", "albedo"});
+    auto stack_or_exr = [&](const json& v, const std::string& field) {
+      const std::string p = (fs::path(s.dir) / r.String(v, field)).string();
+      if (!fs::exists(p)) r.Fail(field, fmt::format("{} not found", p));
+      return p;
+    };
+    s.white.white = stack_or_exr(r.Get(w, "white", "white."), "white.white");
+    if (w.contains("black")) s.white.black = stack_or_exr(w["black"], "white.black");
+    s.white.patch = r.Corners(r.Get(w, "patch", "white."), "white.patch");
+    const json& a = r.Get(w, "albedo", "white.");
+    if (a.is_number()) {
+      const double v = r.Positive(a, "white.albedo");
+      s.white.albedo = {v, v, v};
+    } else {
+      s.white.albedo = r.Numbers<3>(a, "white.albedo");
+    }
+    for (double v : s.white.albedo)
+      if (!(v > 0 && v <= 1)) r.Fail("white.albedo", "must be in (0, 1]");
+  } else {
+    r.Fail("white", "expected a calibration file or {\"white\", \"patch\", \"albedo\", ...}");
+  }
+  if (j.contains("black")) s.black = r.Path(j["black"], "black", true);
+
+  const json& cs = r.Get(j, "conditions", "");
+  if (!cs.is_array() || cs.empty()) r.Fail("conditions", "expected a non-empty list");
+  std::set<std::string> names;
+  for (size_t m = 0; m < cs.size(); ++m) {
+    const std::string where = fmt::format("conditions[{}]", m);
+    const json& c = cs[m];
+    if (!c.is_object()) r.Fail(where, "expected an object");
+    r.CheckKeys(c, where, {"name", "stack", "pattern", "light"});
+    CaptureSpec::Condition cond;
+    cond.name = r.String(r.Get(c, "name", where + "."), where + ".name");
+    if (cond.name.empty() || cond.name.find_first_of("/\\ ") != std::string::npos)
+      r.Fail(where + ".name", "must be non-empty, without spaces or slashes");
+    if (!names.insert(cond.name).second) r.Fail(where + ".name", "duplicate name " + cond.name);
+    cond.stack = r.Path(r.Get(c, "stack", where + "."), where + ".stack", true);
+    if (c.contains("pattern") == c.contains("light"))
+      r.Fail(where, "give exactly one of pattern (projector image) and light (spec on the lit face)");
+    if (c.contains("pattern")) {
+      cond.pattern = r.Path(c["pattern"], where + ".pattern", false);
+      if (!s.projector.present())
+        r.Fail(where + ".pattern", "projector patterns need a projector calibration (field projector)");
+    } else {
+      cond.light = r.String(c["light"], where + ".light");
+    }
+    s.conditions.push_back(cond);
+  }
+  return s;
+}
+
+std::string CaptureJson(const CaptureSpec& s) {
+  auto rel = [&](const std::string& p) { return fs::path(p).lexically_relative(s.dir).generic_string(); };
+  json j;
+  j["format"] = kFormat;
+  j["setup"] = SetupName(s.setup);
+  j["sample_mm"] = s.size_mm;
+  j["spacing_mm"] = s.spacing_mm;
+  if (s.eta != 1.3 || std::abs(s.C - ReflectionParameterC(s.eta)) < 1e-12) j["eta"] = s.eta;
+  if (std::abs(s.C - ReflectionParameterC(s.eta)) > 1e-12) {
+    j.erase("eta");
+    j["C"] = s.C;
+  }
+  if (s.face_corners_px.empty()) j["face_corners_px"] = "auto";
+  else j["face_corners_px"] = s.face_corners_px;
+  if (!s.camera.file.empty()) j["camera"] = rel(s.camera.file);
+  else j["camera"] = {{"photos", rel(s.camera.photos)}, {"board", s.camera.board}};
+  if (!s.projector.file.empty()) {
+    j["projector"] = rel(s.projector.file);
+  } else if (!s.projector.planes.empty()) {
+    j["projector"] = {{"planes", rel(s.projector.planes)}, {"board", s.projector.board},
+                      {"pattern", s.projector.pattern},
+                      {"projector_size", s.projector.projector_size}, {"rear", s.projector.rear}};
+  }
+  if (s.response.linear) {
+    j["response"] = "linear";
+  } else if (!s.response.file.empty()) {
+    j["response"] = rel(s.response.file);
+  } else {
+    json st = json::array();
+    for (const auto& d : s.response.stacks) st.push_back(rel(d));
+    j["response"] = {{"stacks", st}};
+  }
+  if (!s.white.file.empty()) {
+    j["white"] = rel(s.white.file);
+  } else {
+    j["white"] = {{"white", rel(s.white.white)}, {"patch", s.white.patch}, {"albedo", s.white.albedo}};
+    if (!s.white.black.empty()) j["white"]["black"] = rel(s.white.black);
+  }
+  if (!s.black.empty()) j["black"] = rel(s.black);
+  json cs = json::array();
+  for (const auto& c : s.conditions) {
+    json e = {{"name", c.name}, {"stack", rel(c.stack)}};
+    if (!c.pattern.empty()) e["pattern"] = rel(c.pattern);
+    else e["light"] = c.light;
+    cs.push_back(e);
+  }
+  j["conditions"] = cs;
+  return j.dump(2) + "\n";
+}
+
+}  // namespace translume::acquire

@@ -1,0 +1,80 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <array>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "solver/grid.h"
+
+namespace translume::acquire {
+
+// A capture folder, format v1 (docs/capture.md, "Capture folder"): CAPTURE/capture.json names
+// the sample, the recovery grid, the calibration (photos or finished calibration files) and
+// one exposure stack per illumination condition. Paths in the file are relative to the folder;
+// the parsed spec holds them resolved (folder / path).
+//
+// Sample frame (mm): origin at the front face's corner that images as node (0, 0, 0), x along
+// node index i, y along j, z into the sample (SPEC section 2); the front face is z = 0.
+struct CaptureSpec {
+  std::string dir;   // the capture folder
+  std::string file;  // dir/capture.json
+  Setup setup = Setup::kBack;
+  std::array<double, 3> size_mm{};  // sample extent along x, y, z: (n - 1) h per axis
+  GridShape grid;                   // recovery grid (from spacing_mm or grid)
+  double spacing_mm = 0;
+  double eta = 1.3;
+  double C = 0;  // from eta unless given
+  // Image positions (pixels, OpenCV convention) of the front face's corners, in the order
+  // sample (0, 0), (X, 0), (X, Y), (0, Y); empty: found automatically in the images.
+  std::vector<std::array<double, 2>> face_corners_px;
+
+  // Calibration: each either a finished file (`*_file`) or what to compute it from.
+  struct Camera {
+    std::string file;               // OpenCV YAML of `translume calibrate camera`
+    std::string photos, board;      // or: board photos folder and board specification
+  } camera;
+  struct Projector {
+    std::string file;               // OpenCV YAML of `translume calibrate projector`
+    std::string planes, board;      // or: plane photo pairs folder, printed board
+    std::string pattern = "11x7:64";
+    std::string projector_size = "1024x768";
+    bool rear = false;              // rear projection (default: true in the back-lit setup)
+    bool present() const { return !file.empty() || !planes.empty(); }
+  } projector;
+  struct Response {
+    std::string file;                 // OpenCV YAML of `translume calibrate response`
+    std::vector<std::string> stacks;  // or: stacks of static scenes
+    bool linear = false;              // "linear": 16-bit, float or RAW photos need none
+  } response;
+  struct White {
+    std::string file;                 // OpenCV YAML of `translume calibrate white`
+    std::string white, black;         // or: stacks (or .exr) of the reference under projector
+                                      // white and black
+    std::vector<std::array<double, 2>> patch;  // its 4 image corners (pixels)
+    std::array<double, 3> albedo{};   // the patch's RGB albedo
+  } white;
+  std::string black;  // optional: stack of the sample under projector black, subtracted
+
+  struct Condition {
+    std::string name;
+    std::string stack;     // exposure stack folder
+    std::string pattern;   // projector image (q through the projector calibration), or
+    std::string light;     // a light spec on the lit face (solver/light.h), q taken as given
+  };
+  std::vector<Condition> conditions;
+};
+
+// Reads and validates DIR/capture.json (`path` may name the folder or the file). Throws
+// InputError "FILE: FIELD: problem" on: unknown format, unknown or mistyped fields, a setup
+// other than back|front, non-positive sizes, neither or both of spacing_mm and grid, a grid
+// that does not match the size, eta and C both given, corners not 4 pairs, a missing folder
+// or file, a condition with neither or both of pattern and light, pattern conditions without
+// a projector calibration, duplicate condition names.
+CaptureSpec ReadCapture(const std::string& path);
+
+// The JSON text of a spec, paths relative to spec.dir (what ReadCapture reads back).
+std::string CaptureJson(const CaptureSpec& spec);
+
+}  // namespace translume::acquire

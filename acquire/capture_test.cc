@@ -1,0 +1,111 @@
+// SPDX-License-Identifier: MIT
+#include "acquire/capture.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "solver/status.h"
+
+namespace translume::acquire {
+namespace {
+
+namespace fs = std::filesystem;
+
+class CaptureTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           (std::string("translume_capture_") + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    for (const char* d : {"calib/camera", "lighting/00", "lighting/01", "calib/white"}) fs::create_directories(dir_ / d);
+    std::ofstream(dir_ / "calib/response.yml") << "%YAML:1.0\n";
+    base_ = nlohmann::json::parse(R"({
+      "format": "translume-capture/1", "setup": "back", "sample_mm": [11.5, 8.5, 2.5],
+      "spacing_mm": 0.5, "eta": 1.3,
+      "face_corners_px": [[10, 10], [200, 12], [198, 150], [8, 148]],
+      "camera": {"photos": "calib/camera", "board": "chessboard:9x6:2"},
+      "response": "calib/response.yml",
+      "white": {"white": "calib/white", "patch": [[20, 20], [180, 20], [180, 130], [20, 130]], "albedo": 0.9},
+      "conditions": [{"name": "a", "stack": "lighting/00", "light": "region:0,0/2"},
+                     {"name": "b", "stack": "lighting/01", "light": "region:1,0/2"}]})");
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Write(const nlohmann::json& j) {
+    std::ofstream(dir_ / "capture.json") << j.dump(2);
+    return dir_.string();
+  }
+  void ExpectError(const std::function<void(nlohmann::json&)>& edit, const std::string& what) {
+    nlohmann::json j = base_;
+    edit(j);
+    try {
+      ReadCapture(Write(j));
+      ADD_FAILURE() << "no error; expected " << what;
+    } catch (const InputError& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find("capture.json: " + what), std::string::npos) << msg;
+    }
+  }
+  fs::path dir_;
+  nlohmann::json base_;
+};
+
+TEST_F(CaptureTest, ReadsAndRoundTrips) {
+  const CaptureSpec s = ReadCapture(Write(base_));
+  EXPECT_EQ(s.setup, Setup::kBack);
+  EXPECT_EQ(s.grid.nx, 24);
+  EXPECT_EQ(s.grid.ny, 18);
+  EXPECT_EQ(s.grid.nz, 6);
+  EXPECT_NEAR(s.C, 2.6021, 1e-4);
+  EXPECT_EQ(s.face_corners_px.size(), 4u);
+  EXPECT_TRUE(s.projector.file.empty() && s.projector.planes.empty());
+  ASSERT_EQ(s.conditions.size(), 2u);
+  EXPECT_EQ(s.conditions[1].light, "region:1,0/2");
+  EXPECT_EQ(s.white.albedo[2], 0.9);
+  // CaptureJson writes what ReadCapture reads back.
+  std::ofstream(dir_ / "capture.json") << CaptureJson(s);
+  const CaptureSpec t = ReadCapture(dir_.string());
+  EXPECT_EQ(t.grid.nz, s.grid.nz);
+  EXPECT_EQ(t.conditions[0].stack, s.conditions[0].stack);
+  EXPECT_EQ(t.white.patch, s.white.patch);
+  EXPECT_EQ(t.camera.board, s.camera.board);
+}
+
+TEST_F(CaptureTest, GridInsteadOfSpacing) {
+  nlohmann::json j = base_;
+  j.erase("spacing_mm");
+  j["grid"] = {24, 18, 6};
+  const CaptureSpec s = ReadCapture(Write(j));
+  EXPECT_DOUBLE_EQ(s.spacing_mm, 0.5);
+}
+
+TEST_F(CaptureTest, EveryBrokenFieldIsNamed) {
+  ExpectError([](auto& j) { j["format"] = "translume-capture/9"; }, "format: expected");
+  ExpectError([](auto& j) { j["setup"] = "side"; }, "setup: expected");
+  ExpectError([](auto& j) { j["sample_mm"] = {1, 2}; }, "sample_mm: expected 3 numbers");
+  ExpectError([](auto& j) { j["spacing_mm"] = 0.3; }, "spacing_mm: sample_mm[0]");
+  ExpectError([](auto& j) { j["grid"] = {24, 18, 6}; }, "spacing_mm: give exactly one");
+  ExpectError([](auto& j) { j["C"] = 2.0; }, "C: give eta or C");
+  ExpectError([](auto& j) { j["face_corners_px"] = {{1, 2}}; }, "face_corners_px: expected 4");
+  ExpectError([](auto& j) { j["camera"]["photos"] = "nowhere"; }, "camera.photos: folder");
+  ExpectError([](auto& j) { j["response"] = 3; }, "response: expected");
+  ExpectError([](auto& j) { j["white"]["albedo"] = 1.5; }, "white.albedo: must be in (0, 1]");
+  ExpectError([](auto& j) { j["colour"] = 1; }, "colour: unknown field");
+  ExpectError([](auto& j) { j["conditions"][1]["name"] = "a"; }, "conditions[1].name: duplicate");
+  ExpectError([](auto& j) { j["conditions"][0]["stack"] = "lighting/07"; }, "conditions[0].stack: folder");
+  ExpectError([](auto& j) { j["conditions"][0].erase("light"); }, "conditions[0]: give exactly one");
+  ExpectError([](auto& j) { j["conditions"][0]["pattern"] = "calib/response.yml"; j["conditions"][0].erase("light"); },
+              "conditions[0].pattern: projector patterns need a projector calibration");
+  ExpectError([](auto& j) { j["conditions"] = nlohmann::json::array(); }, "conditions: expected a non-empty list");
+}
+
+TEST_F(CaptureTest, NotJsonIsNamed) {
+  std::ofstream(dir_ / "capture.json") << "{ not json";
+  EXPECT_THROW(ReadCapture(dir_.string()), InputError);
+  EXPECT_THROW(ReadCapture((dir_ / "missing").string()), InputError);
+}
+
+}  // namespace
+}  // namespace translume::acquire

@@ -1,0 +1,315 @@
+// SPDX-License-Identifier: MIT
+#include "acquire/face_mapping.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "solver/status.h"
+
+namespace translume::acquire {
+namespace {
+
+// `samples` coordinates (mm) spread evenly over node n's dual interval along one axis.
+std::vector<double> DualBoxSamples(int64_t n, int64_t count, double h, int samples) {
+  const double lo = std::max(0.0, (double(n) - 0.5) * h);
+  const double hi = std::min(double(count - 1) * h, (double(n) + 0.5) * h);
+  std::vector<double> out(static_cast<size_t>(samples));
+  for (int s = 0; s < samples; ++s) out[size_t(s)] = lo + (s + 0.5) * (hi - lo) / samples;
+  return out;
+}
+
+// Sample-frame points of every face node's dual box at depth z: node-major, samples^2 each.
+std::vector<cv::Point3d> FaceBoxPoints(const GridShape& g, double h, double z, int samples) {
+  std::vector<cv::Point3d> pts;
+  pts.reserve(size_t(g.face_size()) * size_t(samples * samples));
+  for (int64_t j = 0; j < g.ny; ++j) {
+    const auto ys = DualBoxSamples(j, g.ny, h, samples);
+    for (int64_t i = 0; i < g.nx; ++i) {
+      const auto xs = DualBoxSamples(i, g.nx, h, samples);
+      for (double y : ys)
+        for (double x : xs) pts.emplace_back(x, y, z);
+    }
+  }
+  return pts;
+}
+
+std::vector<cv::Point3d> Transform(const calib::Pose& to_from, const std::vector<cv::Point3d>& in) {
+  std::vector<cv::Point3d> out;
+  out.reserve(in.size());
+  for (const auto& p : in) {
+    const cv::Vec3d x = to_from.Apply({p.x, p.y, p.z});
+    out.emplace_back(x[0], x[1], x[2]);
+  }
+  return out;
+}
+
+// Bilinear sample of a CV_32FC3 image at continuous pixel position p; false outside.
+bool Bilinear(const cv::Mat& img, const cv::Point2d& p, cv::Vec3f* v) {
+  const double fx = std::floor(p.x), fy = std::floor(p.y);
+  const int x0 = int(fx), y0 = int(fy);
+  if (x0 < 0 || y0 < 0 || x0 + 1 >= img.cols || y0 + 1 >= img.rows) return false;
+  const float ax = float(p.x - fx), ay = float(p.y - fy);
+  const cv::Vec3f& a = img.at<cv::Vec3f>(y0, x0);
+  const cv::Vec3f& b = img.at<cv::Vec3f>(y0, x0 + 1);
+  const cv::Vec3f& c = img.at<cv::Vec3f>(y0 + 1, x0);
+  const cv::Vec3f& d = img.at<cv::Vec3f>(y0 + 1, x0 + 1);
+  *v = (1 - ay) * ((1 - ax) * a + ax * b) + ay * ((1 - ax) * c + ax * d);
+  return true;
+}
+
+double LitFaceZ(const GridShape& g, double h, Setup setup) {
+  return setup == Setup::kBack ? double(g.nz - 1) * h : 0.0;
+}
+
+}  // namespace
+
+std::vector<cv::Point2d> DeviceIntrinsics::Project(const std::vector<cv::Point3d>& xyz) const {
+  std::vector<cv::Point2d> px;
+  if (xyz.empty()) return px;
+  cv::projectPoints(xyz, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), K, dist, px);
+  return px;
+}
+
+std::vector<cv::Point3d> FrontFaceCorners(const GridShape& g, double h) {
+  const double X = double(g.nx - 1) * h, Y = double(g.ny - 1) * h;
+  return {{0, 0, 0}, {X, 0, 0}, {X, Y, 0}, {0, Y, 0}};
+}
+
+calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
+                               const GridShape& grid, double h, const std::string& what,
+                               double* rms_px) {
+  TL_CHECK(corners.size() == 4);
+  for (size_t k = 0; k < 4; ++k)
+    if (corners[k].x < -0.5 || corners[k].y < -0.5 || corners[k].x > camera.size.width - 0.5 ||
+        corners[k].y > camera.size.height - 0.5)
+      throw InputError(fmt::format("{}: corner {} ({:.1f}, {:.1f}) is outside the {}x{} image", what,
+                                   k, corners[k].x, corners[k].y, camera.size.width,
+                                   camera.size.height));
+  const std::vector<cv::Point3d> obj = FrontFaceCorners(grid, h);
+  cv::Vec3d rvec, tvec;
+  if (!cv::solvePnP(obj, corners, camera.K, camera.dist, rvec, tvec, false, cv::SOLVEPNP_IPPE))
+    throw InputError(fmt::format("{}: no sample pose fits the four corners", what));
+  cv::solvePnPRefineLM(obj, corners, camera.K, camera.dist, rvec, tvec);
+  const calib::Pose pose = calib::Pose::FromRodrigues(rvec, tvec);
+  for (const auto& p : obj)
+    if (pose.Apply({p.x, p.y, p.z})[2] <= 0)
+      throw InputError(fmt::format("{}: the corners put the sample behind the camera", what));
+  // The face must be seen from its front (its outward normal, -z, towards the camera).
+  const cv::Vec3d n = pose.R * cv::Vec3d(0, 0, -1);
+  if (n.dot(-pose.t) <= 0)
+    throw InputError(fmt::format("{}: the corners are in the wrong order (expected node (0,0), "
+                                 "(nx-1,0), (nx-1,ny-1), (0,ny-1): the sample seen upright, "
+                                 "clockwise from its top-left corner)", what));
+  if (rms_px) {
+    const auto px = camera.Project(Transform(pose, obj));
+    double s = 0;
+    for (size_t k = 0; k < 4; ++k) s += std::pow(cv::norm(px[k] - corners[k]), 2);
+    *rms_px = std::sqrt(s / 4);
+  }
+  return pose;
+}
+
+std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb) {
+  CV_Assert(rgb.type() == CV_32FC3);
+  cv::Mat lum(rgb.size(), CV_32F);
+  float top = 0;
+  for (int y = 0; y < rgb.rows; ++y)
+    for (int x = 0; x < rgb.cols; ++x) {
+      const cv::Vec3f v = rgb.at<cv::Vec3f>(y, x);
+      const float l = v[0] + v[1] + v[2];
+      lum.at<float>(y, x) = l;
+      if (std::isfinite(l)) top = std::max(top, l);
+    }
+  if (!(top > 0)) return {};
+  cv::Mat lin = lum.clone();
+  for (float& l : cv::Mat_<float>(lin)) l = std::isfinite(l) ? std::max(l, 0.0f) : top;
+  cv::Mat log8(lum.size(), CV_8U);
+  const float floor = top * 1e-6f;
+  for (int y = 0; y < lum.rows; ++y)
+    for (int x = 0; x < lum.cols; ++x) {
+      const float l = std::max(lin.at<float>(y, x), floor);
+      log8.at<uint8_t>(y, x) = cv::saturate_cast<uint8_t>(255.0 * std::log(l / floor) / std::log(top / floor));
+    }
+  cv::Mat mask;
+  cv::threshold(log8, mask, 0, 255, cv::THRESH_BINARY | cv::THRESH_OTSU);
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(mask, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+  if (contours.empty()) return {};
+  const auto& blob = *std::max_element(contours.begin(), contours.end(), [](const auto& a, const auto& b) {
+    return cv::contourArea(a) < cv::contourArea(b);
+  });
+  std::vector<cv::Point> hull, quad;
+  cv::convexHull(blob, hull);
+  const double perimeter = cv::arcLength(hull, true);
+  for (double eps = 0.005; eps < 0.2 && quad.size() != 4; eps *= 1.3)
+    cv::approxPolyDP(hull, quad, eps * perimeter, true);
+  if (quad.size() != 4 || !cv::isContourConvex(quad)) return {};
+  // Order: top-left (smallest x + y) first, then clockwise in the image.
+  std::vector<cv::Point2d> c(quad.begin(), quad.end());
+  if ((c[1] - c[0]).cross(c[2] - c[1]) < 0) std::reverse(c.begin(), c.end());
+  const auto tl = std::min_element(c.begin(), c.end(), [](const auto& a, const auto& b) {
+    return a.x + a.y < b.x + b.y;
+  });
+  std::rotate(c.begin(), tl, c.end());
+  // Each side: sub-pixel edge points where the image crosses half-way between the values just
+  // inside and just outside, along the side's normal; a line through them; corners where
+  // consecutive lines meet.
+  std::vector<cv::Vec3d> lines;
+  for (int s = 0; s < 4; ++s) {
+    const cv::Point2d a = c[size_t(s)], b = c[size_t((s + 1) % 4)];
+    const cv::Point2d d = (b - a) / cv::norm(b - a);
+    const cv::Point2d n(d.y, -d.x);  // outward for a clockwise outline (image y down)
+    std::vector<cv::Point2f> edge;
+    const int count = std::max(8, int(cv::norm(b - a) / 2));
+    for (int k = 0; k < count; ++k) {
+      const cv::Point2d p = a + (b - a) * (0.15 + 0.7 * (k + 0.5) / count);
+      auto at = [&](double t) {
+        const cv::Point2d q = p + t * n;
+        const int x = int(std::floor(q.x)), y = int(std::floor(q.y));
+        if (x < 0 || y < 0 || x + 1 >= lin.cols || y + 1 >= lin.rows) return std::numeric_limits<double>::quiet_NaN();
+        const double fx = q.x - x, fy = q.y - y;
+        return (1 - fy) * ((1 - fx) * lin.at<float>(y, x) + fx * lin.at<float>(y, x + 1)) +
+               fy * ((1 - fx) * lin.at<float>(y + 1, x) + fx * lin.at<float>(y + 1, x + 1));
+      };
+      const double in = 0.5 * (at(-4) + at(-3)), out = 0.5 * (at(3) + at(4));
+      if (!(in > 2 * out)) continue;
+      const double half = 0.5 * (in + out);
+      double prev = at(-3);
+      for (double t = -2.95; t <= 3; t += 0.05) {
+        const double v = at(t);
+        if (prev >= half && v < half) {
+          const double tt = t - 0.05 * (half - v) / (prev - v);
+          edge.emplace_back(p + (tt) * n);
+          break;
+        }
+        prev = v;
+      }
+    }
+    if (edge.size() < 4) return {};
+    cv::Vec4f l;
+    cv::fitLine(edge, l, cv::DIST_HUBER, 0, 0.01, 0.01);
+    // Line as a x + b y = c.
+    lines.emplace_back(l[1], -l[0], l[1] * l[2] - l[0] * l[3]);
+  }
+  std::vector<cv::Point2d> out;
+  for (int s = 0; s < 4; ++s) {
+    const cv::Vec3d& p = lines[size_t((s + 3) % 4)];
+    const cv::Vec3d& q = lines[size_t(s)];
+    const double det = p[0] * q[1] - p[1] * q[0];
+    if (std::abs(det) < 1e-9) return {};
+    out.emplace_back((p[2] * q[1] - p[1] * q[2]) / det, (p[0] * q[2] - p[2] * q[0]) / det);
+  }
+  return out;
+}
+
+FaceSamples ResampleFrontFace(const cv::Mat& img, const DeviceIntrinsics& camera,
+                              const calib::Pose& camera_from_sample, const GridShape& g, double h,
+                              int samples) {
+  CV_Assert(img.type() == CV_32FC3);
+  // At least one sample per pixel of the node's footprint (measured around the face's centre
+  // and corners), so that every pixel under a node is seen: a box filter over the footprint.
+  {
+    std::vector<cv::Point3d> probe;
+    for (double fx : {0.0, 0.5, 1.0})
+      for (double fy : {0.0, 0.5, 1.0}) {
+        const double x = fx * double(g.nx - 2) * h, y = fy * double(g.ny - 2) * h;
+        for (const cv::Vec3d& d : {cv::Vec3d(0, 0, 0), cv::Vec3d(h, 0, 0), cv::Vec3d(0, h, 0)}) {
+          const cv::Vec3d c = camera_from_sample.Apply(cv::Vec3d(x, y, 0) + d);
+          probe.emplace_back(c[0], c[1], c[2]);
+        }
+      }
+    const auto pp = camera.Project(probe);
+    double px_per_node = 0;
+    for (size_t k = 0; k < pp.size(); k += 3)
+      px_per_node = std::max({px_per_node, cv::norm(pp[k + 1] - pp[k]), cv::norm(pp[k + 2] - pp[k])});
+    samples = std::max(samples, std::min(64, int(std::ceil(px_per_node)) + 1));
+  }
+  const auto px = camera.Project(Transform(camera_from_sample, FaceBoxPoints(g, h, 0, samples)));
+  const int64_t F = g.face_size();
+  const size_t S = size_t(samples * samples);
+  FaceSamples out;
+  for (auto& ch : out.value) ch.assign(size_t(F), std::numeric_limits<float>::quiet_NaN());
+  out.saturated.assign(size_t(F), 0.0f);
+  for (int64_t f = 0; f < F; ++f) {
+    cv::Vec3d sum(0, 0, 0);
+    int n = 0, sat = 0;
+    for (size_t s = 0; s < S; ++s) {
+      cv::Vec3f v;
+      if (!Bilinear(img, px[size_t(f) * S + s], &v)) continue;
+      if (!std::isfinite(v[0] + v[1] + v[2])) {
+        ++sat;
+        continue;
+      }
+      sum += cv::Vec3d(v);
+      ++n;
+    }
+    out.saturated[size_t(f)] = float(sat) / float(S);
+    if (n == int(S))
+      for (int c = 0; c < 3; ++c) out.value[size_t(c)][size_t(f)] = float(sum[c] / n);
+  }
+  return out;
+}
+
+std::vector<float> ProjectPatternOnFace(const cv::Mat& pattern, const DeviceIntrinsics& projector,
+                                        const calib::Pose& projector_from_camera,
+                                        const calib::Pose& camera_from_sample, const GridShape& g,
+                                        double h, Setup setup, int samples) {
+  CV_Assert(pattern.type() == CV_32FC1);
+  const double z = LitFaceZ(g, h, setup);
+  const std::vector<cv::Point3d> cam = Transform(camera_from_sample, FaceBoxPoints(g, h, z, samples));
+  const auto px = projector.Project(Transform(projector_from_camera, cam));
+  // Is the lit face turned towards the projector? (Its outward normal: +z back, -z front.)
+  const calib::Pose sample_from_camera = camera_from_sample.Inverse();
+  const cv::Vec3d projector_in_sample =
+      sample_from_camera.Apply(projector_from_camera.Inverse().t);
+  const double outward = setup == Setup::kBack ? 1.0 : -1.0;
+  const bool faces = (projector_in_sample[2] - z) * outward > 0;
+  const int64_t F = g.face_size();
+  const size_t S = size_t(samples * samples);
+  std::vector<float> q(size_t(F), 0.0f);
+  if (!faces) return q;
+  for (int64_t f = 0; f < F; ++f) {
+    double sum = 0;
+    for (size_t s = 0; s < S; ++s) {
+      const cv::Point2d& p = px[size_t(f) * S + s];
+      const int x = int(std::lround(p.x)), y = int(std::lround(p.y));
+      if (x >= 0 && y >= 0 && x < pattern.cols && y < pattern.rows) sum += pattern.at<float>(y, x);
+    }
+    q[size_t(f)] = float(sum / double(S));
+  }
+  return q;
+}
+
+cv::Mat PatternForFaceRect(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
+                           const calib::Pose& camera_from_sample, const GridShape& g, double h,
+                           Setup setup, const std::array<double, 4>& rect) {
+  std::vector<cv::Point2d> pix, norm;
+  pix.reserve(size_t(projector.size.area()));
+  for (int y = 0; y < projector.size.height; ++y)
+    for (int x = 0; x < projector.size.width; ++x) pix.emplace_back(x, y);
+  cv::undistortPoints(pix, norm, projector.K, projector.dist, cv::noArray(), cv::noArray(),
+                      cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 50, 1e-12));
+  // Rays in the sample frame: origin o, direction R (x, y, 1).
+  const calib::Pose sample_from_projector =
+      camera_from_sample.Inverse() * projector_from_camera.Inverse();
+  const cv::Vec3d o = sample_from_projector.t;
+  const double z = LitFaceZ(g, h, setup);
+  cv::Mat out(projector.size, CV_8UC1, cv::Scalar(0));
+  for (size_t k = 0; k < norm.size(); ++k) {
+    const cv::Vec3d d = sample_from_projector.R * cv::Vec3d(norm[k].x, norm[k].y, 1.0);
+    if (std::abs(d[2]) < 1e-12) continue;
+    const double s = (z - o[2]) / d[2];
+    if (s <= 0) continue;
+    const double x = o[0] + s * d[0], y = o[1] + s * d[1];
+    if (x >= rect[0] && x <= rect[1] && y >= rect[2] && y <= rect[3])
+      out.at<uint8_t>(int(k) / projector.size.width, int(k) % projector.size.width) = 255;
+  }
+  return out;
+}
+
+}  // namespace translume::acquire

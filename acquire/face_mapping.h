@@ -1,0 +1,78 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <array>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "calib/synthetic_rig.h"
+#include "solver/forward.h"
+#include "solver/grid.h"
+
+namespace translume::acquire {
+
+// Maps between camera/projector images and the nodes of a block sample's faces. Sample frame:
+// CaptureSpec (capture.h): node (i, j, k) at (i h, j h, k h) mm, front face z = 0. Transforms
+// are calib::Pose (x_to = R x_from + t, mm); camera_from_sample places the sample in the camera
+// frame. Pixels use OpenCV's convention (pixel centres at integer coordinates).
+
+// A pinhole device with OpenCV distortion (k1, k2, p1, p2, k3).
+struct DeviceIntrinsics {
+  cv::Size size;
+  cv::Matx33d K = cv::Matx33d::eye();
+  cv::Vec<double, 5> dist{0, 0, 0, 0, 0};
+  std::vector<cv::Point2d> Project(const std::vector<cv::Point3d>& camera_xyz) const;
+};
+
+// The four front-face corners in the sample frame, in CaptureSpec's order:
+// (0, 0, 0), (X, 0, 0), (X, Y, 0), (0, Y, 0).
+std::vector<cv::Point3d> FrontFaceCorners(const GridShape& grid, double h);
+
+// camera_from_sample from the front face's four image corners (planar PnP, IPPE, refined by
+// Levenberg-Marquardt). *rms_px receives the corners' reprojection RMS. Throws InputError
+// naming `what` when a corner lies outside the image or the pose puts the sample behind the
+// camera.
+calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
+                               const GridShape& grid, double h, const std::string& what,
+                               double* rms_px = nullptr);
+
+// Finds the front face's four corners in a linear image of the lit sample on a dark background
+// (e.g. the sum of every condition's HDR): log-domain Otsu threshold, the largest blob, its
+// four-sided outline, each side refined by a line fit to the outline's points. Corners are
+// returned in image order top-left, top-right, bottom-right, bottom-left (the sample seen
+// upright: node (0, 0) top-left). Empty when no convex quadrilateral is found.
+std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& linear_rgb);
+
+// Node-space front-face radiance from a linear RGB image (CV_32FC3; +inf = saturated): every
+// front-face node's value is the mean of the image over the node's dual box on the face (the
+// face area the node owns, SPEC section 3), sampled at n x n points per box through the camera
+// model with bilinear interpolation, n = max(`samples`, pixels across a node + 1): at least one
+// sample per pixel, an area-weighted resampling.
+struct FaceSamples {
+  FacePattern value;                // RGB, nx * ny (i + nx j); NaN where not measured
+  std::vector<float> saturated;     // fraction of the node's samples on saturated pixels
+};
+FaceSamples ResampleFrontFace(const cv::Mat& linear_rgb, const DeviceIntrinsics& camera,
+                              const calib::Pose& camera_from_sample, const GridShape& grid,
+                              double h, int samples = 6);
+
+// Incoming light q on the lit face (z = Z back-lit, z = 0 front-lit) from a projector image
+// (CV_32FC1, linear, 1 = full white): each lit-face node gets the mean of the pattern over its
+// dual box, sampled at `samples` x `samples` points mapped through camera_from_sample,
+// projector_from_camera and the projector's intrinsics; each projector pixel is a sharp square
+// (a DLP), so the pattern is read at the nearest pixel. Points outside the projector image or
+// on a face turned away from the projector get 0. The projector's irradiance fall-off over the
+// sample is not modelled (q = pattern value; the white calibration fixes q = 1 for full white).
+std::vector<float> ProjectPatternOnFace(const cv::Mat& pattern, const DeviceIntrinsics& projector,
+                                        const calib::Pose& projector_from_camera,
+                                        const calib::Pose& camera_from_sample, const GridShape& grid,
+                                        double h, Setup setup, int samples = 8);
+
+// The projector image (CV_8UC1, 255 inside) that lights the rectangle [x0, x1] x [y0, y1] (mm,
+// sample frame) of the lit face: pixels whose centre ray meets the lit face inside it.
+cv::Mat PatternForFaceRect(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
+                           const calib::Pose& camera_from_sample, const GridShape& grid, double h,
+                           Setup setup, const std::array<double, 4>& rect);
+
+}  // namespace translume::acquire

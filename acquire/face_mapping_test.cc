@@ -1,0 +1,96 @@
+// SPDX-License-Identifier: MIT
+#include "acquire/face_mapping.h"
+
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+#include "acquire/simulate_capture.h"
+#include "solver/evaluate.h"
+#include "solver/light.h"
+#include "solver/status.h"
+
+namespace translume::acquire {
+namespace {
+
+const GridShape kGrid{24, 18, 6};
+constexpr double kH = 0.5;
+
+std::vector<cv::Point2d> TrueCorners(const CaptureRig& rig) {
+  std::vector<cv::Point3d> cam;
+  for (const auto& p : FrontFaceCorners(kGrid, kH)) {
+    const cv::Vec3d x = rig.camera_from_sample.Apply({p.x, p.y, p.z});
+    cam.emplace_back(x[0], x[1], x[2]);
+  }
+  return rig.camera.Project(cam);
+}
+
+TEST(FaceMapping, PoseFromExactCorners) {
+  for (translume::Setup setup : {Setup::kBack, Setup::kFront}) {
+    const CaptureRig rig = DefaultCaptureRig(kGrid, kH, setup);
+    double rms = -1;
+    const calib::Pose p = EstimateSamplePose(rig.camera, TrueCorners(rig), kGrid, kH, "test", &rms);
+    EXPECT_LT(rms, 1e-6);
+    EXPECT_LT(cv::norm(p.t - rig.camera_from_sample.t), 1e-4 * cv::norm(rig.camera_from_sample.t));
+    EXPECT_LT(cv::norm(cv::Mat(p.R - rig.camera_from_sample.R)), 1e-5);
+  }
+}
+
+TEST(FaceMapping, CornersInTheWrongOrderOrOutsideAreRejected) {
+  const CaptureRig rig = DefaultCaptureRig(kGrid, kH, Setup::kBack);
+  auto c = TrueCorners(rig);
+  std::swap(c[1], c[3]);  // counter-clockwise: the face seen from behind
+  EXPECT_THROW(EstimateSamplePose(rig.camera, c, kGrid, kH, "test"), InputError);
+  c = TrueCorners(rig);
+  c[0].x = -20;
+  EXPECT_THROW(EstimateSamplePose(rig.camera, c, kGrid, kH, "test"), InputError);
+}
+
+// A projector image lighting region (I, J) of a 2x2 split, mapped back onto the lit face,
+// matches the ideal region light of solver/light.h (up to the projector's pixels at the edges).
+TEST(FaceMapping, RegionPatternRoundTrip) {
+  for (translume::Setup setup : {Setup::kBack, Setup::kFront}) {
+    const CaptureRig rig = DefaultCaptureRig(kGrid, kH, setup);
+    const double X = double(kGrid.nx - 1) * kH, Y = double(kGrid.ny - 1) * kH;
+    std::vector<FacePattern> got, want;
+    for (int m = 0; m < 4; ++m) {
+      const int I = m % 2, J = m / 2;
+      const cv::Mat p8 = PatternForFaceRect(rig.projector, rig.projector_from_camera, rig.camera_from_sample,
+                                            kGrid, kH, setup, {I * X / 2, (I + 1) * X / 2, J * Y / 2, (J + 1) * Y / 2});
+      cv::Mat p;
+      p8.convertTo(p, CV_32F, 1.0 / 255);
+      got.push_back(GreyPattern(ProjectPatternOnFace(p, rig.projector, rig.projector_from_camera,
+                                                     rig.camera_from_sample, kGrid, kH, setup, 8)));
+      want.push_back(GreyPattern(RasterizeLight(LightSpec::Parse(fmt::format("region:{},{}/2", I, J)), kGrid, kH)));
+    }
+    const double rms = std::sqrt(RelightingError(got, want));
+    std::printf("%s-lit: region pattern q vs ideal region light: relative RMS %.3f %%\n", SetupName(setup), 100 * rms);
+    EXPECT_LT(rms, 0.02);
+  }
+}
+
+TEST(FaceMapping, ResamplingAveragesAndFlagsSaturation) {
+  const CaptureRig rig = DefaultCaptureRig(kGrid, kH, Setup::kBack);
+  cv::Mat img(rig.camera.size, CV_32FC3, cv::Scalar(0.25, 0.5, 0.75));
+  FaceSamples s = ResampleFrontFace(img, rig.camera, rig.camera_from_sample, kGrid, kH);
+  for (int64_t f = 0; f < kGrid.face_size(); ++f) {
+    EXPECT_FLOAT_EQ(s.value[0][size_t(f)], 0.25f);
+    EXPECT_FLOAT_EQ(s.value[2][size_t(f)], 0.75f);
+    EXPECT_EQ(s.saturated[size_t(f)], 0.0f);
+  }
+  // A saturated pixel under node (5, 4): that node (and at most its neighbours) is flagged.
+  std::vector<cv::Point3d> node{{5 * kH, 4 * kH, 0}};
+  const cv::Vec3d x = rig.camera_from_sample.Apply({node[0].x, node[0].y, 0});
+  const cv::Point2d px = rig.camera.Project({cv::Point3d(x[0], x[1], x[2])})[0];
+  img.at<cv::Vec3f>(int(std::lround(px.y)), int(std::lround(px.x)))[1] = std::numeric_limits<float>::infinity();
+  s = ResampleFrontFace(img, rig.camera, rig.camera_from_sample, kGrid, kH);
+  EXPECT_GT(s.saturated[size_t(5 + kGrid.nx * 4)], 0.0f);
+  int flagged = 0;
+  for (float v : s.saturated) flagged += v > 0;
+  EXPECT_LE(flagged, 4);
+}
+
+}  // namespace
+}  // namespace translume::acquire

@@ -1,0 +1,83 @@
+// SPDX-License-Identifier: MIT
+#include "calib/photo_io.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
+#include <map>
+#include <opencv2/imgproc.hpp>
+#include <regex>
+
+#include "calib/error.h"
+#include "calib/hdr.h"
+
+namespace translume::calib {
+
+namespace fs = std::filesystem;
+
+cv::Mat ReadGray8(const std::string& path) {
+  cv::Mat rgb = ReadRgbImage(path);
+  cv::Mat gray8;
+  if (rgb.depth() == CV_16U) rgb.convertTo(rgb, CV_8U, 1.0 / 257);
+  else if (rgb.depth() == CV_32F) rgb.convertTo(rgb, CV_8U, 255);
+  cv::cvtColor(rgb, gray8, cv::COLOR_RGB2GRAY);
+  return gray8;
+}
+
+std::vector<NamedImage> ReadPhotoFolder(const std::string& dir) {
+  if (!fs::is_directory(dir)) throw CalibError(dir + ": not a folder");
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    std::string ext = e.path().extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (e.is_regular_file() && (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" ||
+                                ext == ".tiff" || ext == ".bmp"))
+      files.push_back(e.path());
+  }
+  std::sort(files.begin(), files.end());
+  if (files.empty()) throw CalibError(dir + ": no photos (.png, .jpg, .tif, .bmp)");
+  std::vector<NamedImage> views;
+  for (const fs::path& p : files) views.push_back({p.string(), ReadGray8(p.string())});
+  return views;
+}
+
+std::vector<PlaneView> ReadPlaneFolder(const std::string& dir) {
+  std::vector<NamedImage> photos = ReadPhotoFolder(dir);
+  std::map<std::string, PlaneView> planes;
+  for (NamedImage& p : photos) {
+    const std::string stem = fs::path(p.name).stem().string();
+    const size_t us = stem.rfind('_');
+    const std::string kind = us == std::string::npos ? "" : stem.substr(us + 1);
+    if (kind != "board" && kind != "pattern")
+      throw CalibError(p.name + ": plane photos must be named NAME_board.EXT or NAME_pattern.EXT");
+    PlaneView& v = planes[stem.substr(0, us)];
+    v.name = (fs::path(dir) / stem.substr(0, us)).string();
+    (kind == "board" ? v.board_photo : v.pattern_photo) = p.image;
+  }
+  std::vector<PlaneView> out;
+  for (auto& [name, v] : planes) {
+    if (v.board_photo.empty() || v.pattern_photo.empty())
+      throw CalibError(fmt::format("{}: plane has no {} photo", v.name,
+                                   v.board_photo.empty() ? "_board" : "_pattern"));
+    out.push_back(v);
+  }
+  return out;
+}
+
+ProjectorChessboard ParseProjectorChessboard(const std::string& text, const std::string& size) {
+  std::smatch m, n;
+  static const std::regex pat(R"((\d+)x(\d+):(\d+))"), wh(R"((\d+)x(\d+))");
+  if (!std::regex_match(text, m, pat))
+    throw CalibError(fmt::format("--pattern {}: expected COLSxROWS:SQUARE_PX", text));
+  if (!std::regex_match(size, n, wh))
+    throw CalibError(fmt::format("--projector-size {}: expected WIDTHxHEIGHT", size));
+  const ProjectorChessboard b = ProjectorChessboard::Centered(
+      {std::stoi(n[1]), std::stoi(n[2])}, std::stoi(m[1]), std::stoi(m[2]), std::stoi(m[3]));
+  if (std::string why = b.Validate(); !why.empty())
+    throw CalibError(fmt::format("--pattern {}: {}", text, why));
+  return b;
+}
+
+}  // namespace translume::calib

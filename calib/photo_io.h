@@ -1,0 +1,29 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "calib/camera_calib.h"
+#include "calib/projector_calib.h"
+#include "calib/projector_pattern.h"
+
+namespace translume::calib {
+
+// An 8-bit grey version of any photo (8-bit, 16-bit, float, RAW; see ReadRgbImage).
+cv::Mat ReadGray8(const std::string& path);
+
+// Every photo (.png .jpg .jpeg .tif .tiff .bmp) in `dir`, sorted by name, as 8-bit grey; names
+// are the paths. Throws CalibError when `dir` is not a folder or holds no photo.
+std::vector<NamedImage> ReadPhotoFolder(const std::string& dir);
+
+// Plane photos for CalibrateProjector: NAME_board.EXT and NAME_pattern.EXT pairs in one folder.
+// Throws CalibError naming the file for a photo of another name or a plane missing one photo.
+std::vector<PlaneView> ReadPlaneFolder(const std::string& dir);
+
+// "COLSxROWS:SQUARE_PX" centred on a projector of size "WIDTHxHEIGHT". Throws CalibError naming
+// the option (--pattern / --projector-size) on malformed text or an invalid board.
+ProjectorChessboard ParseProjectorChessboard(const std::string& pattern, const std::string& size);
+
+}  // namespace translume::calib

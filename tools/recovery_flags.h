@@ -1,0 +1,24 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <string>
+
+#include "solver/recover.h"
+
+namespace translume {
+
+// The optimiser flags shared by `solve` and `acquire`.
+struct RecoveryFlags {
+  RecoveryOptions options;
+  std::string optimizer = "lbfgs", regularizer = "tk1", backend = "cpu";
+  // The parsed options; throws InputError "COMMAND: problem" when invalid (and checks that a gl
+  // context exists for --backend gl).
+  RecoveryOptions Options(const char* command) const;
+};
+void AddRecoveryFlags(CLI::App& app, RecoveryFlags* flags);
+
+// "12.3 s", "4.5 min", "1.2 h".
+std::string FormatSeconds(double seconds);
+
+}  // namespace translume
