@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "acquire/acquire.h"
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -133,6 +134,20 @@ TEST_F(AcquireTest, AutomaticCornersWithinTwoPercent) {
   for (size_t k = 0; k < 4; ++k)
     for (size_t a = 0; a < 2; ++a)
       EXPECT_NEAR(rep["face_corners_px"][k][a].get<double>(), given[k][a], 0.5) << "corner " << k;
+}
+
+// Conditions given as light specs on the lit face (a rig whose projector is aligned to the
+// regions by hand) need no projector calibration; q is then the ideal region light.
+TEST_F(AcquireTest, LightSpecConditionsNeedNoProjector) {
+  const std::string c = Copy(Setup::kBack);
+  EditJson(c, [](nlohmann::json& j) {
+    j.erase("projector");
+    for (size_t m = 0; m < j["conditions"].size(); ++m) {
+      j["conditions"][m].erase("pattern");
+      j["conditions"][m]["light"] = fmt::format("region:{},{}/2", m % 2, m / 2);
+    }
+  });
+  CheckMapping(Setup::kBack, false, this, c, Out());
 }
 
 TEST_F(AcquireTest, EndToEndHeldOutError) {

@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fmt/format.h>
@@ -86,7 +87,8 @@ int RunAcquire(int argc, char** argv) {
   o.recovery = flags.Options("acquire");
   o.solve = !no_solve;
   const acquire::CaptureSpec cap = acquire::ReadCapture(capture_path);
-  if (fs::weakly_canonical(fs::path(out).parent_path()) == fs::weakly_canonical(cap.dir))
+  const fs::path out_abs = fs::weakly_canonical(fs::absolute(out)), cap_abs = fs::weakly_canonical(fs::absolute(cap.dir));
+  if (std::mismatch(cap_abs.begin(), cap_abs.end(), out_abs.begin(), out_abs.end()).first == cap_abs.end())
     throw InputError(fmt::format("-o {}: write outside the capture folder (inputs are never touched)", out));
   std::printf("acquire: %s, grid %s (h %g mm), %s-lit, %zu conditions, %d threads\n", cap.file.c_str(),
               cap.grid.ToString().c_str(), cap.spacing_mm, SetupName(cap.setup), cap.conditions.size(),
