@@ -103,24 +103,31 @@ DeviceIntrinsics FromCalibration(const cv::Size& size, const cv::Matx33d& K, con
   return d;
 }
 
-// Side-by-side preview of measured (left) and fitted (right) radiance, one scale for both.
+// Side-by-side preview of measured (left) and fitted (right) radiance, one scale for both,
+// each node a square of pixels so that the image is at least ~512 pixels wide.
 void WriteComparison(const std::string& path, const GridShape& s, const FacePattern& measured,
                      const FacePattern& fitted, const std::vector<float>& mask) {
-  const int64_t W = 2 * s.nx + 2;
+  const int64_t z = std::max<int64_t>(1, 256 / s.nx);  // pixels per node
+  const int64_t W = (2 * s.nx + 2) * z, H = s.ny * z;
   FacePattern both;
   float top = 0;
   for (int c = 0; c < 3; ++c) {
-    both[size_t(c)].assign(size_t(W * s.ny), 0.0f);
-    for (int64_t j = 0; j < s.ny; ++j)
-      for (int64_t i = 0; i < s.nx; ++i) {
-        const size_t f = size_t(i + s.nx * j);
-        const float m = mask[f] > 0 ? measured[size_t(c)][f] : 0.0f;
-        both[size_t(c)][size_t(i + W * j)] = m;
-        both[size_t(c)][size_t(i + s.nx + 2 + W * j)] = fitted[size_t(c)][f];
-        top = std::max(top, m);
+    both[size_t(c)].assign(size_t(W * H), 0.0f);
+    for (int64_t y = 0; y < H; ++y)
+      for (int64_t x = 0; x < W; ++x) {
+        const int64_t i = x / z, j = y / z;
+        float v = 0;
+        if (i < s.nx) {
+          const size_t f = size_t(i + s.nx * j);
+          v = mask[f] > 0 ? measured[size_t(c)][f] : 0.0f;
+          top = std::max(top, v);
+        } else if (i >= s.nx + 2) {
+          v = fitted[size_t(c)][size_t(i - s.nx - 2 + s.nx * j)];
+        }
+        both[size_t(c)][size_t(x + W * y)] = v;
       }
   }
-  WriteRadiancePreview(path, {W, s.ny, 1}, both, top);
+  WriteRadiancePreview(path, {W, H, 1}, both, top);
 }
 
 }  // namespace
