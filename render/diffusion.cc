@@ -83,12 +83,25 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
         }
         S.inv_diag[n * 3 + c] = float(1 / (m.mu[c][n] / kn + sum));
       } else {
+        // The Robin balance over the slab of depth d/2 that the boundary node owns (see the
+        // header): the link's flux, the slab's absorption, and its lateral diffusion taken from
+        // the lateral part of the first interior node's Laplacian (slots 1..4).
         const int64_t b = n - pg.num_interior;
         const int32_t j = pg.neighbours[n][0];
+        const int axis = pg.link_dir[b] / 2;
         const double kj = m.kappa[c][j], d = pg.link_length[b];
-        S.w[(n * 3 + c) * 6] = float(2 * C * kn * kn);
+        const double lateral = C * d * d * kn * kj;
+        double w_link = 2 * C * kn * kn;
+        for (int k = 0, slot = 1; k < 6; ++k) {
+          if (k / 2 == axis) continue;
+          S.nb[n * 6 + slot] = pg.neighbours[j][k];
+          S.w[(n * 3 + c) * 6 + slot] = float(lateral * pg.weights[j][k]);
+          w_link -= lateral * pg.weights[j][k];
+          ++slot;
+        }
+        S.w[(n * 3 + c) * 6] = float(w_link);
         S.s[n * 3 + c] = float(q[c][b] * kn * kj * d);
-        S.inv_diag[n * 3 + c] = float(1 / (kj * d + 2 * C * kn * kj));
+        S.inv_diag[n * 3 + c] = float(1 / (kj * d + 2 * C * kn * kj + C * d * d * m.mu[c][n] * kj));
       }
     }
   }

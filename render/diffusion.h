@@ -20,8 +20,18 @@ struct NodeMaterial {
 // Section 5.2 with phi' = kappa phi, written for every node n and channel c as
 //   phi'_n <- (s_n + sum_k w_nk phi'_{nb_nk}) * inv_diag_n
 // Interior node i:   w_k = w_ji (Appendix B), s = 0,  1/inv_diag = mu_i / kappa_i + sum_j w_ji
-// Boundary node b linked to interior j at distance d:
-//   w_0 = 2 C kappa_b^2,  s = q_b kappa_b kappa_j d,  1/inv_diag = kappa_j d + 2 C kappa_b kappa_j
+// Boundary node b linked to interior j at distance d: the Robin condition phi + 2 C kappa
+// dphi/dn = q (Equation (9)) as a balance over the slab of depth d/2 that b owns along its link
+// (vertex-centred finite volumes, the boundary half cells of SPEC section 3):
+//   (phi_b - q_b) / (2 C) = kappa_b (phi_j - phi_b) / d - (d/2) mu_b phi_b
+//                           + (d/2) sum_{k lateral} w_jk (phi'_k - phi'_j)
+// the flux through the link, the slab's absorption, and its lateral diffusion taken from the
+// four lateral terms of j's Laplacian (directions other than the link's axis). The paper's
+// one-sided form keeps only the first term, which is first order in d; this is second order.
+// Times 2 C kappa_b kappa_j d, with phi = phi' / kappa and W = sum_{k lateral} w_jk:
+//   w_0 (node j) = 2 C kappa_b^2 - C d^2 kappa_b kappa_j W,
+//   w_1..4 (j's lateral neighbours k) = C d^2 kappa_b kappa_j w_jk,
+//   s = q_b kappa_b kappa_j d,  1/inv_diag = kappa_j d + 2 C kappa_b kappa_j + C d^2 mu_b kappa_j
 // Layouts: nb[n * 6 + k] (unused slots point at n with weight 0), w[(n * 3 + c) * 6 + k],
 // s[n * 3 + c], inv_diag[n * 3 + c], and phi'[n * 3 + c].
 struct JacobiSystem {

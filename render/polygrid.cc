@@ -153,8 +153,6 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
 
   // Boundary nodes: project, then even out within each face.
   pg.normal.resize(N - pg.num_interior);
-  for (int64_t b = pg.num_interior; b < N; ++b)
-    shape.Project(pg.position[b], &pg.position[b], &pg.normal[b - pg.num_interior]);
   std::vector<std::vector<int32_t>> face_nbrs(N - pg.num_interior);
   for (int64_t b = pg.num_interior; b < N; ++b) {
     const int dir = pg.link_dir[b - pg.num_interior];
@@ -168,17 +166,22 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       }
     }
   }
-  for (int it = 0; it < options.boundary_relax_iterations; ++it) {
-    std::vector<Vec3> next = pg.position;
-    for (int64_t b = pg.num_interior; b < N; ++b) {
-      const auto& nb = face_nbrs[b - pg.num_interior];
-      if (nb.size() < 4) continue;  // the rim of a face stays where it was projected
-      Vec3 mean = Vec3::Zero();
-      for (int32_t k : nb) mean += pg.position[k] / double(nb.size());
-      shape.Project(0.5 * (pg.position[b] + mean), &next[b], &pg.normal[b - pg.num_interior]);
+  auto project_boundary = [&] {
+    for (int64_t b = pg.num_interior; b < N; ++b)
+      shape.Project(pg.position[b], &pg.position[b], &pg.normal[b - pg.num_interior]);
+    for (int it = 0; it < options.boundary_relax_iterations; ++it) {
+      std::vector<Vec3> next = pg.position;
+      for (int64_t b = pg.num_interior; b < N; ++b) {
+        const auto& nb = face_nbrs[b - pg.num_interior];
+        if (nb.size() < 4) continue;  // the rim of a face stays where it was projected
+        Vec3 mean = Vec3::Zero();
+        for (int32_t k : nb) mean += pg.position[k] / double(nb.size());
+        shape.Project(0.5 * (pg.position[b] + mean), &next[b], &pg.normal[b - pg.num_interior]);
+      }
+      pg.position.swap(next);
     }
-    pg.position.swap(next);
-  }
+  };
+  project_boundary();
   double spacing_sum = 0;
   int64_t spacing_count = 0;
   for (int64_t b = pg.num_interior; b < N; ++b)
@@ -190,6 +193,41 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
                                            : (shape.hi - shape.lo).norm() / lat.n[0];
   const double d = options.first_layer_fraction * pg.mean_boundary_spacing;
   pg.first_layer_distance = d;
+  // Where a side of the polycube meets creases of the surface (a box's edges), the crease rule
+  // below puts the first interior lattice plane at d from the surface. Start again, then, from
+  // the lattice stretched so that on such a side the interior lattice plane 1 (or n-2) lies at
+  // d inside the bounding box (the other sides keep the plain stretch), and project and even
+  // out the boundary nodes as above. On a box every node then already sits where the placement
+  // below converges: a tensor-product grid with straight grid lines to the surface. (From the
+  // plain stretch the alignment passes carry the inset across the grid only about half-way per
+  // pass; measured: grid lines bent by up to 0.07 spacings at 33^3.) A side is a crease side
+  // when most of its boundary nodes that share their interior node with a boundary node of
+  // another side have normals more than 30 degrees apart from it (the crease test below).
+  std::array<int64_t, 6> crease_votes = {0, 0, 0, 0, 0, 0};
+  {
+    std::vector<std::vector<int32_t>> links(pg.num_interior);
+    for (int64_t b = pg.num_interior; b < N; ++b) links[pg.neighbours[b][0]].push_back(int32_t(b));
+    for (const auto& bl : links)
+      for (int32_t b1 : bl)
+        for (int32_t b2 : bl) {
+          const int dir1 = pg.link_dir[b1 - pg.num_interior], dir2 = pg.link_dir[b2 - pg.num_interior];
+          if (dir1 == dir2) continue;
+          const double dot = pg.normal[b1 - pg.num_interior].dot(pg.normal[b2 - pg.num_interior]);
+          crease_votes[dir1] += dot < 0.866 ? 1 : -1;
+        }
+  }
+  if (*std::max_element(crease_votes.begin(), crease_votes.end()) > 0) {
+    pg.position = lattice_position;
+    for (int a = 0; a < 3; ++a) {
+      if (lat.n[a] <= 3) continue;
+      const double extent = shape.hi[a] - shape.lo[a], plain = extent / (lat.n[a] - 1);
+      const double e_lo = crease_votes[2 * a] > 0 ? d : plain;
+      const double e_hi = crease_votes[2 * a + 1] > 0 ? d : plain;
+      for (int64_t n = 0; n < N; ++n)
+        pg.position[n][a] = shape.lo[a] + e_lo + (extent - e_lo - e_hi) * (pg.lattice[n][a] - 1) / (lat.n[a] - 3);
+    }
+    project_boundary();
+  }
 
   // First interior nodes: at distance d along the inward normal of their boundary node.
   // Corner and edge fix: an interior node linked to two or three boundary nodes (a convex edge
