@@ -2,10 +2,12 @@
 // The gl backend of the polygrid relaxation: one compute-shader dispatch per step, ping-ponging
 // two fluence buffers (Section 5.2's radiance buffers I_A, I_B) in the solver's headless context.
 #include <algorithm>
+#include <map>
 #include <fmt/format.h>
 #include <memory>
 
 #include "render/diffusion.h"
+#include "render/gl_internal.h"
 #include "render/gl_shaders.h"
 #include "solver/gl_api.h"
 #include "solver/gl_context.h"
@@ -15,17 +17,31 @@ namespace translume {
 namespace {
 
 using gl::api;
+using render_gl::Ssbo;
 
-GLuint CompileRenderShader(const std::string& file) {
-  static std::string cached_name;
-  static GLuint cached = 0;
-  if (cached && cached_name == file) return cached;
-  const gl::EmbeddedShader* src = nullptr;
-  for (int i = 0; i < gl::kNumRenderShaders; ++i)
-    if (file == gl::kRenderShaders[i].name) src = &gl::kRenderShaders[i];
-  TL_CHECK_MSG(src, file + " is not embedded");
+}  // namespace
+
+namespace render_gl {
+
+GLuint Program(const std::string& file) {
+  static std::map<std::string, GLuint> cache;
+  if (auto it = cache.find(file); it != cache.end()) return it->second;
+  auto embedded = [](const std::string& name) {
+    for (int i = 0; i < gl::kNumRenderShaders; ++i)
+      if (name == gl::kRenderShaders[i].name) return gl::kRenderShaders[i].source;
+    TL_CHECK_MSG(false, name + " is not embedded");
+    return "";
+  };
+  // A file without its own #version line gets "#version 430" and common.glsl before it (the
+  // compiler's log then numbers the three strings 0, 1, 2).
+  const char* source = embedded(file);
+  const char* strings[3] = {"#version 430\n", embedded("render/shaders/common.glsl"), source};
+  const bool standalone = std::string(source).find("#version") != std::string::npos;
   const GLuint sh = api.CreateShader(GL_COMPUTE_SHADER);
-  api.ShaderSource(sh, 1, &src->source, nullptr);
+  if (standalone)
+    api.ShaderSource(sh, 1, &source, nullptr);
+  else
+    api.ShaderSource(sh, 3, strings, nullptr);
   api.CompileShader(sh);
   GLint ok = 0;
   char log[4096] = "";
@@ -43,30 +59,29 @@ GLuint CompileRenderShader(const std::string& file) {
     api.GetProgramInfoLog(prog, sizeof(log), nullptr, log);
     throw InputError(fmt::format("--backend gl: {}: link error: {}", file, log));
   }
-  cached_name = file;
-  cached = prog;
+  cache[file] = prog;
   return prog;
 }
 
-struct Ssbo {
-  GLuint id = 0;
-  ~Ssbo() {
-    if (id) api.DeleteBuffers(1, &id);
-  }
-  void Set(const void* data, size_t bytes) {
-    if (!id) api.GenBuffers(1, &id);
-    api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id);
-    api.BufferData(GL_SHADER_STORAGE_BUFFER, std::max<size_t>(bytes, 16), data, GL_DYNAMIC_DRAW);
-  }
-  template <typename T>
-  void Set(const std::vector<T>& v) { Set(v.data(), v.size() * sizeof(T)); }
-};
+void Dispatch(std::initializer_list<const Ssbo*> buffers, int64_t threads) {
+  if (threads <= 0) return;
+  GLuint b = 0;
+  for (const Ssbo* s : buffers) api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, b++, s->id);
+  const int64_t groups = (threads + 255) / 256;
+  const int64_t gx = std::min<int64_t>(groups, 65535), gy = (groups + gx - 1) / gx;
+  api.DispatchCompute(GLuint(gx), GLuint(gy), 1);
+  api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+}
+
+}  // namespace render_gl
+
+namespace {
 
 class GlRelaxer : public JacobiRelaxer {
  public:
   GlRelaxer() {
     GlContext::Get();
-    program_ = CompileRenderShader("render/shaders/jacobi.comp");
+    program_ = render_gl::Program("render/shaders/jacobi.comp");
   }
   void Load(const JacobiSystem& S) override {
     size_ = S.size;
@@ -84,19 +99,10 @@ class GlRelaxer : public JacobiRelaxer {
     buf_[1].Set(*phi);
     api.UseProgram(program_);
     api.Uniform1i(0, int(active.size()));
-    const int64_t groups = (int64_t(active.size()) + 255) / 256;
-    const int64_t gx = std::min<int64_t>(groups, 65535), gy = (groups + gx - 1) / gx;
-    const Ssbo* fixed[5] = {&nb_, &w_, &s_, &d_, &active_};
-    for (int b = 0; b < 5; ++b) api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, b, fixed[b]->id);
-    for (int it = 0; it < iterations; ++it) {
-      api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, buf_[it % 2].id);
-      api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, buf_[(it + 1) % 2].id);
-      api.DispatchCompute(GLuint(gx), GLuint(gy), 1);
-      api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
-    }
-    api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    api.BindBuffer(GL_SHADER_STORAGE_BUFFER, buf_[iterations % 2].id);
-    api.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, phi->size() * sizeof(float), phi->data());
+    for (int it = 0; it < iterations; ++it)
+      render_gl::Dispatch({&nb_, &w_, &s_, &d_, &active_, &buf_[it % 2], &buf_[(it + 1) % 2]},
+                          int64_t(active.size()));
+    buf_[iterations % 2].Get(phi->data(), phi->size() * sizeof(float));
   }
 
  private:
