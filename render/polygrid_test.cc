@@ -100,6 +100,28 @@ TEST(Polygrid, BuiltinShapesAreWellFormed) {
   }
 }
 
+// The built-in bunny (the benchmark's 253-cube polycube): its solid's surface holds the
+// boundary nodes, and the polygrid is well-formed.
+TEST(Polygrid, BunnyPolycube) {
+  const Polycube pc = BuiltinPolycube("bunny");
+  EXPECT_EQ(pc.cubes.size(), 253u);
+  EXPECT_EQ(pc.Validate(), "");
+  const auto shape = MakeBuiltinShape("bunny", 40, 24);
+  PolygridOptions o;
+  o.resolution = 5;
+  const Polygrid pg = BuildPolygrid(pc, *shape, o);
+  ExpectWellFormed(pg);
+  EXPECT_GT(pg.num_interior, 253 * 27);
+  for (int64_t b = pg.num_interior; b < pg.size(); b += 5) {
+    Vec3 s, n;
+    shape->Project(pg.position[b], &s, &n);
+    EXPECT_NEAR((s - pg.position[b]).norm(), 0, 1e-9);
+  }
+  std::printf("[polygrid] bunny 253 x 5^3: %lld interior + %lld boundary nodes, %lld nodes with "
+              "axis-fallback weights\n", (long long)pg.num_interior, (long long)pg.num_boundary(),
+              (long long)pg.fallback_weights);
+}
+
 TEST(Polygrid, TorusSplitsConcaveNodes) {
   const auto shape = MakeBuiltinShape("torus", 30);
   PolygridOptions o;
