@@ -61,16 +61,36 @@ std::vector<float> SolveReference(const JacobiSystem& system, int channels = 3);
 enum class DiffusionBackend { kCpu, kGl };
 DiffusionBackend ParseDiffusionBackend(const std::string& text);
 
-// `iterations` relaxation steps on the nodes in `active` (the others keep their values), from
-// and into phi'. One implementation per backend with the same arithmetic (float).
-class JacobiRelaxer {
+// The relaxation of a whole hierarchy on one backend, with the same arithmetic (float): the
+// systems, prolongations and fluence stay where the backend keeps them (gl: GPU buffers), so
+// per frame only the boundary light goes in and the finest level's fluence comes out. Levels
+// are numbered finest first.
+class HierarchyRelaxer {
  public:
-  virtual ~JacobiRelaxer() = default;
-  virtual void Load(const JacobiSystem& system) = 0;
-  virtual void Relax(const std::vector<int32_t>& active, int iterations,
-                     std::vector<float>* phi_prime) = 0;
-  static std::unique_ptr<JacobiRelaxer> Create(DiffusionBackend backend);
+  struct Level {
+    JacobiSystem system;            // its s is replaced by SetSource
+    int64_t num_interior = 0;       // the boundary rows are [num_interior, system.size)
+    std::vector<float> source_coef;  // s[(num_interior + b) * 3 + c] = q[c][b] source_coef[b * 3 + c]
+    std::vector<int32_t> active;    // the nodes that adaptive relaxation updates
+    Prolongation prolong;           // from the next coarser level (empty on the coarsest)
+  };
+  virtual ~HierarchyRelaxer() = default;
+  virtual void Load(std::vector<Level> levels) = 0;
+  virtual void SetSource(int level, const BoundaryLight& q) = 0;
+  virtual void Zero(int level) = 0;     // phi' = 0
+  virtual void Prolong(int level) = 0;  // phi'(level) = P phi'(level + 1)
+  // `iterations` Jacobi steps on the level's active nodes (adaptive) or all nodes; the others
+  // keep their values.
+  virtual void Relax(int level, bool adaptive, int iterations) = 0;
+  // Rows [first_row, size) of the level's phi' into (*phi)[first_row * 3 ...]; phi holds
+  // size * 3 values, the other rows are left as they are.
+  virtual void Read(int level, int64_t first_row, std::vector<float>* phi) = 0;
+  static std::unique_ptr<HierarchyRelaxer> Create(DiffusionBackend backend);
 };
+
+// The factor of q in the boundary rows' source (see JacobiSystem): kappa_b kappa_j d, per
+// boundary node and channel, [b * 3 + c].
+std::vector<double> BoundarySourceCoefficients(const Polygrid& pg, const NodeMaterial& m);
 
 // The hierarchical, adaptive scheme of Section 5.3.
 struct DiffusionOptions {
@@ -96,8 +116,9 @@ class PolygridDiffusion {
   PolygridDiffusion(const std::vector<Polygrid>* levels, std::vector<NodeMaterial> materials,
                     double C, const DiffusionOptions& options);
   // Solves for phi' on every level, given q on each level's boundary nodes (finest first), and
-  // returns the finest level's phi' (n * 3 + c).
-  const std::vector<float>& Solve(const std::vector<BoundaryLight>& q);
+  // returns the finest level's phi' (n * 3 + c); with boundary_only, only the boundary rows
+  // are read back from the backend (the others are stale), which is all that shading needs.
+  const std::vector<float>& Solve(const std::vector<BoundaryLight>& q, bool boundary_only = false);
   const std::vector<NodeMaterial>& materials() const { return materials_; }
   int last_iterations() const { return last_iterations_; }
   void ResetCoherence() { have_previous_ = false; }
@@ -107,7 +128,9 @@ class PolygridDiffusion {
   std::vector<NodeMaterial> materials_;
   double C_;
   DiffusionOptions options_;
-  std::unique_ptr<JacobiRelaxer> relaxer_;
+  std::unique_ptr<HierarchyRelaxer> relaxer_;
+  std::vector<int> depth_;       // adaptive depth per level (finest first), -1: all nodes
+  std::vector<int> iterations_;  // relaxation steps per level (finest first)
   std::vector<float> phi_;
   bool have_previous_ = false;
   int last_iterations_ = 0;

@@ -95,8 +95,28 @@ TEST(Diffusion, GlBackendMatchesCpu) {
   PolygridDiffusion gl(&s.levels, s.mats, C, o);
   const std::vector<float> b = gl.Solve(s.q);
   const double err = RelativeL2(b, a);
-  std::printf("[diffusion] gl vs cpu after the same steps: %.2e\n", err);
+  // Adaptive depth on the finest level, then a frame-coherent second frame (the fluence stays
+  // on the device between frames).
+  o.depth = {-1, -1, 2};
+  o.frame_coherence = true;
+  o.coherent_iterations = 30;
+  o.backend = DiffusionBackend::kCpu;
+  PolygridDiffusion cpu2(&s.levels, s.mats, C, o);
+  o.backend = DiffusionBackend::kGl;
+  PolygridDiffusion gl2(&s.levels, s.mats, C, o);
+  const double err_adaptive = RelativeL2(gl2.Solve(s.q), cpu2.Solve(s.q));
+  std::vector<BoundaryLight> dimmer = s.q;
+  for (auto& l : dimmer)
+    for (auto& c : l)
+      for (float& v : c) v *= 0.5f;
+  const std::vector<float> cpu_coherent = cpu2.Solve(dimmer);
+  const double err_coherent = RelativeL2(gl2.Solve(dimmer), cpu_coherent);
+  std::printf("[diffusion] gl vs cpu after the same steps: %.2e; adaptive %.2e; coherent frame "
+              "%.2e\n", err, err_adaptive, err_coherent);
   EXPECT_LT(err, 1e-5);
+  EXPECT_LT(err_adaptive, 1e-5);
+  EXPECT_LT(err_coherent, 1e-5);
+  EXPECT_GT(RelativeL2(cpu_coherent, a), 0.1);  // the coherent frame did use the new light
 }
 
 }  // namespace

@@ -77,42 +77,96 @@ void Dispatch(std::initializer_list<const Ssbo*> buffers, int64_t threads) {
 
 namespace {
 
-class GlRelaxer : public JacobiRelaxer {
+// Per level: the system (neighbours, weights, inverse diagonal, source), the boundary rows'
+// source coefficients and q, the active and all-node lists, the prolongation from the coarser
+// level, and two fluence buffers (the current one is phi[cur]).
+class GlHierarchy : public HierarchyRelaxer {
  public:
-  GlRelaxer() {
+  GlHierarchy() {
     GlContext::Get();
-    program_ = render_gl::Program("render/shaders/jacobi.comp");
+    jacobi_ = render_gl::Program("render/shaders/jacobi.comp");
+    source_ = render_gl::Program("render/shaders/source.comp");
+    prolong_ = render_gl::Program("render/shaders/prolong.comp");
   }
-  void Load(const JacobiSystem& S) override {
-    size_ = S.size;
-    nb_.Set(S.nb);
-    w_.Set(S.w);
-    s_.Set(S.s);
-    d_.Set(S.inv_diag);
+  void Load(std::vector<Level> levels) override {
+    dev_ = std::vector<Device>(levels.size());
+    for (size_t l = 0; l < levels.size(); ++l) {
+      const Level& v = levels[l];
+      Device& d = dev_[l];
+      d.size = v.system.size;
+      d.num_interior = v.num_interior;
+      d.nb.Set(v.system.nb);
+      d.w.Set(v.system.w);
+      d.s.Set(v.system.s);
+      d.inv_diag.Set(v.system.inv_diag);
+      d.coef.Set(v.source_coef);
+      d.q.Set(nullptr, v.source_coef.size() * sizeof(float));
+      d.active.Set(v.active);
+      d.num_active = int64_t(v.active.size());
+      std::vector<int32_t> all(d.size);
+      for (int64_t n = 0; n < d.size; ++n) all[n] = int32_t(n);
+      d.all.Set(all);
+      d.p_start.Set(v.prolong.start);
+      d.p_index.Set(v.prolong.index);
+      d.p_weight.Set(v.prolong.weight);
+      for (Ssbo& b : d.phi) b.Set(nullptr, size_t(d.size) * 3 * sizeof(float));
+    }
   }
-  void Relax(const std::vector<int32_t>& active, int iterations,
-             std::vector<float>* phi) override {
-    TL_CHECK(int64_t(phi->size()) == size_ * 3);
-    if (iterations == 0 || active.empty()) return;
-    active_.Set(active);
-    buf_[0].Set(*phi);
-    buf_[1].Set(*phi);
-    api.UseProgram(program_);
-    api.Uniform1i(0, int(active.size()));
-    for (int it = 0; it < iterations; ++it)
-      render_gl::Dispatch({&nb_, &w_, &s_, &d_, &active_, &buf_[it % 2], &buf_[(it + 1) % 2]},
-                          int64_t(active.size()));
-    buf_[iterations % 2].Get(phi->data(), phi->size() * sizeof(float));
+  void SetSource(int l, const BoundaryLight& q) override {
+    Device& d = dev_[l];
+    const int64_t nb = d.size - d.num_interior;
+    host_q_.resize(nb * 3);
+    for (int64_t b = 0; b < nb; ++b)
+      for (int c = 0; c < 3; ++c) host_q_[b * 3 + c] = q[c][b];
+    d.q.Set(host_q_);
+    api.UseProgram(source_);
+    api.Uniform1i(0, int(nb * 3));
+    api.Uniform1i(1, int(d.num_interior * 3));
+    render_gl::Dispatch({&d.q, &d.coef, &d.s}, nb * 3);
+  }
+  void Zero(int l) override {
+    for (Ssbo& b : dev_[l].phi) b.Zero();
+  }
+  void Prolong(int l) override {
+    Device& d = dev_[l];
+    const Device& coarse = dev_[l + 1];
+    api.UseProgram(prolong_);
+    api.Uniform1i(0, int(d.size));
+    render_gl::Dispatch({&d.p_start, &d.p_index, &d.p_weight, &coarse.phi[coarse.cur], &d.phi[d.cur]}, d.size);
+    d.phi[1 - d.cur].CopyFrom(d.phi[d.cur], size_t(d.size) * 3 * sizeof(float));
+  }
+  void Relax(int l, bool adaptive, int iterations) override {
+    Device& d = dev_[l];
+    const int64_t count = adaptive ? d.num_active : d.size;
+    if (count == 0) return;
+    api.UseProgram(jacobi_);
+    api.Uniform1i(0, int(count));
+    const Ssbo& list = adaptive ? d.active : d.all;
+    for (int it = 0; it < iterations; ++it) {
+      render_gl::Dispatch({&d.nb, &d.w, &d.s, &d.inv_diag, &list, &d.phi[d.cur], &d.phi[1 - d.cur]}, count);
+      d.cur = 1 - d.cur;  // both buffers agree outside the updated nodes
+    }
+  }
+  void Read(int l, int64_t first_row, std::vector<float>* phi) override {
+    const Device& d = dev_[l];
+    TL_CHECK(int64_t(phi->size()) == d.size * 3);
+    d.phi[d.cur].Get(phi->data() + first_row * 3, size_t(d.size - first_row) * 3 * sizeof(float),
+                     size_t(first_row) * 3 * sizeof(float));
   }
 
  private:
-  GLuint program_ = 0;
-  int64_t size_ = 0;
-  Ssbo nb_, w_, s_, d_, active_, buf_[2];
+  struct Device {
+    int64_t size = 0, num_interior = 0, num_active = 0;
+    int cur = 0;
+    Ssbo nb, w, s, inv_diag, coef, q, active, all, p_start, p_index, p_weight, phi[2];
+  };
+  GLuint jacobi_ = 0, source_ = 0, prolong_ = 0;
+  std::vector<Device> dev_;
+  std::vector<float> host_q_;
 };
 
 }  // namespace
 
-std::unique_ptr<JacobiRelaxer> MakeGlRelaxer() { return std::make_unique<GlRelaxer>(); }
+std::unique_ptr<HierarchyRelaxer> MakeGlHierarchy() { return std::make_unique<GlHierarchy>(); }
 
 }  // namespace translume

@@ -4,6 +4,8 @@
 #pragma once
 
 #include <algorithm>
+#include <cstdint>
+#include <initializer_list>
 #include <string>
 #include <vector>
 
@@ -31,11 +33,24 @@ struct Ssbo {
   }
   template <typename T>
   void Set(const std::vector<T>& v) { Set(v.data(), v.size() * sizeof(T)); }
-  // Reads `bytes` from the start (after the shader writes are visible).
-  void Get(void* data, size_t bytes) const {
+  // Reads `bytes` from byte `offset` (after the shader writes are visible).
+  void Get(void* data, size_t bytes, size_t offset = 0) const {
     gl::api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     gl::api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id);
-    gl::api.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, bytes, data);
+    gl::api.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, offset, bytes, data);
+  }
+  // Zeroes the buffer.
+  void Zero() {
+    const uint32_t zero = 0;
+    gl::api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id);
+    gl::api.ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
+  }
+  // Copies the first `bytes` of src into this buffer.
+  void CopyFrom(const Ssbo& src, size_t bytes) {
+    gl::api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+    gl::api.BindBuffer(GL_COPY_READ_BUFFER, src.id);
+    gl::api.BindBuffer(GL_COPY_WRITE_BUFFER, id);
+    gl::api.CopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, 0, bytes);
   }
 };
 

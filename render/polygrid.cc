@@ -417,19 +417,17 @@ std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Sha
   return levels;
 }
 
-void ProlongPolygrid(const Polygrid& coarse, const std::vector<float>& coarse_values,
-                     const Polygrid& fine, std::vector<float>* fine_values) {
-  TL_CHECK(int64_t(coarse_values.size()) == coarse.size());
+Prolongation MakeProlongation(const Polygrid& coarse, const Polygrid& fine) {
   TL_CHECK(fine.resolution - 1 == 2 * (coarse.resolution - 1));
+  // Coarse nodes by lattice node (boundary nodes may share one).
   Lattice lat{coarse.lattice_extent};
-  std::vector<float> sum(lat.size(), 0.f);
-  std::vector<float> count(lat.size(), 0.f);
-  for (int64_t n = 0; n < coarse.size(); ++n) {
-    const int64_t k = lat.index(coarse.lattice[n]);
-    sum[k] += coarse_values[n];
-    count[k] += 1;
-  }
-  fine_values->assign(fine.size(), 0.f);
+  std::vector<int32_t> first(lat.size() + 1, 0), nodes(coarse.size());
+  for (int64_t n = 0; n < coarse.size(); ++n) ++first[lat.index(coarse.lattice[n]) + 1];
+  for (int64_t k = 0; k < lat.size(); ++k) first[k + 1] += first[k];
+  std::vector<int32_t> fill(first.begin(), first.end() - 1);
+  for (int64_t n = 0; n < coarse.size(); ++n) nodes[fill[lat.index(coarse.lattice[n])]++] = int32_t(n);
+  Prolongation P;
+  P.start.assign(fine.size() + 1, 0);
   for (int64_t n = 0; n < fine.size(); ++n) {
     const auto& g = fine.lattice[n];
     int base[3];
@@ -438,22 +436,41 @@ void ProlongPolygrid(const Polygrid& coarse, const std::vector<float>& coarse_va
       base[a] = g[a] / 2;
       t[a] = g[a] % 2 ? 0.5 : 0.0;
     }
-    double acc = 0, wsum = 0;
+    double wsum = 0;
+    std::vector<double> w;
     for (int c = 0; c < 8; ++c) {
       std::array<int, 3> q;
-      double w = 1;
+      double wc = 1;
       for (int a = 0; a < 3; ++a) {
         const int bit = (c >> a) & 1;
         q[a] = base[a] + bit;
-        w *= bit ? t[a] : 1 - t[a];
+        wc *= bit ? t[a] : 1 - t[a];
       }
-      if (w == 0 || !lat.inside(q)) continue;
+      if (wc == 0 || !lat.inside(q)) continue;
       const int64_t k = lat.index(q);
-      if (count[k] == 0) continue;
-      acc += w * sum[k] / count[k];
-      wsum += w;
+      const int count = first[k + 1] - first[k];
+      if (count == 0) continue;
+      wsum += wc;
+      for (int32_t i = first[k]; i < first[k + 1]; ++i) {
+        P.index.push_back(nodes[i]);
+        w.push_back(wc / count);
+      }
     }
-    (*fine_values)[n] = wsum > 0 ? float(acc / wsum) : 0.f;
+    for (size_t i = 0; i < w.size(); ++i) P.weight.push_back(float(w[i] / wsum));
+    P.start[n + 1] = int32_t(P.index.size());
+  }
+  return P;
+}
+
+void ProlongPolygrid(const Polygrid& coarse, const std::vector<float>& coarse_values,
+                     const Polygrid& fine, std::vector<float>* fine_values) {
+  TL_CHECK(int64_t(coarse_values.size()) == coarse.size());
+  const Prolongation P = MakeProlongation(coarse, fine);
+  fine_values->assign(fine.size(), 0.f);
+  for (int64_t n = 0; n < fine.size(); ++n) {
+    double acc = 0;
+    for (int32_t k = P.start[n]; k < P.start[n + 1]; ++k) acc += double(P.weight[k]) * coarse_values[P.index[k]];
+    (*fine_values)[n] = float(acc);
   }
 }
 

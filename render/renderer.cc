@@ -462,7 +462,7 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
   t0 = std::chrono::steady_clock::now();
   const Polygrid& pg = (*I.levels)[0];
   if (I.diffusion) {
-    const std::vector<float>& phi = I.diffusion->Solve(q);
+    const std::vector<float>& phi = I.diffusion->Solve(q, /*boundary_only=*/true);
     // Shading uses L = phi / (2 pi): the SPEC's (phi - q) / (2 pi) where unlit (q = 0), without
     // subtracting q where lit. The paper's net-flux form (phi - q) / (2 pi) is negative under the
     // light (SPEC section 3), which would render lit regions black.
