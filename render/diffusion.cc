@@ -14,20 +14,45 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-class CpuRelaxer : public JacobiRelaxer {
+class CpuHierarchy : public HierarchyRelaxer {
  public:
-  void Load(const JacobiSystem& system) override { sys_ = &system; }
-  void Relax(const std::vector<int32_t>& active, int iterations,
-             std::vector<float>* phi) override {
-    const JacobiSystem& S = *sys_;
-    TL_CHECK(int64_t(phi->size()) == S.size * 3);
-    std::vector<float> next = *phi;
-    const int64_t na = int64_t(active.size());
+  void Load(std::vector<Level> levels) override {
+    L_ = std::move(levels);
+    phi_.assign(L_.size(), {});
+    for (size_t l = 0; l < L_.size(); ++l) phi_[l].assign(L_[l].system.size * 3, 0.f);
+  }
+  void SetSource(int l, const BoundaryLight& q) override {
+    Level& v = L_[l];
+    const int64_t nb = v.system.size - v.num_interior;
+    for (int64_t b = 0; b < nb; ++b)
+      for (int c = 0; c < 3; ++c)
+        v.system.s[(v.num_interior + b) * 3 + c] = q[c][b] * v.source_coef[b * 3 + c];
+  }
+  void Zero(int l) override { std::fill(phi_[l].begin(), phi_[l].end(), 0.f); }
+  void Prolong(int l) override {
+    const Prolongation& P = L_[l].prolong;
+    const std::vector<float>& coarse = phi_[l + 1];
+    std::vector<float>& fine = phi_[l];
+    const int64_t n = L_[l].system.size;
+#pragma omp parallel for schedule(static) if (n > 50000)
+    for (int64_t f = 0; f < n; ++f)
+      for (int c = 0; c < 3; ++c) {
+        double acc = 0;
+        for (int32_t k = P.start[f]; k < P.start[f + 1]; ++k) acc += double(P.weight[k]) * coarse[P.index[k] * 3 + c];
+        fine[f * 3 + c] = float(acc);
+      }
+  }
+  void Relax(int l, bool adaptive, int iterations) override {
+    const JacobiSystem& S = L_[l].system;
+    std::vector<float>& phi = phi_[l];
+    std::vector<float> next = phi;
+    const int64_t na = adaptive ? int64_t(L_[l].active.size()) : S.size;
+    const int32_t* active = L_[l].active.data();
     for (int it = 0; it < iterations; ++it) {
-      const float* p = phi->data();
+      const float* p = phi.data();
 #pragma omp parallel for schedule(static) if (na > 50000)
       for (int64_t a = 0; a < na; ++a) {
-        const int64_t n = active[a];
+        const int64_t n = adaptive ? active[a] : a;
         const int32_t* nb = &S.nb[n * 6];
         for (int c = 0; c < 3; ++c) {
           const float* w = &S.w[(n * 3 + c) * 6];
@@ -36,21 +61,26 @@ class CpuRelaxer : public JacobiRelaxer {
           next[n * 3 + c] = acc * S.inv_diag[n * 3 + c];
         }
       }
-      phi->swap(next);  // both buffers agree outside `active`
+      phi.swap(next);  // both buffers agree outside the updated nodes
     }
+  }
+  void Read(int l, int64_t first_row, std::vector<float>* phi) override {
+    TL_CHECK(phi->size() == phi_[l].size());
+    std::copy(phi_[l].begin() + first_row * 3, phi_[l].end(), phi->begin() + first_row * 3);
   }
 
  private:
-  const JacobiSystem* sys_ = nullptr;
+  std::vector<Level> L_;
+  std::vector<std::vector<float>> phi_;
 };
 
 }  // namespace
 
-std::unique_ptr<JacobiRelaxer> MakeGlRelaxer();  // gl_diffusion.cc
+std::unique_ptr<HierarchyRelaxer> MakeGlHierarchy();  // gl_diffusion.cc
 
-std::unique_ptr<JacobiRelaxer> JacobiRelaxer::Create(DiffusionBackend backend) {
-  if (backend == DiffusionBackend::kGl) return MakeGlRelaxer();
-  return std::make_unique<CpuRelaxer>();
+std::unique_ptr<HierarchyRelaxer> HierarchyRelaxer::Create(DiffusionBackend backend) {
+  if (backend == DiffusionBackend::kGl) return MakeGlHierarchy();
+  return std::make_unique<CpuHierarchy>();
 }
 
 DiffusionBackend ParseDiffusionBackend(const std::string& text) {
@@ -59,8 +89,19 @@ DiffusionBackend ParseDiffusionBackend(const std::string& text) {
   throw InputError("--backend: unknown backend '" + text + "' (expected cpu or gl)");
 }
 
+std::vector<double> BoundarySourceCoefficients(const Polygrid& pg, const NodeMaterial& m) {
+  std::vector<double> coef(pg.num_boundary() * 3);
+  for (int64_t b = 0; b < pg.num_boundary(); ++b) {
+    const int64_t n = pg.num_interior + b;
+    const int32_t j = pg.neighbours[n][0];
+    for (int c = 0; c < 3; ++c) coef[b * 3 + c] = double(m.kappa[c][n]) * m.kappa[c][j] * pg.link_length[b];
+  }
+  return coef;
+}
+
 JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double C,
                                const BoundaryLight& q) {
+  const std::vector<double> coef = BoundarySourceCoefficients(pg, m);
   JacobiSystem S;
   const int64_t N = pg.size();
   S.size = N;
@@ -83,12 +124,25 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
         }
         S.inv_diag[n * 3 + c] = float(1 / (m.mu[c][n] / kn + sum));
       } else {
+        // The Robin balance over the slab of depth d/2 that the boundary node owns (see the
+        // header): the link's flux, the slab's absorption, and its lateral diffusion taken from
+        // the lateral part of the first interior node's Laplacian (slots 1..4).
         const int64_t b = n - pg.num_interior;
         const int32_t j = pg.neighbours[n][0];
+        const int axis = pg.link_dir[b] / 2;
         const double kj = m.kappa[c][j], d = pg.link_length[b];
-        S.w[(n * 3 + c) * 6] = float(2 * C * kn * kn);
-        S.s[n * 3 + c] = float(q[c][b] * kn * kj * d);
-        S.inv_diag[n * 3 + c] = float(1 / (kj * d + 2 * C * kn * kj));
+        const double lateral = C * d * d * kn * kj;
+        double w_link = 2 * C * kn * kn;
+        for (int k = 0, slot = 1; k < 6; ++k) {
+          if (k / 2 == axis) continue;
+          S.nb[n * 6 + slot] = pg.neighbours[j][k];
+          S.w[(n * 3 + c) * 6 + slot] = float(lateral * pg.weights[j][k]);
+          w_link -= lateral * pg.weights[j][k];
+          ++slot;
+        }
+        S.w[(n * 3 + c) * 6] = float(w_link);
+        S.s[n * 3 + c] = float(q[c][b] * coef[b * 3 + c]);
+        S.inv_diag[n * 3 + c] = float(1 / (kj * d + 2 * C * kn * kj + C * d * d * m.mu[c][n] * kj));
       }
     }
   }
@@ -156,13 +210,8 @@ PolygridDiffusion::PolygridDiffusion(const std::vector<Polygrid>* levels,
     : levels_(levels), materials_(std::move(materials)), C_(C), options_(options) {
   if (std::string err = options.Validate(); !err.empty()) throw InputError("diffusion: " + err);
   TL_CHECK(levels_->size() == materials_.size() && !levels_->empty());
-  relaxer_ = JacobiRelaxer::Create(options.backend);
-}
-
-const std::vector<float>& PolygridDiffusion::Solve(const std::vector<BoundaryLight>& q) {
   const std::vector<Polygrid>& L = *levels_;
   const int nl = int(L.size());
-  TL_CHECK(int(q.size()) == nl);
   // Per-level lists are coarsest first; a list longer than the hierarchy drops its coarsest
   // entries (so the last entry is always the finest level's), a shorter one repeats its last.
   auto at = [nl](const std::vector<int>& v, int step, int fallback) {
@@ -170,44 +219,53 @@ const std::vector<float>& PolygridDiffusion::Solve(const std::vector<BoundaryLig
     const int i = step + std::max(0, int(v.size()) - nl);
     return i < int(v.size()) ? v[i] : v.back();
   };
+  std::vector<HierarchyRelaxer::Level> hl(nl);
+  BoundaryLight none;
+  depth_.assign(nl, -1);
+  iterations_.assign(nl, 0);
+  for (int l = 0; l < nl; ++l) {
+    const int step = nl - 1 - l;  // coarsest first
+    depth_[l] = step == 0 ? -1 : at(options_.depth, step, -1);
+    iterations_[l] = at(options_.iterations, step, 100);
+    const Polygrid& pg = L[l];
+    for (int c = 0; c < 3; ++c) none[c].assign(pg.num_boundary(), 0.f);
+    hl[l].system = BuildJacobiSystem(pg, materials_[l], C_, none);
+    hl[l].num_interior = pg.num_interior;
+    const std::vector<double> coef = BoundarySourceCoefficients(pg, materials_[l]);
+    hl[l].source_coef.assign(coef.begin(), coef.end());
+    for (int64_t n = 0; n < pg.size(); ++n)
+      if (depth_[l] < 0 || pg.layer[n] <= depth_[l]) hl[l].active.push_back(int32_t(n));
+    if (l + 1 < nl) hl[l].prolong = MakeProlongation(L[l + 1], pg);
+  }
+  relaxer_ = HierarchyRelaxer::Create(options.backend);
+  relaxer_->Load(std::move(hl));
+}
+
+const std::vector<float>& PolygridDiffusion::Solve(const std::vector<BoundaryLight>& q,
+                                                   bool boundary_only) {
+  const std::vector<Polygrid>& L = *levels_;
+  const int nl = int(L.size());
+  TL_CHECK(int(q.size()) == nl);
+  phi_.resize(L[0].size() * 3, 0.f);
+  const int64_t first_row = boundary_only ? L[0].num_interior : 0;
   last_iterations_ = 0;
   if (options_.frame_coherence && have_previous_) {
-    const JacobiSystem S = BuildJacobiSystem(L[0], materials_[0], C_, q[0]);
-    relaxer_->Load(S);
-    std::vector<int32_t> all(L[0].size());
-    for (int64_t n = 0; n < L[0].size(); ++n) all[n] = int32_t(n);
-    relaxer_->Relax(all, options_.coherent_iterations, &phi_);
+    relaxer_->SetSource(0, q[0]);
+    relaxer_->Relax(0, false, options_.coherent_iterations);
+    relaxer_->Read(0, first_row, &phi_);
     last_iterations_ = options_.coherent_iterations;
     return phi_;
   }
-  std::vector<float> phi;
-  for (int step = 0; step < nl; ++step) {
-    const int l = nl - 1 - step;  // coarsest first
-    const Polygrid& pg = L[l];
-    if (step == 0) {
-      phi.assign(pg.size() * 3, 0.f);
-    } else {
-      std::vector<float> fine[3], coarse[3];
-      std::vector<float> next(pg.size() * 3);
-      for (int c = 0; c < 3; ++c) {
-        coarse[c].resize(L[l + 1].size());
-        for (int64_t n = 0; n < L[l + 1].size(); ++n) coarse[c][n] = phi[n * 3 + c];
-        ProlongPolygrid(L[l + 1], coarse[c], pg, &fine[c]);
-        for (int64_t n = 0; n < pg.size(); ++n) next[n * 3 + c] = fine[c][n];
-      }
-      phi.swap(next);
-    }
-    const int depth = step == 0 ? -1 : at(options_.depth, step, -1);
-    std::vector<int32_t> active;
-    for (int64_t n = 0; n < pg.size(); ++n)
-      if (depth < 0 || pg.layer[n] <= depth) active.push_back(int32_t(n));
-    const JacobiSystem S = BuildJacobiSystem(pg, materials_[l], C_, q[l]);
-    relaxer_->Load(S);
-    const int iters = at(options_.iterations, step, 100);
-    relaxer_->Relax(active, iters, &phi);
-    last_iterations_ += iters;
+  for (int l = nl - 1; l >= 0; --l) {  // coarsest first
+    relaxer_->SetSource(l, q[l]);
+    if (l == nl - 1)
+      relaxer_->Zero(l);
+    else
+      relaxer_->Prolong(l);
+    relaxer_->Relax(l, depth_[l] >= 0, iterations_[l]);
+    last_iterations_ += iterations_[l];
   }
-  phi_.swap(phi);
+  relaxer_->Read(0, first_row, &phi_);
   have_previous_ = true;
   return phi_;
 }

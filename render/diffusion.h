@@ -20,8 +20,18 @@ struct NodeMaterial {
 // Section 5.2 with phi' = kappa phi, written for every node n and channel c as
 //   phi'_n <- (s_n + sum_k w_nk phi'_{nb_nk}) * inv_diag_n
 // Interior node i:   w_k = w_ji (Appendix B), s = 0,  1/inv_diag = mu_i / kappa_i + sum_j w_ji
-// Boundary node b linked to interior j at distance d:
-//   w_0 = 2 C kappa_b^2,  s = q_b kappa_b kappa_j d,  1/inv_diag = kappa_j d + 2 C kappa_b kappa_j
+// Boundary node b linked to interior j at distance d: the Robin condition phi + 2 C kappa
+// dphi/dn = q (Equation (9)) as a balance over the slab of depth d/2 that b owns along its link
+// (vertex-centred finite volumes, the boundary half cells of SPEC section 3):
+//   (phi_b - q_b) / (2 C) = kappa_b (phi_j - phi_b) / d - (d/2) mu_b phi_b
+//                           + (d/2) sum_{k lateral} w_jk (phi'_k - phi'_j)
+// the flux through the link, the slab's absorption, and its lateral diffusion taken from the
+// four lateral terms of j's Laplacian (directions other than the link's axis). The paper's
+// one-sided form keeps only the first term, which is first order in d; this is second order.
+// Times 2 C kappa_b kappa_j d, with phi = phi' / kappa and W = sum_{k lateral} w_jk:
+//   w_0 (node j) = 2 C kappa_b^2 - C d^2 kappa_b kappa_j W,
+//   w_1..4 (j's lateral neighbours k) = C d^2 kappa_b kappa_j w_jk,
+//   s = q_b kappa_b kappa_j d,  1/inv_diag = kappa_j d + 2 C kappa_b kappa_j + C d^2 mu_b kappa_j
 // Layouts: nb[n * 6 + k] (unused slots point at n with weight 0), w[(n * 3 + c) * 6 + k],
 // s[n * 3 + c], inv_diag[n * 3 + c], and phi'[n * 3 + c].
 struct JacobiSystem {
@@ -51,16 +61,36 @@ std::vector<float> SolveReference(const JacobiSystem& system, int channels = 3);
 enum class DiffusionBackend { kCpu, kGl };
 DiffusionBackend ParseDiffusionBackend(const std::string& text);
 
-// `iterations` relaxation steps on the nodes in `active` (the others keep their values), from
-// and into phi'. One implementation per backend with the same arithmetic (float).
-class JacobiRelaxer {
+// The relaxation of a whole hierarchy on one backend, with the same arithmetic (float): the
+// systems, prolongations and fluence stay where the backend keeps them (gl: GPU buffers), so
+// per frame only the boundary light goes in and the finest level's fluence comes out. Levels
+// are numbered finest first.
+class HierarchyRelaxer {
  public:
-  virtual ~JacobiRelaxer() = default;
-  virtual void Load(const JacobiSystem& system) = 0;
-  virtual void Relax(const std::vector<int32_t>& active, int iterations,
-                     std::vector<float>* phi_prime) = 0;
-  static std::unique_ptr<JacobiRelaxer> Create(DiffusionBackend backend);
+  struct Level {
+    JacobiSystem system;            // its s is replaced by SetSource
+    int64_t num_interior = 0;       // the boundary rows are [num_interior, system.size)
+    std::vector<float> source_coef;  // s[(num_interior + b) * 3 + c] = q[c][b] source_coef[b * 3 + c]
+    std::vector<int32_t> active;    // the nodes that adaptive relaxation updates
+    Prolongation prolong;           // from the next coarser level (empty on the coarsest)
+  };
+  virtual ~HierarchyRelaxer() = default;
+  virtual void Load(std::vector<Level> levels) = 0;
+  virtual void SetSource(int level, const BoundaryLight& q) = 0;
+  virtual void Zero(int level) = 0;     // phi' = 0
+  virtual void Prolong(int level) = 0;  // phi'(level) = P phi'(level + 1)
+  // `iterations` Jacobi steps on the level's active nodes (adaptive) or all nodes; the others
+  // keep their values.
+  virtual void Relax(int level, bool adaptive, int iterations) = 0;
+  // Rows [first_row, size) of the level's phi' into (*phi)[first_row * 3 ...]; phi holds
+  // size * 3 values, the other rows are left as they are.
+  virtual void Read(int level, int64_t first_row, std::vector<float>* phi) = 0;
+  static std::unique_ptr<HierarchyRelaxer> Create(DiffusionBackend backend);
 };
+
+// The factor of q in the boundary rows' source (see JacobiSystem): kappa_b kappa_j d, per
+// boundary node and channel, [b * 3 + c].
+std::vector<double> BoundarySourceCoefficients(const Polygrid& pg, const NodeMaterial& m);
 
 // The hierarchical, adaptive scheme of Section 5.3.
 struct DiffusionOptions {
@@ -86,8 +116,9 @@ class PolygridDiffusion {
   PolygridDiffusion(const std::vector<Polygrid>* levels, std::vector<NodeMaterial> materials,
                     double C, const DiffusionOptions& options);
   // Solves for phi' on every level, given q on each level's boundary nodes (finest first), and
-  // returns the finest level's phi' (n * 3 + c).
-  const std::vector<float>& Solve(const std::vector<BoundaryLight>& q);
+  // returns the finest level's phi' (n * 3 + c); with boundary_only, only the boundary rows
+  // are read back from the backend (the others are stale), which is all that shading needs.
+  const std::vector<float>& Solve(const std::vector<BoundaryLight>& q, bool boundary_only = false);
   const std::vector<NodeMaterial>& materials() const { return materials_; }
   int last_iterations() const { return last_iterations_; }
   void ResetCoherence() { have_previous_ = false; }
@@ -97,7 +128,9 @@ class PolygridDiffusion {
   std::vector<NodeMaterial> materials_;
   double C_;
   DiffusionOptions options_;
-  std::unique_ptr<JacobiRelaxer> relaxer_;
+  std::unique_ptr<HierarchyRelaxer> relaxer_;
+  std::vector<int> depth_;       // adaptive depth per level (finest first), -1: all nodes
+  std::vector<int> iterations_;  // relaxation steps per level (finest first)
   std::vector<float> phi_;
   bool have_previous_ = false;
   int last_iterations_ = 0;

@@ -2,10 +2,12 @@
 // The gl backend of the polygrid relaxation: one compute-shader dispatch per step, ping-ponging
 // two fluence buffers (Section 5.2's radiance buffers I_A, I_B) in the solver's headless context.
 #include <algorithm>
+#include <map>
 #include <fmt/format.h>
 #include <memory>
 
 #include "render/diffusion.h"
+#include "render/gl_internal.h"
 #include "render/gl_shaders.h"
 #include "solver/gl_api.h"
 #include "solver/gl_context.h"
@@ -15,17 +17,31 @@ namespace translume {
 namespace {
 
 using gl::api;
+using render_gl::Ssbo;
 
-GLuint CompileRenderShader(const std::string& file) {
-  static std::string cached_name;
-  static GLuint cached = 0;
-  if (cached && cached_name == file) return cached;
-  const gl::EmbeddedShader* src = nullptr;
-  for (int i = 0; i < gl::kNumRenderShaders; ++i)
-    if (file == gl::kRenderShaders[i].name) src = &gl::kRenderShaders[i];
-  TL_CHECK_MSG(src, file + " is not embedded");
+}  // namespace
+
+namespace render_gl {
+
+GLuint Program(const std::string& file) {
+  static std::map<std::string, GLuint> cache;
+  if (auto it = cache.find(file); it != cache.end()) return it->second;
+  auto embedded = [](const std::string& name) {
+    for (int i = 0; i < gl::kNumRenderShaders; ++i)
+      if (name == gl::kRenderShaders[i].name) return gl::kRenderShaders[i].source;
+    TL_CHECK_MSG(false, name + " is not embedded");
+    return "";
+  };
+  // A file without its own #version line gets "#version 430" and common.glsl before it (the
+  // compiler's log then numbers the three strings 0, 1, 2).
+  const char* source = embedded(file);
+  const char* strings[3] = {"#version 430\n", embedded("render/shaders/common.glsl"), source};
+  const bool standalone = std::string(source).find("#version") != std::string::npos;
   const GLuint sh = api.CreateShader(GL_COMPUTE_SHADER);
-  api.ShaderSource(sh, 1, &src->source, nullptr);
+  if (standalone)
+    api.ShaderSource(sh, 1, &source, nullptr);
+  else
+    api.ShaderSource(sh, 3, strings, nullptr);
   api.CompileShader(sh);
   GLint ok = 0;
   char log[4096] = "";
@@ -43,70 +59,114 @@ GLuint CompileRenderShader(const std::string& file) {
     api.GetProgramInfoLog(prog, sizeof(log), nullptr, log);
     throw InputError(fmt::format("--backend gl: {}: link error: {}", file, log));
   }
-  cached_name = file;
-  cached = prog;
+  cache[file] = prog;
   return prog;
 }
 
-struct Ssbo {
-  GLuint id = 0;
-  ~Ssbo() {
-    if (id) api.DeleteBuffers(1, &id);
-  }
-  void Set(const void* data, size_t bytes) {
-    if (!id) api.GenBuffers(1, &id);
-    api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id);
-    api.BufferData(GL_SHADER_STORAGE_BUFFER, std::max<size_t>(bytes, 16), data, GL_DYNAMIC_DRAW);
-  }
-  template <typename T>
-  void Set(const std::vector<T>& v) { Set(v.data(), v.size() * sizeof(T)); }
-};
+void Dispatch(std::initializer_list<const Ssbo*> buffers, int64_t threads) {
+  if (threads <= 0) return;
+  GLuint b = 0;
+  for (const Ssbo* s : buffers) api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, b++, s->id);
+  const int64_t groups = (threads + 255) / 256;
+  const int64_t gx = std::min<int64_t>(groups, 65535), gy = (groups + gx - 1) / gx;
+  api.DispatchCompute(GLuint(gx), GLuint(gy), 1);
+  api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+}
 
-class GlRelaxer : public JacobiRelaxer {
+}  // namespace render_gl
+
+namespace {
+
+// Per level: the system (neighbours, weights, inverse diagonal, source), the boundary rows'
+// source coefficients and q, the active and all-node lists, the prolongation from the coarser
+// level, and two fluence buffers (the current one is phi[cur]).
+class GlHierarchy : public HierarchyRelaxer {
  public:
-  GlRelaxer() {
+  GlHierarchy() {
     GlContext::Get();
-    program_ = CompileRenderShader("render/shaders/jacobi.comp");
+    jacobi_ = render_gl::Program("render/shaders/jacobi.comp");
+    source_ = render_gl::Program("render/shaders/source.comp");
+    prolong_ = render_gl::Program("render/shaders/prolong.comp");
   }
-  void Load(const JacobiSystem& S) override {
-    size_ = S.size;
-    nb_.Set(S.nb);
-    w_.Set(S.w);
-    s_.Set(S.s);
-    d_.Set(S.inv_diag);
-  }
-  void Relax(const std::vector<int32_t>& active, int iterations,
-             std::vector<float>* phi) override {
-    TL_CHECK(int64_t(phi->size()) == size_ * 3);
-    if (iterations == 0 || active.empty()) return;
-    active_.Set(active);
-    buf_[0].Set(*phi);
-    buf_[1].Set(*phi);
-    api.UseProgram(program_);
-    api.Uniform1i(0, int(active.size()));
-    const int64_t groups = (int64_t(active.size()) + 255) / 256;
-    const int64_t gx = std::min<int64_t>(groups, 65535), gy = (groups + gx - 1) / gx;
-    const Ssbo* fixed[5] = {&nb_, &w_, &s_, &d_, &active_};
-    for (int b = 0; b < 5; ++b) api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, b, fixed[b]->id);
-    for (int it = 0; it < iterations; ++it) {
-      api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, buf_[it % 2].id);
-      api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, buf_[(it + 1) % 2].id);
-      api.DispatchCompute(GLuint(gx), GLuint(gy), 1);
-      api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+  void Load(std::vector<Level> levels) override {
+    dev_ = std::vector<Device>(levels.size());
+    for (size_t l = 0; l < levels.size(); ++l) {
+      const Level& v = levels[l];
+      Device& d = dev_[l];
+      d.size = v.system.size;
+      d.num_interior = v.num_interior;
+      d.nb.Set(v.system.nb);
+      d.w.Set(v.system.w);
+      d.s.Set(v.system.s);
+      d.inv_diag.Set(v.system.inv_diag);
+      d.coef.Set(v.source_coef);
+      d.q.Set(nullptr, v.source_coef.size() * sizeof(float));
+      d.active.Set(v.active);
+      d.num_active = int64_t(v.active.size());
+      std::vector<int32_t> all(d.size);
+      for (int64_t n = 0; n < d.size; ++n) all[n] = int32_t(n);
+      d.all.Set(all);
+      d.p_start.Set(v.prolong.start);
+      d.p_index.Set(v.prolong.index);
+      d.p_weight.Set(v.prolong.weight);
+      for (Ssbo& b : d.phi) b.Set(nullptr, size_t(d.size) * 3 * sizeof(float));
     }
-    api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    api.BindBuffer(GL_SHADER_STORAGE_BUFFER, buf_[iterations % 2].id);
-    api.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, phi->size() * sizeof(float), phi->data());
+  }
+  void SetSource(int l, const BoundaryLight& q) override {
+    Device& d = dev_[l];
+    const int64_t nb = d.size - d.num_interior;
+    host_q_.resize(nb * 3);
+    for (int64_t b = 0; b < nb; ++b)
+      for (int c = 0; c < 3; ++c) host_q_[b * 3 + c] = q[c][b];
+    d.q.Set(host_q_);
+    api.UseProgram(source_);
+    api.Uniform1i(0, int(nb * 3));
+    api.Uniform1i(1, int(d.num_interior * 3));
+    render_gl::Dispatch({&d.q, &d.coef, &d.s}, nb * 3);
+  }
+  void Zero(int l) override {
+    for (Ssbo& b : dev_[l].phi) b.Zero();
+  }
+  void Prolong(int l) override {
+    Device& d = dev_[l];
+    const Device& coarse = dev_[l + 1];
+    api.UseProgram(prolong_);
+    api.Uniform1i(0, int(d.size));
+    render_gl::Dispatch({&d.p_start, &d.p_index, &d.p_weight, &coarse.phi[coarse.cur], &d.phi[d.cur]}, d.size);
+    d.phi[1 - d.cur].CopyFrom(d.phi[d.cur], size_t(d.size) * 3 * sizeof(float));
+  }
+  void Relax(int l, bool adaptive, int iterations) override {
+    Device& d = dev_[l];
+    const int64_t count = adaptive ? d.num_active : d.size;
+    if (count == 0) return;
+    api.UseProgram(jacobi_);
+    api.Uniform1i(0, int(count));
+    const Ssbo& list = adaptive ? d.active : d.all;
+    for (int it = 0; it < iterations; ++it) {
+      render_gl::Dispatch({&d.nb, &d.w, &d.s, &d.inv_diag, &list, &d.phi[d.cur], &d.phi[1 - d.cur]}, count);
+      d.cur = 1 - d.cur;  // both buffers agree outside the updated nodes
+    }
+  }
+  void Read(int l, int64_t first_row, std::vector<float>* phi) override {
+    const Device& d = dev_[l];
+    TL_CHECK(int64_t(phi->size()) == d.size * 3);
+    d.phi[d.cur].Get(phi->data() + first_row * 3, size_t(d.size - first_row) * 3 * sizeof(float),
+                     size_t(first_row) * 3 * sizeof(float));
   }
 
  private:
-  GLuint program_ = 0;
-  int64_t size_ = 0;
-  Ssbo nb_, w_, s_, d_, active_, buf_[2];
+  struct Device {
+    int64_t size = 0, num_interior = 0, num_active = 0;
+    int cur = 0;
+    Ssbo nb, w, s, inv_diag, coef, q, active, all, p_start, p_index, p_weight, phi[2];
+  };
+  GLuint jacobi_ = 0, source_ = 0, prolong_ = 0;
+  std::vector<Device> dev_;
+  std::vector<float> host_q_;
 };
 
 }  // namespace
 
-std::unique_ptr<JacobiRelaxer> MakeGlRelaxer() { return std::make_unique<GlRelaxer>(); }
+std::unique_ptr<HierarchyRelaxer> MakeGlHierarchy() { return std::make_unique<GlHierarchy>(); }
 
 }  // namespace translume

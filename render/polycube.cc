@@ -5,6 +5,7 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <tuple>
 
 #include "solver/status.h"
 
@@ -87,8 +88,77 @@ std::string FormatPolycube(const Polycube& polycube) {
   return s;
 }
 
+namespace {
+
+// The built-in bunny: 253 unit cubes (the cube count of the paper's Bunny polygrid, Table III),
+// grown face by face from the best cube of a lattice of 11 x 7 x 10 cells, always adding the
+// free face neighbour with the highest f, the largest of 1 - |(p - c) / r|^2 over ellipsoids
+// (p: the cell centre, in cube units; c, r: centre and radii) for the body, head, two ears and
+// tail. Face-connected by construction; deterministic.
+Polycube BunnyPolycube() {
+  struct Ellipsoid {
+    double c[3], r[3];
+  };
+  const Ellipsoid parts[] = {
+      {{4.5, 3.5, 2.8}, {3.9, 2.9, 2.7}},  // body
+      {{8.2, 3.5, 5.2}, {2.1, 1.9, 1.9}},  // head
+      {{7.6, 2.6, 7.8}, {0.9, 0.7, 2.2}},  // ears
+      {{7.6, 4.4, 7.8}, {0.9, 0.7, 2.2}},
+      {{0.7, 3.5, 3.4}, {0.9, 0.9, 0.9}},  // tail
+  };
+  const int nx = 11, ny = 7, nz = 10;
+  auto f = [&](int x, int y, int z) {
+    double best = -1e300;
+    for (const Ellipsoid& e : parts) {
+      const double p[3] = {x + 0.5, y + 0.5, z + 0.5};
+      double r2 = 0;
+      for (int a = 0; a < 3; ++a) r2 += (p[a] - e.c[a]) * (p[a] - e.c[a]) / (e.r[a] * e.r[a]);
+      best = std::max(best, 1 - r2);
+    }
+    return best;
+  };
+  std::vector<char> in(nx * ny * nz, 0);
+  auto idx = [&](int x, int y, int z) { return x + nx * (y + ny * z); };
+  Polycube p;
+  std::array<int, 3> start = {0, 0, 0};
+  for (int z = 0; z < nz; ++z)
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x)
+        if (f(x, y, z) > f(start[0], start[1], start[2])) start = {x, y, z};
+  p.cubes.push_back(start);
+  in[idx(start[0], start[1], start[2])] = 1;
+  while (p.cubes.size() < 253) {
+    std::array<int, 3> best = {-1, -1, -1};
+    double best_f = -1e300;
+    for (const auto& c : p.cubes)
+      for (int dir = 0; dir < 6; ++dir) {
+        std::array<int, 3> g = c;
+        g[dir / 2] += dir % 2 ? 1 : -1;
+        if (g[0] < 0 || g[1] < 0 || g[2] < 0 || g[0] >= nx || g[1] >= ny || g[2] >= nz) continue;
+        if (in[idx(g[0], g[1], g[2])]) continue;
+        const double v = f(g[0], g[1], g[2]);
+        if (v > best_f || (v == best_f && g < best)) best_f = v, best = g;
+      }
+    in[idx(best[0], best[1], best[2])] = 1;
+    p.cubes.push_back(best);
+  }
+  // Shift to the origin.
+  std::array<int, 3> lo = p.cubes[0];
+  for (const auto& c : p.cubes)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]);
+  for (auto& c : p.cubes)
+    for (int a = 0; a < 3; ++a) c[a] -= lo[a];
+  std::sort(p.cubes.begin(), p.cubes.end(), [](const auto& a, const auto& b) {
+    return std::tie(a[2], a[1], a[0]) < std::tie(b[2], b[1], b[0]);
+  });
+  return p;
+}
+
+}  // namespace
+
 Polycube BuiltinPolycube(const std::string& shape) {
   Polycube p;
+  if (shape == "bunny") return BunnyPolycube();
   if (shape == "sphere" || shape == "blob" || shape == "box") {
     p.cubes = {{0, 0, 0}};
   } else if (shape == "slab") {
@@ -100,7 +170,7 @@ Polycube BuiltinPolycube(const std::string& shape) {
         if (x != 1 || y != 1) p.cubes.push_back({x, y, 0});
   } else {
     throw InputError("--shape: unknown shape '" + shape +
-                     "' (expected slab, sphere, torus, blob, or a mesh file .obj/.ply)");
+                     "' (expected slab, sphere, torus, blob, bunny, or a mesh file .obj/.ply)");
   }
   return p;
 }

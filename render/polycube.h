@@ -28,7 +28,8 @@ Polycube ReadPolycube(const std::string& path);
 std::string FormatPolycube(const Polycube& polycube);
 
 // The polycubes of the built-in shapes: slab 3x3x1 cubes, sphere and blob one cube, torus a
-// ring of 8 cubes (3x3x1 without the centre). Throws InputError on an unknown name.
+// ring of 8 cubes (3x3x1 without the centre), bunny 253 cubes (a blocky bunny grown from
+// ellipsoids for body, head, ears and tail; polycube.cc). Throws InputError on an unknown name.
 Polycube BuiltinPolycube(const std::string& shape);
 
 }  // namespace translume

@@ -153,8 +153,6 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
 
   // Boundary nodes: project, then even out within each face.
   pg.normal.resize(N - pg.num_interior);
-  for (int64_t b = pg.num_interior; b < N; ++b)
-    shape.Project(pg.position[b], &pg.position[b], &pg.normal[b - pg.num_interior]);
   std::vector<std::vector<int32_t>> face_nbrs(N - pg.num_interior);
   for (int64_t b = pg.num_interior; b < N; ++b) {
     const int dir = pg.link_dir[b - pg.num_interior];
@@ -168,17 +166,22 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       }
     }
   }
-  for (int it = 0; it < options.boundary_relax_iterations; ++it) {
-    std::vector<Vec3> next = pg.position;
-    for (int64_t b = pg.num_interior; b < N; ++b) {
-      const auto& nb = face_nbrs[b - pg.num_interior];
-      if (nb.size() < 4) continue;  // the rim of a face stays where it was projected
-      Vec3 mean = Vec3::Zero();
-      for (int32_t k : nb) mean += pg.position[k] / double(nb.size());
-      shape.Project(0.5 * (pg.position[b] + mean), &next[b], &pg.normal[b - pg.num_interior]);
+  auto project_boundary = [&] {
+    for (int64_t b = pg.num_interior; b < N; ++b)
+      shape.Project(pg.position[b], &pg.position[b], &pg.normal[b - pg.num_interior]);
+    for (int it = 0; it < options.boundary_relax_iterations; ++it) {
+      std::vector<Vec3> next = pg.position;
+      for (int64_t b = pg.num_interior; b < N; ++b) {
+        const auto& nb = face_nbrs[b - pg.num_interior];
+        if (nb.size() < 4) continue;  // the rim of a face stays where it was projected
+        Vec3 mean = Vec3::Zero();
+        for (int32_t k : nb) mean += pg.position[k] / double(nb.size());
+        shape.Project(0.5 * (pg.position[b] + mean), &next[b], &pg.normal[b - pg.num_interior]);
+      }
+      pg.position.swap(next);
     }
-    pg.position.swap(next);
-  }
+  };
+  project_boundary();
   double spacing_sum = 0;
   int64_t spacing_count = 0;
   for (int64_t b = pg.num_interior; b < N; ++b)
@@ -190,6 +193,41 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
                                            : (shape.hi - shape.lo).norm() / lat.n[0];
   const double d = options.first_layer_fraction * pg.mean_boundary_spacing;
   pg.first_layer_distance = d;
+  // Where a side of the polycube meets creases of the surface (a box's edges), the crease rule
+  // below puts the first interior lattice plane at d from the surface. Start again, then, from
+  // the lattice stretched so that on such a side the interior lattice plane 1 (or n-2) lies at
+  // d inside the bounding box (the other sides keep the plain stretch), and project and even
+  // out the boundary nodes as above. On a box every node then already sits where the placement
+  // below converges: a tensor-product grid with straight grid lines to the surface. (From the
+  // plain stretch the alignment passes carry the inset across the grid only about half-way per
+  // pass; measured: grid lines bent by up to 0.07 spacings at 33^3.) A side is a crease side
+  // when most of its boundary nodes that share their interior node with a boundary node of
+  // another side have normals more than 30 degrees apart from it (the crease test below).
+  std::array<int64_t, 6> crease_votes = {0, 0, 0, 0, 0, 0};
+  {
+    std::vector<std::vector<int32_t>> links(pg.num_interior);
+    for (int64_t b = pg.num_interior; b < N; ++b) links[pg.neighbours[b][0]].push_back(int32_t(b));
+    for (const auto& bl : links)
+      for (int32_t b1 : bl)
+        for (int32_t b2 : bl) {
+          const int dir1 = pg.link_dir[b1 - pg.num_interior], dir2 = pg.link_dir[b2 - pg.num_interior];
+          if (dir1 == dir2) continue;
+          const double dot = pg.normal[b1 - pg.num_interior].dot(pg.normal[b2 - pg.num_interior]);
+          crease_votes[dir1] += dot < 0.866 ? 1 : -1;
+        }
+  }
+  if (*std::max_element(crease_votes.begin(), crease_votes.end()) > 0) {
+    pg.position = lattice_position;
+    for (int a = 0; a < 3; ++a) {
+      if (lat.n[a] <= 3) continue;
+      const double extent = shape.hi[a] - shape.lo[a], plain = extent / (lat.n[a] - 1);
+      const double e_lo = crease_votes[2 * a] > 0 ? d : plain;
+      const double e_hi = crease_votes[2 * a + 1] > 0 ? d : plain;
+      for (int64_t n = 0; n < N; ++n)
+        pg.position[n][a] = shape.lo[a] + e_lo + (extent - e_lo - e_hi) * (pg.lattice[n][a] - 1) / (lat.n[a] - 3);
+    }
+    project_boundary();
+  }
 
   // First interior nodes: at distance d along the inward normal of their boundary node.
   // Corner and edge fix: an interior node linked to two or three boundary nodes (a convex edge
@@ -379,19 +417,17 @@ std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Sha
   return levels;
 }
 
-void ProlongPolygrid(const Polygrid& coarse, const std::vector<float>& coarse_values,
-                     const Polygrid& fine, std::vector<float>* fine_values) {
-  TL_CHECK(int64_t(coarse_values.size()) == coarse.size());
+Prolongation MakeProlongation(const Polygrid& coarse, const Polygrid& fine) {
   TL_CHECK(fine.resolution - 1 == 2 * (coarse.resolution - 1));
+  // Coarse nodes by lattice node (boundary nodes may share one).
   Lattice lat{coarse.lattice_extent};
-  std::vector<float> sum(lat.size(), 0.f);
-  std::vector<float> count(lat.size(), 0.f);
-  for (int64_t n = 0; n < coarse.size(); ++n) {
-    const int64_t k = lat.index(coarse.lattice[n]);
-    sum[k] += coarse_values[n];
-    count[k] += 1;
-  }
-  fine_values->assign(fine.size(), 0.f);
+  std::vector<int32_t> first(lat.size() + 1, 0), nodes(coarse.size());
+  for (int64_t n = 0; n < coarse.size(); ++n) ++first[lat.index(coarse.lattice[n]) + 1];
+  for (int64_t k = 0; k < lat.size(); ++k) first[k + 1] += first[k];
+  std::vector<int32_t> fill(first.begin(), first.end() - 1);
+  for (int64_t n = 0; n < coarse.size(); ++n) nodes[fill[lat.index(coarse.lattice[n])]++] = int32_t(n);
+  Prolongation P;
+  P.start.assign(fine.size() + 1, 0);
   for (int64_t n = 0; n < fine.size(); ++n) {
     const auto& g = fine.lattice[n];
     int base[3];
@@ -400,22 +436,41 @@ void ProlongPolygrid(const Polygrid& coarse, const std::vector<float>& coarse_va
       base[a] = g[a] / 2;
       t[a] = g[a] % 2 ? 0.5 : 0.0;
     }
-    double acc = 0, wsum = 0;
+    double wsum = 0;
+    std::vector<double> w;
     for (int c = 0; c < 8; ++c) {
       std::array<int, 3> q;
-      double w = 1;
+      double wc = 1;
       for (int a = 0; a < 3; ++a) {
         const int bit = (c >> a) & 1;
         q[a] = base[a] + bit;
-        w *= bit ? t[a] : 1 - t[a];
+        wc *= bit ? t[a] : 1 - t[a];
       }
-      if (w == 0 || !lat.inside(q)) continue;
+      if (wc == 0 || !lat.inside(q)) continue;
       const int64_t k = lat.index(q);
-      if (count[k] == 0) continue;
-      acc += w * sum[k] / count[k];
-      wsum += w;
+      const int count = first[k + 1] - first[k];
+      if (count == 0) continue;
+      wsum += wc;
+      for (int32_t i = first[k]; i < first[k + 1]; ++i) {
+        P.index.push_back(nodes[i]);
+        w.push_back(wc / count);
+      }
     }
-    (*fine_values)[n] = wsum > 0 ? float(acc / wsum) : 0.f;
+    for (size_t i = 0; i < w.size(); ++i) P.weight.push_back(float(w[i] / wsum));
+    P.start[n + 1] = int32_t(P.index.size());
+  }
+  return P;
+}
+
+void ProlongPolygrid(const Polygrid& coarse, const std::vector<float>& coarse_values,
+                     const Polygrid& fine, std::vector<float>* fine_values) {
+  TL_CHECK(int64_t(coarse_values.size()) == coarse.size());
+  const Prolongation P = MakeProlongation(coarse, fine);
+  fine_values->assign(fine.size(), 0.f);
+  for (int64_t n = 0; n < fine.size(); ++n) {
+    double acc = 0;
+    for (int32_t k = P.start[n]; k < P.start[n + 1]; ++k) acc += double(P.weight[k]) * coarse_values[P.index[k]];
+    (*fine_values)[n] = float(acc);
   }
 }
 

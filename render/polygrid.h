@@ -87,6 +87,15 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
 std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Shape& shape,
                                              const PolygridOptions& options, int max_levels);
 
+// A prolongation as a sparse matrix over nodes, rows by fine node (CSR):
+//   fine[f] = sum_{k in [start[f], start[f + 1])} weight[k] coarse[index[k]].
+struct Prolongation {
+  std::vector<int32_t> start, index;
+  std::vector<float> weight;
+};
+// The weights of ProlongPolygrid (below) as a matrix.
+Prolongation MakeProlongation(const Polygrid& coarse, const Polygrid& fine);
+
 // Interpolates node values from a coarse level to a fine one (resolution 2(nc-1)+1) through the
 // shared lattice: a coarse lattice node's value is its interior node's, or the mean of its
 // boundary nodes; a fine node takes the trilinear interpolation at lattice position g/2 over the

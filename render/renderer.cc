@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <sstream>
 
+#include "render/render_passes.h"
 #include "solver/status.h"
 
 namespace translume {
@@ -19,36 +20,6 @@ double Seconds(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// A pinhole (perspective) or orthographic view: camera-space x right, y up, z forward.
-struct View {
-  Vec3 eye = Vec3::Zero(), right = Vec3::UnitX(), up = Vec3::UnitY(), forward = Vec3::UnitZ();
-  bool ortho = false;
-  double scale = 1;  // perspective: 1 / tan(fov / 2); ortho: 1 / half-width (mm)
-  int width = 0, height = 0;
-
-  static View LookAt(const Vec3& eye, const Vec3& target, int w, int h, bool ortho, double scale) {
-    View v;
-    v.eye = eye;
-    v.forward = (target - eye).normalized();
-    Vec3 up_hint = std::abs(v.forward.z()) > 0.99 ? Vec3(0, 1, 0) : Vec3(0, 0, 1);
-    v.right = v.forward.cross(up_hint).normalized();
-    v.up = v.right.cross(v.forward);
-    v.ortho = ortho;
-    v.scale = scale;
-    v.width = w;
-    v.height = h;
-    return v;
-  }
-  // Screen x, y in pixels and depth (mm along forward).
-  Vec3 Project(const Vec3& p) const {
-    const Vec3 d = p - eye;
-    const double x = d.dot(right), y = d.dot(up), z = d.dot(forward);
-    const double aspect = double(width) / height;
-    const double k = ortho ? scale : scale / std::max(z, 1e-9);
-    return Vec3(0.5 * width * (1 + x * k / aspect), 0.5 * height * (1 - y * k), z);
-  }
-};
-
 // Z-buffer rasterisation: per pixel the nearest triangle and its screen-space barycentrics.
 struct Raster {
   int width = 0, height = 0;
@@ -56,7 +27,7 @@ struct Raster {
   std::vector<int32_t> tri;
   std::vector<float> b1, b2;
 
-  void Draw(const View& view, const TriangleMesh& mesh) {
+  void Draw(const PassView& view, const TriangleMesh& mesh) {
     width = view.width;
     height = view.height;
     depth.assign(size_t(width) * height, 1e30f);
@@ -95,6 +66,28 @@ struct Raster {
 };
 
 }  // namespace
+
+PassView PassView::LookAt(const Vec3& eye, const Vec3& target, int w, int h, bool ortho, double scale) {
+  PassView v;
+  v.eye = eye;
+  v.forward = (target - eye).normalized();
+  Vec3 up_hint = std::abs(v.forward.z()) > 0.99 ? Vec3(0, 1, 0) : Vec3(0, 0, 1);
+  v.right = v.forward.cross(up_hint).normalized();
+  v.up = v.right.cross(v.forward);
+  v.ortho = ortho;
+  v.scale = scale;
+  v.width = w;
+  v.height = h;
+  return v;
+}
+
+Vec3 PassView::Project(const Vec3& p) const {
+  const Vec3 d = p - eye;
+  const double x = d.dot(right), y = d.dot(up), z = d.dot(forward);
+  const double aspect = double(width) / height;
+  const double k = ortho ? scale : scale / std::max(z, 1e-9);
+  return Vec3(0.5 * width * (1 + x * k / aspect), 0.5 * height * (1 - y * k), z);
+}
 
 RenderLight RenderLight::Parse(const std::string& text) {
   RenderLight l;
@@ -227,19 +220,143 @@ double ToneMap(Image* image, double exposure) {
   return scale;
 }
 
+
+namespace {
+
+// The cpu implementation of passes 1 and 3 (OpenMP, double; render_passes.h).
+class CpuRenderPasses : public RenderPasses {
+ public:
+  explicit CpuRenderPasses(const PassScene* scene) : sc_(*scene) {}
+
+  std::vector<BoundaryLight> Incident(const std::vector<LightSample>& samples) override {
+    shadows_.assign(samples.size(), Raster());
+    for (size_t s = 0; s < samples.size(); ++s) shadows_[s].Draw(samples[s].view, *sc_.mesh);
+    std::vector<BoundaryLight> q(sc_.levels->size());
+    for (size_t l = 0; l < sc_.levels->size(); ++l) {
+      const Polygrid& pg = (*sc_.levels)[l];
+      for (int c = 0; c < 3; ++c) q[l][c].assign(pg.num_boundary(), 0.f);
+#pragma omp parallel for schedule(static) if (pg.num_boundary() > 20000)
+      for (int64_t b = 0; b < pg.num_boundary(); ++b) {
+        double acc[3] = {0, 0, 0};
+        for (size_t s = 0; s < samples.size(); ++s) {
+          double cos_i;
+          Vec3 dir;
+          const double e = Light(samples, s, pg.position[pg.num_interior + b], pg.normal[b], &cos_i, &dir);
+          if (e == 0) continue;
+          const double v = e * cos_i * FresnelTransmittance(cos_i, sc_.options.eta);
+          for (int c = 0; c < 3; ++c) acc[c] += v * samples[s].E[c];
+        }
+        for (int c = 0; c < 3; ++c) q[l][c][b] = float(acc[c]);
+      }
+    }
+    return q;
+  }
+
+  Image Shade(const PassView& cam, const BoundaryLight& radiance,
+              const std::vector<LightSample>& samples) override {
+    const RenderOptions& o = sc_.options;
+    const TriangleMesh& mesh = *sc_.mesh;
+    std::vector<std::array<float, 3>> vrad(mesh.vertices.size());
+    for (size_t v = 0; v < mesh.vertices.size(); ++v)
+      for (int c = 0; c < 3; ++c) {
+        double acc = 0;
+        for (int k = 0; k < 4; ++k) acc += sc_.near_w[v][k] * radiance[c][sc_.near_idx[v][k]];
+        vrad[v][c] = float(acc);
+      }
+    const int ss = o.supersample, W = cam.width, H = cam.height;
+    Raster r;
+    r.Draw(cam, mesh);
+    Image img;
+    img.width = W / ss;
+    img.height = H / ss;
+    img.channels = 3;
+    img.data.assign(size_t(img.width) * img.height * 3, 0.f);
+    const double alpha2 = o.roughness * o.roughness;
+#pragma omp parallel for schedule(dynamic, 4)
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const size_t i = size_t(y) * W + x;
+        if (r.tri[i] < 0) continue;
+        const auto& tr = mesh.triangles[r.tri[i]];
+        const double w1 = r.b1[i], w2 = r.b2[i], w0 = 1 - w1 - w2;
+        const Vec3 p = w0 * mesh.vertices[tr[0]] + w1 * mesh.vertices[tr[1]] + w2 * mesh.vertices[tr[2]];
+        const Vec3 n = (w0 * sc_.vertex_normals[tr[0]] + w1 * sc_.vertex_normals[tr[1]] +
+                        w2 * sc_.vertex_normals[tr[2]]).normalized();
+        const Vec3 view = (cam.eye - p).normalized();
+        const double cos_o = std::max(0.0, n.dot(view));
+        const double ft = FresnelTransmittance(cos_o, o.eta);
+        double surface[3] = {0, 0, 0};
+        if (cos_o > 0 && (o.specular > 0 || o.surface_reflectance > 0)) {
+          for (size_t s = 0; s < samples.size(); ++s) {
+            double cos_i;
+            Vec3 l;
+            const double e = Light(samples, s, p, n, &cos_i, &l);
+            if (e == 0) continue;
+            const Vec3 hv = (l + view).normalized();
+            const double cd = std::clamp(n.dot(hv), 1e-6, 1.0);
+            const double tan2 = (1 - cd * cd) / (cd * cd);
+            const double ward = o.specular * std::exp(-tan2 / alpha2) / (4 * kPi * alpha2 * std::sqrt(cos_i * cos_o));
+            for (int c = 0; c < 3; ++c)
+              surface[c] += (ward + o.surface_reflectance / kPi) * e * cos_i * samples[s].E[c];
+          }
+        }
+        for (int c = 0; c < 3; ++c) {
+          const double ms = w0 * vrad[tr[0]][c] + w1 * vrad[tr[1]][c] + w2 * vrad[tr[2]][c];
+          const double value = (ft * ms + surface[c]) / (ss * ss);
+#pragma omp atomic
+          img.data[(size_t(y / ss) * img.width + x / ss) * 3 + c] += float(value);
+        }
+      }
+    return img;
+  }
+
+ private:
+  // Irradiance factor (falloff x visibility) of sample s at p with normal n; cos_i and the
+  // direction l towards the light.
+  double Light(const std::vector<LightSample>& samples, size_t s, const Vec3& p, const Vec3& n,
+               double* cos_i, Vec3* l) const {
+    const LightSample& smp = samples[s];
+    double e = 1;
+    if (!smp.point) {
+      *l = smp.v;
+    } else {
+      *l = smp.v - p;
+      e = (smp.v - sc_.centre).squaredNorm() / std::max(1e-12, l->squaredNorm());
+      l->normalize();
+    }
+    *cos_i = n.dot(*l);
+    if (*cos_i <= 0) return 0.0;
+    const Vec3 sp = smp.view.Project(p);
+    const int x = int(sp.x()), y = int(sp.y()), S = smp.view.width;
+    if (x >= 0 && y >= 0 && x < S && y < S &&
+        sp.z() > shadows_[s].depth[size_t(y) * S + x] + sc_.shadow_bias)
+      return 0.0;
+    return e;
+  }
+
+  const PassScene& sc_;
+  std::vector<Raster> shadows_;
+};
+
+}  // namespace
+
+std::unique_ptr<RenderPasses> MakeCpuRenderPasses(const PassScene* scene) {
+  return std::make_unique<CpuRenderPasses>(scene);
+}
+
+std::unique_ptr<RenderPasses> RenderPasses::Create(DiffusionBackend backend, const PassScene* scene) {
+  if (backend == DiffusionBackend::kGl) return MakeGlRenderPasses(scene);
+  return MakeCpuRenderPasses(scene);
+}
+
 struct Renderer::Impl {
   const Shape* shape;
   const std::vector<Polygrid>* levels;
   std::vector<NodeMaterial> materials;
   double C;
-  RenderOptions o;
   std::unique_ptr<PolygridDiffusion> diffusion;
-  std::vector<Vec3> vertex_normals;
-  // Mesh vertex -> 4 nearest boundary nodes of the finest level and inverse-distance weights.
-  std::vector<std::array<int32_t, 4>> near_idx;
-  std::vector<std::array<float, 4>> near_w;
-  Vec3 centre;
-  double radius;
+  PassScene scene;
+  std::unique_ptr<RenderPasses> passes;
   // The environment's direction samples, computed once per environment image.
   const Image* env_source = nullptr;
   std::vector<std::pair<Vec3, std::array<double, 3>>> env;
@@ -255,18 +372,22 @@ Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
   I.levels = levels;
   I.materials = materials;
   I.C = C;
-  I.o = options;
   if (options.model == "polygrid")
     I.diffusion = std::make_unique<PolygridDiffusion>(levels, std::move(materials), C, diffusion);
+  PassScene& sc = I.scene;
+  sc.options = options;
+  sc.levels = levels;
+  sc.mesh = &shape->mesh();
   const TriangleMesh& mesh = shape->mesh();
-  I.vertex_normals = mesh.VertexNormals();
-  I.centre = (shape->lo + shape->hi) / 2;
-  I.radius = 0;  // bounding sphere about the box centre
-  for (const Vec3& v : mesh.vertices) I.radius = std::max(I.radius, (v - I.centre).norm());
+  sc.vertex_normals = mesh.VertexNormals();
+  sc.centre = (shape->lo + shape->hi) / 2;
+  sc.radius = 0;  // bounding sphere about the box centre
+  for (const Vec3& v : mesh.vertices) sc.radius = std::max(sc.radius, (v - sc.centre).norm());
+  sc.shadow_bias = 0.03 * sc.radius;
   const Polygrid& pg = (*levels)[0];
   const int64_t nb = pg.num_boundary();
-  I.near_idx.resize(mesh.vertices.size());
-  I.near_w.resize(mesh.vertices.size());
+  sc.near_idx.resize(mesh.vertices.size());
+  sc.near_w.resize(mesh.vertices.size());
 #pragma omp parallel for schedule(dynamic, 64)
   for (int64_t v = 0; v < int64_t(mesh.vertices.size()); ++v) {
     std::array<std::pair<double, int32_t>, 4> best;
@@ -280,19 +401,20 @@ Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
     double wsum = 0;
     for (int k = 0; k < 4; ++k) {
       const double w = 1 / (best[k].first + 1e-6 * pg.mean_boundary_spacing * pg.mean_boundary_spacing);
-      I.near_idx[v][k] = best[k].second;
-      I.near_w[v][k] = float(w);
+      sc.near_idx[v][k] = best[k].second;
+      sc.near_w[v][k] = float(w);
       wsum += w;
     }
-    for (int k = 0; k < 4; ++k) I.near_w[v][k] = float(I.near_w[v][k] / wsum);
+    for (int k = 0; k < 4; ++k) sc.near_w[v][k] = float(sc.near_w[v][k] / wsum);
   }
+  I.passes = RenderPasses::Create(diffusion.backend, &sc);
 }
 
 Renderer::~Renderer() = default;
 
 Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
   Impl& I = *impl_;
-  const RenderOptions& o = I.o;
+  const RenderOptions& o = I.scene.options;
   const auto rot = [&](const Vec3& v) {
     const double a = turn_deg * kPi / 180;
     return Vec3(std::cos(a) * v.x() - std::sin(a) * v.y(), std::sin(a) * v.x() + std::cos(a) * v.y(), v.z());
@@ -304,85 +426,43 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
   // light is a list of samples: one for dir and point lights, one per direction for an
   // environment map (EnvironmentSamples).
   auto t0 = std::chrono::steady_clock::now();
-  struct Sample {
-    bool point = false;
-    Vec3 v;                       // direction towards the light, or the point light's position
-    std::array<double, 3> E{};    // irradiance at normal incidence (RGB)
-    View view;
-    Raster shadow;
-  };
-  std::vector<Sample> samples;
+  std::vector<LightSample> samples;
   if (light.kind == RenderLight::Kind::kEnvironment) {
     if (I.env_source != light.environment.get()) {
       I.env = EnvironmentSamples(*light.environment, o.environment_directions);
       I.env_source = light.environment.get();
     }
     for (const auto& [dir, E] : I.env) {
-      Sample smp;
+      LightSample smp;
       smp.v = rot(dir);
       smp.E = E;
       samples.push_back(smp);
     }
   } else {
-    Sample smp;
+    LightSample smp;
     smp.point = light.kind == RenderLight::Kind::kPoint;
     smp.v = light.v;
     smp.E = {1, 1, 1};
     samples.push_back(smp);
   }
   const int S = samples.size() > 1 ? std::max(16, o.shadow_map_size / 4) : o.shadow_map_size;
-  for (Sample& smp : samples) {
+  const Vec3& centre = I.scene.centre;
+  const double radius = I.scene.radius;
+  for (LightSample& smp : samples) {
     if (!smp.point)
-      smp.view = View::LookAt(I.centre + 3 * I.radius * smp.v, I.centre, S, S, true, 1 / I.radius);
+      smp.view = PassView::LookAt(centre + 3 * radius * smp.v, centre, S, S, true, 1 / radius);
     else
-      smp.view = View::LookAt(smp.v, I.centre, S, S, false,
-                              1 / std::tan(std::asin(std::min(0.99, I.radius / std::max(1e-9, (smp.v - I.centre).norm())))));
-    smp.shadow.Draw(smp.view, I.shape->mesh());
+      smp.view = PassView::LookAt(smp.v, centre, S, S, false,
+                                  1 / std::tan(std::asin(std::min(0.99, radius / std::max(1e-9, (smp.v - centre).norm())))));
   }
-  const double bias = 0.03 * I.radius;
-  // Irradiance factor (falloff x visibility) of sample `smp` at p, and cos_i.
-  auto incident = [&](const Sample& smp, const Vec3& p, const Vec3& n, double* cos_i, Vec3* l) {
-    double e = 1;
-    if (!smp.point) {
-      *l = smp.v;
-    } else {
-      *l = smp.v - p;
-      e = (smp.v - I.centre).squaredNorm() / std::max(1e-12, l->squaredNorm());
-      l->normalize();
-    }
-    *cos_i = n.dot(*l);
-    if (*cos_i <= 0) return 0.0;
-    const Vec3 sp = smp.view.Project(p);
-    const int x = int(sp.x()), y = int(sp.y());
-    if (x >= 0 && y >= 0 && x < S && y < S && sp.z() > smp.shadow.depth[size_t(y) * S + x] + bias)
-      return 0.0;
-    return e;
-  };
-  std::vector<BoundaryLight> q(I.levels->size());
-  for (size_t l = 0; l < I.levels->size(); ++l) {
-    const Polygrid& pg = (*I.levels)[l];
-    for (int c = 0; c < 3; ++c) q[l][c].assign(pg.num_boundary(), 0.f);
-#pragma omp parallel for schedule(static) if (pg.num_boundary() > 20000)
-    for (int64_t b = 0; b < pg.num_boundary(); ++b) {
-      double acc[3] = {0, 0, 0};
-      for (const Sample& smp : samples) {
-        double cos_i;
-        Vec3 dir;
-        const double e = incident(smp, pg.position[pg.num_interior + b], pg.normal[b], &cos_i, &dir);
-        if (e == 0) continue;
-        const double v = e * cos_i * FresnelTransmittance(cos_i, o.eta);
-        for (int c = 0; c < 3; ++c) acc[c] += v * smp.E[c];
-      }
-      for (int c = 0; c < 3; ++c) q[l][c][b] = float(acc[c]);
-    }
-  }
+  std::vector<BoundaryLight> q = I.passes->Incident(samples);
   times_.incident = Seconds(t0);
 
   // Pass 2: diffusion (or the dipole baseline).
   t0 = std::chrono::steady_clock::now();
   const Polygrid& pg = (*I.levels)[0];
   if (I.diffusion) {
-    const std::vector<float>& phi = I.diffusion->Solve(q);
+    const std::vector<float>& phi = I.diffusion->Solve(q, /*boundary_only=*/true);
     // Shading uses L = phi / (2 pi): the SPEC's (phi - q) / (2 pi) where unlit (q = 0), without
     // subtracting q where lit. The paper's net-flux form (phi - q) / (2 pi) is negative under the
     // light (SPEC section 3), which would render lit regions black.
@@ -404,61 +484,13 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
 
   // Pass 3: shading, supersampled.
   t0 = std::chrono::steady_clock::now();
-  const TriangleMesh& mesh = I.shape->mesh();
-  std::vector<std::array<float, 3>> vrad(mesh.vertices.size());
-  for (size_t v = 0; v < mesh.vertices.size(); ++v)
-    for (int c = 0; c < 3; ++c) {
-      double acc = 0;
-      for (int k = 0; k < 4; ++k) acc += I.near_w[v][k] * radiance_[c][I.near_idx[v][k]];
-      vrad[v][c] = float(acc);
-    }
-  const int ss = o.supersample, W = o.width * ss, H = o.height * ss;
+  const int ss = o.supersample;
   const double az = (o.azimuth_deg + turn_deg) * kPi / 180, el = o.elevation_deg * kPi / 180;
   const double t = std::tan(o.fov_deg * kPi / 360);
-  const double dist = I.radius / std::sin(o.fov_deg * kPi / 360) * 1.15;
-  const Vec3 eye = I.centre + dist * Vec3(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
-  const View cam = View::LookAt(eye, I.centre, W, H, false, 1 / t);
-  Raster r;
-  r.Draw(cam, mesh);
-  Image img;
-  img.width = o.width;
-  img.height = o.height;
-  img.channels = 3;
-  img.data.assign(size_t(o.width) * o.height * 3, 0.f);
-  const double alpha2 = o.roughness * o.roughness;
-#pragma omp parallel for schedule(dynamic, 4)
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      const size_t i = size_t(y) * W + x;
-      if (r.tri[i] < 0) continue;
-      const auto& tr = mesh.triangles[r.tri[i]];
-      const double w1 = r.b1[i], w2 = r.b2[i], w0 = 1 - w1 - w2;
-      const Vec3 p = w0 * mesh.vertices[tr[0]] + w1 * mesh.vertices[tr[1]] + w2 * mesh.vertices[tr[2]];
-      Vec3 n = (w0 * I.vertex_normals[tr[0]] + w1 * I.vertex_normals[tr[1]] + w2 * I.vertex_normals[tr[2]]).normalized();
-      const Vec3 view = (eye - p).normalized();
-      const double cos_o = std::max(0.0, n.dot(view));
-      const double ft = FresnelTransmittance(cos_o, o.eta);
-      double surface[3] = {0, 0, 0};
-      if (cos_o > 0 && (o.specular > 0 || o.surface_reflectance > 0)) {
-        for (const Sample& smp : samples) {
-          double cos_i;
-          Vec3 l;
-          const double e = incident(smp, p, n, &cos_i, &l);
-          if (e == 0) continue;
-          const Vec3 hv = (l + view).normalized();
-          const double cd = std::clamp(n.dot(hv), 1e-6, 1.0);
-          const double tan2 = (1 - cd * cd) / (cd * cd);
-          const double ward = o.specular * std::exp(-tan2 / alpha2) / (4 * kPi * alpha2 * std::sqrt(cos_i * cos_o));
-          for (int c = 0; c < 3; ++c) surface[c] += (ward + o.surface_reflectance / kPi) * e * cos_i * smp.E[c];
-        }
-      }
-      for (int c = 0; c < 3; ++c) {
-        const double ms = w0 * vrad[tr[0]][c] + w1 * vrad[tr[1]][c] + w2 * vrad[tr[2]][c];
-        const double value = (ft * ms + surface[c]) / (ss * ss);
-#pragma omp atomic
-        img.data[(size_t(y / ss) * o.width + x / ss) * 3 + c] += float(value);
-      }
-    }
+  const double dist = radius / std::sin(o.fov_deg * kPi / 360) * 1.15;
+  const Vec3 eye = centre + dist * Vec3(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
+  const PassView cam = PassView::LookAt(eye, centre, o.width * ss, o.height * ss, false, 1 / t);
+  Image img = I.passes->Shade(cam, radiance_, samples);
   times_.shading = Seconds(t0);
   return img;
 }

@@ -9,6 +9,7 @@
 #include <filesystem>
 
 #include "render/material_map.h"
+#include "render/test_metrics.h"
 #include "solver/image_io.h"
 #include "solver/status.h"
 
@@ -48,6 +49,63 @@ TEST(Render, ImageHasRequestedSizeAndIsNotEmpty) {
   EXPECT_GT(lit, 48 * 40 / 5);   // the sphere covers a good part of the frame
   EXPECT_LT(lit, 48 * 40);       // and the background stays black
   EXPECT_EQ(img.at(0, 0, 0), 0.f);
+}
+
+// The gl passes (compute shaders: shadow maps, incident light, rasterisation, shading) against
+// the cpu passes, the same scene and light: q at the boundary nodes and the image agree to
+// float rounding (a pixel whose sample centre lies on a triangle edge may pick the other
+// triangle, so the image is compared in L2 and by the share of pixels that differ).
+TEST(Render, GlPassesMatchCpu) {
+  auto sky = std::make_shared<Image>();
+  sky->width = 32;
+  sky->height = 16;
+  sky->channels = 3;
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 32; ++x)
+      for (int c = 0; c < 3; ++c) sky->data.push_back(y < 6 ? 1.f + 0.5f * c : 0.2f);
+  RenderLight env = RenderLight::Parse("env:sky.exr");
+  env.environment = sky;
+  struct Case {
+    std::string shape, light;
+  };
+  for (const Case& k : {Case{"sphere", "dir:1,0.3,0.6"}, Case{"torus", "point:30,10,20"},
+                        Case{"torus", "env"}}) {
+    SCOPED_TRACE(k.shape + " " + k.light);
+    const auto shape = MakeBuiltinShape(k.shape, 20, 24);
+    PolygridOptions po;
+    po.resolution = 5;
+    const auto levels = BuildPolygridHierarchy(BuiltinPolycube(k.shape), *shape, po, 2);
+    std::vector<NodeMaterial> mats;
+    for (const Polygrid& pg : levels) mats.push_back(ProceduralNodeMaterial(pg, "marble"));
+    RenderOptions ro;
+    ro.width = 40;
+    ro.height = 32;
+    ro.surface_reflectance = 0.1;
+    ro.environment_directions = 16;
+    DiffusionOptions d;
+    d.iterations = {50, 50};
+    const RenderLight light = k.light == "env" ? env : RenderLight::Parse(k.light);
+    Renderer cpu(shape.get(), &levels, mats, ReflectionParameterC(1.3), d, ro);
+    const Image a = cpu.Render(light, 15);
+    d.backend = DiffusionBackend::kGl;
+    Renderer gl(shape.get(), &levels, mats, ReflectionParameterC(1.3), d, ro);
+    const Image b = gl.Render(light, 15);
+    double eq = 0;
+    for (int c = 0; c < 3; ++c)
+      eq = std::max(eq, RelativeL2(gl.boundary_light()[c], cpu.boundary_light()[c]));
+    int differ = 0, lit = 0;
+    for (size_t i = 0; i < a.data.size(); ++i) {
+      differ += std::abs(a.data[i] - b.data[i]) > 1e-4 * (std::abs(a.data[i]) + 1e-3);
+      lit += a.data[i] > 0;
+    }
+    const double ei = RelativeL2(b.data, a.data);
+    std::printf("[gl passes] %s %s: q relative L2 %.2e, image relative L2 %.2e, %d of %d values "
+                "differ by > 1e-4\n", k.shape.c_str(), k.light.c_str(), eq, ei, differ, lit);
+    EXPECT_GT(lit, int(a.data.size()) / 5);
+    EXPECT_LT(eq, 1e-5);
+    EXPECT_LT(ei, 1e-3);
+    EXPECT_LT(differ, int(a.data.size()) / 100);
+  }
 }
 
 // The stored reference: tests/data/render_sphere_marble.exr (linear RGB). After an intentional

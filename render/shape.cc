@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #include "render/shape.h"
 
+#include "render/polycube.h"
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -57,6 +59,35 @@ void OrientOutward(TriangleMesh* m) {
     volume += m->vertices[t[0]].dot(m->vertices[t[1]].cross(m->vertices[t[2]])) / 6;
   if (volume < 0)
     for (auto& t : m->triangles) std::swap(t[1], t[2]);
+}
+
+// Appends the tess x tess quads (two triangles each) of an axis-aligned face whose lattice
+// corners are corner + i e_a1 + j e_a2, i, j in [0, tess] (a1 = axis + 1, a2 = axis + 2, mod 3),
+// facing +axis (side 1) or -axis (side 0), counter-clockwise seen from outside; vid(lattice
+// point) gives the vertex index.
+template <typename Vid>
+void AppendFaceQuads(TriangleMesh* mesh, int axis, int side, const std::array<int, 3>& corner,
+                     int tess, Vid&& vid) {
+  const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+  for (int i = 0; i < tess; ++i)
+    for (int j = 0; j < tess; ++j) {
+      const int di[4] = {0, 1, 1, 0}, dj[4] = {0, 0, 1, 1};
+      int q[4];
+      for (int k = 0; k < 4; ++k) {
+        std::array<int, 3> g = corner;
+        g[a1] += i + di[k];
+        g[a2] += j + dj[k];
+        q[k] = vid(g);
+      }
+      // (a1, a2, axis) is right-handed, so CCW in (a1, a2) faces +axis.
+      if (side == 1) {
+        mesh->triangles.push_back({q[0], q[1], q[2]});
+        mesh->triangles.push_back({q[0], q[2], q[3]});
+      } else {
+        mesh->triangles.push_back({q[0], q[2], q[1]});
+        mesh->triangles.push_back({q[0], q[3], q[2]});
+      }
+    }
 }
 
 class SphereShape : public Shape {
@@ -140,27 +171,9 @@ class BoxShape : public Shape {
     };
     for (int axis = 0; axis < 3; ++axis)
       for (int side = 0; side < 2; ++side) {
-        const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
-        for (int i = 0; i < tess; ++i)
-          for (int j = 0; j < tess; ++j) {
-            std::array<int, 3> g[4];
-            const int di[4] = {0, 1, 1, 0}, dj[4] = {0, 0, 1, 1};
-            for (int c = 0; c < 4; ++c) {
-              g[c][axis] = side * tess;
-              g[c][a1] = i + di[c];
-              g[c][a2] = j + dj[c];
-            }
-            int q[4];
-            for (int c = 0; c < 4; ++c) q[c] = vid(g[c]);
-            // (a1, a2, axis) is right-handed, so CCW in (a1, a2) faces +axis.
-            if (side == 1) {
-              mesh_.triangles.push_back({q[0], q[1], q[2]});
-              mesh_.triangles.push_back({q[0], q[2], q[3]});
-            } else {
-              mesh_.triangles.push_back({q[0], q[2], q[1]});
-              mesh_.triangles.push_back({q[0], q[3], q[2]});
-            }
-          }
+        std::array<int, 3> corner = {0, 0, 0};
+        corner[axis] = side * tess;
+        AppendFaceQuads(&mesh_, axis, side, corner, tess, vid);
       }
   }
   // Closest point on the box surface: clamp outside; inside, push to the nearest face.
@@ -179,6 +192,79 @@ class BoxShape : public Shape {
     *n = Vec3::Zero();
     (*n)[a] = best % 2 ? 1 : -1;
   }
+};
+
+// The solid union of a polycube's unit cubes, centred and scaled so that the largest extent is
+// size_mm (the built-in bunny): the surface is the cubes' exposed faces, each a tess x tess grid
+// of quads in the render mesh (vertices shared on the lattice of step 1/tess). Project: the
+// closest point on the exposed faces, with the face's normal; only the faces of the cubes
+// around the query's cell are searched when one of them is within a cube's width (no face of
+// a farther cube can then be closer), else all.
+class PolycubeSolidShape : public Shape {
+ public:
+  PolycubeSolidShape(const Polycube& pc, double size_mm, int tess, const std::string& name) {
+    name_ = name;
+    ext_ = pc.Extent();
+    unit_ = size_mm / std::max({ext_[0], ext_[1], ext_[2]});
+    origin_ = -0.5 * unit_ * Vec3(ext_[0], ext_[1], ext_[2]);
+    lo = origin_;
+    hi = -origin_;
+    cube_faces_.assign(size_t(ext_[0]) * ext_[1] * ext_[2], {});
+    std::map<std::array<int, 3>, int> ids;
+    auto vid = [&](const std::array<int, 3>& g) {
+      auto [it, fresh] = ids.emplace(g, int(mesh_.vertices.size()));
+      if (fresh) mesh_.vertices.push_back(origin_ + unit_ * Vec3(g[0], g[1], g[2]) / tess);
+      return it->second;
+    };
+    for (const auto& c : pc.cubes)
+      for (int dir = 0; dir < 6; ++dir) {
+        const int axis = dir / 2, side = dir % 2;
+        std::array<int, 3> nb = c;
+        nb[axis] += side ? 1 : -1;
+        if (pc.Has(nb[0], nb[1], nb[2])) continue;
+        cube_faces_[Cell(c)].push_back(int(faces_.size()));
+        faces_.push_back({c, dir});
+        std::array<int, 3> corner;
+        for (int a = 0; a < 3; ++a) corner[a] = (c[a] + (a == axis ? side : 0)) * tess;
+        AppendFaceQuads(&mesh_, axis, side, corner, tess, vid);
+      }
+  }
+
+  void Project(const Vec3& p, Vec3* s, Vec3* n) const override {
+    const Vec3 u = (p - origin_) / unit_;  // cube units
+    std::array<int, 3> g;
+    for (int a = 0; a < 3; ++a) g[a] = std::clamp(int(std::floor(u[a])), 0, ext_[a] - 1);
+    double best = 1e300;
+    int best_face = -1;
+    Vec3 best_point;
+    auto try_face = [&](int f) {
+      const auto& [c, dir] = faces_[f];
+      Vec3 q;
+      for (int a = 0; a < 3; ++a) q[a] = std::clamp(u[a], double(c[a]), double(c[a] + 1));
+      q[dir / 2] = c[dir / 2] + dir % 2;
+      const double d2 = (q - u).squaredNorm();
+      if (d2 < best) best = d2, best_face = f, best_point = q;
+    };
+    for (int z = std::max(0, g[2] - 1); z <= std::min(ext_[2] - 1, g[2] + 1); ++z)
+      for (int y = std::max(0, g[1] - 1); y <= std::min(ext_[1] - 1, g[1] + 1); ++y)
+        for (int x = std::max(0, g[0] - 1); x <= std::min(ext_[0] - 1, g[0] + 1); ++x)
+          for (int f : cube_faces_[Cell({x, y, z})]) try_face(f);
+    if (best > 1)
+      for (int f = 0; f < int(faces_.size()); ++f) try_face(f);
+    *s = origin_ + unit_ * best_point;
+    *n = Vec3::Zero();
+    (*n)[faces_[best_face].second / 2] = faces_[best_face].second % 2 ? 1 : -1;
+  }
+
+ private:
+  size_t Cell(const std::array<int, 3>& c) const {
+    return c[0] + size_t(ext_[0]) * (c[1] + size_t(ext_[1]) * c[2]);
+  }
+  std::array<int, 3> ext_;
+  double unit_;
+  Vec3 origin_;
+  std::vector<std::pair<std::array<int, 3>, int>> faces_;  // exposed faces: cube, direction
+  std::vector<std::vector<int>> cube_faces_;               // per lattice cell
 };
 
 // Closest-point queries on a mesh, accelerated by a uniform grid of triangle bounding boxes:
@@ -499,8 +585,11 @@ std::unique_ptr<Shape> MakeBuiltinShape(const std::string& name, double size_mm,
   if (name == "slab") {
     return std::make_unique<BoxShape>(Vec3(3 * unit, 3 * unit, unit), 24, "slab");
   }
+  if (name == "bunny")
+    return std::make_unique<PolycubeSolidShape>(BuiltinPolycube("bunny"), size_mm,
+                                                std::max(1, tessellation / 12), "bunny");
   throw InputError("--shape: unknown shape '" + name +
-                   "' (expected slab, sphere, torus, blob, or a mesh file .obj/.ply)");
+                   "' (expected slab, sphere, torus, blob, bunny, or a mesh file .obj/.ply)");
 }
 
 std::unique_ptr<Shape> MakeBoxShape(const Vec3& extent_mm, int tessellation) {

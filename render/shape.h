@@ -57,6 +57,9 @@ class Shape {
 //   torus  ring radius 1, tube radius 0.5 units (a hole; extent 3 x 3 x 1 units)
 //   blob   a ball with a smooth radial bump r(d) = R (1 + 0.15 sin(3 d.x) sin(2 d.y + 1) cos(2 d.z))
 //   box    an axis-aligned box with the given extents (used by tests: `size` per axis)
+//   bunny  the solid of BuiltinPolycube("bunny"), 253 unit cubes (body, head, ears, tail; the
+//          cube count of the paper's Bunny, for the frame-rate benchmark): a blocky bunny,
+//          11 x 7 x 10 cubes at most; each exposed face is tessellation/12 quads per side
 // `tessellation` sets the render mesh's resolution. Throws InputError on an unknown name.
 std::unique_ptr<Shape> MakeBuiltinShape(const std::string& name, double size_mm,
                                         int tessellation = 48);

@@ -74,8 +74,9 @@ std::vector<int> ParseIntList(const std::string& text, const char* flag) {
 int RunRender(int argc, char** argv) {
   CLI::App app{"Render a material on a shape with the polygrid diffusion renderer (Wang et al.\n"
                "2008, Section 5). MATERIAL: a .vdb file (mapped as a shell), procedural:marble,\n"
-               "procedural:layers, or homogeneous:KAPPA,MU. Shapes: slab, sphere, torus, blob, or\n"
-               "a closed mesh (.obj, .ply) with an optional --polycube file.",
+               "procedural:layers, or homogeneous:KAPPA,MU. Shapes: slab, sphere, torus, blob, bunny\n"
+               "(253 cubes), or"
+               " a closed mesh (.obj, .ply) with an optional --polycube file.",
                "translume render"};
   std::string material, shape_name = "sphere", polycube_path, light = "dir:1,0.3,0.6", out,
               camera, image = "256x256", iterations = "200,100,100", depth, backend = "cpu";
@@ -84,7 +85,7 @@ int RunRender(int argc, char** argv) {
   bool coherence = false, clamp = false;
   RenderOptions ro;
   app.add_option("material", material, "Material")->required();
-  app.add_option("--shape", shape_name, "slab|sphere|torus|blob|MESH.obj|MESH.ply")->capture_default_str();
+  app.add_option("--shape", shape_name, "slab|sphere|torus|blob|bunny|MESH.obj|MESH.ply")->capture_default_str();
   app.add_option("--polycube", polycube_path, "Polycube file (docs/render.md); default: the shape's");
   app.add_option("--size", size_mm, "Largest extent of the object, mm")->capture_default_str();
   app.add_option("--resolution", resolution, "Polygrid nodes per cube edge")->capture_default_str();
@@ -93,7 +94,7 @@ int RunRender(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--iterations", iterations, "Relaxation steps per level, coarsest first")->capture_default_str();
   app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all)");
-  app.add_option("--backend", backend, "Diffusion on cpu or gl (compute shaders)")->capture_default_str();
+  app.add_option("--backend", backend, "All three passes on cpu or gl (compute shaders)")->capture_default_str();
   app.add_option("--light", light, "dir:X,Y,Z | point:X,Y,Z (mm) | env:FILE.exr (lat-long)")->capture_default_str();
   app.add_option("--camera", camera, "AZIMUTH,ELEVATION in degrees (default 30,25)");
   app.add_option("--image", image, "Output size WxH")->capture_default_str();

@@ -1,0 +1,212 @@
+// SPDX-License-Identifier: MIT
+// The gl backend of the renderer's incident-light and shading passes (render_passes.h):
+// compute shaders (render/shaders/raster.comp, incident.comp, shade.comp, with common.glsl) in
+// the solver's headless context. The mesh, the boundary nodes of every level and the vertex ->
+// boundary node weights are uploaded once; per frame the light samples go up, q and the image
+// come back.
+#include <cstring>
+#include <limits>
+#include <memory>
+
+#include "render/gl_internal.h"
+#include "render/render_passes.h"
+#include "solver/gl_api.h"
+#include "solver/gl_context.h"
+#include "solver/status.h"
+
+namespace translume {
+namespace {
+
+using gl::api;
+using render_gl::Dispatch;
+using render_gl::Ssbo;
+
+constexpr int kSampleFloats = 28;  // struct Sample in common.glsl: 7 vec4
+constexpr int32_t kNoTriangle = std::numeric_limits<int32_t>::max();
+
+void PutVec(float* out, const Vec3& v, double w) {
+  for (int a = 0; a < 3; ++a) out[a] = float(v[a]);
+  out[3] = float(w);
+}
+
+// Fills a buffer of 32-bit words with `value`.
+void Fill(const Ssbo& buffer, uint32_t value) {
+  api.BindBuffer(GL_SHADER_STORAGE_BUFFER, buffer.id);
+  api.ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, &value);
+}
+
+class GlRenderPasses : public RenderPasses {
+ public:
+  explicit GlRenderPasses(const PassScene* scene) : sc_(*scene) {
+    GlContext::Get();
+    raster_ = render_gl::Program("render/shaders/raster.comp");
+    incident_ = render_gl::Program("render/shaders/incident.comp");
+    shade_ = render_gl::Program("render/shaders/shade.comp");
+    const TriangleMesh& mesh = *sc_.mesh;
+    std::vector<float> v(mesh.vertices.size() * 8);
+    for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+      PutVec(&v[i * 8], mesh.vertices[i], 1);
+      PutVec(&v[i * 8 + 4], sc_.vertex_normals[i], 0);
+    }
+    verts_.Set(v);
+    std::vector<int32_t> t(mesh.triangles.size() * 3);
+    for (size_t i = 0; i < mesh.triangles.size(); ++i)
+      for (int k = 0; k < 3; ++k) t[i * 3 + k] = mesh.triangles[i][k];
+    tris_.Set(t);
+    num_tris_ = int(mesh.triangles.size());
+    // The boundary nodes of every level, one after the other (finest first).
+    std::vector<float> nodes;
+    for (const Polygrid& pg : *sc_.levels) {
+      level_start_.push_back(int64_t(nodes.size() / 8));
+      for (int64_t b = 0; b < pg.num_boundary(); ++b) {
+        nodes.resize(nodes.size() + 8);
+        PutVec(&nodes[nodes.size() - 8], pg.position[pg.num_interior + b], 1);
+        PutVec(&nodes[nodes.size() - 4], pg.normal[b], 0);
+      }
+    }
+    num_nodes_ = int64_t(nodes.size() / 8);
+    level_start_.push_back(num_nodes_);
+    nodes_.Set(nodes);
+    // struct Near { ivec4 idx; vec4 w; }
+    std::vector<int32_t> near(sc_.near_idx.size() * 8);
+    for (size_t i = 0; i < sc_.near_idx.size(); ++i)
+      for (int k = 0; k < 4; ++k) {
+        near[i * 8 + k] = sc_.near_idx[i][k];
+        std::memcpy(&near[i * 8 + 4 + k], &sc_.near_w[i][k], sizeof(float));
+      }
+    near_.Set(near);
+    q_.Set(nullptr, size_t(num_nodes_) * 3 * sizeof(float));
+    ids_.Set(nullptr, 16);  // bound (unused) while drawing shadow maps
+  }
+
+  std::vector<BoundaryLight> Incident(const std::vector<LightSample>& samples) override {
+    TL_CHECK(!samples.empty());
+    UploadSamples(samples, nullptr);
+    map_size_ = samples[0].view.width;
+    const size_t texels = size_t(map_size_) * map_size_;
+    shadow_.Set(nullptr, samples.size() * texels * sizeof(uint32_t));
+    Fill(shadow_, FarDepth());
+    api.UseProgram(raster_);
+    api.Uniform1i(0, num_tris_);
+    api.Uniform1i(2, 0);  // depth only
+    for (size_t s = 0; s < samples.size(); ++s) {
+      api.Uniform1i(1, int(s));
+      api.Uniform1i(3, int(s * texels));
+      Dispatch({&samples_, &shadow_, &verts_, &tris_, &ids_}, num_tris_);
+    }
+    api.UseProgram(incident_);
+    api.Uniform1i(0, int(num_nodes_));
+    api.Uniform1i(1, int(samples.size()));
+    api.Uniform1i(2, map_size_);
+    api.Uniform1f(3, float(sc_.shadow_bias));
+    api.Uniform1f(4, float(sc_.options.eta));
+    Dispatch({&samples_, &shadow_, &verts_, &tris_, &ids_, &nodes_, &q_}, num_nodes_);
+    std::vector<float> q(size_t(num_nodes_) * 3);
+    q_.Get(q.data(), q.size() * sizeof(float));
+    std::vector<BoundaryLight> out(sc_.levels->size());
+    for (size_t l = 0; l < out.size(); ++l)
+      for (int c = 0; c < 3; ++c) {
+        out[l][c].resize(level_start_[l + 1] - level_start_[l]);
+        for (size_t b = 0; b < out[l][c].size(); ++b) out[l][c][b] = q[(level_start_[l] + b) * 3 + c];
+      }
+    return out;
+  }
+
+  Image Shade(const PassView& cam, const BoundaryLight& radiance,
+              const std::vector<LightSample>& samples) override {
+    TL_CHECK_MSG(shadow_.id != 0, "Shade before Incident");
+    const RenderOptions& o = sc_.options;
+    const int ss = o.supersample;
+    Image img;
+    img.width = cam.width / ss;
+    img.height = cam.height / ss;
+    img.channels = 3;
+    img.data.assign(size_t(img.width) * img.height * 3, 0.f);
+    UploadSamples(samples, &cam);
+    const size_t pixels = size_t(cam.width) * cam.height;
+    if (pixels != cam_pixels_) {
+      cam_depth_.Set(nullptr, pixels * sizeof(uint32_t));
+      ids_.Set(nullptr, pixels * sizeof(int32_t));
+      image_.Set(nullptr, img.data.size() * sizeof(float));
+      cam_pixels_ = pixels;
+    }
+    Fill(cam_depth_, FarDepth());
+    Fill(ids_, uint32_t(kNoTriangle));
+    api.UseProgram(raster_);
+    api.Uniform1i(0, num_tris_);
+    api.Uniform1i(1, int(samples.size()));
+    api.Uniform1i(3, 0);
+    for (int mode = 0; mode < 2; ++mode) {
+      api.Uniform1i(2, mode);
+      Dispatch({&samples_, &cam_depth_, &verts_, &tris_, &ids_}, num_tris_);
+    }
+    const int64_t nb = (*sc_.levels)[0].num_boundary();
+    std::vector<float> rad(size_t(nb) * 3);
+    for (int c = 0; c < 3; ++c) std::copy(radiance[c].begin(), radiance[c].end(), rad.begin() + c * nb);
+    radiance_.Set(rad);
+    api.UseProgram(shade_);
+    api.Uniform1i(0, img.width);
+    api.Uniform1i(1, img.height);
+    api.Uniform1i(2, ss);
+    api.Uniform1i(3, int(samples.size()));
+    api.Uniform1i(4, map_size_);
+    api.Uniform1f(5, float(sc_.shadow_bias));
+    api.Uniform1f(6, float(o.eta));
+    api.Uniform1f(7, float(o.specular));
+    api.Uniform1f(8, float(o.roughness));
+    api.Uniform1f(9, float(o.surface_reflectance));
+    api.Uniform1i(10, int(nb));
+    Dispatch({&samples_, &shadow_, &verts_, &tris_, &ids_, &near_, &image_, &radiance_},
+             int64_t(img.width) * img.height);
+    image_.Get(img.data.data(), img.data.size() * sizeof(float));
+    return img;
+  }
+
+ private:
+  static uint32_t FarDepth() {
+    const float far = 1e30f;  // as the cpu raster's empty texel
+    uint32_t bits;
+    std::memcpy(&bits, &far, sizeof(bits));
+    return bits;
+  }
+
+  // struct Sample of common.glsl per light sample, then the camera (if any) as one more.
+  void UploadSamples(const std::vector<LightSample>& samples, const PassView* camera) {
+    std::vector<float> f((samples.size() + (camera ? 1 : 0)) * kSampleFloats, 0.f);
+    auto put_view = [](float* out, const PassView& v) {
+      PutVec(out, v.eye, 0);
+      PutVec(out + 4, v.right, 0);
+      PutVec(out + 8, v.up, 0);
+      PutVec(out + 12, v.forward, 0);
+      out[16] = v.ortho ? 1.f : 0.f;
+      out[17] = float(v.scale);
+      out[18] = float(v.width);
+      out[19] = float(v.height);
+    };
+    for (size_t s = 0; s < samples.size(); ++s) {
+      float* out = &f[s * kSampleFloats];
+      const LightSample& smp = samples[s];
+      PutVec(out, smp.v, smp.point ? 1 : 0);
+      PutVec(out + 4, Vec3(smp.E[0], smp.E[1], smp.E[2]), smp.point ? (smp.v - sc_.centre).squaredNorm() : 0);
+      put_view(out + 8, smp.view);
+    }
+    if (camera) put_view(&f[samples.size() * kSampleFloats + 8], *camera);
+    samples_.Set(f);
+  }
+
+  const PassScene& sc_;
+  GLuint raster_ = 0, incident_ = 0, shade_ = 0;
+  int num_tris_ = 0, map_size_ = 0;
+  int64_t num_nodes_ = 0;
+  std::vector<int64_t> level_start_;
+  size_t cam_pixels_ = 0;
+  Ssbo verts_, tris_, nodes_, near_, samples_, shadow_, q_, cam_depth_, ids_, image_, radiance_;
+};
+
+}  // namespace
+
+std::unique_ptr<RenderPasses> MakeGlRenderPasses(const PassScene* scene) {
+  return std::make_unique<GlRenderPasses>(scene);
+}
+
+}  // namespace translume

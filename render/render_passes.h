@@ -1,0 +1,90 @@
+// SPDX-License-Identifier: MIT
+// Internal to render/: the incident-light and shading passes of the renderer (Wang et al. 2008,
+// Section 5, passes 1 and 3), one implementation per backend with the same arithmetic: cpu
+// (renderer.cc, OpenMP, double) and gl (gl_render_passes.cc, compute shaders in the solver's
+// headless context, float). No GL headers here.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "render/diffusion.h"
+#include "render/polygrid.h"
+#include "render/renderer.h"
+#include "render/shape.h"
+#include "solver/image.h"
+
+namespace translume {
+
+// A pinhole (perspective) or orthographic view onto a width x height raster: camera-space x
+// right, y up, z forward.
+struct PassView {
+  Vec3 eye = Vec3::Zero(), right = Vec3::UnitX(), up = Vec3::UnitY(), forward = Vec3::UnitZ();
+  bool ortho = false;
+  double scale = 1;  // perspective: 1 / tan(fov / 2); ortho: 1 / half-width (mm)
+  int width = 0, height = 0;
+
+  static PassView LookAt(const Vec3& eye, const Vec3& target, int w, int h, bool ortho, double scale);
+  // Screen position of p: x, y in pixels (pixel (i, j) covers [i, i+1] x [j, j+1], y down) and
+  // the depth along `forward` (mm):
+  //   x = w/2 (1 + X k / aspect), y = h/2 (1 - Y k), k = scale (ortho) or scale / Z,
+  // with (X, Y, Z) = p - eye in camera axes and aspect = w / h.
+  Vec3 Project(const Vec3& p) const;
+};
+
+// One light sample of pass 1: a directional light (v: unit direction towards the light) or a
+// point light (v: position, mm), with irradiance E at normal incidence (RGB; for a point light,
+// at the object's centre, falling off as 1/r^2), and the view of its shadow map (S x S).
+struct LightSample {
+  bool point = false;
+  Vec3 v = Vec3::UnitZ();
+  std::array<double, 3> E = {0, 0, 0};
+  PassView view;
+};
+
+// What the passes draw, fixed for a renderer's lifetime.
+struct PassScene {
+  const TriangleMesh* mesh = nullptr;
+  std::vector<Vec3> vertex_normals;
+  const std::vector<Polygrid>* levels = nullptr;  // finest first
+  // Mesh vertex -> 4 boundary nodes of the finest level and their weights (sum 1): the vertex's
+  // multiple-scattering radiance is sum_k near_w[v][k] L[near_idx[v][k]].
+  std::vector<std::array<int32_t, 4>> near_idx;
+  std::vector<std::array<float, 4>> near_w;
+  Vec3 centre = Vec3::Zero();
+  double radius = 1;       // bounding sphere about `centre`, mm
+  double shadow_bias = 0;  // mm: a point is shadowed when deeper than the map by more than this
+  RenderOptions options;
+};
+
+class RenderPasses {
+ public:
+  virtual ~RenderPasses() = default;
+  // Pass 1. Draws every sample's shadow map (the nearest depth per texel; kept for Shade), then
+  // returns, at the boundary nodes of every level (finest first),
+  //   q = sum_samples E f cos_i F_t(cos_i) V
+  // with f the point light's falloff |v - centre|^2 / |v - x|^2 (1 for directional), cos_i > 0
+  // the cosine between the node's normal and the direction to the light, F_t the Fresnel
+  // transmittance and V = 0 where the node's depth in the sample's map exceeds the map's by
+  // more than the bias.
+  virtual std::vector<BoundaryLight> Incident(const std::vector<LightSample>& samples) = 0;
+  // Pass 3. Rasterises the mesh into camera.width x camera.height samples (nearest triangle per
+  // sample centre; ties: the lower triangle index), and returns the (camera.width / s) x
+  // (camera.height / s) image (s = options.supersample), each pixel the mean over its s x s
+  // samples of F_t(cos_o) L_ms + (Ward isotropic rho_s, alpha + rho_d / pi) E f cos_i V, with
+  // L_ms interpolated barycentrically from the vertices' radiance, the normal from the vertex
+  // normals, and the light terms of Incident's samples (same shadow maps). `radiance`: the
+  // finest level's boundary radiance.
+  virtual Image Shade(const PassView& camera, const BoundaryLight& radiance,
+                      const std::vector<LightSample>& samples) = 0;
+
+  // gl: compute shaders (render/shaders/raster.comp, incident.comp, shade.comp).
+  static std::unique_ptr<RenderPasses> Create(DiffusionBackend backend, const PassScene* scene);
+};
+
+std::unique_ptr<RenderPasses> MakeCpuRenderPasses(const PassScene* scene);  // renderer.cc
+std::unique_ptr<RenderPasses> MakeGlRenderPasses(const PassScene* scene);   // gl_render_passes.cc
+
+}  // namespace translume
