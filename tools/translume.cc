@@ -24,7 +24,7 @@ const Command kCommands[] = {
     {"simulate-capture", translume::RunSimulateCapture, "Write a simulated capture folder of a material"},
     {"synth", translume::RunSynth, "Write a synthetic material volume (.vdb)"},
     {"forward", translume::RunForward, "Simulate the front-face radiance of a material under a light"},
-    {"simulate", translume::RunSimulate, "Simulate a capture of a material into a dataset"},
+    {"simulate", translume::RunSimulate, "Simulate node-space data of a material (no photos): a dataset"},
     {"solve", translume::RunSolve, "Recover kappa and mu from a dataset (the inverse problem)"},
     {"evaluate", translume::RunEvaluate, "Held-out relighting and parameter errors of a recovery"},
     {"calibrate", translume::RunCalibrate, "Calibrate camera, projector, response, white balance"},
@@ -41,7 +41,7 @@ void PrintUsage(FILE* out) {
                "usage: translume COMMAND [options]   (translume COMMAND --help for its options)\n\n"
                "commands:\n",
                TRANSLUME_VERSION);
-  for (const Command& c : kCommands) std::fprintf(out, "  %-12s %s\n", c.name, c.help);
+  for (const Command& c : kCommands) std::fprintf(out, "  %-17s %s\n", c.name, c.help);
   std::fprintf(out, "\nEvery command takes --threads N. Docs: README.md and docs/.\n");
 }
 
