@@ -183,8 +183,10 @@ MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
   for (size_t l = 0; l < levels_.size(); ++l) {
     Level& L = *levels_[l];
     const int64_t n = L.grid.shape.size();
-    L.b.assign(n + 1, T(0));
-    L.x.assign(n + 1, T(0));
+    if (!mixed) {  // (with mixed precision the float hierarchy runs the V-cycles)
+      L.b.assign(n + 1, T(0));
+      L.x.assign(n + 1, T(0));
+    }
     if (l > 0) {
       L.restrict_norm.resize(n);
       std::vector<T> ones(levels_[l - 1]->grid.shape.size(), T(1));

@@ -54,14 +54,18 @@ inline void HalfRowKernel(int64_t len, bool first_has_left, bool last_has_right,
     if constexpr (kResidual) v += czp[m] * xzp[m] - dg[m] * xs[m];
     return v;
   };
-  auto put = [&](int64_t m, T v) {
-    if constexpr (kResidual) out[m] = v;
-    else out[m] = v * inv[m];
+  // The residual in two loops (one would need more registers than SSE has, and the compiler
+  // would not vectorise it): the y, z and diagonal terms, then the x-neighbours.
+  if constexpr (kResidual)
+    for (int64_t m = 0; m < len; ++m) out[m] = core(m);
+  auto put = [&](int64_t m, T x_terms) {
+    if constexpr (kResidual) out[m] += x_terms;
+    else out[m] = (core(m) + x_terms) * inv[m];
   };
   const int64_t m0 = first_has_left ? 0 : 1, m1 = last_has_right ? len : len - 1;
-  if (!first_has_left) put(0, core(0) + (len > 1 || last_has_right ? cr[0] * xr[0] : T(0)));
-  for (int64_t m = m0; m < m1; ++m) put(m, core(m) + cl[m] * xl[m] + cr[m] * xr[m]);
-  if (!last_has_right && len - 1 >= m0) put(len - 1, core(len - 1) + cl[len - 1] * xl[len - 1]);
+  if (!first_has_left) put(0, len > 1 || last_has_right ? cr[0] * xr[0] : T(0));
+  for (int64_t m = m0; m < m1; ++m) put(m, cl[m] * xl[m] + cr[m] * xr[m]);
+  if (!last_has_right && len - 1 >= m0) put(len - 1, cl[len - 1] * xl[len - 1]);
 }
 
 // Transfers along x between a fine level's split rows and the next coarser level's split rows
