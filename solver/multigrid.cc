@@ -26,29 +26,6 @@ double Dot(const A* a, const B* b, int64_t n) {
   return s;
 }
 
-// r -= alpha q, and rf = float(r) if rf is not null; returns ||r||^2 (accumulated in double).
-template <typename T>
-double UpdateResidual(int64_t n, double alpha, const T* q, T* r, float* rf) {
-  double rr = 0;
-  const T a = T(alpha);
-  if (rf) {
-#pragma omp parallel for simd reduction(+ : rr) schedule(static)
-    for (int64_t i = 0; i < n; ++i) {
-      const T ri = r[i] - a * q[i];
-      r[i] = ri;
-      rf[i] = float(ri);
-      rr += double(ri) * double(ri);
-    }
-  } else {
-#pragma omp parallel for simd reduction(+ : rr) schedule(static)
-    for (int64_t i = 0; i < n; ++i) {
-      r[i] -= a * q[i];
-      rr += double(r[i]) * double(r[i]);
-    }
-  }
-  return rr;
-}
-
 // Levels with fewer nodes than this are smoothed on one thread (a parallel region and its
 // barriers cost more than the work there).
 constexpr int64_t kParallelNodes = 20000;
@@ -59,6 +36,55 @@ T* Scratch(size_t n) {
   static thread_local std::vector<T> buf;
   if (buf.size() < n) buf.resize(n);
   return buf.data();
+}
+
+// CG's vector loops on a grid of shape s, fused with the moves between CG's natural layout and
+// the V-cycle's level layout (row (j, k) at nx (k + nz j), split; the V-cycle's input vb and
+// output vx, of the precision P of the hierarchy).
+// r -= alpha q (q null: r as is) and vb = r (converted), row by row; returns ||r||^2
+// (accumulated in double).
+template <typename T, typename P>
+double UpdateResidualRows(const GridShape& s, double alpha, const T* q, T* r, P* vb) {
+  const int64_t nx = s.nx;
+  const T a = T(alpha);
+  double rr = 0;
+#pragma omp parallel for collapse(2) reduction(+ : rr) schedule(static)
+  for (int64_t k = 0; k < s.nz; ++k)
+    for (int64_t j = 0; j < s.ny; ++j) {
+      const int64_t o = nx * (j + s.ny * k);
+      T* __restrict rr_row = r + o;
+      if (q) {
+        const T* __restrict q_row = q + o;
+        for (int64_t i = 0; i < nx; ++i) rr_row[i] -= a * q_row[i];
+      }
+      double sum = 0;
+#pragma omp simd reduction(+ : sum)
+      for (int64_t i = 0; i < nx; ++i) sum += double(rr_row[i]) * double(rr_row[i]);
+      rr += sum;
+      SplitRow(nx, rr_row, vb + nx * (k + s.nz * j));
+    }
+  return rr;
+}
+
+// x += alpha p (the update CG deferred), then p = vx + beta p, row by row.
+template <typename T, typename P>
+void UpdateDirectionRows(const GridShape& s, double alpha, double beta, const P* vx, double* x,
+                         T* p) {
+  const int64_t nx = s.nx;
+  const T bt = T(beta);
+#pragma omp parallel for collapse(2) schedule(static)
+  for (int64_t k = 0; k < s.nz; ++k)
+    for (int64_t j = 0; j < s.ny; ++j) {
+      const int64_t o = nx * (j + s.ny * k);
+      P* __restrict z = Scratch<P>(size_t(nx));
+      MergeRow(nx, vx + nx * (k + s.nz * j), z);
+      double* __restrict xr = x + o;
+      T* __restrict pr = p + o;
+      for (int64_t i = 0; i < nx; ++i) {
+        xr[i] += alpha * double(pr[i]);
+        pr[i] = T(z[i]) + bt * pr[i];
+      }
+    }
 }
 
 }  // namespace
@@ -170,8 +196,6 @@ MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
     MultigridOptions fo = options_;
     fo.mixed_precision = false;
     float_preconditioner_ = std::make_unique<MultigridSolver<float>>(shape, h, fo);
-    rf_.resize(shape.size());
-    zf_.resize(shape.size());
   }
   // Mixed precision: only the finest level in T (coarsest_nodes = its size stops coarsening).
   for (MultigridLevel& geo :
@@ -205,7 +229,6 @@ MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
   }
   const int64_t n0 = shape.size();
   r_.resize(n0);
-  z_.resize(n0);
   p_.resize(n0);
   q_.resize(n0);
 }
@@ -305,7 +328,9 @@ void MultigridSolver<T>::Precondition(const T* r, T* z) {
         MergeRow(nx, L.x.data() + nx * (k + s.nz * j), z + nx * (j + s.ny * k));
     return;
   }
-  const int64_t n = int64_t(rf_.size());
+  const int64_t n = levels_[0]->grid.shape.size();
+  rf_.resize(n);  // (Solve does not use these)
+  zf_.resize(n);
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < n; ++i) rf_[i] = float(r[i]);
   float_preconditioner_->Precondition(rf_.data(), zf_.data());
@@ -398,8 +423,7 @@ void MultigridSolver<T>::Sweep(const Level& L, const T* b, T* x, int first, bool
   // reads its old values; stage 2 needs stage 1 of rows j-1..j+1. Each thread walks its block
   // of rows with the stages one row apart (the rows it just touched are still in cache), and
   // the rows on block edges, which need a neighbour's rows, wait for a barrier. The result is
-  // exactly that of two separate half-sweeps. (Discarded lanes of a row's vector loop may read
-  // values another thread is writing; their results are never stored.)
+  // exactly that of two separate half-sweeps.
   const int threads = L.grid.shape.size() >= kParallelNodes ? omp_get_max_threads() : 1;
 #pragma omp parallel num_threads(threads)
   {
@@ -486,80 +510,68 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
     std::fill(x, x + n, 0.0);
     return finish(true, "zero right-hand side", 0.0);
   }
-  // Mixed precision: the float V-cycle reads rf = float(r), written by the loops that update
-  // r, and its result zf stays in float (p = zf + beta p reads it directly).
-  const bool mixed = bool(float_preconditioner_);
-  T* r = r_.data();
-  T* p = p_.data();
-  T* q = q_.data();
-  float* rf = mixed ? rf_.data() : nullptr;
-  // rnorm = ||r|| (and rf = float(r)) from the r just computed.
-  auto norm_of_r = [&] { return std::sqrt(UpdateResidual(n, 0.0, r, r, rf)); };
-  // From a zero guess r = b, and A x need not be computed.
-  bool zero_guess = true;
-  for (int64_t i = 0; i < n && zero_guess; ++i) zero_guess = x[i] == 0;
-  if (zero_guess) std::copy(b, b + n, r);
-  else StencilResidual(L0.A, b, x, r);
-  double rnorm = norm_of_r();
-  sum.initial_residual = rnorm / bnorm;
-  if (sum.initial_residual <= options_.tolerance) return finish(true, "", rnorm);
-  const double tol = options_.tolerance * bnorm;
-  // z = M r and r . z.
-  auto precondition = [&] {
-    if (mixed) {
-      float_preconditioner_->Precondition(rf, zf_.data());
-      return Dot(rf, zf_.data(), n);
-    }
-    Precondition(r, z_.data());
-    return Dot(r, z_.data(), n);
-  };
-  // x += alpha p (the update CG deferred), then p = z + beta p, in one pass.
-  auto update_p = [&](double alpha, double beta) {
-    auto run = [&](const auto* z) {
-#pragma omp parallel for schedule(static)
-      for (int64_t i = 0; i < n; ++i) {
-        x[i] += alpha * double(p[i]);
-        p[i] = T(z[i]) + T(beta) * p[i];
-      }
+  // The V-cycles run on `V`: the float hierarchy with mixed precision, else this one. CG writes
+  // r straight into V's level-0 right-hand side vb (V's precision and layout) as it updates r,
+  // and reads V's result vx as it updates p.
+  auto cg = [&](auto& V) {
+    const GridShape& s = L0.grid.shape;
+    auto* vb = V.levels_[0]->b.data();
+    auto* vx = V.levels_[0]->x.data();
+    T* r = r_.data();
+    T* p = p_.data();
+    T* q = q_.data();
+    auto norm_of_r = [&] { return std::sqrt(UpdateResidualRows<T>(s, 0.0, nullptr, r, vb)); };
+    // From a zero guess r = b, and A x need not be computed.
+    bool zero_guess = true;
+    for (int64_t i = 0; i < n && zero_guess; ++i) zero_guess = x[i] == 0;
+    if (zero_guess) std::copy(b, b + n, r);
+    else StencilResidual(L0.A, b, x, r);
+    double rnorm = norm_of_r();
+    sum.initial_residual = rnorm / bnorm;
+    if (sum.initial_residual <= options_.tolerance) return finish(true, "", rnorm);
+    const double tol = options_.tolerance * bnorm;
+    // z = M r and r . z (both in the level layout).
+    auto precondition = [&] {
+      V.VCycle(0, vb, vx);
+      return Dot(vb, vx, n);
     };
-    if (mixed) run(zf_.data());
-    else run(z_.data());
-  };
-  auto update_x = [&](double alpha) {
+    auto update_x = [&](double alpha) {
 #pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < n; ++i) x[i] += alpha * double(p[i]);
+      for (int64_t i = 0; i < n; ++i) x[i] += alpha * double(p[i]);
+    };
+    int restarts = 0;
+    bool restart = true;
+    double rz = 0, alpha = 0;
+    while (sum.iterations < options_.max_iterations) {
+      if (restart) {
+        rz = precondition();
+        UpdateDirectionRows(s, 0.0, 0.0, vx, x, p);  // p = z
+        restart = false;
+      } else {
+        const double rz_new = precondition();
+        UpdateDirectionRows(s, alpha, rz_new / rz, vx, x, p);
+        rz = rz_new;
+      }
+      alpha = rz / ApplyStencilDot(L0.A, p, q);  // q = A p
+      rnorm = std::sqrt(UpdateResidualRows(s, alpha, q, r, vb));
+      ++sum.iterations;
+      sum.history.push_back(rnorm / bnorm);
+      if (rnorm <= tol) {
+        update_x(alpha);
+        alpha = 0;
+        // The recursive residual drifts: confirm with the true one.
+        StencilResidual(L0.A, b, x, r);
+        rnorm = norm_of_r();
+        if (rnorm <= tol) return finish(true, "", rnorm);
+        if (++restarts > 3) return finish(false, "stagnated", rnorm);
+        restart = true;
+      }
+    }
+    update_x(alpha);
+    return finish(false, fmt::format("reached max_iterations = {}", options_.max_iterations));
   };
-  int restarts = 0;
-  bool restart = true;
-  double rz = 0, alpha = 0;
-  while (sum.iterations < options_.max_iterations) {
-    if (restart) {
-      rz = precondition();
-      update_p(0.0, 0.0);  // p = z
-      restart = false;
-    } else {
-      const double rz_new = precondition();
-      update_p(alpha, rz_new / rz);
-      rz = rz_new;
-    }
-    alpha = rz / ApplyStencilDot(L0.A, p, q);  // q = A p
-    const double rr = UpdateResidual(n, alpha, q, r, rf);
-    ++sum.iterations;
-    rnorm = std::sqrt(rr);
-    sum.history.push_back(rnorm / bnorm);
-    if (rnorm <= tol) {
-      update_x(alpha);
-      alpha = 0;
-      // The recursive residual drifts: confirm with the true one.
-      StencilResidual(L0.A, b, x, r);
-      rnorm = norm_of_r();
-      if (rnorm <= tol) return finish(true, "", rnorm);
-      if (++restarts > 3) return finish(false, "stagnated", rnorm);
-      restart = true;
-    }
-  }
-  update_x(alpha);
-  return finish(false, fmt::format("reached max_iterations = {}", options_.max_iterations));
+  if (float_preconditioner_) return cg(*float_preconditioner_);
+  return cg(*this);
 }
 
 template <typename T>

@@ -73,6 +73,9 @@ class MultigridSolver {
   MultigridOptions& mutable_options() { return options_; }
 
  private:
+  // A double solver's CG runs its float hierarchy's V-cycles on that hierarchy's own buffers.
+  template <typename>
+  friend class MultigridSolver;
   struct Level;
   void VCycle(size_t l, const T* b, T* x);
   // V-cycle internals work on split rows (solver/multigrid_split.h); b and x are the level's.
@@ -94,7 +97,7 @@ class MultigridSolver {
   // holds only the finest level's double operator.
   std::unique_ptr<MultigridSolver<float>> float_preconditioner_;
   std::vector<float> rf_, zf_;
-  std::vector<T> r_, z_, p_, q_;
+  std::vector<T> r_, p_, q_;
   bool has_coefficients_ = false;
 };
 

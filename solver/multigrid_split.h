@@ -39,8 +39,10 @@ inline void MergeRow(int64_t nx, const T* in, U* out) {
 // xl[m] and xr[m] are the x-neighbours of node m (in the other half); the first node has no
 // left neighbour unless first_has_left, the last no right one unless last_has_right, and those
 // terms are left out (not read). Missing y/z rows point at zeros.
+// Not inlined: inlined into its callers, the __restrict qualifiers are lost and the loops are
+// not vectorised.
 template <typename T, bool kResidual>
-inline void HalfRowKernel(int64_t len, bool first_has_left, bool last_has_right,
+[[gnu::noinline]] void HalfRowKernel(int64_t len, bool first_has_left, bool last_has_right,
                           const T* __restrict b, const T* __restrict cl, const T* __restrict xl,
                           const T* __restrict cr, const T* __restrict xr,
                           const T* __restrict cym, const T* __restrict xym,
@@ -49,7 +51,9 @@ inline void HalfRowKernel(int64_t len, bool first_has_left, bool last_has_right,
                           const T* __restrict czp, const T* __restrict xzp,
                           const T* __restrict dg, const T* __restrict xs,
                           const T* __restrict inv, T* __restrict out) {
-  auto core = [&](int64_t m) {
+  // (Lambdas capture by value: with references the compiler reloads every pointer after each
+  // store and does not vectorise.)
+  auto core = [=](int64_t m) {
     T v = b[m] + cym[m] * xym[m] + cyp[m] * xyp[m] + czm[m] * xzm[m];
     if constexpr (kResidual) v += czp[m] * xzp[m] - dg[m] * xs[m];
     return v;
@@ -58,7 +62,7 @@ inline void HalfRowKernel(int64_t len, bool first_has_left, bool last_has_right,
   // would not vectorise it): the y, z and diagonal terms, then the x-neighbours.
   if constexpr (kResidual)
     for (int64_t m = 0; m < len; ++m) out[m] = core(m);
-  auto put = [&](int64_t m, T x_terms) {
+  auto put = [=](int64_t m, T x_terms) {
     if constexpr (kResidual) out[m] += x_terms;
     else out[m] = (core(m) + x_terms) * inv[m];
   };

@@ -36,6 +36,11 @@ void AddBenchForward(CLI::App& bench) {
       ->capture_default_str();
   fwd->add_option("--jacobi-cap", f->o.jacobi_cap_seconds, "Longest Jacobi run per grid, seconds")
       ->capture_default_str();
+  fwd->add_option("--jacobi-factor", f->o.jacobi_factor,
+                  "Jacobi also stops after this many times our solve time (its ratio is then a "
+                  "lower bound; raise it to measure the ratio itself)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   fwd->add_flag("--no-peers", f->no_peers, "Skip the Eigen and Jacobi peers");
   fwd->add_flag("--json", f->json, "Print JSON instead of a table");
   fwd->callback([f] {
