@@ -172,7 +172,7 @@ TEST_F(Cli, BenchForwardSmoke) {
   // A large --jacobi-factor lets the paper's relaxation run to 1e-6, so its ratio is measured
   // rather than a lower bound.
   const CommandRun r = Translume("bench forward --grids 17x13x9 --repeats 1 --jacobi-factor 1e5 "
-                                 "--jacobi-cap 20 --threads 1 --json");
+                                 "--jacobi-cap 20 --threads 1 --cpu-time --json");
   ASSERT_EQ(r.status, 0) << r.output;
   const auto j = nlohmann::json::parse(r.output.substr(r.output.find('[')));
   ASSERT_EQ(j.size(), 1u);
@@ -185,6 +185,7 @@ TEST_F(Cli, BenchForwardSmoke) {
   EXPECT_LE(jacobi["residual"].get<double>(), 1e-6);
   EXPECT_GT(jacobi["ratio"].get<double>(), 1.0);
   ExpectOneLineError(Translume("bench forward --jacobi-factor 0"), "jacobi-factor");
+  ExpectOneLineError(Translume("bench forward --backend gl --cpu-time"), "--cpu-time");
 }
 
 TEST_F(Cli, BenchRecoverySmoke) {
