@@ -39,10 +39,9 @@ inline void MergeRow(int64_t nx, const T* in, U* out) {
 // xl[m] and xr[m] are the x-neighbours of node m (in the other half); the first node has no
 // left neighbour unless first_has_left, the last no right one unless last_has_right, and those
 // terms are left out (not read). Missing y/z rows point at zeros.
-// Not inlined: inlined into its callers, the __restrict qualifiers are lost and the loops are
-// not vectorised.
+// (Inlined, the __restrict qualifiers are lost; `ivdep` keeps the loops vectorised.)
 template <typename T, bool kResidual>
-[[gnu::noinline]] void HalfRowKernel(int64_t len, bool first_has_left, bool last_has_right,
+inline void HalfRowKernel(int64_t len, bool first_has_left, bool last_has_right,
                           const T* __restrict b, const T* __restrict cl, const T* __restrict xl,
                           const T* __restrict cr, const T* __restrict xr,
                           const T* __restrict cym, const T* __restrict xym,
@@ -60,14 +59,17 @@ template <typename T, bool kResidual>
   };
   // The residual in two loops (one would need more registers than SSE has, and the compiler
   // would not vectorise it): the y, z and diagonal terms, then the x-neighbours.
-  if constexpr (kResidual)
+  if constexpr (kResidual) {
+#pragma GCC ivdep
     for (int64_t m = 0; m < len; ++m) out[m] = core(m);
+  }
   auto put = [=](int64_t m, T x_terms) {
     if constexpr (kResidual) out[m] += x_terms;
     else out[m] = (core(m) + x_terms) * inv[m];
   };
   const int64_t m0 = first_has_left ? 0 : 1, m1 = last_has_right ? len : len - 1;
   if (!first_has_left) put(0, len > 1 || last_has_right ? cr[0] * xr[0] : T(0));
+#pragma GCC ivdep
   for (int64_t m = m0; m < m1; ++m) put(m, cl[m] * xl[m] + cr[m] * xr[m]);
   if (!last_has_right && len - 1 >= m0) put(len - 1, cl[len - 1] * xl[len - 1]);
 }
