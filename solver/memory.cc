@@ -12,10 +12,11 @@ namespace translume {
 MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision precision) {
   const double n = double(shape.size());
   const double t = precision == Precision::kDouble ? 8 : 4;
-  // Per level: kappa, mu, cx, cy, cz, diag, lu_c, lu_inv, b, x, r, transfer temporaries.
-  const double hierarchy = 12 * t * n * 4.0 / 3.0;
-  // Finest level extras: CG vectors r, z, p, q; the caller's kappa, mu, b, phi.
-  const double solve = hierarchy + 8 * t * n;
+  // Per level: kappa, mu, cx, cy, cz, diag, the smoother's copy of the stencil in its own
+  // layout (4 arrays), lu_c, lu_inv, b, x, transfer temporaries (~1).
+  const double hierarchy = 15 * t * n * 4.0 / 3.0;
+  // Finest level extras: CG vectors r, p, q; the caller's kappa, mu, b, phi.
+  const double solve = hierarchy + 7 * t * n;
   const double material = 6 * 4 * n;  // RGB kappa and mu, float
   MemoryEstimate e;
   e.forward_bytes = int64_t(solve + material);

@@ -9,19 +9,82 @@
 #include <cmath>
 #include <type_traits>
 #include <fmt/format.h>
+#include <omp.h>
 
 #include "solver/multigrid_hierarchy.h"
+#include "solver/multigrid_split.h"
 #include "solver/status.h"
 
 namespace translume {
 namespace {
 
-template <typename T>
-double Dot(const T* a, const T* b, int64_t n) {
+template <typename A, typename B>
+double Dot(const A* a, const B* b, int64_t n) {
   double s = 0;
-#pragma omp parallel for reduction(+ : s) schedule(static)
+#pragma omp parallel for simd reduction(+ : s) schedule(static)
   for (int64_t i = 0; i < n; ++i) s += double(a[i]) * double(b[i]);
   return s;
+}
+
+// Levels with fewer nodes than this are smoothed on one thread (a parallel region and its
+// barriers cost more than the work there).
+constexpr int64_t kParallelNodes = 20000;
+
+// Per-thread scratch of at least n values (one row of z-lines and one residual row).
+template <typename T>
+T* Scratch(size_t n) {
+  static thread_local std::vector<T> buf;
+  if (buf.size() < n) buf.resize(n);
+  return buf.data();
+}
+
+// CG's vector loops on a grid of shape s, fused with the moves between CG's natural layout and
+// the V-cycle's level layout (row (j, k) at nx (k + nz j), split; the V-cycle's input vb and
+// output vx, of the precision P of the hierarchy).
+// r -= alpha q (q null: r as is) and vb = r (converted), row by row; returns ||r||^2
+// (accumulated in double).
+template <typename T, typename P>
+double UpdateResidualRows(const GridShape& s, double alpha, const T* q, T* r, P* vb) {
+  const int64_t nx = s.nx;
+  const T a = T(alpha);
+  double rr = 0;
+#pragma omp parallel for collapse(2) reduction(+ : rr) schedule(static)
+  for (int64_t k = 0; k < s.nz; ++k)
+    for (int64_t j = 0; j < s.ny; ++j) {
+      const int64_t o = nx * (j + s.ny * k);
+      T* __restrict rr_row = r + o;
+      if (q) {
+        const T* __restrict q_row = q + o;
+        for (int64_t i = 0; i < nx; ++i) rr_row[i] -= a * q_row[i];
+      }
+      double sum = 0;
+#pragma omp simd reduction(+ : sum)
+      for (int64_t i = 0; i < nx; ++i) sum += double(rr_row[i]) * double(rr_row[i]);
+      rr += sum;
+      SplitRow(nx, rr_row, vb + nx * (k + s.nz * j));
+    }
+  return rr;
+}
+
+// x += alpha p (the update CG deferred), then p = vx + beta p, row by row.
+template <typename T, typename P>
+void UpdateDirectionRows(const GridShape& s, double alpha, double beta, const P* vx, double* x,
+                         T* p) {
+  const int64_t nx = s.nx;
+  const T bt = T(beta);
+#pragma omp parallel for collapse(2) schedule(static)
+  for (int64_t k = 0; k < s.nz; ++k)
+    for (int64_t j = 0; j < s.ny; ++j) {
+      const int64_t o = nx * (j + s.ny * k);
+      P* __restrict z = Scratch<P>(size_t(nx));
+      MergeRow(nx, vx + nx * (k + s.nz * j), z);
+      double* __restrict xr = x + o;
+      T* __restrict pr = p + o;
+      for (int64_t i = 0; i < nx; ++i) {
+        xr[i] += alpha * double(pr[i]);
+        pr[i] = T(z[i]) + bt * pr[i];
+      }
+    }
 }
 
 }  // namespace
@@ -45,13 +108,22 @@ template <typename T>
 struct MultigridSolver<T>::Level {
   MultigridLevel geo;
   const TensorGrid& grid = geo.grid;
-  Stencil<T> A;
-  std::vector<T> lu_c, lu_inv;  // factors of every z-column's tridiagonal block
-  std::vector<T> b, x, r;
+  Stencil<T> A;  // natural layout (the finest level's operator; coarse-level assembly)
+  // V-cycle arrays are in the level layout: x-rows split (multigrid_split.h) and ordered
+  // plane-fastest, row (j, k) at nx (k + nz j), so that the z-lines of one y-row are contiguous.
+  // The smoother's copy of A in it: diagonal, conductance to the x-neighbour on the right (the
+  // one on the left is its left neighbour's), to the next row in y and the next plane in z.
+  std::vector<T> sdiag, sxr, sy, sz;
+  std::vector<T> lu_c, lu_inv;  // factors of every z-line's tridiagonal block (level layout)
+  // Right-hand side and iterate of the V-cycle on this level, level layout, one padding value.
+  std::vector<T> b, x;
   std::vector<T> kappa, mu;
   std::vector<T> restrict_norm;          // on this level: R applied to ones from the finer one
-  mutable std::vector<T> tmp_a, tmp_b;   // intermediate results of separable transfers
+  // Intermediate results of separable transfers (level layout); the last pre-smoothing sweep
+  // writes its residual restricted along x into tmp_a ((coarse nx) * nz * ny).
+  mutable std::vector<T> tmp_a, tmp_b;
   std::vector<T> zeros;                  // one x-row of zeros (missing neighbours)
+  std::unique_ptr<SplitTransferX<T>> tx;  // x transfers towards the next coarser level
   std::unique_ptr<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>> direct;
 };
 
@@ -60,9 +132,56 @@ void MultigridSolver<T>::Restrict(const Level& L, const T* f, T* c) const {
   Restrict3(L.geo, f, c, L.tmp_a.data(), L.tmp_b.data());
 }
 
+// The y and z passes between the level layouts of a level and the next coarser one, for
+// blocks already transferred along x: restriction z then y ((mx, nz, ny) -> (mx, mz, my)),
+// prolongation y then z. Axes that are not coarsened are skipped; the last pass writes `out`
+// (added to it if `add`, prolongation only), earlier ones `tmp` ((mx, mz, ny) values).
+template <typename T>
+void TransferYZ(const MultigridLevel& L, bool restrict, const T* in, T* out, bool add, T* tmp) {
+  const auto& t = L.to_coarse;
+  const int64_t ny = L.grid.shape.ny, nz = L.grid.shape.nz;
+  const int64_t mx = t[0].n_coarse, mz = t[2].n_coarse;
+  struct Pass {
+    const AxisTransfer* t;
+    int64_t inner, outer;
+  };
+  const Pass z{&t[2], mx, ny}, y{&t[1], mx * mz, 1};
+  std::vector<Pass> passes;
+  for (const Pass& P : restrict ? std::array<Pass, 2>{z, y} : std::array<Pass, 2>{y, z})
+    if (P.t->coarsened) passes.push_back(P);
+  if (passes.empty()) {
+    const int64_t m = mx * nz * ny;
+    if (add) for (int64_t i = 0; i < m; ++i) out[i] += in[i];
+    else std::copy(in, in + m, out);
+    return;
+  }
+  for (size_t i = 0; i < passes.size(); ++i) {
+    const bool last = i + 1 == passes.size();
+    T* dst = last ? out : tmp;
+    if (restrict) RestrictAxis(*passes[i].t, in, dst, passes[i].inner, passes[i].outer);
+    else ProlongAxis(*passes[i].t, in, dst, passes[i].inner, passes[i].outer, last && add);
+    in = dst;
+  }
+}
+
 template <typename T>
 void MultigridSolver<T>::ProlongAdd(const Level& L, const T* c, T* f) const {
-  ProlongAdd3(L.geo, c, f, L.tmp_a.data(), L.tmp_b.data());
+  const GridShape& s = L.grid.shape;
+  if (!L.tx->coarsened) {
+    // Along x the transfer is the identity and both levels' rows have the same layout.
+    TransferYZ(L.geo, false, c, f, true, L.tmp_b.data());
+    return;
+  }
+  TransferYZ(L.geo, false, c, L.tmp_a.data(), false, L.tmp_b.data());  // (mx, nz, ny)
+  const int64_t nx = s.nx, mx = L.tx->nc, rows = s.ny * s.nz;
+  const int threads = s.size() >= kParallelNodes ? omp_get_max_threads() : 1;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int64_t row = 0; row < rows; ++row) {
+    T* nat = Scratch<T>(size_t(mx + 1));
+    MergeRow(mx, L.tmp_a.data() + mx * row, nat);
+    nat[mx] = T(0);
+    L.tx->ProlongAdd(nat, f + nx * row);
+  }
 }
 
 template <typename T>
@@ -77,8 +196,6 @@ MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
     MultigridOptions fo = options_;
     fo.mixed_precision = false;
     float_preconditioner_ = std::make_unique<MultigridSolver<float>>(shape, h, fo);
-    rf_.resize(shape.size());
-    zf_.resize(shape.size());
   }
   // Mixed precision: only the finest level in T (coarsest_nodes = its size stops coarsening).
   for (MultigridLevel& geo :
@@ -90,18 +207,21 @@ MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
   for (size_t l = 0; l < levels_.size(); ++l) {
     Level& L = *levels_[l];
     const int64_t n = L.grid.shape.size();
+    if (!mixed) {  // (with mixed precision the float hierarchy runs the V-cycles)
+      L.b.assign(n + 1, T(0));
+      L.x.assign(n + 1, T(0));
+    }
     if (l > 0) {
-      L.b.resize(n);
-      L.x.resize(n);
       L.restrict_norm.resize(n);
       std::vector<T> ones(levels_[l - 1]->grid.shape.size(), T(1));
       Restrict(*levels_[l - 1], ones.data(), L.restrict_norm.data());
     }
     if (l + 1 < levels_.size()) {
-      L.r.resize(n);
       const auto& t = L.geo.to_coarse;
       L.tmp_a.resize(t[0].n_coarse * L.grid.shape.ny * L.grid.shape.nz);
-      L.tmp_b.resize(t[0].n_coarse * t[1].n_coarse * L.grid.shape.nz);
+      L.tmp_b.resize(std::max(t[0].n_coarse * t[1].n_coarse * L.grid.shape.nz,
+                              t[0].n_coarse * t[2].n_coarse * L.grid.shape.ny));
+      L.tx = std::make_unique<SplitTransferX<T>>(t[0]);
     }
     L.kappa.resize(n);
     L.mu.resize(n);
@@ -109,7 +229,6 @@ MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
   }
   const int64_t n0 = shape.size();
   r_.resize(n0);
-  z_.resize(n0);
   p_.resize(n0);
   q_.resize(n0);
 }
@@ -139,19 +258,29 @@ void MultigridSolver<T>::SetCoefficients(const T* kappa, const T* mu, double C) 
     const GridShape& s = L.grid.shape;
     const int64_t nxy = s.nx * s.ny;
     if (l + 1 < levels_.size()) {
-      L.lu_c.resize(n);
-      L.lu_inv.resize(n);
+      // The smoother's copy of A in the split layout, then the z-lines' factors from it.
+      for (auto* v : {&L.sdiag, &L.sxr, &L.sy, &L.sz, &L.lu_c, &L.lu_inv}) v->resize(n);
+#pragma omp parallel for collapse(2) schedule(static)
+      for (int64_t k = 0; k < s.nz; ++k)
+        for (int64_t j = 0; j < s.ny; ++j) {
+          const int64_t o = s.nx * (j + s.ny * k), d = s.nx * (k + s.nz * j);
+          SplitRow(s.nx, L.A.diag.data() + o, L.sdiag.data() + d);
+          SplitRow(s.nx, L.A.cx.data() + o, L.sxr.data() + d);
+          SplitRow(s.nx, L.A.cy.data() + o, L.sy.data() + d);
+          SplitRow(s.nx, L.A.cz.data() + o, L.sz.data() + d);
+        }
 #pragma omp parallel for schedule(static)
-      for (int64_t col = 0; col < nxy; ++col) {
+      for (int64_t col = 0; col < nxy; ++col) {  // col = (position in the row, j)
+        const int64_t base = col % s.nx + s.nx * s.nz * (col / s.nx);
         for (int64_t k = 0; k < s.nz; ++k) {
-          const int64_t p = col + nxy * k;
-          double denom = double(L.A.diag[p]);
+          const int64_t p = base + s.nx * k;
+          double denom = double(L.sdiag[p]);
           if (k > 0) {
-            const double c = double(L.A.cz[p - nxy]);
-            denom -= c * c * double(L.lu_inv[p - nxy]);
+            const double c = double(L.sz[p - s.nx]);
+            denom -= c * c * double(L.lu_inv[p - s.nx]);
           }
           L.lu_inv[p] = T(1.0 / denom);
-          L.lu_c[p] = T(double(L.A.cz[p]) / denom);
+          L.lu_c[p] = T(double(L.sz[p]) / denom);
         }
       }
     } else {
@@ -184,10 +313,24 @@ void MultigridSolver<T>::SetCoefficients(const T* kappa, const T* mu, double C) 
 template <typename T>
 void MultigridSolver<T>::Precondition(const T* r, T* z) {
   if (!float_preconditioner_) {
-    VCycle(0, r, z);
+    Level& L = *levels_[0];
+    const GridShape& s = L.grid.shape;
+    // The V-cycle works in the level layout.
+    const int64_t nx = s.nx;
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int64_t k = 0; k < s.nz; ++k)
+      for (int64_t j = 0; j < s.ny; ++j)
+        SplitRow(nx, r + nx * (j + s.ny * k), L.b.data() + nx * (k + s.nz * j));
+    VCycle(0, L.b.data(), L.x.data());
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int64_t k = 0; k < s.nz; ++k)
+      for (int64_t j = 0; j < s.ny; ++j)
+        MergeRow(nx, L.x.data() + nx * (k + s.nz * j), z + nx * (j + s.ny * k));
     return;
   }
-  const int64_t n = int64_t(rf_.size());
+  const int64_t n = levels_[0]->grid.shape.size();
+  rf_.resize(n);  // (Solve does not use these)
+  zf_.resize(n);
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < n; ++i) rf_[i] = float(r[i]);
   float_preconditioner_->Precondition(rf_.data(), zf_.data());
@@ -196,42 +339,108 @@ void MultigridSolver<T>::Precondition(const T* r, T* z) {
 }
 
 template <typename T>
-void MultigridSolver<T>::Smooth(const Level& L, const T* b, T* x, int color) const {
+void MultigridSolver<T>::LineRow(const Level& L, const T* b, T* x, int64_t j, int color,
+                                 bool from_zero) const {
   const GridShape& s = L.grid.shape;
-  const int64_t nx = s.nx, ny = s.ny, nz = s.nz, nxy = nx * ny;
-  const T* inv = L.lu_inv.data();
-  const T* luc = L.lu_c.data();
+  const int64_t nx = s.nx, ny = s.ny, nz = s.nz, dy = nx * nz, he = (nx + 1) / 2;
+  // Colour `color`'s columns in row j are the even-i half of the split row if (color + j) is
+  // even, else the odd-i half; their x-neighbours are the other half.
+  const bool even = ((color + j) & 1) == 0;
+  const int64_t off = even ? 0 : he, len = even ? he : nx - he;
+  const int64_t left = even ? he - 1 : 0, right = even ? he : 1;  // neighbours, from the row start
+  const bool first_has_left = !even, last_has_right = even ? nx % 2 == 0 : nx % 2 == 1;
   const T* zeros = L.zeros.data();
-#pragma omp parallel for schedule(static)
-  for (int64_t j = 0; j < ny; ++j) {
-    const int64_t i0 = (color + j) & 1;
-    // Forward elimination of every column of this colour in row j; x temporarily holds d'.
-    // Missing neighbours read a row of zeros instead of branching.
-    for (int64_t k = 0; k < nz; ++k) {
-      const int64_t row = nx * (j + ny * k);
-      const T* cx = L.A.cx.data() + row;
-      const T* cym = j > 0 ? L.A.cy.data() + row - nx : zeros;
-      const T* xym = j > 0 ? x + row - nx : zeros;
-      const T* cyp = j + 1 < ny ? L.A.cy.data() + row : zeros;
-      const T* xyp = j + 1 < ny ? x + row + nx : zeros;
-      const T* czm = k > 0 ? L.A.cz.data() + row - nxy : zeros;
-      const T* xzm = k > 0 ? x + row - nxy : zeros;
-      const T* br = b + row;
-      T* xr = x + row;
-      const T* ir = inv + row;
-      for (int64_t i = i0; i < nx; i += 2) {
-        T d = br[i] + cym[i] * xym[i] + cyp[i] * xyp[i] + czm[i] * xzm[i];
-        if (i > 0) d += cx[i - 1] * xr[i - 1];
-        if (i + 1 < nx) d += cx[i] * xr[i + 1];
-        xr[i] = d * ir[i];
-      }
+  for (int64_t k = 0; k < nz; ++k) {
+    const int64_t row = nx * (k + nz * j), p = row + off;
+    // The previous plane's half-row already holds its eliminated values.
+    const T* czm = k > 0 ? L.sz.data() + p - nx : zeros;
+    const T* xzm = k > 0 ? x + p - nx : zeros;
+    if (from_zero) {  // no neighbour values to read
+      const T* __restrict bp = b + p;
+      const T* __restrict inv = L.lu_inv.data() + p;
+      T* __restrict xs = x + p;
+      for (int64_t m = 0; m < len; ++m) xs[m] = (bp[m] + czm[m] * xzm[m]) * inv[m];
+    } else {
+      HalfRowKernel<T, false>(len, first_has_left, last_has_right, b + p,
+                              L.sxr.data() + row + left, x + row + left, L.sxr.data() + p,
+                              x + row + right, j > 0 ? L.sy.data() + p - dy : zeros,
+                              j > 0 ? x + p - dy : zeros, j + 1 < ny ? L.sy.data() + p : zeros,
+                              j + 1 < ny ? x + p + dy : zeros, czm, xzm, nullptr, nullptr,
+                              nullptr, nullptr, L.lu_inv.data() + p, x + p);
     }
-    for (int64_t k = nz - 2; k >= 0; --k) {
-      const int64_t row = nx * (j + ny * k);
-      T* xr = x + row;
-      const T* xn = x + row + nxy;
-      const T* lr = luc + row;
-      for (int64_t i = i0; i < nx; i += 2) xr[i] += lr[i] * xn[i];
+  }
+  for (int64_t k = nz - 2; k >= 0; --k) {
+    const int64_t p = nx * (k + nz * j) + off;
+    T* __restrict xs = x + p;
+    const T* __restrict xn = x + p + nx;
+    const T* __restrict c = L.lu_c.data() + p;
+    for (int64_t m = 0; m < len; ++m) xs[m] += c[m] * xn[m];
+  }
+}
+
+template <typename T>
+void MultigridSolver<T>::ResidualRow(const Level& L, const T* b, const T* x, int64_t j,
+                                     T* restricted) const {
+  const GridShape& s = L.grid.shape;
+  const int64_t nx = s.nx, ny = s.ny, nz = s.nz, dy = nx * nz, he = (nx + 1) / 2;
+  const SplitTransferX<T>& tx = *L.tx;
+  const int64_t mx = tx.nc;
+  const T* zeros = L.zeros.data();
+  T* r = Scratch<T>(size_t(nx + 2 * mx + 3));  // residual row, padded; coarse natural row
+  T* nat = r + nx + 1;
+  for (int64_t k = 0; k < nz; ++k) {
+    const int64_t row = nx * (k + nz * j);
+    for (int half = 0; half < 2; ++half) {
+      const bool even = half == 0;
+      const int64_t off = even ? 0 : he, len = even ? he : nx - he, p = row + off;
+      const int64_t left = even ? he - 1 : 0, right = even ? he : 1;
+      HalfRowKernel<T, true>(len, !even, even ? nx % 2 == 0 : nx % 2 == 1, b + p,
+                             L.sxr.data() + row + left, x + row + left, L.sxr.data() + p,
+                             x + row + right, j > 0 ? L.sy.data() + p - dy : zeros,
+                             j > 0 ? x + p - dy : zeros, j + 1 < ny ? L.sy.data() + p : zeros,
+                             j + 1 < ny ? x + p + dy : zeros, k > 0 ? L.sz.data() + p - nx : zeros,
+                             k > 0 ? x + p - nx : zeros, k + 1 < nz ? L.sz.data() + p : zeros,
+                             k + 1 < nz ? x + p + nx : zeros,
+                             L.sdiag.data() + p, x + p, nullptr, r + off);
+    }
+    T* out = restricted + mx * (k + nz * j);
+    if (!tx.coarsened) {
+      std::copy(r, r + nx, out);  // same row on the coarser level
+      continue;
+    }
+    r[nx] = T(0);
+    tx.Restrict(r, nat);
+    SplitRow(mx, nat, out);
+  }
+}
+
+template <typename T>
+void MultigridSolver<T>::Sweep(const Level& L, const T* b, T* x, int first, bool from_zero,
+                               T* restricted) const {
+  const int64_t ny = L.grid.shape.ny;
+  // Stages per row j: 0 = colour `first`'s lines, 1 = the other colour's, 2 = the residual.
+  // Stage 1 of row j needs stage 0 of rows j-1..j+1 and must precede stage 0 of row j+2, which
+  // reads its old values; stage 2 needs stage 1 of rows j-1..j+1. Each thread walks its block
+  // of rows with the stages one row apart (the rows it just touched are still in cache), and
+  // the rows on block edges, which need a neighbour's rows, wait for a barrier. The result is
+  // exactly that of two separate half-sweeps.
+  const int threads = L.grid.shape.size() >= kParallelNodes ? omp_get_max_threads() : 1;
+#pragma omp parallel num_threads(threads)
+  {
+    const int64_t nt = omp_get_num_threads(), id = omp_get_thread_num();
+    const int64_t j0 = ny * id / nt, j1 = ny * (id + 1) / nt;
+    for (int64_t j = j0; j < j1; ++j) {
+      LineRow(L, b, x, j, first, from_zero);
+      if (j - 1 >= j0 + 1) LineRow(L, b, x, j - 1, 1 - first, false);
+      if (restricted && j - 2 >= j0 + 2) ResidualRow(L, b, x, j - 2, restricted);
+    }
+#pragma omp barrier
+    if (j1 > j0) LineRow(L, b, x, j0, 1 - first, false);
+    if (j1 - 1 > j0) LineRow(L, b, x, j1 - 1, 1 - first, false);
+    if (restricted) {
+#pragma omp barrier
+      for (int64_t j = j0; j < j1; ++j)
+        if (j < j0 + 2 || j > j1 - 3) ResidualRow(L, b, x, j, restricted);
     }
   }
 }
@@ -241,26 +450,28 @@ void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x) {
   Level& L = *levels_[l];
   const int64_t n = L.grid.shape.size();
   if (l + 1 == levels_.size()) {
+    // Exact solve; the rows are split here too.
+    const GridShape& s = L.grid.shape;
     Eigen::VectorXd rhs(n);
-    for (int64_t p = 0; p < n; ++p) rhs[p] = double(b[p]);
+    for (int64_t k = 0; k < s.nz; ++k)
+      for (int64_t j = 0; j < s.ny; ++j)
+        MergeRow(s.nx, b + s.nx * (k + s.nz * j), rhs.data() + s.nx * (j + s.ny * k));
     const Eigen::VectorXd sol = L.direct->solve(rhs);
-    for (int64_t p = 0; p < n; ++p) x[p] = T(sol[p]);
+    for (int64_t k = 0; k < s.nz; ++k)
+      for (int64_t j = 0; j < s.ny; ++j)
+        SplitRow(s.nx, sol.data() + s.nx * (j + s.ny * k), x + s.nx * (k + s.nz * j));
     return;
   }
-  std::fill(x, x + n, T(0));
-  for (int s = 0; s < options_.pre_smoothing; ++s) {
-    Smooth(L, b, x, 0);
-    Smooth(L, b, x, 1);
-  }
-  StencilResidual(L.A, b, x, L.r.data());
+  // Pre-smoothing from x = 0, colour 0 first; the last sweep also restricts its residual
+  // along x. Post-smoothing colour 1 first: the cycle is symmetric.
+  for (int s = 0; s < options_.pre_smoothing; ++s)
+    Sweep(L, b, x, 0, s == 0, s + 1 == options_.pre_smoothing ? L.tmp_a.data() : nullptr);
   Level& Cl = *levels_[l + 1];
-  Restrict(L, L.r.data(), Cl.b.data());
+  TransferYZ(L.geo, true, static_cast<const T*>(L.tmp_a.data()), Cl.b.data(), false,
+             L.tmp_b.data());
   VCycle(l + 1, Cl.b.data(), Cl.x.data());
   ProlongAdd(L, Cl.x.data(), x);
-  for (int s = 0; s < options_.post_smoothing; ++s) {
-    Smooth(L, b, x, 1);
-    Smooth(L, b, x, 0);
-  }
+  for (int s = 0; s < options_.post_smoothing; ++s) Sweep(L, b, x, 1, false, nullptr);
 }
 
 template <typename T>
@@ -299,54 +510,68 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
     std::fill(x, x + n, 0.0);
     return finish(true, "zero right-hand side", 0.0);
   }
-  T* r = r_.data();
-  T* z = z_.data();
-  T* p = p_.data();
-  T* q = q_.data();
-  StencilResidual(L0.A, b, x, r);
-  double rnorm = std::sqrt(Dot(r, r, n));
-  sum.initial_residual = rnorm / bnorm;
-  if (sum.initial_residual <= options_.tolerance) return finish(true, "", rnorm);
-  const double tol = options_.tolerance * bnorm;
-  int restarts = 0;
-  bool restart = true;
-  double rz = 0;
-  while (sum.iterations < options_.max_iterations) {
-    if (restart) {
-      Precondition(r, z);
-      std::copy(z, z + n, p);
-      rz = Dot(r, z, n);
-      restart = false;
-    }
-    ApplyStencil(L0.A, p, q);
-    const double alpha = rz / Dot(p, q, n);
-    double rr = 0;
-#pragma omp parallel for reduction(+ : rr) schedule(static)
-    for (int64_t i = 0; i < n; ++i) {
-      x[i] += alpha * double(p[i]);
-      r[i] -= T(alpha) * q[i];
-      rr += double(r[i]) * double(r[i]);
-    }
-    ++sum.iterations;
-    rnorm = std::sqrt(rr);
-    sum.history.push_back(rnorm / bnorm);
-    if (rnorm <= tol) {
-      // The recursive residual drifts: confirm with the true one.
-      StencilResidual(L0.A, b, x, r);
-      rnorm = std::sqrt(Dot(r, r, n));
-      if (rnorm <= tol) return finish(true, "", rnorm);
-      if (++restarts > 3) return finish(false, "stagnated", rnorm);
-      restart = true;
-      continue;
-    }
-    Precondition(r, z);
-    const double rz_new = Dot(r, z, n);
-    const double beta = rz_new / rz;
-    rz = rz_new;
+  // The V-cycles run on `V`: the float hierarchy with mixed precision, else this one. CG writes
+  // r straight into V's level-0 right-hand side vb (V's precision and layout) as it updates r,
+  // and reads V's result vx as it updates p.
+  auto cg = [&](auto& V) {
+    const GridShape& s = L0.grid.shape;
+    auto* vb = V.levels_[0]->b.data();
+    auto* vx = V.levels_[0]->x.data();
+    T* r = r_.data();
+    T* p = p_.data();
+    T* q = q_.data();
+    auto norm_of_r = [&] { return std::sqrt(UpdateResidualRows<T>(s, 0.0, nullptr, r, vb)); };
+    // From a zero guess r = b, and A x need not be computed.
+    bool zero_guess = true;
+    for (int64_t i = 0; i < n && zero_guess; ++i) zero_guess = x[i] == 0;
+    if (zero_guess) std::copy(b, b + n, r);
+    else StencilResidual(L0.A, b, x, r);
+    double rnorm = norm_of_r();
+    sum.initial_residual = rnorm / bnorm;
+    if (sum.initial_residual <= options_.tolerance) return finish(true, "", rnorm);
+    const double tol = options_.tolerance * bnorm;
+    // z = M r and r . z (both in the level layout).
+    auto precondition = [&] {
+      V.VCycle(0, vb, vx);
+      return Dot(vb, vx, n);
+    };
+    auto update_x = [&](double alpha) {
 #pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < n; ++i) p[i] = z[i] + T(beta) * p[i];
-  }
-  return finish(false, fmt::format("reached max_iterations = {}", options_.max_iterations));
+      for (int64_t i = 0; i < n; ++i) x[i] += alpha * double(p[i]);
+    };
+    int restarts = 0;
+    bool restart = true;
+    double rz = 0, alpha = 0;
+    while (sum.iterations < options_.max_iterations) {
+      if (restart) {
+        rz = precondition();
+        UpdateDirectionRows(s, 0.0, 0.0, vx, x, p);  // p = z
+        restart = false;
+      } else {
+        const double rz_new = precondition();
+        UpdateDirectionRows(s, alpha, rz_new / rz, vx, x, p);
+        rz = rz_new;
+      }
+      alpha = rz / ApplyStencilDot(L0.A, p, q);  // q = A p
+      rnorm = std::sqrt(UpdateResidualRows(s, alpha, q, r, vb));
+      ++sum.iterations;
+      sum.history.push_back(rnorm / bnorm);
+      if (rnorm <= tol) {
+        update_x(alpha);
+        alpha = 0;
+        // The recursive residual drifts: confirm with the true one.
+        StencilResidual(L0.A, b, x, r);
+        rnorm = norm_of_r();
+        if (rnorm <= tol) return finish(true, "", rnorm);
+        if (++restarts > 3) return finish(false, "stagnated", rnorm);
+        restart = true;
+      }
+    }
+    update_x(alpha);
+    return finish(false, fmt::format("reached max_iterations = {}", options_.max_iterations));
+  };
+  if (float_preconditioner_) return cg(*float_preconditioner_);
+  return cg(*this);
 }
 
 template <typename T>

@@ -73,9 +73,21 @@ class MultigridSolver {
   MultigridOptions& mutable_options() { return options_; }
 
  private:
+  // A double solver's CG runs its float hierarchy's V-cycles on that hierarchy's own buffers.
+  template <typename>
+  friend class MultigridSolver;
   struct Level;
   void VCycle(size_t l, const T* b, T* x);
-  void Smooth(const Level& L, const T* b, T* x, int color) const;
+  // V-cycle internals work on split rows (solver/multigrid_split.h); b and x are the level's.
+  // One Gauss-Seidel sweep over both colours of z-lines (colour c: the columns with
+  // (i + j) % 2 == c), colour `first` first, fused into one pass over memory. from_zero: x is
+  // taken as zero on entry. restricted: if not null, also writes the residual b - A x after the
+  // sweep, restricted along x, into it ((coarse nx) * ny * nz values).
+  void Sweep(const Level& L, const T* b, T* x, int first, bool from_zero, T* restricted) const;
+  // The line solves of colour `color`'s columns in row j (all planes).
+  void LineRow(const Level& L, const T* b, T* x, int64_t j, int color, bool from_zero) const;
+  // Residual of row j (all planes), restricted along x into `restricted`.
+  void ResidualRow(const Level& L, const T* b, const T* x, int64_t j, T* restricted) const;
   void Restrict(const Level& L, const T* fine, T* coarse) const;
   void ProlongAdd(const Level& L, const T* coarse, T* fine) const;
 
@@ -85,7 +97,7 @@ class MultigridSolver {
   // holds only the finest level's double operator.
   std::unique_ptr<MultigridSolver<float>> float_preconditioner_;
   std::vector<float> rf_, zf_;
-  std::vector<T> r_, z_, p_, q_;
+  std::vector<T> r_, p_, q_;
   bool has_coefficients_ = false;
 };
 

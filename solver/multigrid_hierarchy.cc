@@ -98,10 +98,18 @@ std::vector<MultigridLevel> BuildMultigridHierarchy(const GridShape& shape, doub
   return levels;
 }
 
+// Loops with fewer values than this run on one thread: a parallel region costs more there.
+constexpr int64_t kParallelValues = 16384;
+
 template <typename T>
 void RestrictAxis(const AxisTransfer& t, const T* in, T* out, int64_t inner, int64_t outer) {
   const int64_t n_in = t.n_fine, n_out = t.n_coarse;
-#pragma omp parallel for collapse(2) schedule(static)
+  if (inner == 1) {  // along x: one contiguous row per block
+#pragma omp parallel for schedule(static) if (outer * n_in >= kParallelValues)
+    for (int64_t o = 0; o < outer; ++o) RestrictRow(t, in + o * n_in, out + o * n_out);
+    return;
+  }
+#pragma omp parallel for collapse(2) schedule(static) if (outer * n_in * inner >= kParallelValues)
   for (int64_t o = 0; o < outer; ++o)
     for (int64_t c = 0; c < n_out; ++c) {
       const T* src = in + o * n_in * inner;
@@ -119,7 +127,19 @@ template <typename T>
 void ProlongAxis(const AxisTransfer& t, const T* in, T* out, int64_t inner, int64_t outer,
                  bool add) {
   const int64_t n_in = t.n_coarse, n_out = t.n_fine;
-#pragma omp parallel for collapse(2) schedule(static)
+  if (inner == 1) {  // along x: one contiguous row per block
+#pragma omp parallel for schedule(static) if (outer * n_out >= kParallelValues)
+    for (int64_t o = 0; o < outer; ++o) {
+      const T* src = in + o * n_in;
+      T* dst = out + o * n_out;
+      for (int64_t f = 0; f < n_out; ++f) {
+        const T v = T(t.wlo[f]) * src[t.lo[f]] + T(t.whi[f]) * src[t.hi[f]];
+        dst[f] = add ? dst[f] + v : v;
+      }
+    }
+    return;
+  }
+#pragma omp parallel for collapse(2) schedule(static) if (outer * n_out * inner >= kParallelValues)
   for (int64_t o = 0; o < outer; ++o)
     for (int64_t f = 0; f < n_out; ++f) {
       const T* a = in + (o * n_in + t.lo[f]) * inner;
@@ -133,14 +153,26 @@ void ProlongAxis(const AxisTransfer& t, const T* in, T* out, int64_t inner, int6
     }
 }
 
+// Axes that are not coarsened are identities and skipped.
 template <typename T>
 void Restrict3(const MultigridLevel& L, const T* f, T* c, T* a, T* b) {
   const auto& t = L.to_coarse;
   const int64_t ny = L.grid.shape.ny, nz = L.grid.shape.nz;
   const int64_t mx = t[0].n_coarse, my = t[1].n_coarse;
-  RestrictAxis(t[0], f, a, 1, ny * nz);   // -> (mx, ny, nz)
-  RestrictAxis(t[1], a, b, mx, nz);       // -> (mx, my, nz)
-  RestrictAxis(t[2], b, c, mx * my, 1);   // -> (mx, my, mz)
+  const T* in = f;
+  if (t[0].coarsened) {
+    T* out = t[1].coarsened || t[2].coarsened ? a : c;
+    RestrictAxis(t[0], in, out, 1, ny * nz);  // -> (mx, ny, nz)
+    in = out;
+  }
+  if (t[1].coarsened) {
+    T* out = t[2].coarsened ? b : c;
+    RestrictAxis(t[1], in, out, mx, nz);  // -> (mx, my, nz)
+    in = out;
+  }
+  if (t[2].coarsened) RestrictAxis(t[2], in, c, mx * my, 1);  // -> (mx, my, mz)
+  if (!t[0].coarsened && !t[1].coarsened && !t[2].coarsened)
+    std::copy(f, f + L.grid.shape.size(), c);
 }
 
 template <typename T>
@@ -148,9 +180,20 @@ void ProlongAdd3(const MultigridLevel& L, const T* c, T* f, T* a, T* b) {
   const auto& t = L.to_coarse;
   const int64_t ny = L.grid.shape.ny, nz = L.grid.shape.nz;
   const int64_t mx = t[0].n_coarse, my = t[1].n_coarse;
-  ProlongAxis(t[2], c, b, mx * my, 1, false);  // -> (mx, my, nz)
-  ProlongAxis(t[1], b, a, mx, nz, false);      // -> (mx, ny, nz)
-  ProlongAxis(t[0], a, f, 1, ny * nz, true);   // -> (nx, ny, nz), added
+  const T* in = c;
+  if (t[2].coarsened) {
+    const bool last = !t[1].coarsened && !t[0].coarsened;
+    T* out = last ? f : b;
+    ProlongAxis(t[2], in, out, mx * my, 1, last);  // -> (mx, my, nz)
+    in = out;
+  }
+  if (t[1].coarsened) {
+    const bool last = !t[0].coarsened;
+    T* out = last ? f : a;
+    ProlongAxis(t[1], in, out, mx, nz, last);  // -> (mx, ny, nz)
+    in = out;
+  }
+  if (t[0].coarsened) ProlongAxis(t[0], in, f, 1, ny * nz, true);  // -> (nx, ny, nz), added
 }
 
 #define TL_INSTANTIATE(T)                                                                    \

@@ -45,6 +45,17 @@ template <typename T>
 void ProlongAxis(const AxisTransfer& t, const T* in, T* out, int64_t inner, int64_t outer,
                  bool add);
 
+// One contiguous row along an axis (inner = 1): out[c] = sum of in[g_idx] g_w over the fine
+// nodes that coarse node c gathers (n_fine values in, n_coarse out).
+template <typename T>
+inline void RestrictRow(const AxisTransfer& t, const T* in, T* out) {
+  for (int64_t c = 0; c < t.n_coarse; ++c) {
+    T s = T(0);
+    for (int64_t g = t.g_start[c]; g < t.g_start[c + 1]; ++g) s += T(t.g_w[g]) * in[t.g_idx[g]];
+    out[c] = s;
+  }
+}
+
 // Full 3-D transfers between `fine` and the next coarser level, through two temporaries of
 // (coarse nx) * ny * nz and (coarse nx) * (coarse ny) * nz values.
 template <typename T>

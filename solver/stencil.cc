@@ -76,49 +76,59 @@ void AssembleStencil(const TensorGrid& g, const T* kappa, const T* mu, double C,
 
 namespace {
 
-// One x-row of A x (row j, plane k), shared by Apply and Residual.
+// Row j of plane k of A x (kResidual: b - A x) into y; zx and zc are nx zeros.
 template <typename T, typename X, bool kResidual>
-inline void StencilRow(const Stencil<T>& A, const T* b, const X* x, T* y, int64_t j, int64_t k) {
+inline void StencilRow(const Stencil<T>& A, const T* b, const X* x, T* y, int64_t j, int64_t k,
+                       const X* zx, const T* zc) {
   const int64_t nx = A.shape.nx, ny = A.shape.ny, nz = A.shape.nz, nxy = nx * ny;
   const int64_t row = nx * (j + ny * k);
-  const T* cx = A.cx.data();
-  const T* cy = A.cy.data();
-  const T* cz = A.cz.data();
-  const T* dg = A.diag.data();
-  const bool has_ym = j > 0, has_yp = j + 1 < ny, has_zm = k > 0, has_zp = k + 1 < nz;
-  // Residuals accumulate in double: b - A x cancels almost completely near convergence, and a
-  // float sum would stall the float solver above a relative residual of 1e-6.
+  const bool ym = j > 0, yp = j + 1 < ny, zm = k > 0, zp = k + 1 < nz;
   using Acc = std::conditional_t<kResidual, double, T>;
-  for (int64_t i = 0; i < nx; ++i) {
-    const int64_t p = row + i;
-    Acc v = Acc(dg[p]) * Acc(x[p]);
-    if (i > 0) v -= Acc(cx[p - 1]) * Acc(x[p - 1]);
-    if (i + 1 < nx) v -= Acc(cx[p]) * Acc(x[p + 1]);
-    if (has_ym) v -= Acc(cy[p - nx]) * Acc(x[p - nx]);
-    if (has_yp) v -= Acc(cy[p]) * Acc(x[p + nx]);
-    if (has_zm) v -= Acc(cz[p - nxy]) * Acc(x[p - nxy]);
-    if (has_zp) v -= Acc(cz[p]) * Acc(x[p + nxy]);
-    if constexpr (kResidual) y[p] = T(Acc(b[p]) - v);
-    else y[p] = T(v);
-  }
+  StencilRowKernel<T, X, Acc, kResidual>(
+      nx, A.diag.data() + row, A.cx.data() + row, x + row, ym ? A.cy.data() + row - nx : zc,
+      ym ? x + row - nx : zx, yp ? A.cy.data() + row : zc, yp ? x + row + nx : zx,
+      zm ? A.cz.data() + row - nxy : zc, zm ? x + row - nxy : zx, zp ? A.cz.data() + row : zc,
+      zp ? x + row + nxy : zx, kResidual ? b + row : nullptr, y + row);
 }
 
 }  // namespace
 
 template <typename T>
 void ApplyStencil(const Stencil<T>& A, const T* x, T* y) {
-  const int64_t ny = A.shape.ny, nz = A.shape.nz;
+  const int64_t nx = A.shape.nx, ny = A.shape.ny, nz = A.shape.nz;
+  const std::vector<T> zeros(nx, T(0));
 #pragma omp parallel for collapse(2) schedule(static)
   for (int64_t k = 0; k < nz; ++k)
-    for (int64_t j = 0; j < ny; ++j) StencilRow<T, T, false>(A, nullptr, x, y, j, k);
+    for (int64_t j = 0; j < ny; ++j)
+      StencilRow<T, T, false>(A, nullptr, x, y, j, k, zeros.data(), zeros.data());
+}
+
+template <typename T>
+double ApplyStencilDot(const Stencil<T>& A, const T* x, T* y) {
+  const int64_t nx = A.shape.nx, ny = A.shape.ny, nz = A.shape.nz;
+  const std::vector<T> zeros(nx, T(0));
+  double dot = 0;
+#pragma omp parallel for collapse(2) schedule(static) reduction(+ : dot)
+  for (int64_t k = 0; k < nz; ++k)
+    for (int64_t j = 0; j < ny; ++j) {
+      StencilRow<T, T, false>(A, nullptr, x, y, j, k, zeros.data(), zeros.data());
+      const int64_t row = nx * (j + ny * k);
+      double s = 0;  // the row is still in L1
+#pragma omp simd reduction(+ : s)
+      for (int64_t i = row; i < row + nx; ++i) s += double(x[i]) * double(y[i]);
+      dot += s;
+    }
+  return dot;
 }
 
 template <typename T, typename X>
 void StencilResidual(const Stencil<T>& A, const T* b, const X* x, T* r) {
-  const int64_t ny = A.shape.ny, nz = A.shape.nz;
+  const int64_t nx = A.shape.nx, ny = A.shape.ny, nz = A.shape.nz;
+  const std::vector<X> zx(nx, X(0));
+  const std::vector<T> zc(nx, T(0));
 #pragma omp parallel for collapse(2) schedule(static)
   for (int64_t k = 0; k < nz; ++k)
-    for (int64_t j = 0; j < ny; ++j) StencilRow<T, X, true>(A, b, x, r, j, k);
+    for (int64_t j = 0; j < ny; ++j) StencilRow<T, X, true>(A, b, x, r, j, k, zx.data(), zc.data());
 }
 
 template <typename T>
@@ -158,6 +168,7 @@ void AccumulateOperatorGradient(const TensorGrid& g, const T* phi, const T* psi,
 #define TL_INSTANTIATE(T)                                                                     \
   template void AssembleStencil<T>(const TensorGrid&, const T*, const T*, double, Stencil<T>*); \
   template void ApplyStencil<T>(const Stencil<T>&, const T*, T*);                             \
+  template double ApplyStencilDot<T>(const Stencil<T>&, const T*, T*);                        \
   template void StencilResidual<T, T>(const Stencil<T>&, const T*, const T*, T*);           \
   template void LitFaceSource<T>(const TensorGrid&, int64_t, double, const float*, T*);      \
   template void AccumulateOperatorGradient<T>(const TensorGrid&, const T*, const T*, double, T*, T*);

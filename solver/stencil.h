@@ -48,9 +48,45 @@ template <typename T>
 void AssembleStencil(const TensorGrid& grid, const T* kappa, const T* mu, double C,
                      Stencil<T>* stencil);
 
+// One x-row of A x (kResidual: b - A x) for kernels that walk the grid themselves: the
+// interior nodes in one branch-free loop that the compiler vectorises, the two ends apart.
+// Every pointer is the row's start: the row's diagonal, x-conductances and x, the conductances
+// and x of the rows below and above in y and z (nx zeros where the row is on the boundary), b
+// (kResidual only) and the output row. Sums accumulate in Acc: double where b - A x must not
+// lose the cancellation near convergence, T inside a preconditioner.
+template <typename T, typename X, typename Acc, bool kResidual>
+inline void StencilRowKernel(int64_t nx, const T* __restrict dg, const T* __restrict cx,
+                             const X* __restrict xr, const T* __restrict cym,
+                             const X* __restrict xym, const T* __restrict cyp,
+                             const X* __restrict xyp, const T* __restrict czm,
+                             const X* __restrict xzm, const T* __restrict czp,
+                             const X* __restrict xzp, const T* __restrict br, T* __restrict yr) {
+  auto vertical = [&](int64_t i) {
+    return Acc(dg[i]) * Acc(xr[i]) - Acc(cym[i]) * Acc(xym[i]) - Acc(cyp[i]) * Acc(xyp[i]) -
+           Acc(czm[i]) * Acc(xzm[i]) - Acc(czp[i]) * Acc(xzp[i]);
+  };
+  auto put = [&](int64_t i, Acc v) {
+    if constexpr (kResidual) yr[i] = T(Acc(br[i]) - v);
+    else yr[i] = T(v);
+  };
+  if (nx == 1) {
+    put(0, vertical(0));
+    return;
+  }
+  put(0, vertical(0) - Acc(cx[0]) * Acc(xr[1]));
+  for (int64_t i = 1; i + 1 < nx; ++i)
+    put(i, vertical(i) - Acc(cx[i - 1]) * Acc(xr[i - 1]) - Acc(cx[i]) * Acc(xr[i + 1]));
+  put(nx - 1, vertical(nx - 1) - Acc(cx[nx - 2]) * Acc(xr[nx - 2]));
+}
+
 // y = A x. Multithreaded.
 template <typename T>
 void ApplyStencil(const Stencil<T>& A, const T* x, T* y);
+
+// y = A x like ApplyStencil, and returns the dot product x . y (accumulated in double) from the
+// same pass over memory (conjugate gradients' p . A p). Multithreaded.
+template <typename T>
+double ApplyStencilDot(const Stencil<T>& A, const T* x, T* y);
 
 // r = b - A x, accumulated in double. x may be double for a float stencil (a float solver's
 // iterate is kept in double; see MultigridSolver). Multithreaded.

@@ -180,6 +180,26 @@ TEST_F(Cli, InverseCommandsRejectBadArguments) {
   EXPECT_EQ(Translume("bench recovery --help").status, 0);
 }
 
+TEST_F(Cli, BenchForwardSmoke) {
+  // A large --jacobi-factor lets the paper's relaxation run to 1e-6, so its ratio is measured
+  // rather than a lower bound.
+  const CommandRun r = Translume("bench forward --grids 17x13x9 --repeats 1 --jacobi-factor 1e5 "
+                                 "--jacobi-cap 20 --threads 1 --cpu-time --json");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output.substr(r.output.find('[')));
+  ASSERT_EQ(j.size(), 1u);
+  EXPECT_LE(j[0]["residual"].get<double>(), 1e-6);
+  EXPECT_LE(j[0]["iterations"].get<int>(), 8);
+  ASSERT_EQ(j[0]["peers"].size(), 3u);
+  const auto& jacobi = j[0]["peers"][2];
+  EXPECT_TRUE(jacobi["converged"].get<bool>()) << jacobi.dump();
+  EXPECT_FALSE(jacobi["ratio_is_lower_bound"].get<bool>());
+  EXPECT_LE(jacobi["residual"].get<double>(), 1e-6);
+  EXPECT_GT(jacobi["ratio"].get<double>(), 1.0);
+  ExpectOneLineError(Translume("bench forward --jacobi-factor 0"), "jacobi-factor");
+  ExpectOneLineError(Translume("bench forward --backend gl --cpu-time"), "--cpu-time");
+}
+
 TEST_F(Cli, BenchRecoverySmoke) {
   const CommandRun r = Translume("bench recovery --grid 8x6x4 --presets wax --max-iterations 3 "
                                  "--paper-iterations 2 --json");

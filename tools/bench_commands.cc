@@ -9,6 +9,7 @@
 #include "solver/bench_forward.h"
 #include "solver/forward.h"
 #include "solver/gl_context.h"
+#include "solver/status.h"
 #include "solver/threads.h"
 #include "tools/commands.h"
 
@@ -36,6 +37,14 @@ void AddBenchForward(CLI::App& bench) {
       ->capture_default_str();
   fwd->add_option("--jacobi-cap", f->o.jacobi_cap_seconds, "Longest Jacobi run per grid, seconds")
       ->capture_default_str();
+  fwd->add_option("--jacobi-factor", f->o.jacobi_factor,
+                  "Jacobi also stops after this many times our solve time (its ratio is then a "
+                  "lower bound; raise it to measure the ratio itself)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  fwd->add_flag("--cpu-time", f->o.cpu_time,
+                "Time with the process's CPU clock, not the wall clock (cpu backend, with "
+                "--threads 1: unaffected by other jobs on a shared machine)");
   fwd->add_flag("--no-peers", f->no_peers, "Skip the Eigen and Jacobi peers");
   fwd->add_flag("--json", f->json, "Print JSON instead of a table");
   fwd->callback([f] {
@@ -43,14 +52,16 @@ void AddBenchForward(CLI::App& bench) {
     for (const auto& g : f->grids) o.grids.push_back(ParseGridShape(g, "--grids"));
     o.precision = ParsePrecision(f->precision);
     o.backend = ParseBackend(f->backend);
+    if (o.cpu_time && o.backend == Backend::kGl)
+      throw InputError("--cpu-time: only with --backend cpu (the gl solver runs on the GPU)");
     if (o.backend == Backend::kGl) {
       const GlInfo& info = GlContext::Get().info();
       std::fprintf(stderr, "gl: %s, %s, %s\n", info.platform.c_str(), info.renderer.c_str(),
                    info.version.c_str());
     }
     o.peers = !f->no_peers;
-    std::fprintf(stderr, "bench forward: backend %s, %d threads, %s\n", f->backend.c_str(),
-                 NumThreads(), f->precision.c_str());
+    std::fprintf(stderr, "bench forward: backend %s, %d threads, %s%s\n", f->backend.c_str(),
+                 NumThreads(), f->precision.c_str(), o.cpu_time ? ", CPU time" : "");
     const auto rows = RunForwardBench(o, PrintBenchProgress);
     std::printf("%s\n", (f->json ? ForwardBenchJson(rows) : ForwardBenchTable(rows)).c_str());
   });
