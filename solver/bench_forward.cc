@@ -186,6 +186,61 @@ ForwardBenchRow BenchOne(const GridShape& shape, const ForwardBenchOptions& o,
   return row;
 }
 
+// The batched gl solve of o.batch right-hand sides (the 4x4 region lights on the lit face, cycled)
+// and, with peers, the cpu solver (o.precision) on the same right-hand sides one by one.
+void BenchGlBatch(const BenchProblem& problem, GlMultigridSolver& solver,
+                  const ForwardBenchOptions& o, ForwardBenchRow* row,
+                  void (*progress)(const std::string&)) {
+  const Material& m = problem.material;
+  const GridShape& shape = m.shape;
+  const int64_t n = shape.size();
+  const TensorGrid grid = TensorGrid::Uniform(shape, m.spacing_mm);
+  std::vector<float> b(o.batch * n), x(o.batch * n);
+  for (int f = 0; f < o.batch; ++f) {
+    const std::string spec = fmt::format("region:{},{}/4", f % 4, (f / 4) % 4);
+    const std::vector<float> q = RasterizeLight(LightSpec::Parse(spec), shape, m.spacing_mm);
+    LitFaceSource(grid, shape.nz - 1, m.C, q.data(), b.data() + f * n);
+  }
+  std::vector<double> times;
+  for (int r = 0; r < std::max(1, o.repeats); ++r) {
+    std::fill(x.begin(), x.end(), 0.0f);
+    const std::vector<SolveSummary> sums = solver.SolveBatch(o.batch, b.data(), x.data());
+    times.push_back(sums[0].seconds);
+    row->batch_iterations = 0;
+    for (const SolveSummary& s : sums) row->batch_iterations = std::max(row->batch_iterations, s.iterations);
+  }
+  row->batch_fields = o.batch;
+  row->batch_seconds = Median(times);
+  if (o.peers) {
+    MultigridOptions mo;
+    mo.tolerance = o.tolerance;
+    const auto t0 = Clock::now();
+    if (o.precision == Precision::kDouble) {
+      MultigridSolver<double> cpu(shape, m.spacing_mm, mo);
+      const std::vector<double> kappa = problem.Field<double>(m.kappa[1]), mu = problem.Field<double>(m.mu[1]);
+      cpu.SetCoefficients(kappa.data(), mu.data(), m.C);
+      std::vector<double> bd(n), xd(n);
+      for (int f = 0; f < o.batch; ++f) {
+        std::copy(b.begin() + f * n, b.begin() + (f + 1) * n, bd.begin());
+        std::fill(xd.begin(), xd.end(), 0.0);
+        cpu.Solve(bd.data(), xd.data());
+      }
+    } else {
+      MultigridSolver<float> cpu(shape, m.spacing_mm, mo);
+      cpu.SetCoefficients(m.kappa[1].data(), m.mu[1].data(), m.C);
+      for (int f = 0; f < o.batch; ++f) {
+        std::fill(x.begin(), x.begin() + n, 0.0f);
+        cpu.Solve(b.data() + f * n, x.data());
+      }
+    }
+    row->batch_cpu_seconds = Since(t0);
+  }
+  if (progress)
+    progress(fmt::format("{}: gl batch of {}: {:.4f} s ({:.4f} s per right-hand side){}",
+                         shape.ToString(), o.batch, row->batch_seconds, row->batch_seconds / o.batch,
+                         o.peers ? fmt::format(", cpu one by one {:.4f} s", row->batch_cpu_seconds) : ""));
+}
+
 // The gl backend on the same problem, with the cpu multigrid solver (same precision as
 // requested, in the same process) as the peer.
 ForwardBenchRow BenchGl(const GridShape& shape, const ForwardBenchOptions& o,
@@ -223,6 +278,7 @@ ForwardBenchRow BenchGl(const GridShape& shape, const ForwardBenchOptions& o,
                          "{:.1f} GB/s", shape.ToString(), row.iterations, row.seconds,
                          row.apply_bandwidth / 1e9, 100 * row.apply_bandwidth / row.copy_bandwidth,
                          row.copy_bandwidth / 1e9));
+  if (o.batch > 0) BenchGlBatch(problem, solver, o, &row, progress);
   if (o.peers) {
     ForwardBenchOptions co = o;
     co.peers = false;
@@ -276,6 +332,16 @@ std::string ForwardBenchTable(const std::vector<ForwardBenchRow>& rows) {
                          r.apply_bandwidth / 1e9, r.copy_bandwidth / 1e9,
                          100 * r.apply_bandwidth / r.copy_bandwidth);
   }
+  if (!rows.empty() && rows[0].batch_fields > 0) {
+    out += fmt::format("\n{:>14} {:>6} {:>5} {:>10} {:>12} {:>12} {:>10}\n", "grid", "batch",
+                       "iters", "gl batch s", "gl s / rhs", "cpu s (all)", "cpu / gl");
+    for (const auto& r : rows)
+      out += fmt::format("{:>14} {:>6} {:>5} {:>10.4f} {:>12.5f} {:>12} {:>10}\n", r.shape.ToString(),
+                         r.batch_fields, r.batch_iterations, r.batch_seconds,
+                         r.batch_seconds / r.batch_fields,
+                         r.batch_cpu_seconds > 0 ? fmt::format("{:.4f}", r.batch_cpu_seconds) : "-",
+                         r.batch_cpu_seconds > 0 ? fmt::format("{:.2f}x", r.batch_cpu_seconds / r.batch_seconds) : "-");
+  }
   bool any = false;
   for (const auto& r : rows) any |= !r.peers.empty();
   if (any) {
@@ -301,6 +367,12 @@ std::string ForwardBenchJson(const std::vector<ForwardBenchRow>& rows) {
       row["stencil_bytes_per_second"] = r.apply_bandwidth;
       row["copy_bytes_per_second"] = r.copy_bandwidth;
       row["stencil_fraction_of_copy"] = r.apply_bandwidth / r.copy_bandwidth;
+    }
+    if (r.batch_fields > 0) {
+      row["batch_fields"] = r.batch_fields;
+      row["batch_iterations"] = r.batch_iterations;
+      row["batch_seconds"] = r.batch_seconds;
+      if (r.batch_cpu_seconds > 0) row["batch_cpu_seconds"] = r.batch_cpu_seconds;
     }
     for (const auto& p : r.peers)
       row["peers"].push_back({{"name", p.name}, {"seconds", p.seconds},

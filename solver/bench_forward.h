@@ -19,6 +19,10 @@ struct ForwardBenchOptions {
   double jacobi_factor = 100;
   double jacobi_cap_seconds = 60;
   double tolerance = 1e-6;
+  // gl: also solve `batch` right-hand sides (the 4x4 region lights on the lit face, cycled) as
+  // one batched solve, next to the cpu solver on the same right-hand sides one after another.
+  // 0 skips it.
+  int batch = 16;
 };
 
 struct PeerResult {
@@ -43,6 +47,11 @@ struct ForwardBenchRow {
   // gl only: effective bandwidth of the stencil (ApplyBytes / apply_seconds) and of a plain
   // copy kernel measured in the same run (the device's practical peak), bytes per second.
   double apply_bandwidth = 0, copy_bandwidth = 0;
+  // gl only: the batched solve of batch_fields right-hand sides (median seconds for all of
+  // them, the most iterations of any field) and, with peers, the cpu solver's seconds for the
+  // same right-hand sides one after another (0 when not run).
+  int batch_fields = 0, batch_iterations = 0;
+  double batch_seconds = 0, batch_cpu_seconds = 0;
   std::vector<PeerResult> peers;
 };
 
