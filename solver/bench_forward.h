@@ -20,8 +20,8 @@ struct ForwardBenchOptions {
   double jacobi_cap_seconds = 60;
   double tolerance = 1e-6;
   // gl: also solve `batch` right-hand sides (the 4x4 region lights on the lit face, cycled) as
-  // one batched solve, next to the cpu solver on the same right-hand sides one after another.
-  // 0 skips it.
+  // one batched solve; the table sets its time per right-hand side against one gl solve and
+  // the cpu peer's. 0 skips it.
   int batch = 16;
 };
 
@@ -48,10 +48,9 @@ struct ForwardBenchRow {
   // copy kernel measured in the same run (the device's practical peak), bytes per second.
   double apply_bandwidth = 0, copy_bandwidth = 0;
   // gl only: the batched solve of batch_fields right-hand sides (median seconds for all of
-  // them, the most iterations of any field) and, with peers, the cpu solver's seconds for the
-  // same right-hand sides one after another (0 when not run).
+  // them, the most iterations of any field).
   int batch_fields = 0, batch_iterations = 0;
-  double batch_seconds = 0, batch_cpu_seconds = 0;
+  double batch_seconds = 0;
   std::vector<PeerResult> peers;
 };
 

@@ -37,7 +37,7 @@ void AddBenchForward(CLI::App& bench) {
   fwd->add_option("--jacobi-cap", f->o.jacobi_cap_seconds, "Longest Jacobi run per grid, seconds")
       ->capture_default_str();
   fwd->add_option("--batch", f->o.batch, "gl: also solve this many right-hand sides (4x4 region "
-                                         "lights) as one batch, next to the cpu one by one; 0 skips")
+                                         "lights) as one batch; 0 skips")
       ->capture_default_str();
   fwd->add_flag("--no-peers", f->no_peers, "Skip the Eigen and Jacobi peers");
   fwd->add_flag("--json", f->json, "Print JSON instead of a table");
