@@ -197,6 +197,36 @@ ForwardBenchRow BenchOne(const GridShape& shape, const ForwardBenchOptions& o,
   return row;
 }
 
+// The batched gl solve of o.batch right-hand sides (the 4x4 region lights on the lit face,
+// cycled).
+void BenchGlBatch(const BenchProblem& problem, GlMultigridSolver& solver,
+                  const ForwardBenchOptions& o, ForwardBenchRow* row,
+                  void (*progress)(const std::string&)) {
+  const Material& m = problem.material;
+  const GridShape& shape = m.shape;
+  const int64_t n = shape.size();
+  const TensorGrid grid = TensorGrid::Uniform(shape, m.spacing_mm);
+  std::vector<float> b(o.batch * n), x(o.batch * n);
+  for (int f = 0; f < o.batch; ++f) {
+    const std::string spec = fmt::format("region:{},{}/4", f % 4, (f / 4) % 4);
+    const std::vector<float> q = RasterizeLight(LightSpec::Parse(spec), shape, m.spacing_mm);
+    LitFaceSource(grid, shape.nz - 1, m.C, q.data(), b.data() + f * n);
+  }
+  std::vector<double> times;
+  for (int r = 0; r < std::max(1, o.repeats); ++r) {
+    std::fill(x.begin(), x.end(), 0.0f);
+    const std::vector<SolveSummary> sums = solver.SolveBatch(o.batch, b.data(), x.data());
+    times.push_back(sums[0].seconds);
+    row->batch_iterations = 0;
+    for (const SolveSummary& s : sums) row->batch_iterations = std::max(row->batch_iterations, s.iterations);
+  }
+  row->batch_fields = o.batch;
+  row->batch_seconds = Median(times);
+  if (progress)
+    progress(fmt::format("{}: gl batch of {}: {:.4f} s ({:.4f} s per right-hand side)",
+                         shape.ToString(), o.batch, row->batch_seconds, row->batch_seconds / o.batch));
+}
+
 // The gl backend on the same problem, with the cpu multigrid solver (same precision as
 // requested, in the same process) as the peer.
 ForwardBenchRow BenchGl(const GridShape& shape, const ForwardBenchOptions& o,
@@ -234,6 +264,7 @@ ForwardBenchRow BenchGl(const GridShape& shape, const ForwardBenchOptions& o,
                          "{:.1f} GB/s", shape.ToString(), row.iterations, row.seconds,
                          row.apply_bandwidth / 1e9, 100 * row.apply_bandwidth / row.copy_bandwidth,
                          row.copy_bandwidth / 1e9));
+  if (o.batch > 0) BenchGlBatch(problem, solver, o, &row, progress);
   if (o.peers) {
     ForwardBenchOptions co = o;
     co.peers = false;
@@ -289,6 +320,18 @@ std::string ForwardBenchTable(const std::vector<ForwardBenchRow>& rows) {
                          r.apply_bandwidth / 1e9, r.copy_bandwidth / 1e9,
                          100 * r.apply_bandwidth / r.copy_bandwidth);
   }
+  if (!rows.empty() && rows[0].batch_fields > 0) {
+    // Per right-hand side against one gl solve and the cpu peer's one solve.
+    out += fmt::format("\n{:>14} {:>6} {:>5} {:>10} {:>12} {:>14} {:>14}\n", "grid", "batch",
+                       "iters", "gl batch s", "gl s / rhs", "single / rhs", "cpu / gl rhs");
+    for (const auto& r : rows) {
+      const double per = r.batch_seconds / r.batch_fields;
+      out += fmt::format("{:>14} {:>6} {:>5} {:>10.4f} {:>12.5f} {:>13.2f}x {:>14}\n",
+                         r.shape.ToString(), r.batch_fields, r.batch_iterations, r.batch_seconds,
+                         per, r.seconds / per,
+                         r.peers.empty() ? "-" : fmt::format("{:.3f}x", r.peers[0].seconds / per));
+    }
+  }
   bool any = false;
   for (const auto& r : rows) any |= !r.peers.empty();
   if (any) {
@@ -314,6 +357,11 @@ std::string ForwardBenchJson(const std::vector<ForwardBenchRow>& rows) {
       row["stencil_bytes_per_second"] = r.apply_bandwidth;
       row["copy_bytes_per_second"] = r.copy_bandwidth;
       row["stencil_fraction_of_copy"] = r.apply_bandwidth / r.copy_bandwidth;
+    }
+    if (r.batch_fields > 0) {
+      row["batch_fields"] = r.batch_fields;
+      row["batch_iterations"] = r.batch_iterations;
+      row["batch_seconds"] = r.batch_seconds;
     }
     for (const auto& p : r.peers)
       row["peers"].push_back({{"name", p.name}, {"seconds", p.seconds},

@@ -22,6 +22,10 @@ struct ForwardBenchOptions {
   // Time with the process's CPU clock instead of the wall clock (cpu backend; meaningful with
   // one thread, where it is the solve's own time however busy the machine is).
   bool cpu_time = false;
+  // gl: also solve `batch` right-hand sides (the 4x4 region lights on the lit face, cycled) as
+  // one batched solve; the table sets its time per right-hand side against one gl solve and
+  // the cpu peer's. 0 skips it.
+  int batch = 16;
 };
 
 struct PeerResult {
@@ -46,6 +50,10 @@ struct ForwardBenchRow {
   // gl only: effective bandwidth of the stencil (ApplyBytes / apply_seconds) and of a plain
   // copy kernel measured in the same run (the device's practical peak), bytes per second.
   double apply_bandwidth = 0, copy_bandwidth = 0;
+  // gl only: the batched solve of batch_fields right-hand sides (median seconds for all of
+  // them, the most iterations of any field).
+  int batch_fields = 0, batch_iterations = 0;
+  double batch_seconds = 0;
   std::vector<PeerResult> peers;
 };
 

@@ -26,6 +26,19 @@ FacePattern GreyPattern(const std::vector<float>& q) { return {q, q, q}; }
 
 namespace {
 
+// The front-face radiance L = (phi - incoming) / (2 pi) of one channel (SPEC section 3).
+template <typename T>
+std::vector<float> FrontRadiance(const GridShape& s, const T* phi, const std::vector<float>& q,
+                                 Setup setup) {
+  std::vector<float> L(s.face_size());
+  const bool lit_front = setup == Setup::kFront;
+  for (int64_t f = 0; f < s.face_size(); ++f) {
+    const double incoming = lit_front ? q[f] : 0.0;
+    L[f] = float((double(phi[f]) - incoming) / (2 * std::numbers::pi));
+  }
+  return L;
+}
+
 template <typename Solver, typename T>
 ForwardResult SolveForwardT(const Material& m, const FacePattern& q, const ForwardOptions& o) {
   const GridShape& s = m.shape;
@@ -44,15 +57,36 @@ ForwardResult SolveForwardT(const Material& m, const FacePattern& q, const Forwa
     LitFaceSource(grid, k_lit, m.C, q[c].data(), b.data());
     std::fill(phi.begin(), phi.end(), T(0));
     result.summaries[c] = solver.Solve(b.data(), phi.data());
-    std::vector<float>& L = result.radiance[c];
-    L.resize(s.face_size());
-    const bool lit_front = o.setup == Setup::kFront;
-    for (int64_t f = 0; f < s.face_size(); ++f) {
-      const double incoming = lit_front ? q[c][f] : 0.0;
-      L[f] = float((double(phi[f]) - incoming) / (2 * std::numbers::pi));
-    }
+    result.radiance[c] = FrontRadiance(s, phi.data(), q[c], o.setup);
   }
   return result;
+}
+
+// All lights of a channel as one batch of the gl solver; fields back to back (gl_solver.h).
+std::vector<ForwardResult> SolveForwardGlBatch(const Material& m,
+                                               const std::vector<FacePattern>& lights,
+                                               const ForwardOptions& o) {
+  const GridShape& s = m.shape;
+  GlMultigridSolver solver(s, m.spacing_mm, o.multigrid);
+  const TensorGrid grid = TensorGrid::Uniform(s, m.spacing_mm);
+  const int64_t n = s.size(), k_lit = LitFaceK(o.setup, s);
+  const int count = int(lights.size());
+  std::vector<float> b(count * n), phi(count * n);
+  std::vector<ForwardResult> results(count);
+  for (int c = 0; c < 3; ++c) {
+    solver.SetCoefficients(m.kappa[c].data(), m.mu[c].data(), m.C);
+    for (int l = 0; l < count; ++l) {
+      TL_CHECK(int64_t(lights[l][c].size()) == s.face_size());
+      LitFaceSource(grid, k_lit, m.C, lights[l][c].data(), b.data() + l * n);
+    }
+    std::fill(phi.begin(), phi.end(), 0.0f);
+    const std::vector<SolveSummary> sums = solver.SolveBatch(count, b.data(), phi.data());
+    for (int l = 0; l < count; ++l) {
+      results[l].summaries[c] = sums[l];
+      results[l].radiance[c] = FrontRadiance(s, phi.data() + l * n, lights[l][c], o.setup);
+    }
+  }
+  return results;
 }
 
 }  // namespace
@@ -65,6 +99,16 @@ ForwardResult SolveForward(const Material& material, const FacePattern& q,
   return options.precision == Precision::kDouble
              ? SolveForwardT<MultigridSolver<double>, double>(material, q, options)
              : SolveForwardT<MultigridSolver<float>, float>(material, q, options);
+}
+
+std::vector<ForwardResult> SolveForwardBatch(const Material& material,
+                                             const std::vector<FacePattern>& lights,
+                                             const ForwardOptions& options) {
+  if (std::string err = material.Validate(); !err.empty()) throw InputError("material: " + err);
+  if (options.backend == Backend::kGl) return SolveForwardGlBatch(material, lights, options);
+  std::vector<ForwardResult> results;
+  for (const FacePattern& q : lights) results.push_back(SolveForward(material, q, options));
+  return results;
 }
 
 }  // namespace translume

@@ -42,4 +42,11 @@ struct ForwardResult {
 ForwardResult SolveForward(const Material& material, const FacePattern& q,
                            const ForwardOptions& options);
 
+// SolveForward for several lights. The gl backend solves all lights of a channel as one batch
+// (GlMultigridSolver::SolveBatch: one dispatch per step for all of them); the cpu backend
+// solves them one after another.
+std::vector<ForwardResult> SolveForwardBatch(const Material& material,
+                                             const std::vector<FacePattern>& lights,
+                                             const ForwardOptions& options);
+
 }  // namespace translume

@@ -33,14 +33,15 @@ class Buffer {
     api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
     api.BufferData(GL_SHADER_STORAGE_BUFFER, bytes_, data, GL_DYNAMIC_DRAW);
   }
-  void Upload(const void* data, int64_t bytes) {
+  // Writes / reads `bytes` bytes at byte `offset` (a field of a batched buffer: f n elements).
+  void Upload(const void* data, int64_t bytes, int64_t offset = 0) {
     api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
-    api.BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, bytes, data);
+    api.BufferSubData(GL_SHADER_STORAGE_BUFFER, offset, bytes, data);
   }
-  void Download(void* data, int64_t bytes) const {
+  void Download(void* data, int64_t bytes, int64_t offset = 0) const {
     api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
-    api.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, bytes, data);
+    api.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, offset, bytes, data);
   }
   void Zero() {
     api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
@@ -67,6 +68,16 @@ GLuint Program(const std::string& name, const std::string& defines = "");
 int64_t Run(const char* name, std::initializer_list<const Buffer*> buffers,
             std::initializer_list<int> ints, int64_t threads, int float_location = -1,
             float float_value = 0, const char* defines = "");
+// The same for `fields` fields at once: `threads` threads per field, work-group z = the field
+// (common.glsl). Returns the number of work groups per field.
+int64_t RunBatch(const char* name, std::initializer_list<const Buffer*> buffers,
+                 std::initializer_list<int> ints, int64_t threads, int fields,
+                 const char* defines = "");
+// Work groups per field that Run and RunBatch dispatch for `threads` threads.
+int64_t WorkGroups(int64_t threads);
+
+// Slots of the per-field conjugate-gradient scalars; mirrors common.glsl's kCg* constants.
+enum CgSlot { kCgRz, kCgPq, kCgRr, kCgRzNew, kCgBb, kCgActive, kCgIter, kCgTol2, kCgStride };
 
 struct AxisBuffers {
   Buffer gstart, gidx, gw, lohi, w;
@@ -92,6 +103,9 @@ struct AxisBuffers {
   }
 };
 
+// One level of the hierarchy. Per node: geometry, kappa, mu, the stencil (cx, cy, cz, diag),
+// the line factors (inv, luc) and rnorm; per field of a batch (Impl::Reserve): b, x, r and the
+// transfer temporaries tmp_a, tmp_b.
 struct GLevel {
   MultigridLevel geo;
   GridShape s;
@@ -106,93 +120,96 @@ using gl_internal::AxisBuffers;
 using gl_internal::Buffer;
 using gl_internal::GLevel;
 using gl_internal::Run;
+using gl_internal::kCgActive;
+using gl_internal::kCgBb;
+using gl_internal::kCgIter;
+using gl_internal::kCgPq;
+using gl_internal::kCgRr;
+using gl_internal::kCgRz;
+using gl_internal::kCgRzNew;
+using gl_internal::kCgStride;
+using gl_internal::kCgTol2;
+using gl_internal::RunBatch;
+using gl_internal::WorkGroups;
 
 struct GlMultigridSolver::Impl {
   MultigridOptions options;
   std::vector<std::unique_ptr<GLevel>> levels;
-  Buffer r, z, p, q, partial, result;
-  Buffer xd;  // the conjugate-gradient iterate, double
+  // Per field of a batch (`capacity` fields, back to back): r, z, p, q (float), the host API's
+  // iterate xd (double); per field: partial (dot.comp's partial sums), scal (the CG scalars,
+  // kCgStride doubles) and hist (max_iterations recursive rr values).
+  Buffer r, z, p, q, partial, scal, hist;
+  Buffer xd;
   Buffer coarse_inverse;  // dense inverse of the coarsest operator (when small enough)
   bool dense_coarse = false;
   int64_t n0 = 0;
   int coarse_sweeps = 8;
+  int capacity = 0;
+  int max_batch = 1;
+  // Iterations between two read-backs of the per-field scalars (the convergence check; M x 8
+  // doubles for the whole batch). 1: on llvmpipe a read-back costs nothing measurable while an
+  // iteration past convergence costs a whole V-cycle for every field (bench recovery 12x10x5:
+  // 31-34 s with 1, 36-38 s with 2; docs/benchmarks.md). On a GPU a read-back drains the queue
+  // (tens of microseconds) against 1-2 ms per iteration, so 1 is the better bet there too.
+  int check_every = 1;
 
-  void Restrict(GLevel& L, const Buffer& f, Buffer& c) {
+  // Grows the per-field buffers to hold `fields` fields (contents are lost when they grow).
+  void Reserve(int fields);
+
+  void Restrict(GLevel& L, const Buffer& f, Buffer& c, int nb) {
     const int ny = int(L.s.ny), nz = int(L.s.nz), mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
     auto pass = [&](const AxisBuffers& a, const Buffer& in, Buffer& out, int inner, int outer) {
-      Run("restrict_axis", {&in, &out, &a.gstart, &a.gidx, &a.gw},
-          {a.n_fine, a.n_coarse, inner, outer}, int64_t(outer) * a.n_coarse * inner);
+      RunBatch("restrict_axis", {&in, &out, &a.gstart, &a.gidx, &a.gw},
+               {a.n_fine, a.n_coarse, inner, outer}, int64_t(outer) * a.n_coarse * inner, nb);
     };
     pass(L.t[0], f, L.tmp_a, 1, ny * nz);
     pass(L.t[1], L.tmp_a, L.tmp_b, mx, nz);
     pass(L.t[2], L.tmp_b, c, mx * my, 1);
   }
 
-  void ProlongAdd(GLevel& L, const Buffer& c, Buffer& f) {
+  void ProlongAdd(GLevel& L, const Buffer& c, Buffer& f, int nb) {
     const int ny = int(L.s.ny), nz = int(L.s.nz), mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
     auto pass = [&](const AxisBuffers& a, const Buffer& in, Buffer& out, int inner, int outer,
                     int add) {
-      Run("prolong_axis", {&in, &out, &a.lohi, &a.w}, {a.n_coarse, a.n_fine, inner, outer, add},
-          int64_t(outer) * a.n_fine * inner);
+      RunBatch("prolong_axis", {&in, &out, &a.lohi, &a.w},
+               {a.n_coarse, a.n_fine, inner, outer, add}, int64_t(outer) * a.n_fine * inner, nb);
     };
     pass(L.t[2], c, L.tmp_b, mx * my, 1, 0);
     pass(L.t[1], L.tmp_b, L.tmp_a, mx, nz, 0);
     pass(L.t[0], L.tmp_a, f, 1, ny * nz, 1);
   }
 
-  void Smooth(GLevel& L, const Buffer& b, Buffer& x, int color) {
+  void Smooth(GLevel& L, const Buffer& b, Buffer& x, int color, int nb) {
     const int half = int((L.s.nx + 1) / 2);
-    Run("smooth", {&L.cx, &L.cy, &L.cz, &L.inv, &L.luc, &b, &x},
-        {int(L.s.nx), int(L.s.ny), int(L.s.nz), color}, int64_t(half) * L.s.ny);
+    RunBatch("smooth", {&L.cx, &L.cy, &L.cz, &L.inv, &L.luc, &b, &x},
+             {int(L.s.nx), int(L.s.ny), int(L.s.nz), color}, int64_t(half) * L.s.ny, nb);
   }
 
-  void Stencil(GLevel& L, const Buffer& x, const Buffer& b, Buffer& out, int mode,
+  void Stencil(GLevel& L, const Buffer& x, const Buffer& b, Buffer& out, int mode, int nb,
                bool x_double = false) {
-    Run("residual", {&L.cx, &L.cy, &L.cz, &L.diag, &x, &b, &out},
-        {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode}, L.n, -1, 0,
-        x_double ? "#define X_DOUBLE\n" : "");
+    RunBatch("residual", {&L.cx, &L.cy, &L.cz, &L.diag, &x, &b, &out},
+             {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode}, L.n, nb,
+             x_double ? "#define X_DOUBLE\n" : "");
   }
 
-  void VCycle(size_t l, const Buffer& b, Buffer& x) {
-    GLevel& L = *levels[l];
-    x.Zero();
-    if (l + 1 == levels.size()) {
-      if (dense_coarse) {
-        Run("dense_solve", {&coarse_inverse, &b, &x}, {int(L.n)}, L.n);
-        return;
-      }
-      for (int s = 0; s < coarse_sweeps; ++s) {
-        Smooth(L, b, x, 0);
-        Smooth(L, b, x, 1);
-        Smooth(L, b, x, 1);
-        Smooth(L, b, x, 0);
-      }
-      return;
-    }
-    for (int s = 0; s < options.pre_smoothing; ++s) {
-      Smooth(L, b, x, 0);
-      Smooth(L, b, x, 1);
-    }
-    Stencil(L, x, b, L.r, 0);
-    GLevel& C = *levels[l + 1];
-    Restrict(L, L.r, C.b);
-    VCycle(l + 1, C.b, C.x);
-    ProlongAdd(L, C.x, x);
-    for (int s = 0; s < options.post_smoothing; ++s) {
-      Smooth(L, b, x, 1);
-      Smooth(L, b, x, 0);
-    }
+  // One V-cycle x = B b on `nb` fields of level l.
+  void VCycle(size_t l, const Buffer& b, Buffer& x, int nb);
+
+  // a . b of every field (double) into scal[f kCgStride + slot]; Dot2 also a . c into slot + 1.
+  void Dot(const Buffer& a, const Buffer& b, int slot, int nb) {
+    const int64_t m = RunBatch("dot", {&a, &b, &partial}, {int(n0)}, n0, nb);
+    RunBatch("reduce", {&partial, &scal}, {int(m), slot, 1, kCgStride}, 256, nb);
+  }
+  void Dot2(const Buffer& a, const Buffer& b, const Buffer& c, int slot, int nb) {
+    const int64_t m = RunBatch("dot", {&a, &b, &partial, &c}, {int(n0)}, n0, nb, "#define PAIR\n");
+    RunBatch("reduce", {&partial, &scal}, {int(m), slot, 2, kCgStride}, 256, nb);
   }
 
-  // Dots into result[slot] (double); read with ReadResults.
-  void Dot(const Buffer& a, const Buffer& b, int slot) {
-    const int64_t m = Run("dot", {&a, &b, &partial}, {int(n0)}, n0);
-    Run("reduce", {&partial, &result}, {int(m), slot}, 256);
-  }
-  void ReadResults(double* out, int count) { result.Download(out, count * 8); }
-  // Multigrid-PCG on device buffers: b (float, n0) and the iterate x (double, n0), which holds
-  // the initial guess on entry. Coefficients must be set.
-  SolveSummary SolveDevice(const Buffer& b, Buffer& x);
+  // Multigrid-PCG on `nb` fields at once, in lockstep (every dispatch serves all of them): b
+  // (float) and the iterates x (double) hold nb fields of n0 values back to back; x holds the
+  // initial guesses on entry. Coefficients must be set; nb <= max_batch. One summary per field;
+  // `seconds` is the time of the whole batch.
+  std::vector<SolveSummary> SolveDevice(const Buffer& b, Buffer& x, int nb);
 };
 
 }  // namespace translume

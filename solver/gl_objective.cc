@@ -3,7 +3,9 @@
 // Per condition the right-hand side b, the forward field phi and the adjoint field psi stay on
 // the GPU across evaluations (warm starts); what crosses the bus per evaluation is kappa and mu
 // (in), the front face of each phi (out) with the adjoint source on the front face (in), and the
-// gradient (out).
+// gradient (out). The conditions solve as batches (GlMultigridSolver::SolveBatch): all forward
+// solves of a batch in one lockstep multigrid-PCG, then all adjoint solves, then one gradient
+// dispatch per batch.
 #include <algorithm>
 #include <cmath>
 #include <fmt/format.h>
@@ -21,22 +23,27 @@ class GlChannelObjective : public FrontFaceObjective {
   GlChannelObjective(const Dataset& d, int channel, const MultigridOptions& mg)
       : FrontFaceObjective(d, channel), shape_(d.shape), C_(d.C),
         solver_(d.shape, d.spacing_mm, mg) {
-    const int64_t n = shape_.size(), nf = shape_.face_size(), M = int64_t(d.conditions.size());
+    const int64_t n = shape_.size(), nf = shape_.face_size();
+    const int M = int(d.conditions.size());
     const TensorGrid grid = TensorGrid::Uniform(shape_, d.spacing_mm);
     const int64_t k_lit = LitFaceK(d.setup, shape_);
-    std::vector<float> b(n);
-    const std::vector<double> zeros(n, 0.0);
-    for (int64_t m = 0; m < M; ++m) {
-      LitFaceSource(grid, k_lit, C_, d.conditions[m].q[channel].data(), b.data());
-      b_.push_back(std::make_unique<Buffer>());
-      b_.back()->Alloc(n * 4, b.data());
-      phi_.push_back(std::make_unique<Buffer>());
-      phi_.back()->Alloc(n * 8, zeros.data());
-      psi_.push_back(std::make_unique<Buffer>());
-      psi_.back()->Alloc(n * 8, zeros.data());
+    for (int first = 0; first < M; first += solver_.max_batch()) {
+      auto batch = std::make_unique<Batch>();
+      batch->first = first;
+      batch->count = std::min(solver_.max_batch(), M - first);
+      const int64_t values = batch->count * n;
+      std::vector<float> b(values);
+      for (int f = 0; f < batch->count; ++f)
+        LitFaceSource(grid, k_lit, C_, d.conditions[first + f].q[channel].data(), b.data() + f * n);
+      batch->b.Alloc(values * 4, b.data());
+      batch->rhs.Alloc(values * 4);
+      batch->rhs.Zero();
+      for (Buffer* field : {&batch->phi, &batch->psi}) {
+        field->Alloc(values * 8);
+        field->Zero();  // all-zero bits are 0.0 in double too
+      }
+      batches_.push_back(std::move(batch));
     }
-    rhs_.Alloc(n * 4);
-    rhs_.Zero();
     grad_kappa_.Alloc(n * 8);
     grad_mu_.Alloc(n * 8);
     front_.assign(M, std::vector<double>(nf, 0.0));
@@ -48,23 +55,28 @@ class GlChannelObjective : public FrontFaceObjective {
     solver_.SetCoefficients(kf.data(), mf.data(), C_);
     GlMultigridSolver::Impl& I = solver_.impl();
     if (gk) {
-      grad_kappa_.Zero();  // all-zero bits are 0.0 in double too
+      grad_kappa_.Zero();
       grad_mu_.Zero();
     }
     BeginEvaluation();
     double J = 0;
     std::vector<double> source(nf);
     std::vector<float> source_f(nf);
-    for (size_t m = 0; m < b_.size(); ++m) {
-      Track(I.SolveDevice(*b_[m], *phi_[m]));
-      phi_[m]->Download(front_[m].data(), nf * 8);  // the front face is k = 0: the first nf nodes
-      J += ConditionMisfit(m, source.data());
+    for (auto& batch : batches_) {
+      for (const SolveSummary& s : I.SolveDevice(batch->b, batch->phi, batch->count)) Track(s);
+      for (int f = 0; f < batch->count; ++f) {
+        const size_t m = size_t(batch->first + f);
+        // The front face is k = 0: the first nf nodes of the field.
+        batch->phi.Download(front_[m].data(), nf * 8, f * n * 8);
+        J += ConditionMisfit(m, source.data());
+        if (!gk) continue;
+        std::copy(source.begin(), source.end(), source_f.begin());
+        batch->rhs.Upload(source_f.data(), nf * 4, f * n * 4);
+      }
       if (!gk) continue;
-      std::copy(source.begin(), source.end(), source_f.begin());
-      rhs_.Upload(source_f.data(), nf * 4);
-      Track(I.SolveDevice(rhs_, *psi_[m]));
-      Run("gradient", {&I.levels[0]->geometry, phi_[m].get(), psi_[m].get(), &grad_kappa_, &grad_mu_},
-          {int(shape_.nx), int(shape_.ny), int(shape_.nz)}, n);
+      for (const SolveSummary& s : I.SolveDevice(batch->rhs, batch->psi, batch->count)) Track(s);
+      Run("gradient", {&I.levels[0]->geometry, &batch->phi, &batch->psi, &grad_kappa_, &grad_mu_},
+          {int(shape_.nx), int(shape_.ny), int(shape_.nz), batch->count}, n);
     }
     if (gk) {
       grad_kappa_.Download(gk, n * 8);
@@ -76,11 +88,18 @@ class GlChannelObjective : public FrontFaceObjective {
  private:
   const double* FrontField(size_t m) const override { return front_[m].data(); }
 
+  // Conditions first .. first + count - 1, each buffer holding their fields back to back:
+  // b (float), the adjoint sources rhs (float, zero off the front face), phi and psi (double).
+  struct Batch {
+    int first = 0, count = 0;
+    Buffer b, rhs, phi, psi;
+  };
+
   GridShape shape_;
   double C_;
   GlMultigridSolver solver_;
-  std::vector<std::unique_ptr<Buffer>> b_, phi_, psi_;
-  Buffer rhs_, grad_kappa_, grad_mu_;
+  std::vector<std::unique_ptr<Batch>> batches_;
+  Buffer grad_kappa_, grad_mu_;
   std::vector<std::vector<double>> front_;  // front faces of phi, read back per evaluation
 };
 

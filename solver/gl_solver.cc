@@ -89,12 +89,22 @@ GLuint Program(const std::string& name, const std::string& defines) {
   return program;
 }
 
-// Binds `buffers` to bindings 0.., sets int uniforms at locations 0.., and dispatches
-// `threads` threads (256 per group, tiled to stay under 65535 groups per dimension).
-// Returns the number of work groups.
-int64_t Run(const char* name, std::initializer_list<const Buffer*> buffers,
-            std::initializer_list<int> ints, int64_t threads, int float_location,
-            float float_value, const char* defines) {
+namespace {
+
+// Work groups (x, y) for `threads` threads: 256 per group, at most 65535 groups along x.
+std::pair<int64_t, int64_t> Tiling(int64_t threads) {
+  const int64_t groups = std::max<int64_t>(1, (threads + 255) / 256);
+  const int64_t gx = std::min<int64_t>(groups, 65535);
+  return {gx, (groups + gx - 1) / gx};
+}
+
+// Binds `buffers` to bindings 0.., sets int uniforms at locations 0.. and an optional float
+// uniform, and dispatches `threads` threads per field (256 per group, tiled to stay under 65535
+// groups per dimension) for `fields` fields (work-group z), followed by a shader-storage
+// barrier. Returns the number of work groups per field.
+int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
+                 std::initializer_list<int> ints, int64_t threads, int fields, int float_location,
+                 float float_value, const char* defines) {
   const GLuint prog = Program(name, defines);
   api.UseProgram(prog);
   GLuint b = 0;
@@ -102,11 +112,29 @@ int64_t Run(const char* name, std::initializer_list<const Buffer*> buffers,
   GLint loc = 0;
   for (int v : ints) api.Uniform1i(loc++, v);
   if (float_location >= 0) api.Uniform1f(float_location, float_value);
-  const int64_t groups = std::max<int64_t>(1, (threads + 255) / 256);
-  const int64_t gx = std::min<int64_t>(groups, 65535), gy = (groups + gx - 1) / gx;
-  api.DispatchCompute(GLuint(gx), GLuint(gy), 1);
+  const auto [gx, gy] = Tiling(threads);
+  api.DispatchCompute(GLuint(gx), GLuint(gy), GLuint(fields));
   api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
   return gx * gy;
+}
+
+}  // namespace
+
+int64_t WorkGroups(int64_t threads) {
+  const auto [gx, gy] = Tiling(threads);
+  return gx * gy;
+}
+
+int64_t Run(const char* name, std::initializer_list<const Buffer*> buffers,
+            std::initializer_list<int> ints, int64_t threads, int float_location,
+            float float_value, const char* defines) {
+  return Dispatch(name, buffers, ints, threads, 1, float_location, float_value, defines);
+}
+
+int64_t RunBatch(const char* name, std::initializer_list<const Buffer*> buffers,
+                 std::initializer_list<int> ints, int64_t threads, int fields,
+                 const char* defines) {
+  return Dispatch(name, buffers, ints, threads, fields, -1, 0, defines);
 }
 
 }  // namespace gl_internal
@@ -151,14 +179,10 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
       for (int64_t i = 0; i < L.s.n(a); ++i)
         geo.push_back(i + 1 < L.s.n(a) ? float(L.geo.grid.Gap(a, i)) : 1.0f);
     L.geometry.Alloc(geo.size() * 4, geo.data());
-    for (Buffer* b : {&L.kappa, &L.mu, &L.cx, &L.cy, &L.cz, &L.diag, &L.inv, &L.luc, &L.b, &L.x, &L.r})
+    for (Buffer* b : {&L.kappa, &L.mu, &L.cx, &L.cy, &L.cz, &L.diag, &L.inv, &L.luc})
       b->Alloc(bytes);
-    if (l + 1 < I.levels.size()) {
+    if (l + 1 < I.levels.size())
       for (int a = 0; a < 3; ++a) L.t[a].Upload(L.geo.to_coarse[a]);
-      const int64_t mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
-      L.tmp_a.Alloc(mx * L.s.ny * L.s.nz * 4);
-      L.tmp_b.Alloc(mx * my * L.s.nz * 4);
-    }
     if (l > 0) {
       // R applied to ones from the finer level: the weights that make restricted kappa and mu
       // averages.
@@ -170,10 +194,33 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
       L.rnorm.Alloc(bytes, rn.data());
     }
   }
-  for (Buffer* b : {&I.r, &I.z, &I.p, &I.q}) b->Alloc(I.n0 * 4);
-  I.xd.Alloc(I.n0 * 8);
-  I.partial.Alloc(((I.n0 + 255) / 256 + 1) * 8);
-  I.result.Alloc(8 * 8);
+  // Fields per batch: every per-field buffer (the largest: nb n0 doubles) within the largest
+  // shader storage block, nb n0 below 2^31 (the shaders' int indices), and at most 4096.
+  const GlInfo& info = GlContext::Get().info();
+  int64_t most = std::min<int64_t>({info.max_ssbo_bytes / (I.n0 * 8), ((int64_t(1) << 31) - 1) / I.n0,
+                                    info.max_work_group_count[2], 4096});
+  I.max_batch = int(std::max<int64_t>(1, most));
+  I.Reserve(1);
+}
+
+void GlMultigridSolver::Impl::Reserve(int fields) {
+  TL_CHECK(fields >= 1 && fields <= max_batch);
+  if (fields <= capacity) return;
+  for (size_t l = 0; l < levels.size(); ++l) {
+    GLevel& L = *levels[l];
+    for (Buffer* b : {&L.b, &L.x, &L.r}) b->Alloc(L.n * 4 * fields);
+    if (l + 1 < levels.size()) {
+      const int64_t mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
+      L.tmp_a.Alloc(mx * L.s.ny * L.s.nz * 4 * fields);
+      L.tmp_b.Alloc(mx * my * L.s.nz * 4 * fields);
+    }
+  }
+  for (Buffer* b : {&r, &z, &p, &q}) b->Alloc(n0 * 4 * fields);
+  xd.Alloc(n0 * 8 * fields);
+  partial.Alloc(WorkGroups(n0) * 2 * 8 * fields);
+  scal.Alloc(kCgStride * 8 * fields);
+  hist.Alloc(int64_t(options.max_iterations) * 8 * fields);
+  capacity = fields;
 }
 
 GlMultigridSolver::~GlMultigridSolver() = default;
@@ -189,10 +236,10 @@ void GlMultigridSolver::SetCoefficients(const float* kappa, const float* mu, dou
       L.mu.Upload(mu, L.n * 4);
     } else {
       GLevel& F = *I.levels[l - 1];
-      I.Restrict(F, F.kappa, L.kappa);
-      I.Restrict(F, F.mu, L.mu);
-      Run("vector_ops", {&L.kappa, &L.rnorm, &L.rnorm, &L.rnorm}, {int(L.n), 2}, L.n);
-      Run("vector_ops", {&L.mu, &L.rnorm, &L.rnorm, &L.rnorm}, {int(L.n), 2}, L.n);
+      I.Restrict(F, F.kappa, L.kappa, 1);
+      I.Restrict(F, F.mu, L.mu, 1);
+      Run("divide", {&L.kappa, &L.rnorm}, {int(L.n)}, L.n);
+      Run("divide", {&L.mu, &L.rnorm}, {int(L.n)}, L.n);
     }
     Run("assemble", {&L.kappa, &L.mu, &L.geometry, &L.cx, &L.cy, &L.cz, &L.diag},
         {int(L.s.nx), int(L.s.ny), int(L.s.nz)}, L.n, 3, float(1.0 / (2.0 * C)));
@@ -234,96 +281,187 @@ void GlMultigridSolver::Apply(const float* x, float* y) {
   Impl& I = *impl_;
   GLevel& L = *I.levels[0];
   L.x.Upload(x, L.n * 4);
-  I.Stencil(L, L.x, L.x, I.q, 1);
+  I.Stencil(L, L.x, L.x, I.q, 1, 1);
   I.q.Download(y, L.n * 4);
 }
 
-SolveSummary GlMultigridSolver::Impl::SolveDevice(const Buffer& b, Buffer& x) {
-  const auto t0 = std::chrono::steady_clock::now();
-  GLevel& L = *levels[0];
-  const int64_t n = n0;
-  SolveSummary sum;
-  double v[2];
-  Dot(b, b, 0);
-  Stencil(L, x, b, r, 0, true);
-  Dot(r, r, 1);
-  ReadResults(v, 2);
-  const double bnorm = std::sqrt(v[0]);
-  // `rr`: ||b - A x||^2 if the caller has just computed it, else < 0.
-  auto finish = [&](bool converged, std::string message, double rr = -1) {
-    if (rr < 0) {
-      Stencil(L, x, b, r, 0, true);
-      Dot(r, r, 0);
-      ReadResults(&rr, 1);
+void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int nb) {
+  GLevel& L = *levels[l];
+  x.Zero();
+  if (l + 1 == levels.size()) {
+    if (dense_coarse) {
+      RunBatch("dense_solve", {&coarse_inverse, &b, &x}, {int(L.n)}, L.n, nb);
+      return;
     }
-    sum.final_residual = bnorm > 0 ? std::sqrt(rr) / bnorm : 0.0;
-    sum.converged = converged;
-    sum.message = std::move(message);
-    sum.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    return sum;
-  };
-  if (bnorm == 0) {
-    std::vector<double> zeros(n, 0.0);
-    x.Upload(zeros.data(), n * 8);
-    return finish(true, "zero right-hand side", 0.0);
-  }
-  sum.initial_residual = std::sqrt(v[1]) / bnorm;
-  if (sum.initial_residual <= options.tolerance) return finish(true, "", v[1]);
-  const double tol = options.tolerance * bnorm;
-  int restarts = 0;
-  double rz = 0;
-  auto restart = [&]() {
-    VCycle(0, r, z);
-    p.CopyFrom(z, n * 4);
-    Dot(r, z, 0);
-    ReadResults(&rz, 1);
-  };
-  restart();
-  while (sum.iterations < options.max_iterations) {
-    Stencil(L, p, p, q, 1);
-    Dot(p, q, 0);
-    double pq;
-    ReadResults(&pq, 1);
-    const float alpha = float(rz / pq);
-    Run("vector_ops", {&x, &r, &p, &q}, {int(n), 0}, n, 2, alpha, "#define X_DOUBLE\n");
-    ++sum.iterations;
-    // Precondition before looking at the residual: one read-back per iteration for both dots.
-    VCycle(0, r, z);
-    Dot(r, r, 0);
-    Dot(r, z, 1);
-    ReadResults(v, 2);
-    sum.history.push_back(std::sqrt(v[0]) / bnorm);
-    if (std::sqrt(v[0]) <= tol) {
-      Stencil(L, x, b, r, 0, true);
-      Dot(r, r, 0);
-      double rr;
-      ReadResults(&rr, 1);
-      if (std::sqrt(rr) <= tol) return finish(true, "", rr);
-      if (++restarts > 3) return finish(false, "stagnated", rr);
-      restart();
-      continue;
+    for (int s = 0; s < coarse_sweeps; ++s) {
+      Smooth(L, b, x, 0, nb);
+      Smooth(L, b, x, 1, nb);
+      Smooth(L, b, x, 1, nb);
+      Smooth(L, b, x, 0, nb);
     }
-    const double beta = v[1] / rz;
-    rz = v[1];
-    Run("vector_ops", {&p, &z, &z, &z}, {int(n), 1}, n, 2, float(beta));
+    return;
   }
-  return finish(false, fmt::format("reached max_iterations = {}", options.max_iterations));
+  for (int s = 0; s < options.pre_smoothing; ++s) {
+    Smooth(L, b, x, 0, nb);
+    Smooth(L, b, x, 1, nb);
+  }
+  Stencil(L, x, b, L.r, 0, nb);
+  GLevel& C = *levels[l + 1];
+  Restrict(L, L.r, C.b, nb);
+  VCycle(l + 1, C.b, C.x, nb);
+  ProlongAdd(L, C.x, x, nb);
+  for (int s = 0; s < options.post_smoothing; ++s) {
+    Smooth(L, b, x, 1, nb);
+    Smooth(L, b, x, 0, nb);
+  }
 }
 
-SolveSummary GlMultigridSolver::Solve(const float* b_host, float* x_host) {
+// The cpu solver's algorithm (multigrid.cc) on nb fields in lockstep. The per-field scalars
+// (alpha = rz / pq, beta = rz_new / rz, the convergence test rr <= (tol ||b||)^2) live on the
+// GPU (scal, cg_update.comp, cg_scalars.comp): a field that meets the test freezes (alpha = 0)
+// while the others go on. The host reads the scalars back once at the start and then every
+// check_every iterations; when no field is active it verifies every frozen field's true
+// residual b - A x (double x) and restarts those that miss the tolerance (at most 3 times,
+// then "stagnated"), as the cpu solver does.
+std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, Buffer& x, int nb) {
+  const auto t0 = std::chrono::steady_clock::now();
+  Reserve(nb);
+  GLevel& L = *levels[0];
+  const int64_t n = n0;
+  const int max_it = options.max_iterations;
+  const double tol = options.tolerance;
+  std::vector<SolveSummary> sums(nb);
+  std::vector<char> done(nb, 0);
+  std::vector<int> restarts(nb, 0);
+  std::vector<double> sc(int64_t(nb) * kCgStride, 0.0);
+  auto at = [&](int f, int slot) -> double& { return sc[int64_t(f) * kCgStride + slot]; };
+  auto read = [&] { scal.Download(sc.data(), int64_t(sc.size()) * 8); };
+  auto finish = [&](int f, bool converged, std::string message) {
+    const double bb = at(f, kCgBb);
+    sums[f].final_residual = bb > 0 ? std::sqrt(at(f, kCgRr) / bb) : 0.0;
+    sums[f].converged = converged;
+    sums[f].message = std::move(message);
+    done[f] = 1;
+  };
+  // rr of every field from its true residual r = b - A x; r is then the restart's residual.
+  auto true_residual = [&] {
+    Stencil(L, x, b, r, 0, nb, true);
+    Dot(r, r, kCgRr, nb);
+    read();
+  };
+  auto restart = [&] {
+    VCycle(0, r, z, nb);
+    p.CopyFrom(z, n * 4 * nb);
+    Dot(r, z, kCgRz, nb);
+  };
+
+  scal.Zero();
+  Dot(b, b, kCgBb, nb);
+  true_residual();
+  bool any = false;
+  for (int f = 0; f < nb; ++f) {
+    const double bb = at(f, kCgBb);
+    if (bb == 0) {
+      const std::vector<double> zeros(n, 0.0);
+      x.Upload(zeros.data(), n * 8, int64_t(f) * n * 8);
+      at(f, kCgRr) = 0;
+      finish(f, true, "zero right-hand side");
+      continue;
+    }
+    sums[f].initial_residual = std::sqrt(at(f, kCgRr) / bb);
+    if (sums[f].initial_residual <= tol) {
+      finish(f, true, "");
+      continue;
+    }
+    at(f, kCgActive) = 1;
+    at(f, kCgTol2) = tol * tol * bb;
+    any = true;
+  }
+  int it = 0;
+  if (any) {
+    scal.Upload(sc.data(), int64_t(sc.size()) * 8);
+    restart();
+  }
+  while (any && it < max_it) {
+    Stencil(L, p, p, q, 1, nb);
+    Dot(p, q, kCgPq, nb);
+    RunBatch("cg_update", {&x, &r, &p, &q, &scal}, {int(n)}, n, nb);
+    // Precondition before looking at the residual: both dots from one pass.
+    VCycle(0, r, z, nb);
+    Dot2(r, r, z, kCgRr, nb);  // rr and rz_new
+    RunBatch("cg_update", {&p, &z, &z, &z, &scal}, {int(n)}, n, nb, "#define DIRECTION\n");
+    Run("cg_scalars", {&scal, &hist}, {nb, max_it}, nb);
+    ++it;
+    if (it % check_every != 0 && it < max_it) continue;
+    read();
+    bool active = false;
+    for (int f = 0; f < nb; ++f) active |= !done[f] && at(f, kCgActive) != 0;
+    if (active) continue;
+    true_residual();
+    bool again = false;
+    for (int f = 0; f < nb; ++f) {
+      if (done[f]) continue;
+      if (at(f, kCgRr) <= at(f, kCgTol2)) {
+        finish(f, true, "");
+      } else if (++restarts[f] > 3) {
+        finish(f, false, "stagnated");
+      } else {
+        at(f, kCgActive) = 1;
+        again = true;
+      }
+    }
+    if (!again) break;
+    scal.Upload(sc.data(), int64_t(sc.size()) * 8);
+    restart();
+  }
+  bool left = false;
+  for (int f = 0; f < nb; ++f) left |= !done[f];
+  if (left) {
+    true_residual();
+    for (int f = 0; f < nb; ++f)
+      if (!done[f]) finish(f, false, fmt::format("reached max_iterations = {}", max_it));
+  }
+  std::vector<double> h(int64_t(nb) * max_it);
+  if (it > 0) hist.Download(h.data(), int64_t(h.size()) * 8);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  for (int f = 0; f < nb; ++f) {
+    SolveSummary& s = sums[f];
+    s.iterations = int(at(f, kCgIter));
+    for (int i = 0; i < std::min(s.iterations, max_it); ++i)
+      s.history.push_back(std::sqrt(h[int64_t(f) * max_it + i] / at(f, kCgBb)));
+    s.seconds = seconds;
+  }
+  return sums;
+}
+
+std::vector<SolveSummary> GlMultigridSolver::SolveBatch(int fields, const float* b_host,
+                                                        float* x_host) {
   const auto t0 = std::chrono::steady_clock::now();
   Impl& I = *impl_;
   const int64_t n = I.n0;
-  // b lives in the finest level's b buffer; the iterate in double (see residual.comp).
-  I.levels[0]->b.Upload(b_host, n * 4);
-  std::vector<double> xd(x_host, x_host + n);
-  I.xd.Upload(xd.data(), n * 8);
-  SolveSummary sum = I.SolveDevice(I.levels[0]->b, I.xd);
-  I.xd.Download(xd.data(), n * 8);
-  for (int64_t i = 0; i < n; ++i) x_host[i] = float(xd[i]);
-  sum.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  return sum;
+  std::vector<SolveSummary> out;
+  for (int first = 0; first < fields; first += I.max_batch) {
+    const int nb = std::min(I.max_batch, fields - first);
+    I.Reserve(nb);
+    // b lives in the finest level's b buffer; the iterates in double (see residual.comp).
+    I.levels[0]->b.Upload(b_host + first * n, nb * n * 4);
+    std::vector<double> xd(x_host + first * n, x_host + (first + nb) * n);
+    I.xd.Upload(xd.data(), nb * n * 8);
+    for (SolveSummary& s : I.SolveDevice(I.levels[0]->b, I.xd, nb)) out.push_back(std::move(s));
+    I.xd.Download(xd.data(), nb * n * 8);
+    for (int64_t i = 0; i < nb * n; ++i) x_host[first * n + i] = float(xd[i]);
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  for (SolveSummary& s : out) s.seconds = seconds;
+  return out;
 }
+
+SolveSummary GlMultigridSolver::Solve(const float* b_host, float* x_host) {
+  return SolveBatch(1, b_host, x_host)[0];
+}
+
+int GlMultigridSolver::max_batch() const { return impl_->max_batch; }
 
 double GlMultigridSolver::TimeApply(int repetitions) {
   Impl& I = *impl_;
@@ -332,7 +470,7 @@ double GlMultigridSolver::TimeApply(int repetitions) {
   api.Finish();
   for (int r = 0; r < repetitions; ++r) {
     const auto t0 = std::chrono::steady_clock::now();
-    for (int k = 0; k < 10; ++k) I.Stencil(L, L.x, L.x, I.q, 1);
+    for (int k = 0; k < 10; ++k) I.Stencil(L, L.x, L.x, I.q, 1, 1);
     api.Finish();
     times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / 10);
   }

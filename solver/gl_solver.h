@@ -3,6 +3,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "solver/multigrid.h"
 
@@ -14,7 +15,10 @@ namespace translume {
 // double. Differences from the cpu backend: the coarsest level (<= 64 nodes where the grid
 // allows) is solved by 8 symmetric sweep pairs instead of a direct factorisation, and the
 // coefficients are assembled on the GPU, so SetCoefficients uploads only kappa and mu.
-// Uses the process-wide GlContext; call from the thread that created it.
+// Several right-hand sides of one operator solve as a batch: every dispatch serves all fields
+// (kappa, mu and the stencil are read once for all), conjugate gradients run in lockstep with
+// each field's scalars kept on the GPU, and the host reads them back only every few iterations
+// (docs/gpu.md). Uses the process-wide GlContext; call from the thread that created it.
 class GlMultigridSolver {
  public:
   GlMultigridSolver(const GridShape& shape, double h, const MultigridOptions& options = {});
@@ -23,6 +27,14 @@ class GlMultigridSolver {
   void SetCoefficients(const float* kappa, const float* mu, double C);
   // x: initial guess in, solution out (host arrays of shape.size() floats).
   SolveSummary Solve(const float* b, float* x);
+  // Solves A x_f = b_f for `fields` right-hand sides at once. b and x hold the fields back to
+  // back: field f is b[f n .. (f + 1) n), n = shape.size(); x: initial guesses in, solutions
+  // out. Returns one summary per field (each field converges, stagnates or runs out of
+  // iterations on its own); `seconds` is the whole call's time. Batches of more than
+  // max_batch() fields run as several batches.
+  std::vector<SolveSummary> SolveBatch(int fields, const float* b, float* x);
+  // The most fields one batch holds (bounded by the largest shader storage block).
+  int max_batch() const;
   void Apply(const float* x, float* y);
   int num_levels() const;
 

@@ -45,6 +45,9 @@ void AddBenchForward(CLI::App& bench) {
   fwd->add_flag("--cpu-time", f->o.cpu_time,
                 "Time with the process's CPU clock, not the wall clock (cpu backend, with "
                 "--threads 1: unaffected by other jobs on a shared machine)");
+  fwd->add_option("--batch", f->o.batch, "gl: also solve this many right-hand sides (4x4 region "
+                                         "lights) as one batch; 0 skips")
+      ->capture_default_str();
   fwd->add_flag("--no-peers", f->no_peers, "Skip the Eigen and Jacobi peers");
   fwd->add_flag("--json", f->json, "Print JSON instead of a table");
   fwd->callback([f] {

@@ -1,19 +1,27 @@
 // SPDX-License-Identifier: MIT
-// Sums m partial sums (double) into result[slot], in one work group.
+// Sums the m partial sums of each field (dot.comp's layout, `width` sums per group) into
+// result[f * stride + slot + k], k < width: one work group per field (work-group z).
 layout(std430, binding = 0) readonly buffer Partial { double partial[]; };
 layout(std430, binding = 1) buffer Result { double result[]; };
 layout(location = 0) uniform int m;
 layout(location = 1) uniform int slot;
+layout(location = 2) uniform int width;
+layout(location = 3) uniform int stride;
 shared double sdata[256];
 
 void main() {
-  double s = 0.0LF;
-  for (int q = int(gl_LocalInvocationID.x); q < m; q += 256) s += partial[q];
-  sdata[gl_LocalInvocationID.x] = s;
-  barrier();
-  for (uint st = 128u; st > 0u; st >>= 1u) {
-    if (gl_LocalInvocationID.x < st) sdata[gl_LocalInvocationID.x] += sdata[gl_LocalInvocationID.x + st];
+  uint l = gl_LocalInvocationID.x;
+  int f = int(Field());
+  for (int k = 0; k < width; ++k) {
+    double s = 0.0LF;
+    for (int q = int(l); q < m; q += 256) s += partial[(f * m + q) * width + k];
+    sdata[l] = s;
+    barrier();
+    for (uint st = 128u; st > 0u; st >>= 1u) {
+      if (l < st) sdata[l] += sdata[l + st];
+      barrier();
+    }
+    if (l == 0u) result[f * stride + slot + k] = sdata[0];
     barrier();
   }
-  if (gl_LocalInvocationID.x == 0u) result[slot] = sdata[0];
 }

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // One half-sweep of red-black (zebra) z-line Gauss-Seidel: every column (i, j) with
 // (i + j) % 2 == color solves its tridiagonal z-system exactly, the neighbouring columns
-// (the other colour) held fixed. x holds d' between the two passes.
+// (the other colour) held fixed. x holds d' between the two passes. Batched: b and x hold one
+// field per work-group z (common.glsl).
 layout(std430, binding = 0) readonly buffer Cx { float cx[]; };
 layout(std430, binding = 1) readonly buffer Cy { float cy[]; };
 layout(std430, binding = 2) readonly buffer Cz { float cz[]; };
@@ -22,18 +23,19 @@ void main() {
   int i = 2 * (int(t) % half_nx) + ((color + j) & 1);
   if (i >= nx) return;
   int nxy = nx * ny;
+  int o = int(Field()) * nxy * nz;  // offset of this field
   for (int k = 0; k < nz; ++k) {
-    int p = i + nx * j + nxy * k;
-    float d = b[p];
-    if (i > 0) d += cx[p - 1] * x[p - 1];
-    if (i + 1 < nx) d += cx[p] * x[p + 1];
-    if (j > 0) d += cy[p - nx] * x[p - nx];
-    if (j + 1 < ny) d += cy[p] * x[p + nx];
-    if (k > 0) d += cz[p - nxy] * x[p - nxy];
-    x[p] = d * inv[p];
+    int p = i + nx * j + nxy * k, q = o + p;
+    float d = b[q];
+    if (i > 0) d += cx[p - 1] * x[q - 1];
+    if (i + 1 < nx) d += cx[p] * x[q + 1];
+    if (j > 0) d += cy[p - nx] * x[q - nx];
+    if (j + 1 < ny) d += cy[p] * x[q + nx];
+    if (k > 0) d += cz[p - nxy] * x[q - nxy];
+    x[q] = d * inv[p];
   }
   for (int k = nz - 2; k >= 0; --k) {
     int p = i + nx * j + nxy * k;
-    x[p] += luc[p] * x[p + nxy];
+    x[o + p] += luc[p] * x[o + p + nxy];
   }
 }
