@@ -146,6 +146,7 @@ ForwardBenchRow BenchOne(const GridShape& shape, const ForwardBenchOptions& o,
   const std::vector<T> kappa = problem.Field<T>(m.kappa[1]), mu = problem.Field<T>(m.mu[1]);
   MultigridOptions mo;
   mo.tolerance = o.tolerance;
+  mo.pre_smoothing = mo.post_smoothing = o.smoothing;
   MultigridSolver<T> solver(shape, m.spacing_mm, mo);
   solver.SetCoefficients(kappa.data(), mu.data(), m.C);
   std::vector<T> b(problem.b.begin(), problem.b.end()), x(n), y(n);
@@ -236,6 +237,7 @@ ForwardBenchRow BenchGl(const GridShape& shape, const ForwardBenchOptions& o,
   const int64_t n = shape.size();
   MultigridOptions mo;
   mo.tolerance = o.tolerance;
+  mo.pre_smoothing = mo.post_smoothing = o.smoothing;
   GlMultigridSolver solver(shape, m.spacing_mm, mo);
   solver.SetCoefficients(m.kappa[1].data(), m.mu[1].data(), m.C);
   std::vector<float> b(problem.b.begin(), problem.b.end()), x(n);

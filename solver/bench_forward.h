@@ -19,6 +19,7 @@ struct ForwardBenchOptions {
   double jacobi_factor = 100;
   double jacobi_cap_seconds = 60;
   double tolerance = 1e-6;
+  int smoothing = 2;  // our solver's V(smoothing, smoothing) cycle
   // Time with the process's CPU clock instead of the wall clock (cpu backend; meaningful with
   // one thread, where it is the solve's own time however busy the machine is).
   bool cpu_time = false;

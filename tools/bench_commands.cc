@@ -48,6 +48,9 @@ void AddBenchForward(CLI::App& bench) {
   fwd->add_option("--batch", f->o.batch, "gl: also solve this many right-hand sides (4x4 region "
                                          "lights) as one batch; 0 skips")
       ->capture_default_str();
+  fwd->add_option("--smoothing", f->o.smoothing, "Our solver's V(N, N) cycle: smoothing sweeps "
+                  "before and after each coarse correction")
+      ->capture_default_str()->check(CLI::Range(1, 8));
   fwd->add_flag("--no-peers", f->no_peers, "Skip the Eigen and Jacobi peers");
   fwd->add_flag("--json", f->json, "Print JSON instead of a table");
   fwd->callback([f] {
