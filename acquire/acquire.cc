@@ -253,13 +253,15 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     }
   }
   const calib::ResponseCurve* curve = response ? &*response : nullptr;
+  // The file the curve came from: stages that merge stacks depend on it.
+  const std::string response_file = !cap.response.file.empty() ? cap.response.file : (work / "response.yml").string();
 
   calib::WhiteBalance white;
   if (!cap.white.file.empty()) {
     white = calib::ReadWhiteBalance(cap.white.file);
   } else {
     const std::string yml = (work / "white.yml").string();
-    const std::string sig = Signature({cap.white.white, cap.white.black, (work / "response.yml").string()},
+    const std::string sig = Signature({cap.white.white, cap.white.black, response_file},
                                       fmt::format("{}{}", nlohmann::json(cap.white.patch).dump(),
                                                   nlohmann::json(cap.white.albedo).dump()));
     if (log.Done("white", sig, {yml})) {
@@ -291,7 +293,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   const fs::path hdr_dir = work / "hdr";
   auto merge = [&](const std::string& name, const std::string& stack) {
     const std::string exr = (hdr_dir / (name + ".exr")).string();
-    const std::string sig = Signature({stack, (work / "response.yml").string()});
+    const std::string sig = Signature({stack, response_file});
     if (log.Done("hdr:" + name, sig, {exr})) return calib::ReadLinearRgb(exr);
     const calib::ExposureStack s = calib::ReadExposureStack(stack);
     if (s.Size() != camera.image_size)

@@ -6,10 +6,8 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <map>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
-#include <regex>
 #include <sstream>
 #include <stdexcept>
 
