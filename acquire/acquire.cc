@@ -88,10 +88,6 @@ class StageLog {
   nlohmann::json log_;
 };
 
-cv::Mat ReadHdrOrStack(const std::string& path, const calib::ResponseCurve* response) {
-  if (!fs::is_directory(path)) return calib::ReadLinearRgb(path);
-  return calib::MergeHdr(calib::ReadExposureStack(path), response).radiance;
-}
 
 DeviceIntrinsics FromCalibration(const cv::Size& size, const cv::Matx33d& K, const cv::Mat& dist) {
   DeviceIntrinsics d;
@@ -268,8 +264,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       white = calib::ReadWhiteBalance(yml);
     } else {
       progress("white balance ...");
-      const cv::Mat w = ReadHdrOrStack(cap.white.white, curve);
-      const cv::Mat b = cap.white.black.empty() ? cv::Mat() : ReadHdrOrStack(cap.white.black, curve);
+      const cv::Mat w = calib::ReadHdrOrStack(cap.white.white, curve);
+      const cv::Mat b = cap.white.black.empty() ? cv::Mat() : calib::ReadHdrOrStack(cap.white.black, curve);
       if (w.size() != camera.image_size)
         throw InputError(fmt::format("{}: images are {}x{} but the camera calibration is {}x{}",
                                      cap.white.white, w.cols, w.rows, camera.image_size.width,
@@ -351,17 +347,23 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   d.C = cap.C;
   d.setup = cap.setup;
   const int64_t F = g.face_size();
+  // The black level, subtracted from every condition: saturated (+inf) samples of it, which do
+  // not occur in practice, count as 0 so that they cannot hide a condition's own saturation.
+  cv::Mat black_level = black.clone();
+  for (auto it = black_level.begin<cv::Vec3f>(); it != black_level.end<cv::Vec3f>(); ++it)
+    for (int k = 0; k < 3; ++k)
+      if (!std::isfinite((*it)[k])) (*it)[k] = 0;
+  DeviceIntrinsics proj;
+  calib::Pose projector_from_camera;
+  if (projector) {
+    proj = FromCalibration(projector->projector_size, projector->K, projector->dist);
+    projector_from_camera.R = projector->R;
+    projector_from_camera.t = projector->T;
+  }
   for (size_t m = 0; m < cap.conditions.size(); ++m) {
     const auto& c = cap.conditions[m];
-    cv::Mat img = hdr[m].clone();
-    if (!black.empty()) {
-      // inf - finite stays inf (saturated); the black level is never saturated in practice.
-      cv::Mat b = black.clone();
-      for (auto it = b.begin<cv::Vec3f>(); it != b.end<cv::Vec3f>(); ++it)
-        for (int k = 0; k < 3; ++k)
-          if (!std::isfinite((*it)[k])) (*it)[k] = 0;
-      img -= b;
-    }
+    cv::Mat img = hdr[m];
+    if (!black_level.empty()) img = hdr[m] - black_level;  // inf - finite stays inf (saturated)
     const FaceSamples fsm = ResampleFrontFace(img, cam, camera_from_sample, g, h, o.face_samples);
     DatasetCondition dc;
     dc.name = c.name;
@@ -371,11 +373,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       if (grey.size() != projector->projector_size)
         throw InputError(fmt::format("{}: pattern is {}x{} but the projector is {}x{}", c.pattern, grey.cols,
                                      grey.rows, projector->projector_size.width, projector->projector_size.height));
-      calib::Pose projector_from_camera;
-      projector_from_camera.R = projector->R;
-      projector_from_camera.t = projector->T;
-      dc.q = GreyPattern(ProjectPatternOnFace(grey, FromCalibration(projector->projector_size, projector->K, projector->dist),
-                                              projector_from_camera, camera_from_sample, g, h, cap.setup));
+      dc.q = GreyPattern(ProjectPatternOnFace(grey, proj, projector_from_camera, camera_from_sample, g, h, cap.setup));
     } else {
       dc.q = GreyPattern(RasterizeLightFile(LightSpec::Parse(c.light), g, h));
     }

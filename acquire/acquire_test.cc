@@ -92,13 +92,14 @@ class AcquireTest : public ::testing::Test {
 
 // Mapping targets of the capture issue: L and q from the photos within 2 % RMS of the
 // simulator's own node-space values.
-void CheckMapping(translume::Setup setup, bool auto_corners, AcquireTest* t, const std::string& capture,
+void CheckMapping(translume::Setup setup, bool auto_corners, const std::string& capture,
                   const std::string& out) {
-  (void)t;
   AcquireOptions o;
   o.solve = false;
   const CaptureSpec cap = ReadCapture(capture);
-  if (auto_corners) EXPECT_TRUE(cap.face_corners_px.empty());
+  if (auto_corners) {
+    EXPECT_TRUE(cap.face_corners_px.empty());
+  }
   const AcquireReport r = Acquire(cap, out, o);
   std::printf("%s", r.Table().c_str());
   const Dataset measured = ReadDataset(r.dataset_dir);
@@ -117,19 +118,19 @@ void CheckMapping(translume::Setup setup, bool auto_corners, AcquireTest* t, con
 
 TEST_F(AcquireTest, BackLitMappingWithinTwoPercent) {
   const std::string c = Copy(Setup::kBack);
-  CheckMapping(Setup::kBack, false, this, c, Out());
+  CheckMapping(Setup::kBack, false, c, Out());
 }
 
 TEST_F(AcquireTest, FrontLitMappingWithinTwoPercent) {
   const std::string c = Copy(Setup::kFront);
-  CheckMapping(Setup::kFront, false, this, c, Out());
+  CheckMapping(Setup::kFront, false, c, Out());
 }
 
 TEST_F(AcquireTest, AutomaticCornersWithinTwoPercent) {
   const std::string c = Copy(Setup::kBack);
   const auto given = ReadCapture(c).face_corners_px;
   EditJson(c, [](nlohmann::json& j) { j["face_corners_px"] = "auto"; });
-  CheckMapping(Setup::kBack, true, this, c, Out());
+  CheckMapping(Setup::kBack, true, c, Out());
   const nlohmann::json rep = nlohmann::json::parse(std::ifstream(WorkDir(Out()) + "/report.json"));
   for (size_t k = 0; k < 4; ++k)
     for (size_t a = 0; a < 2; ++a)
@@ -147,7 +148,7 @@ TEST_F(AcquireTest, LightSpecConditionsNeedNoProjector) {
       j["conditions"][m]["light"] = fmt::format("region:{},{}/2", m % 2, m / 2);
     }
   });
-  CheckMapping(Setup::kBack, false, this, c, Out());
+  CheckMapping(Setup::kBack, false, c, Out());
 }
 
 TEST_F(AcquireTest, EndToEndHeldOutError) {

@@ -239,11 +239,8 @@ std::string CaptureJson(const CaptureSpec& s) {
   j["setup"] = SetupName(s.setup);
   j["sample_mm"] = s.size_mm;
   j["spacing_mm"] = s.spacing_mm;
-  if (s.eta != 1.3 || std::abs(s.C - ReflectionParameterC(s.eta)) < 1e-12) j["eta"] = s.eta;
-  if (std::abs(s.C - ReflectionParameterC(s.eta)) > 1e-12) {
-    j.erase("eta");
-    j["C"] = s.C;
-  }
+  if (std::abs(s.C - ReflectionParameterC(s.eta)) < 1e-12) j["eta"] = s.eta;
+  else j["C"] = s.C;
   if (s.face_corners_px.empty()) j["face_corners_px"] = "auto";
   else j["face_corners_px"] = s.face_corners_px;
   if (!s.camera.file.empty()) j["camera"] = rel(s.camera.file);

@@ -116,22 +116,22 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
 
 std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb) {
   CV_Assert(rgb.type() == CV_32FC3);
-  cv::Mat lum(rgb.size(), CV_32F);
+  // Luminance (R + G + B), saturated pixels at the brightest finite value, negatives at 0.
+  cv::Mat lin(rgb.size(), CV_32F);
   float top = 0;
   for (int y = 0; y < rgb.rows; ++y)
     for (int x = 0; x < rgb.cols; ++x) {
       const cv::Vec3f v = rgb.at<cv::Vec3f>(y, x);
       const float l = v[0] + v[1] + v[2];
-      lum.at<float>(y, x) = l;
+      lin.at<float>(y, x) = l;
       if (std::isfinite(l)) top = std::max(top, l);
     }
   if (!(top > 0)) return {};
-  cv::Mat lin = lum.clone();
   for (float& l : cv::Mat_<float>(lin)) l = std::isfinite(l) ? std::max(l, 0.0f) : top;
-  cv::Mat log8(lum.size(), CV_8U);
+  cv::Mat log8(lin.size(), CV_8U);
   const float floor = top * 1e-6f;
-  for (int y = 0; y < lum.rows; ++y)
-    for (int x = 0; x < lum.cols; ++x) {
+  for (int y = 0; y < lin.rows; ++y)
+    for (int x = 0; x < lin.cols; ++x) {
       const float l = std::max(lin.at<float>(y, x), floor);
       log8.at<uint8_t>(y, x) = cv::saturate_cast<uint8_t>(255.0 * std::log(l / floor) / std::log(top / floor));
     }

@@ -311,6 +311,15 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
   try {
     const Geometry g = Geom(material.shape, material.spacing_mm);
     const calib::SyntheticRig srig = ToSyntheticRig(rig);
+    // Photographs a linear radiance image at `times` (the rig's response and noise, `bits` deep)
+    // and writes the stack to `dir`; returns the number of photos.
+    auto shoot = [&](const std::string& dir_out, const cv::Mat& radiance, const std::vector<double>& times,
+                     int bits, uint64_t seed) {
+      calib::StackOptions so = rig.noise;
+      so.bits = bits;
+      so.seed = seed;
+      return WriteStack(dir_out, calib::SyntheticRig::RenderExposureStack(radiance, times, rig.response, so), times);
+    };
     const double D = rig.camera_from_sample.t[2];
 
     // Camera calibration photos: a small chessboard sized to the sample.
@@ -355,11 +364,8 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
           const double base = std::pow(10.0, -4 + 4.3 * (s ? v : u)) * (0.6 + 0.4 * (s ? u : v));
           scene.at<cv::Vec3f>(y, x) = cv::Vec3f(float(base * 40), float(base * 48), float(base * 36));
         }
-      calib::StackOptions so = rig.noise;
-      so.bits = 8;
-      so.seed = o.seed * 3000 + uint64_t(s);
       const std::string d = (tmp / "calib/response" / fmt::format("s{}", s + 1)).string();
-      sum.photos += WriteStack(d, calib::SyntheticRig::RenderExposureStack(scene, rtimes, rig.response, so), rtimes);
+      sum.photos += shoot(d, scene, rtimes, 8, o.seed * 3000 + uint64_t(s));
       response_stacks.push_back(d);
     }
     progress("camera response: 2 stacks");
@@ -414,12 +420,8 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     for (int s = 0; s < 2; ++s) {
       const double q = s == 0 ? 1.0 : rig.projector_black;
       const cv::Mat img = RenderFace(rig, srig, g, [&](double, double) { return white_radiance * q; });
-      calib::StackOptions so = rig.noise;
-      so.bits = rig.bits;
-      so.seed = o.seed * 4000 + uint64_t(s);
-      sum.photos += WriteStack((tmp / (s == 0 ? "calib/white" : "calib/white_black")).string(),
-                               calib::SyntheticRig::RenderExposureStack(img, s ? btimes : wtimes, rig.response, so),
-                               s ? btimes : wtimes);
+      sum.photos += shoot((tmp / (s == 0 ? "calib/white" : "calib/white_black")).string(), img,
+                          s ? btimes : wtimes, rig.bits, o.seed * 4000 + uint64_t(s));
     }
     std::vector<cv::Point3d> patch3;
     for (const auto& c : FrontFaceCorners(g.grid, g.h))
@@ -455,26 +457,15 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
         return v;
       });
     };
-    std::vector<cv::Mat> radiance;
-    for (int m = 0; m < M; ++m) radiance.push_back(photo(m, rig.projector_black));
     CaptureSpec spec;
     spec.dir = tmp.string();
     for (int m = 0; m < M; ++m) {
-      calib::StackOptions so = rig.noise;
-      so.bits = rig.bits;
-      so.seed = o.seed * 5000 + uint64_t(m);
       const std::string d = (tmp / "lighting" / fmt::format("{:02d}", m)).string();
-      sum.photos += WriteStack(d, calib::SyntheticRig::RenderExposureStack(radiance[size_t(m)], mtimes, rig.response, so), mtimes);
+      sum.photos += shoot(d, photo(m, rig.projector_black), mtimes, rig.bits, o.seed * 5000 + uint64_t(m));
       spec.conditions.push_back({fmt::format("{:02d}", m), d, (tmp / "patterns" / fmt::format("{:02d}.png", m)).string(), ""});
     }
-    {
-      calib::StackOptions so = rig.noise;
-      so.bits = rig.bits;
-      so.seed = o.seed * 5000 + 999;
-      sum.photos += WriteStack((tmp / "lighting/black").string(),
-                               calib::SyntheticRig::RenderExposureStack(photo(-1, rig.projector_black), mtimes, rig.response, so),
-                               mtimes);
-    }
+    sum.photos += shoot((tmp / "lighting/black").string(), photo(-1, rig.projector_black), mtimes, rig.bits,
+                        o.seed * 5000 + 999);
     progress(fmt::format("{} exposure stacks of {} photos ({:.3g} s to {:.3g} s)", M + 1,
                          o.exposures, mtimes.front(), mtimes.back()));
 

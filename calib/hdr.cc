@@ -433,4 +433,9 @@ HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
   return h;
 }
 
+cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response) {
+  if (!fs::is_directory(path)) return ReadLinearRgb(path);
+  return MergeHdr(ReadExposureStack(path), response).radiance;
+}
+
 }  // namespace translume::calib

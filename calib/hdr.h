@@ -102,4 +102,8 @@ struct HdrImage {
 HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
                   const ExposureStack* black = nullptr, const MergeOptions& options = {});
 
+// A linear HDR image from `path`: an image file read as is (ReadLinearRgb), or a stack folder
+// merged with MergeHdr (`response` for 8-bit stacks, may be null otherwise).
+cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response);
+
 }  // namespace translume::calib

@@ -161,13 +161,6 @@ int RunCalibrateResponse(int argc, char** argv) {
 }
 
 // A linear HDR image: an .exr file, or an exposure stack folder merged here.
-cv::Mat ReadHdrOrStack(const std::string& path, const std::string& response_path) {
-  if (!fs::is_directory(path)) return calib::ReadLinearRgb(path);
-  calib::ResponseCurve curve;
-  if (!response_path.empty()) curve = calib::ReadResponse(response_path);
-  return calib::MergeHdr(calib::ReadExposureStack(path), response_path.empty() ? nullptr : &curve)
-      .radiance;
-}
 
 std::vector<double> ParseNumbers(const std::string& text, const char* flag, size_t n1, size_t n2) {
   std::vector<double> v;
@@ -222,8 +215,11 @@ int RunCalibrateWhite(int argc, char** argv) {
     const std::vector<double> a = ParseNumbers(albedo_text, "--albedo", 1, 3);
     albedo = a.size() == 1 ? cv::Vec3d::all(a[0]) : cv::Vec3d(a[0], a[1], a[2]);
   }
-  const cv::Mat white = ReadHdrOrStack(white_path, response_path);
-  const cv::Mat black = black_path.empty() ? cv::Mat() : ReadHdrOrStack(black_path, response_path);
+  calib::ResponseCurve curve;
+  if (!response_path.empty()) curve = calib::ReadResponse(response_path);
+  const calib::ResponseCurve* response = response_path.empty() ? nullptr : &curve;
+  const cv::Mat white = calib::ReadHdrOrStack(white_path, response);
+  const cv::Mat black = black_path.empty() ? cv::Mat() : calib::ReadHdrOrStack(black_path, response);
   const calib::WhiteBalance w = patch.empty() ? calib::WhiteFromColorChecker(white, black)
                                               : calib::WhiteFromPatch(white, black, corners, albedo);
   cv::Vec3d black_mean(0, 0, 0);
