@@ -30,32 +30,45 @@ int64_t Key(const std::array<int, 3>& g, int dir) {
   return ((int64_t(g[0]) * 4096 + g[1]) * 4096 + g[2]) * 8 + dir;
 }
 
-// Sum over the interior (free) nodes of the variance of their six edge lengths.
+// Sum over the interior (free) nodes of the variance of their six edge lengths, and its
+// gradient with respect to the free nodes' positions. Two passes, each parallel: the per-edge
+// coefficients c_ij = (d Var_i / d l_ij) / l_ij, then per node the gather
+//   grad_i = sum_j c_ij (v_i - v_j) - sum_{free j} c_ji (v_j - v_i)
+// (interior links are lattice links, so j's link back to i is in the opposite direction).
+// `c` is scratch (kept between calls: it is large).
 double VarianceObjective(const Polygrid& pg, const std::vector<char>& free_node,
-                         std::vector<Vec3>* gradient) {
+                         std::vector<Vec3>* gradient, std::vector<std::array<double, 6>>& c) {
+  const int64_t n = pg.num_interior;
+  if (gradient) c.assign(n, {0, 0, 0, 0, 0, 0});
   double f = 0;
-  if (gradient) gradient->assign(pg.size(), Vec3::Zero());
-  for (int64_t i = 0; i < pg.num_interior; ++i) {
+#pragma omp parallel for schedule(static) reduction(+ : f) if (n > 20000)
+  for (int64_t i = 0; i < n; ++i) {
     if (!free_node[i]) continue;
     double l[6], m = 0;
-    Vec3 dir[6];
     for (int j = 0; j < 6; ++j) {
-      const Vec3 e = pg.position[i] - pg.position[pg.neighbours[i][j]];
-      l[j] = e.norm();
-      dir[j] = l[j] > 0 ? Vec3(e / l[j]) : Vec3::Zero();
+      l[j] = (pg.position[i] - pg.position[pg.neighbours[i][j]]).norm();
       m += l[j] / 6;
     }
     for (int j = 0; j < 6; ++j) {
       const double r = l[j] - m;
       f += r * r / 6;
-      if (gradient) {
-        // d Var / d l_j = 2 (l_j - m) / 6 (the mean's derivative sums to zero).
-        const Vec3 g = (2 * r / 6) * dir[j];
-        (*gradient)[i] += g;
-        const int32_t k = pg.neighbours[i][j];
-        if (k < pg.num_interior && free_node[k]) (*gradient)[k] -= g;
-      }
+      // d Var / d l_j = 2 (l_j - m) / 6 (the mean's derivative sums to zero).
+      if (gradient) c[i][j] = l[j] > 0 ? 2 * r / 6 / l[j] : 0.0;
     }
+  }
+  if (!gradient) return f;
+  gradient->assign(pg.size(), Vec3::Zero());
+#pragma omp parallel for schedule(static) if (n > 20000)
+  for (int64_t i = 0; i < n; ++i) {
+    if (!free_node[i]) continue;
+    Vec3 g = Vec3::Zero();
+    for (int j = 0; j < 6; ++j) {
+      const int32_t k = pg.neighbours[i][j];
+      const Vec3 e = pg.position[i] - pg.position[k];
+      g += c[i][j] * e;
+      if (k < n && free_node[k]) g += c[k][j ^ 1] * e;
+    }
+    (*gradient)[i] = g;
   }
   return f;
 }
@@ -294,19 +307,32 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       pg.position[i] = x;
     }
   };
-  // Laplacian smoothing of the free nodes: in-place Gauss-Seidel with over-relaxation (omega
+  // Laplacian smoothing of the free nodes: red-black Gauss-Seidel with over-relaxation (omega
   // 1.7), until no node moves more than 1e-6 of the boundary spacing or `iterations` sweeps.
+  // Interior nodes are linked along the lattice only, so the nodes of one lattice parity
+  // (x + y + z even or odd) depend only on the other's: each half-sweep runs in parallel and
+  // the result does not depend on the thread count.
+  std::array<std::vector<int32_t>, 2> colour;
+  for (int64_t i = 0; i < pg.num_interior; ++i)
+    if (free_node[i]) {
+      const auto& g = pg.lattice[i];
+      colour[(g[0] + g[1] + g[2]) & 1].push_back(int32_t(i));
+    }
   auto smooth = [&](int iterations) {
     const double tol = 1e-6 * pg.mean_boundary_spacing;
     for (int it = 0; it < iterations; ++it) {
       double moved = 0;
-      for (int64_t i = 0; i < pg.num_interior; ++i) {
-        if (!free_node[i]) continue;
-        Vec3 mean = Vec3::Zero();
-        for (int j = 0; j < 6; ++j) mean += pg.position[pg.neighbours[i][j]];
-        const Vec3 step = 1.7 * (mean / 6 - pg.position[i]);
-        pg.position[i] += step;
-        moved = std::max(moved, step.norm());
+      for (const std::vector<int32_t>& nodes : colour) {
+        const int64_t n = int64_t(nodes.size());
+#pragma omp parallel for schedule(static) reduction(max : moved) if (n > 20000)
+        for (int64_t c = 0; c < n; ++c) {
+          const int32_t i = nodes[c];
+          Vec3 mean = Vec3::Zero();
+          for (int j = 0; j < 6; ++j) mean += pg.position[pg.neighbours[i][j]];
+          const Vec3 step = 1.7 * (mean / 6 - pg.position[i]);
+          pg.position[i] += step;
+          moved = std::max(moved, step.norm());
+        }
       }
       if (moved < tol) break;
     }
@@ -335,14 +361,15 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
     smooth(std::min(200, options.smooth_iterations));  // warm-started
   }
   std::vector<Vec3> grad;
-  double f = VarianceObjective(pg, free_node, &grad);
+  std::vector<std::array<double, 6>> scratch;
+  double f = VarianceObjective(pg, free_node, &grad, scratch);
   double step = 0.5;
   for (int it = 0; it < options.variance_iterations && f > 0; ++it) {
     const std::vector<Vec3> saved = pg.position;
     for (int64_t i = 0; i < pg.num_interior; ++i)
       if (free_node[i]) pg.position[i] -= step * grad[i];
     std::vector<Vec3> g2;
-    const double f2 = VarianceObjective(pg, free_node, &g2);
+    const double f2 = VarianceObjective(pg, free_node, &g2, scratch);
     if (f2 < f) {
       f = f2;
       grad.swap(g2);
