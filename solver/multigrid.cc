@@ -380,7 +380,7 @@ void MultigridSolver<T>::LineRow(const Level& L, const T* b, T* x, int64_t j, in
 
 template <typename T>
 void MultigridSolver<T>::ResidualRow(const Level& L, const T* b, const T* x, int64_t j,
-                                     T* restricted) const {
+                                     int solved, T* restricted) const {
   const GridShape& s = L.grid.shape;
   const int64_t nx = s.nx, ny = s.ny, nz = s.nz, dy = nx * nz, he = (nx + 1) / 2;
   const SplitTransferX<T>& tx = *L.tx;
@@ -393,6 +393,10 @@ void MultigridSolver<T>::ResidualRow(const Level& L, const T* b, const T* x, int
     for (int half = 0; half < 2; ++half) {
       const bool even = half == 0;
       const int64_t off = even ? 0 : he, len = even ? he : nx - he, p = row + off;
+      if (even == (((solved + j) & 1) == 0)) {  // colour `solved`'s lines: zero
+        std::fill(r + off, r + off + len, T(0));
+        continue;
+      }
       const int64_t left = even ? he - 1 : 0, right = even ? he : 1;
       HalfRowKernel<T, true>(len, !even, even ? nx % 2 == 0 : nx % 2 == 1, b + p,
                              L.sxr.data() + row + left, x + row + left, L.sxr.data() + p,
@@ -432,7 +436,7 @@ void MultigridSolver<T>::Sweep(const Level& L, const T* b, T* x, int first, bool
     for (int64_t j = j0; j < j1; ++j) {
       LineRow(L, b, x, j, first, from_zero);
       if (j - 1 >= j0 + 1) LineRow(L, b, x, j - 1, 1 - first, false);
-      if (restricted && j - 2 >= j0 + 2) ResidualRow(L, b, x, j - 2, restricted);
+      if (restricted && j - 2 >= j0 + 2) ResidualRow(L, b, x, j - 2, 1 - first, restricted);
     }
 #pragma omp barrier
     if (j1 > j0) LineRow(L, b, x, j0, 1 - first, false);
@@ -440,7 +444,7 @@ void MultigridSolver<T>::Sweep(const Level& L, const T* b, T* x, int first, bool
     if (restricted) {
 #pragma omp barrier
       for (int64_t j = j0; j < j1; ++j)
-        if (j < j0 + 2 || j > j1 - 3) ResidualRow(L, b, x, j, restricted);
+        if (j < j0 + 2 || j > j1 - 3) ResidualRow(L, b, x, j, 1 - first, restricted);
     }
   }
 }

@@ -86,8 +86,11 @@ class MultigridSolver {
   void Sweep(const Level& L, const T* b, T* x, int first, bool from_zero, T* restricted) const;
   // The line solves of colour `color`'s columns in row j (all planes).
   void LineRow(const Level& L, const T* b, T* x, int64_t j, int color, bool from_zero) const;
-  // Residual of row j (all planes), restricted along x into `restricted`.
-  void ResidualRow(const Level& L, const T* b, const T* x, int64_t j, T* restricted) const;
+  // Residual of row j (all planes), restricted along x into `restricted`. Colour `solved`'s
+  // lines were the last to be solved exactly given all their neighbours, so their residual is
+  // zero (to rounding) and is not computed: half the work.
+  void ResidualRow(const Level& L, const T* b, const T* x, int64_t j, int solved,
+                   T* restricted) const;
   void Restrict(const Level& L, const T* fine, T* coarse) const;
   void ProlongAdd(const Level& L, const T* coarse, T* fine) const;
 
