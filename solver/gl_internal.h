@@ -19,19 +19,43 @@ namespace gl_internal {
 
 using gl::api;
 
-// A shader storage buffer.
+// How the shaders are specialised for the device (docs/gpu.md, "Shaders on llvmpipe"). Mesa
+// llvmpipe (22.x) runs every shader-storage-buffer access as a scalar loop over the SIMD lanes
+// with a bounds check per lane (~7 ns per access and invocation), an image-buffer access as one
+// vector gather (~0.5 ns), and pays a fixed cost per invocation; a GPU wants plain buffer loads
+// and many invocations. Chosen once from GL_RENDERER; TRANSLUME_GL_TUNING=llvmpipe|gpu forces one.
+struct Tuning {
+  // Arrays as image buffers (imageLoad / imageStore, TL_IMAGES in common.glsl) instead of
+  // shader storage buffers.
+  bool images = false;
+  // One invocation per z-column of a level (kz = nz, common.glsl's Column) instead of one per
+  // node (kz = 1), and grid-stride loops over at most `flat_groups` work groups per field for
+  // the element-wise kernels (0: one invocation per element).
+  bool columns = false;
+  int flat_groups = 0;
+};
+const Tuning& GetTuning();
+
+// A buffer's element type: its image format when the shaders read it as an image buffer.
+enum class Elem { kFloat, kInt, kDouble, kVec4 };
+
+// A shader storage buffer (and, under Tuning::images, the buffer texture that shaders bind as
+// an image buffer).
 class Buffer {
  public:
   Buffer() = default;
   Buffer(const Buffer&) = delete;
   ~Buffer() {
+    if (tex_) api.DeleteTextures(1, &tex_);
     if (id_) api.DeleteBuffers(1, &id_);
   }
-  void Alloc(int64_t bytes, const void* data = nullptr) {
+  void Alloc(int64_t bytes, const void* data = nullptr, Elem elem = Elem::kFloat) {
     if (!id_) api.GenBuffers(1, &id_);
     bytes_ = std::max<int64_t>(bytes, 16);
+    elem_ = elem;
     api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
     api.BufferData(GL_SHADER_STORAGE_BUFFER, bytes_, data, GL_DYNAMIC_DRAW);
+    if (tex_) AttachTexture();
   }
   // Writes / reads `bytes` bytes at byte `offset` (a field of a batched buffer: f n elements).
   void Upload(const void* data, int64_t bytes, int64_t offset = 0) {
@@ -53,10 +77,34 @@ class Buffer {
     api.CopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, 0, bytes);
   }
   GLuint id() const { return id_; }
+  // Binds the buffer to image unit `unit` (read-write, in its element's format).
+  void BindImage(GLuint unit) const {
+    if (!tex_) {
+      api.GenTextures(1, &tex_);
+      AttachTexture();
+    }
+    api.BindImageTexture(unit, tex_, 0, GL_FALSE, 0, GL_READ_WRITE, Format());
+  }
 
  private:
+  GLenum Format() const {
+    switch (elem_) {
+      case Elem::kInt: return GL_R32I;
+      case Elem::kDouble: return GL_RG32UI;  // unpacked with packDouble2x32 (common.glsl)
+      case Elem::kVec4: return GL_RGBA32F;
+      default: return GL_R32F;
+    }
+  }
+  void AttachTexture() const {
+    api.BindTexture(GL_TEXTURE_BUFFER, tex_);
+    api.TexBuffer(GL_TEXTURE_BUFFER, Format(), id_);
+    api.BindTexture(GL_TEXTURE_BUFFER, 0);
+  }
+
   GLuint id_ = 0;
+  mutable GLuint tex_ = 0;
   int64_t bytes_ = 0;
+  Elem elem_ = Elem::kFloat;
 };
 
 // The program of solver/shaders/NAME.comp, compiled once per `defines` (e.g. "#define X\n").
@@ -75,6 +123,11 @@ int64_t RunBatch(const char* name, std::initializer_list<const Buffer*> buffers,
                  const char* defines = "");
 // Work groups per field that Run and RunBatch dispatch for `threads` threads.
 int64_t WorkGroups(int64_t threads);
+// Invocations for a grid-stride loop over n elements (Tuning::flat_groups).
+int64_t FlatThreads(int64_t n);
+// Nodes per invocation of a column kernel on a level (common.glsl's kz), and its invocations.
+int ColumnLength(const GridShape& s);
+int64_t ColumnThreads(const GridShape& s);
 
 // Slots of the per-field conjugate-gradient scalars; mirrors common.glsl's kCg* constants.
 enum CgSlot { kCgRz, kCgPq, kCgRr, kCgRzNew, kCgBb, kCgActive, kCgIter, kCgTol2, kCgStride };
@@ -95,10 +148,10 @@ struct AxisBuffers {
       wf[2 * f] = float(t.wlo[f]);
       wf[2 * f + 1] = float(t.whi[f]);
     }
-    gstart.Alloc(gs.size() * 4, gs.data());
-    gidx.Alloc(gi.size() * 4, gi.data());
+    gstart.Alloc(gs.size() * 4, gs.data(), Elem::kInt);
+    gidx.Alloc(gi.size() * 4, gi.data(), Elem::kInt);
     gw.Alloc(gwf.size() * 4, gwf.data());
-    lohi.Alloc(lh.size() * 4, lh.data());
+    lohi.Alloc(lh.size() * 4, lh.data(), Elem::kInt);
     w.Alloc(wf.size() * 4, wf.data());
   }
 };
@@ -118,6 +171,10 @@ struct GLevel {
 
 using gl_internal::AxisBuffers;
 using gl_internal::Buffer;
+using gl_internal::ColumnLength;
+using gl_internal::ColumnThreads;
+using gl_internal::Elem;
+using gl_internal::FlatThreads;
 using gl_internal::GLevel;
 using gl_internal::Run;
 using gl_internal::kCgActive;
@@ -160,7 +217,8 @@ struct GlMultigridSolver::Impl {
     const int ny = int(L.s.ny), nz = int(L.s.nz), mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
     auto pass = [&](const AxisBuffers& a, const Buffer& in, Buffer& out, int inner, int outer) {
       RunBatch("restrict_axis", {&in, &out, &a.gstart, &a.gidx, &a.gw},
-               {a.n_fine, a.n_coarse, inner, outer}, int64_t(outer) * a.n_coarse * inner, nb);
+               {a.n_fine, a.n_coarse, inner, outer},
+               FlatThreads(int64_t(outer) * a.n_coarse * inner), nb);
     };
     pass(L.t[0], f, L.tmp_a, 1, ny * nz);
     pass(L.t[1], L.tmp_a, L.tmp_b, mx, nz);
@@ -172,7 +230,8 @@ struct GlMultigridSolver::Impl {
     auto pass = [&](const AxisBuffers& a, const Buffer& in, Buffer& out, int inner, int outer,
                     int add) {
       RunBatch("prolong_axis", {&in, &out, &a.lohi, &a.w},
-               {a.n_coarse, a.n_fine, inner, outer, add}, int64_t(outer) * a.n_fine * inner, nb);
+               {a.n_coarse, a.n_fine, inner, outer, add}, FlatThreads(int64_t(outer) * a.n_fine * inner),
+               nb);
     };
     pass(L.t[2], c, L.tmp_b, mx * my, 1, 0);
     pass(L.t[1], L.tmp_b, L.tmp_a, mx, nz, 0);
@@ -188,7 +247,7 @@ struct GlMultigridSolver::Impl {
   void Stencil(GLevel& L, const Buffer& x, const Buffer& b, Buffer& out, int mode, int nb,
                bool x_double = false) {
     RunBatch("residual", {&L.cx, &L.cy, &L.cz, &L.diag, &x, &b, &out},
-             {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode}, L.n, nb,
+             {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode, ColumnLength(L.s)}, ColumnThreads(L.s), nb,
              x_double ? "#define X_DOUBLE\n" : "");
   }
 
@@ -197,11 +256,12 @@ struct GlMultigridSolver::Impl {
 
   // a . b of every field (double) into scal[f kCgStride + slot]; Dot2 also a . c into slot + 1.
   void Dot(const Buffer& a, const Buffer& b, int slot, int nb) {
-    const int64_t m = RunBatch("dot", {&a, &b, &partial}, {int(n0)}, n0, nb);
+    const int64_t m = RunBatch("dot", {&a, &b, &partial}, {int(n0)}, FlatThreads(n0), nb);
     RunBatch("reduce", {&partial, &scal}, {int(m), slot, 1, kCgStride}, 256, nb);
   }
   void Dot2(const Buffer& a, const Buffer& b, const Buffer& c, int slot, int nb) {
-    const int64_t m = RunBatch("dot", {&a, &b, &partial, &c}, {int(n0)}, n0, nb, "#define PAIR\n");
+    const int64_t m =
+        RunBatch("dot", {&a, &b, &partial, &c}, {int(n0)}, FlatThreads(n0), nb, "#define PAIR\n");
     RunBatch("reduce", {&partial, &scal}, {int(m), slot, 2, kCgStride}, 256, nb);
   }
 

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fmt/format.h>
 #include <map>
@@ -40,12 +41,15 @@ std::string NameLog(const std::string& log, const std::string& common, const std
   return out;
 }
 
-// Compiles and links one compute program from common.glsl, `defines` and the file's text.
+// Compiles and links one compute program from common.glsl, `defines` and the file's text
+// (TL_IMAGES defined first under Tuning::images).
 GLuint CompileProgram(const gl::EmbeddedShader& common, const std::string& defines,
                       const std::string& file_name, const char* source) {
   GLuint shader = api.CreateShader(GL_COMPUTE_SHADER);
-  const std::string text = fmt::format("#version 430\n#line {}\n{}{}#line 1\n{}", kCommonLine,
-                                       common.source, defines, source);
+  const std::string text =
+      fmt::format("#version 430\n{}#line {}\n{}{}#line 1\n{}",
+                  GetTuning().images ? "#define TL_IMAGES\n" : "", kCommonLine, common.source,
+                  defines, source);
   const char* sources[1] = {text.c_str()};
   api.ShaderSource(shader, 1, sources, nullptr);
   api.CompileShader(shader);
@@ -78,6 +82,25 @@ const gl::EmbeddedShader& FindShader(const std::string& name) {
   std::abort();
 }
 
+const Tuning& GetTuning() {
+  static const Tuning tuning = [] {
+    const char* forced = std::getenv("TRANSLUME_GL_TUNING");
+    const std::string f = forced ? forced : "";
+    if (!f.empty() && f != "llvmpipe" && f != "gpu")
+      throw InputError(fmt::format("TRANSLUME_GL_TUNING='{}' is not llvmpipe or gpu", f));
+    const bool cpu = f.empty() ? GlContext::Get().info().renderer.find("llvmpipe") != std::string::npos
+                               : f == "llvmpipe";
+    Tuning t;
+    if (cpu) {
+      t.images = true;
+      t.columns = true;
+      t.flat_groups = 8;
+    }
+    return t;
+  }();
+  return tuning;
+}
+
 // The program of solver/shaders/NAME.comp, compiled once with `defines` (e.g. "#define X\n").
 GLuint Program(const std::string& name, const std::string& defines) {
   static std::map<std::string, GLuint> cache;
@@ -108,17 +131,35 @@ int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
   const GLuint prog = Program(name, defines);
   api.UseProgram(prog);
   GLuint b = 0;
-  for (const Buffer* buf : buffers) api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, b++, buf->id());
+  const bool images = GetTuning().images;
+  for (const Buffer* buf : buffers) {
+    if (images)
+      buf->BindImage(b++);
+    else
+      api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, b++, buf->id());
+  }
   GLint loc = 0;
   for (int v : ints) api.Uniform1i(loc++, v);
   if (float_location >= 0) api.Uniform1f(float_location, float_value);
   const auto [gx, gy] = Tiling(threads);
   api.DispatchCompute(GLuint(gx), GLuint(gy), GLuint(fields));
-  api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+  api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
   return gx * gy;
 }
 
 }  // namespace
+
+int64_t FlatThreads(int64_t n) {
+  const int groups = GetTuning().flat_groups;
+  return groups > 0 ? std::min<int64_t>(n, int64_t(groups) * 256) : n;
+}
+
+int ColumnLength(const GridShape& s) { return GetTuning().columns ? int(s.nz) : 1; }
+
+int64_t ColumnThreads(const GridShape& s) {
+  const int64_t kz = ColumnLength(s);
+  return s.nx * s.ny * ((s.nz + kz - 1) / kz);
+}
 
 int64_t WorkGroups(int64_t threads) {
   const auto [gx, gy] = Tiling(threads);
@@ -199,6 +240,11 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
   const GlInfo& info = GlContext::Get().info();
   int64_t most = std::min<int64_t>({info.max_ssbo_bytes / (I.n0 * 8), ((int64_t(1) << 31) - 1) / I.n0,
                                     info.max_work_group_count[2], 4096});
+  if (gl_internal::GetTuning().images) {  // ... and within the largest buffer texture
+    GLint texels = 0;
+    api.GetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &texels);
+    most = std::min<int64_t>(most, texels / I.n0);
+  }
   I.max_batch = int(std::max<int64_t>(1, most));
   I.Reserve(1);
 }
@@ -216,10 +262,10 @@ void GlMultigridSolver::Impl::Reserve(int fields) {
     }
   }
   for (Buffer* b : {&r, &z, &p, &q}) b->Alloc(n0 * 4 * fields);
-  xd.Alloc(n0 * 8 * fields);
-  partial.Alloc(WorkGroups(n0) * 2 * 8 * fields);
-  scal.Alloc(kCgStride * 8 * fields);
-  hist.Alloc(int64_t(options.max_iterations) * 8 * fields);
+  xd.Alloc(n0 * 8 * fields, nullptr, Elem::kDouble);
+  partial.Alloc(WorkGroups(FlatThreads(n0)) * 2 * 8 * fields, nullptr, Elem::kDouble);
+  scal.Alloc(kCgStride * 8 * fields, nullptr, Elem::kDouble);
+  hist.Alloc(int64_t(options.max_iterations) * 8 * fields, nullptr, Elem::kDouble);
   capacity = fields;
 }
 
@@ -238,11 +284,11 @@ void GlMultigridSolver::SetCoefficients(const float* kappa, const float* mu, dou
       GLevel& F = *I.levels[l - 1];
       I.Restrict(F, F.kappa, L.kappa, 1);
       I.Restrict(F, F.mu, L.mu, 1);
-      Run("divide", {&L.kappa, &L.rnorm}, {int(L.n)}, L.n);
-      Run("divide", {&L.mu, &L.rnorm}, {int(L.n)}, L.n);
+      Run("divide", {&L.kappa, &L.rnorm}, {int(L.n)}, FlatThreads(L.n));
+      Run("divide", {&L.mu, &L.rnorm}, {int(L.n)}, FlatThreads(L.n));
     }
     Run("assemble", {&L.kappa, &L.mu, &L.geometry, &L.cx, &L.cy, &L.cz, &L.diag},
-        {int(L.s.nx), int(L.s.ny), int(L.s.nz)}, L.n, 3, float(1.0 / (2.0 * C)));
+        {int(L.s.nx), int(L.s.ny), int(L.s.nz)}, FlatThreads(L.n), 3, float(1.0 / (2.0 * C)));
     Run("factor", {&L.cz, &L.diag, &L.inv, &L.luc}, {int(L.s.nx), int(L.s.ny), int(L.s.nz)},
         L.s.nx * L.s.ny);
   }
@@ -385,11 +431,12 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
   while (any && it < max_it) {
     Stencil(L, p, p, q, 1, nb);
     Dot(p, q, kCgPq, nb);
-    RunBatch("cg_update", {&x, &r, &p, &q, &scal}, {int(n)}, n, nb);
+    RunBatch("cg_update", {&x, &r, &p, &q, &scal}, {int(n)}, FlatThreads(n), nb);
     // Precondition before looking at the residual: both dots from one pass.
     VCycle(0, r, z, nb);
     Dot2(r, r, z, kCgRr, nb);  // rr and rz_new
-    RunBatch("cg_update", {&p, &z, &z, &z, &scal}, {int(n)}, n, nb, "#define DIRECTION\n");
+    RunBatch("cg_update", {&p, &z, &z, &z, &scal}, {int(n)}, FlatThreads(n), nb,
+             "#define DIRECTION\n");
     Run("cg_scalars", {&scal, &hist}, {nb, max_it}, nb);
     ++it;
     if (it % check_every != 0 && it < max_it) continue;
@@ -481,14 +528,14 @@ double GlMultigridSolver::TimeApply(int repetitions) {
 double GlMultigridSolver::TimeCopy(int64_t bytes, int repetitions) {
   Buffer src, dst;
   const int64_t n4 = bytes / 16;
-  src.Alloc(n4 * 16);
-  dst.Alloc(n4 * 16);
+  src.Alloc(n4 * 16, nullptr, Elem::kVec4);
+  dst.Alloc(n4 * 16, nullptr, Elem::kVec4);
   src.Zero();
   std::vector<double> times;
   api.Finish();
   for (int r = 0; r < repetitions; ++r) {
     const auto t0 = std::chrono::steady_clock::now();
-    for (int k = 0; k < 10; ++k) Run("copy", {&src, &dst}, {int(n4)}, n4);
+    for (int k = 0; k < 10; ++k) Run("copy", {&src, &dst}, {int(n4)}, FlatThreads(n4));
     api.Finish();
     times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / 10);
   }

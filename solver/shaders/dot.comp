@@ -1,12 +1,13 @@
 // SPDX-License-Identifier: MIT
 // Per-work-group partial sums of a . b (and, with PAIR defined, of a . c too), accumulated in
-// double. Batched: a, b, c hold one field of n values per work-group z; the partial sums of
-// field f, group g (G groups per field) are at partial[(f G + g) W + k], W = 1 or 2 sums.
-layout(std430, binding = 0) readonly buffer A { float a[]; };
-layout(std430, binding = 1) readonly buffer B { float b[]; };
-layout(std430, binding = 2) writeonly buffer Partial { double partial[]; };
+// double, each invocation first summing its elements of a grid-stride loop (common.glsl).
+// Batched: a, b, c hold one field of n values per work-group z; the partial sums of field f,
+// group g (G groups per field) are at partial[(f G + g) W + k], W = 1 or 2 sums.
+FLOATS(0, A, a, readonly);
+FLOATS(1, B, b, readonly);
+DOUBLES(2, Partial, partial, writeonly);
 #ifdef PAIR
-layout(std430, binding = 3) readonly buffer C { float c[]; };
+FLOATS(3, C, c, readonly);
 const uint W = 2u;
 shared double sdata1[256];
 #else
@@ -16,12 +17,18 @@ layout(location = 0) uniform int n;
 shared double sdata[256];
 
 void main() {
-  uint p = ThreadIndex(), l = gl_LocalInvocationID.x;
-  bool inside = p < uint(n);
-  uint o = inside ? Field() * uint(n) + p : 0u;
-  sdata[l] = inside ? double(a[o]) * double(b[o]) : 0.0LF;
+  uint l = gl_LocalInvocationID.x, f0 = Field() * uint(n);
+  double s0 = 0.0LF, s1 = 0.0LF;
+  for (uint e = ThreadIndex(); e < uint(n); e += Stride()) {
+    double ae = double(LD(a, f0 + e));
+    s0 += ae * double(LD(b, f0 + e));
 #ifdef PAIR
-  sdata1[l] = inside ? double(a[o]) * double(c[o]) : 0.0LF;
+    s1 += ae * double(LD(c, f0 + e));
+#endif
+  }
+  sdata[l] = s0;
+#ifdef PAIR
+  sdata1[l] = s1;
 #endif
   barrier();
   for (uint s = 128u; s > 0u; s >>= 1u) {
@@ -37,9 +44,9 @@ void main() {
     uint groups = gl_NumWorkGroups.x * gl_NumWorkGroups.y;
     uint g = gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
     uint at = (Field() * groups + g) * W;
-    partial[at] = sdata[0];
+    STD(partial, at, sdata[0]);
 #ifdef PAIR
-    partial[at + 1u] = sdata1[0];
+    STD(partial, at + 1u, sdata1[0]);
 #endif
   }
 }
