@@ -33,6 +33,10 @@ struct Tuning {
   // the element-wise kernels (0: one invocation per element).
   bool columns = false;
   int flat_groups = 0;
+  // Invocations per work group (common.glsl's TL_GROUP).
+  int group = 256;
+  // Dots leave one partial sum per invocation, no shared-memory tree (TL_INVOCATION_SUMS).
+  bool invocation_sums = false;
 };
 const Tuning& GetTuning();
 
@@ -111,8 +115,8 @@ class Buffer {
 GLuint Program(const std::string& name, const std::string& defines = "");
 
 // Binds `buffers` to bindings 0.., sets int uniforms at locations 0.., an optional float
-// uniform, and dispatches `threads` threads (256 per group, tiled to stay under 65535 groups per
-// dimension), followed by a shader-storage barrier. Returns the number of work groups.
+// uniform, and dispatches `threads` threads (Tuning::group per group, tiled to stay under 65535
+// groups per dimension), followed by a barrier. Returns the number of work groups.
 int64_t Run(const char* name, std::initializer_list<const Buffer*> buffers,
             std::initializer_list<int> ints, int64_t threads, int float_location = -1,
             float float_value = 0, const char* defines = "");
@@ -123,6 +127,9 @@ int64_t RunBatch(const char* name, std::initializer_list<const Buffer*> buffers,
                  const char* defines = "");
 // Work groups per field that Run and RunBatch dispatch for `threads` threads.
 int64_t WorkGroups(int64_t threads);
+// Invocations of dot.comp for n elements, and the partial sums per field they leave.
+int64_t DotThreads(int64_t n);
+int64_t DotPartials(int64_t threads);
 // Invocations for a grid-stride loop over n elements (Tuning::flat_groups).
 int64_t FlatThreads(int64_t n);
 // Nodes per invocation of a column kernel on a level (common.glsl's kz), and its invocations.
@@ -175,6 +182,7 @@ using gl_internal::ColumnLength;
 using gl_internal::ColumnThreads;
 using gl_internal::Elem;
 using gl_internal::FlatThreads;
+using gl_internal::GetTuning;
 using gl_internal::GLevel;
 using gl_internal::Run;
 using gl_internal::kCgActive;
@@ -187,6 +195,8 @@ using gl_internal::kCgRzNew;
 using gl_internal::kCgStride;
 using gl_internal::kCgTol2;
 using gl_internal::RunBatch;
+using gl_internal::DotPartials;
+using gl_internal::DotThreads;
 using gl_internal::WorkGroups;
 
 struct GlMultigridSolver::Impl {
@@ -256,13 +266,14 @@ struct GlMultigridSolver::Impl {
 
   // a . b of every field (double) into scal[f kCgStride + slot]; Dot2 also a . c into slot + 1.
   void Dot(const Buffer& a, const Buffer& b, int slot, int nb) {
-    const int64_t m = RunBatch("dot", {&a, &b, &partial}, {int(n0)}, FlatThreads(n0), nb);
-    RunBatch("reduce", {&partial, &scal}, {int(m), slot, 1, kCgStride}, 256, nb);
+    RunBatch("dot", {&a, &b, &partial}, {int(n0)}, DotThreads(n0), nb);
+    const int64_t m = DotPartials(DotThreads(n0));
+    RunBatch("reduce", {&partial, &scal}, {int(m), slot, 1, kCgStride}, GetTuning().group, nb);
   }
   void Dot2(const Buffer& a, const Buffer& b, const Buffer& c, int slot, int nb) {
-    const int64_t m =
-        RunBatch("dot", {&a, &b, &partial, &c}, {int(n0)}, FlatThreads(n0), nb, "#define PAIR\n");
-    RunBatch("reduce", {&partial, &scal}, {int(m), slot, 2, kCgStride}, 256, nb);
+    RunBatch("dot", {&a, &b, &partial, &c}, {int(n0)}, DotThreads(n0), nb, "#define PAIR\n");
+    const int64_t m = DotPartials(DotThreads(n0));
+    RunBatch("reduce", {&partial, &scal}, {int(m), slot, 2, kCgStride}, GetTuning().group, nb);
   }
 
   // Multigrid-PCG on `nb` fields at once, in lockstep (every dispatch serves all of them): b

@@ -42,14 +42,16 @@ std::string NameLog(const std::string& log, const std::string& common, const std
 }
 
 // Compiles and links one compute program from common.glsl, `defines` and the file's text
-// (TL_IMAGES defined first under Tuning::images).
+// (first the Tuning's defines: TL_IMAGES, TL_INVOCATION_SUMS, TL_GROUP).
 GLuint CompileProgram(const gl::EmbeddedShader& common, const std::string& defines,
                       const std::string& file_name, const char* source) {
   GLuint shader = api.CreateShader(GL_COMPUTE_SHADER);
   const std::string text =
-      fmt::format("#version 430\n{}#line {}\n{}{}#line 1\n{}",
-                  GetTuning().images ? "#define TL_IMAGES\n" : "", kCommonLine, common.source,
-                  defines, source);
+      fmt::format("#version 430\n{}{}{}#line {}\n{}{}#line 1\n{}",
+                  GetTuning().images ? "#define TL_IMAGES\n" : "",
+                  GetTuning().invocation_sums ? "#define TL_INVOCATION_SUMS\n" : "",
+                  fmt::format("#define TL_GROUP {}\n", GetTuning().group), kCommonLine,
+                  common.source, defines, source);
   const char* sources[1] = {text.c_str()};
   api.ShaderSource(shader, 1, sources, nullptr);
   api.CompileShader(shader);
@@ -95,6 +97,8 @@ const Tuning& GetTuning() {
       t.images = true;
       t.columns = true;
       t.flat_groups = 8;
+      t.group = 64;
+      t.invocation_sums = true;
     }
     return t;
   }();
@@ -114,15 +118,17 @@ GLuint Program(const std::string& name, const std::string& defines) {
 
 namespace {
 
-// Work groups (x, y) for `threads` threads: 256 per group, at most 65535 groups along x.
+// Work groups (x, y) for `threads` threads: Tuning::group per group, at most 65535 groups
+// along x.
 std::pair<int64_t, int64_t> Tiling(int64_t threads) {
-  const int64_t groups = std::max<int64_t>(1, (threads + 255) / 256);
+  const int64_t g = GetTuning().group;
+  const int64_t groups = std::max<int64_t>(1, (threads + g - 1) / g);
   const int64_t gx = std::min<int64_t>(groups, 65535);
   return {gx, (groups + gx - 1) / gx};
 }
 
 // Binds `buffers` to bindings 0.., sets int uniforms at locations 0.. and an optional float
-// uniform, and dispatches `threads` threads per field (256 per group, tiled to stay under 65535
+// uniform, and dispatches `threads` threads per field (Tuning::group per group, tiled under 65535
 // groups per dimension) for `fields` fields (work-group z), followed by a shader-storage
 // barrier. Returns the number of work groups per field.
 int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
@@ -151,7 +157,7 @@ int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
 
 int64_t FlatThreads(int64_t n) {
   const int groups = GetTuning().flat_groups;
-  return groups > 0 ? std::min<int64_t>(n, int64_t(groups) * 256) : n;
+  return groups > 0 ? std::min<int64_t>(n, int64_t(groups) * GetTuning().group) : n;
 }
 
 int ColumnLength(const GridShape& s) { return GetTuning().columns ? int(s.nz) : 1; }
@@ -159,6 +165,16 @@ int ColumnLength(const GridShape& s) { return GetTuning().columns ? int(s.nz) : 
 int64_t ColumnThreads(const GridShape& s) {
   const int64_t kz = ColumnLength(s);
   return s.nx * s.ny * ((s.nz + kz - 1) / kz);
+}
+
+// With one partial sum per invocation, two work groups per field: reduce.comp adds the
+// partial sums up in one invocation per field.
+int64_t DotThreads(int64_t n) {
+  return GetTuning().invocation_sums ? std::min<int64_t>(n, 2 * GetTuning().group) : FlatThreads(n);
+}
+
+int64_t DotPartials(int64_t threads) {
+  return WorkGroups(threads) * (GetTuning().invocation_sums ? GetTuning().group : 1);
 }
 
 int64_t WorkGroups(int64_t threads) {
@@ -263,7 +279,7 @@ void GlMultigridSolver::Impl::Reserve(int fields) {
   }
   for (Buffer* b : {&r, &z, &p, &q}) b->Alloc(n0 * 4 * fields);
   xd.Alloc(n0 * 8 * fields, nullptr, Elem::kDouble);
-  partial.Alloc(WorkGroups(FlatThreads(n0)) * 2 * 8 * fields, nullptr, Elem::kDouble);
+  partial.Alloc(DotPartials(DotThreads(n0)) * 2 * 8 * fields, nullptr, Elem::kDouble);
   scal.Alloc(kCgStride * 8 * fields, nullptr, Elem::kDouble);
   hist.Alloc(int64_t(options.max_iterations) * 8 * fields, nullptr, Elem::kDouble);
   capacity = fields;

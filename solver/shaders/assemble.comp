@@ -20,7 +20,7 @@ layout(location = 3) uniform float robin;  // 1 / (2 C)
 float Conductance(float area_over_gap, float ka, float kb) { return 0.5 * area_over_gap * (ka + kb); }
 
 void Node(uint p) {
-  int i = int(p) % nx, j = (int(p) / nx) % ny, k = int(p) / (nx * ny);
+  int r = Div(int(p), nx), i = int(p) - r * nx, k = Div(r, ny), j = r - k * ny;
   int nxy = nx * ny, g0 = nx + ny + nz;
   float wx = LD(geo, i), wy = LD(geo, nx + j), wz = LD(geo, nx + ny + k);
   float kp = LD(kappa, p);

@@ -4,10 +4,15 @@
 // exceed 65535 groups. Batched dispatches (several right-hand sides of one operator) add a
 // third dimension: work-group z is the field index, and every per-field buffer holds its
 // fields back to back (field f of a level with n nodes occupies [f n, (f + 1) n)).
-layout(local_size_x = 256) in;
+// TL_GROUP invocations per work group: 256, or what the host defines (64 on llvmpipe, where the
+// invocations of a mostly idle group of a small level still cost).
+#ifndef TL_GROUP
+#define TL_GROUP 256
+#endif
+layout(local_size_x = TL_GROUP) in;
 
 uint ThreadIndex() {
-  return gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+  return gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * uint(TL_GROUP);
 }
 
 // The field (right-hand side) this invocation works on, 0 in unbatched dispatches.
@@ -16,15 +21,25 @@ uint Field() { return gl_WorkGroupID.z; }
 // Invocations per field: the step of a grid-stride loop `for (e = ThreadIndex(); e < n; e +=
 // Stride())`. The host launches one invocation per element on a GPU (one pass of the loop) and
 // a few work groups per field on llvmpipe (gl_internal.h, Tuning).
-uint Stride() { return gl_NumWorkGroups.x * gl_NumWorkGroups.y * 256u; }
+uint Stride() { return gl_NumWorkGroups.x * gl_NumWorkGroups.y * uint(TL_GROUP); }
+
+// a / b for 0 <= a < 2^31, b > 0. llvmpipe scalarises integer division (one divide per SIMD
+// lane); there it is a vector double division, exact for these ranges.
+int Div(int a, int b) {
+#ifdef TL_IMAGES
+  return int(double(a) / double(b));
+#else
+  return a / b;
+#endif
+}
 
 // Per-node kernels walk a level's nodes in z-columns of kz nodes (kz a uniform from the host:
 // 1 on a GPU, one node per invocation; nz on llvmpipe, whose fixed cost per invocation is
 // high). Invocation t covers i = t % nx, j = (t / nx) % ny, k = k0 .. k1 - 1 with
 // k0 = kz (t / (nx ny)), so neighbouring invocations take neighbouring i (coalesced).
 bool Column(int nx, int ny, int nz, int kz, out int i, out int j, out int k0, out int k1) {
-  int t = int(ThreadIndex()), nxy = nx * ny, c = t / nxy, r = t - c * nxy;
-  j = r / nx;
+  int t = int(ThreadIndex()), nxy = nx * ny, c = Div(t, nxy), r = t - c * nxy;
+  j = Div(r, nx);
   i = r - j * nx;
   k0 = c * kz;
   k1 = min(k0 + kz, nz);

@@ -1,20 +1,22 @@
 // SPDX-License-Identifier: MIT
-// Per-work-group partial sums of a . b (and, with PAIR defined, of a . c too), accumulated in
-// double, each invocation first summing its elements of a grid-stride loop (common.glsl).
-// Batched: a, b, c hold one field of n values per work-group z; the partial sums of field f,
-// group g (G groups per field) are at partial[(f G + g) W + k], W = 1 or 2 sums.
+// Partial sums of a . b (and, with PAIR defined, of a . c too), accumulated in double, each
+// invocation first summing its elements of a grid-stride loop (common.glsl), then one sum per
+// work group from a shared-memory tree; with TL_INVOCATION_SUMS (llvmpipe, where barriers are
+// coroutine switches) one sum per invocation instead. Batched: a, b, c hold one field of n
+// values per work-group z; partial sum g of field f (G per field) is at partial[(f G + g) W + k],
+// W = 1 or 2 sums.
 FLOATS(0, A, a, readonly);
 FLOATS(1, B, b, readonly);
 DOUBLES(2, Partial, partial, writeonly);
 #ifdef PAIR
 FLOATS(3, C, c, readonly);
 const uint W = 2u;
-shared double sdata1[256];
+shared double sdata1[TL_GROUP];
 #else
 const uint W = 1u;
 #endif
 layout(location = 0) uniform int n;
-shared double sdata[256];
+shared double sdata[TL_GROUP];
 
 void main() {
   uint l = gl_LocalInvocationID.x, f0 = Field() * uint(n);
@@ -26,12 +28,20 @@ void main() {
     s1 += ae * double(LD(c, f0 + e));
 #endif
   }
+#ifdef TL_INVOCATION_SUMS
+  uint at = (Field() * Stride() + ThreadIndex()) * W;
+  STD(partial, at, s0);
+#ifdef PAIR
+  STD(partial, at + 1u, s1);
+#endif
+  return;
+#endif
   sdata[l] = s0;
 #ifdef PAIR
   sdata1[l] = s1;
 #endif
   barrier();
-  for (uint s = 128u; s > 0u; s >>= 1u) {
+  for (uint s = uint(TL_GROUP) / 2u; s > 0u; s >>= 1u) {
     if (l < s) {
       sdata[l] += sdata[l + s];
 #ifdef PAIR

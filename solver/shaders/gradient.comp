@@ -16,7 +16,7 @@ layout(location = 2) uniform int nz;
 layout(location = 3) uniform int fields;
 
 void Node(uint p) {
-  int i = int(p) % nx, j = (int(p) / nx) % ny, k = int(p) / (nx * ny);
+  int r = Div(int(p), nx), i = int(p) - r * nx, k = Div(r, ny), j = r - k * ny;
   int n = nx * ny * nz, g0 = nx + ny + nz;
   double wx = double(LD(geo, i)), wy = double(LD(geo, nx + j)), wz = double(LD(geo, nx + ny + k));
   // Half the area over the gap of each face (0 on the boundary), with the neighbour's offset.

@@ -15,7 +15,7 @@ layout(location = 4) uniform int add;
 void main() {
   int field = int(Field()), in0 = field * outer * n_in * inner;
   for (uint e = ThreadIndex(); e < uint(outer * n_out * inner); e += Stride()) {
-    int v = int(e) % inner, f = (int(e) / inner) % n_out, o = int(e) / (inner * n_out);
+    int ef = Div(int(e), inner), v = int(e) - ef * inner, o = Div(ef, n_out), f = ef - o * n_out;
     int d = field * outer * n_out * inner + int(e), base = in0 + o * n_in * inner + v;
     float s = LD(w, 2 * f) * LD(src, base + LD(lohi, 2 * f) * inner) +
               LD(w, 2 * f + 1) * LD(src, base + LD(lohi, 2 * f + 1) * inner);

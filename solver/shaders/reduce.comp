@@ -7,13 +7,16 @@ layout(location = 0) uniform int m;
 layout(location = 1) uniform int slot;
 layout(location = 2) uniform int width;
 layout(location = 3) uniform int stride;
-shared double sdata[256];
+shared double sdata[TL_GROUP];
 
 void main() {
   uint l = gl_LocalInvocationID.x;
   int f = int(Field());
   for (int k = 0; k < width; ++k) {
-    if (m <= 32) {  // few partial sums (llvmpipe's grid-stride dots): no barrier tree
+#ifndef TL_INVOCATION_SUMS
+    if (m <= 32)  // few partial sums: no barrier tree
+#endif
+    {  // llvmpipe: one invocation adds them up
       if (l == 0u) {
         double s = 0.0LF;
         for (int q = 0; q < m; ++q) s += LDD(partial, (f * m + q) * width + k);
@@ -22,10 +25,10 @@ void main() {
       continue;
     }
     double s = 0.0LF;
-    for (int q = int(l); q < m; q += 256) s += LDD(partial, (f * m + q) * width + k);
+    for (int q = int(l); q < m; q += TL_GROUP) s += LDD(partial, (f * m + q) * width + k);
     sdata[l] = s;
     barrier();
-    for (uint st = 128u; st > 0u; st >>= 1u) {
+    for (uint st = uint(TL_GROUP) / 2u; st > 0u; st >>= 1u) {
       if (l < st) sdata[l] += sdata[l + st];
       barrier();
     }

@@ -16,7 +16,7 @@ layout(location = 3) uniform int outer;
 void main() {
   int f = int(Field()), in0 = f * outer * n_in * inner, out0 = f * outer * n_out * inner;
   for (uint e = ThreadIndex(); e < uint(outer * n_out * inner); e += Stride()) {
-    int v = int(e) % inner, c = (int(e) / inner) % n_out, o = int(e) / (inner * n_out);
+    int ec = Div(int(e), inner), v = int(e) - ec * inner, o = Div(ec, n_out), c = ec - o * n_out;
     int base = in0 + o * n_in * inner + v;
     float s = 0.0;
     for (int g = LD(gstart, c); g < LD(gstart, c + 1); ++g)

@@ -19,7 +19,7 @@ layout(location = 3) uniform int color;
 void main() {
   uint t = ThreadIndex();
   int half_nx = (nx + 1) / 2;
-  int j = int(t) / half_nx;
+  int j = Div(int(t), half_nx);
   if (j >= ny) return;
   int i = 2 * (int(t) - j * half_nx) + ((color + j) & 1);
   if (i >= nx) return;
