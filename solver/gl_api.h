@@ -5,6 +5,11 @@
 
 #include <GL/glcorearb.h>
 
+// OpenGL 1.1 entry points, which glcorearb.h declares without pointer types.
+typedef void(APIENTRYP TlGenTextures)(GLsizei n, GLuint* textures);
+typedef void(APIENTRYP TlDeleteTextures)(GLsizei n, const GLuint* textures);
+typedef void(APIENTRYP TlBindTexture)(GLenum target, GLuint texture);
+
 namespace translume::gl {
 
 #define TL_GL_FUNCTIONS(X)                                               \
@@ -39,6 +44,11 @@ namespace translume::gl {
   X(PFNGLCLEARBUFFERDATAPROC, ClearBufferData)                           \
   X(PFNGLDISPATCHCOMPUTEPROC, DispatchCompute)                           \
   X(PFNGLMEMORYBARRIERPROC, MemoryBarrier)                               \
+  X(TlGenTextures, GenTextures)                                          \
+  X(TlDeleteTextures, DeleteTextures)                                     \
+  X(TlBindTexture, BindTexture)                                          \
+  X(PFNGLTEXBUFFERPROC, TexBuffer)                                       \
+  X(PFNGLBINDIMAGETEXTUREPROC, BindImageTexture)                         \
   X(PFNGLFINISHPROC, Finish)
 
 struct Api {

@@ -19,19 +19,47 @@ namespace gl_internal {
 
 using gl::api;
 
-// A shader storage buffer.
+// How the shaders are specialised for the device (docs/gpu.md, "Shaders on llvmpipe"). Mesa
+// llvmpipe (22.x) runs every shader-storage-buffer access as a scalar loop over the SIMD lanes
+// with a bounds check per lane (~7 ns per access and invocation), an image-buffer access as one
+// vector gather (~0.5 ns), and pays a fixed cost per invocation; a GPU wants plain buffer loads
+// and many invocations. Chosen once from GL_RENDERER; TRANSLUME_GL_TUNING=llvmpipe|gpu forces one.
+struct Tuning {
+  // Arrays as image buffers (imageLoad / imageStore, TL_IMAGES in common.glsl) instead of
+  // shader storage buffers.
+  bool images = false;
+  // One invocation per z-column of a level (kz = nz, common.glsl's Column) instead of one per
+  // node (kz = 1), and grid-stride loops over at most `flat_groups` work groups per field for
+  // the element-wise kernels (0: one invocation per element).
+  bool columns = false;
+  int flat_groups = 0;
+  // Invocations per work group (common.glsl's TL_GROUP).
+  int group = 256;
+  // Dots leave one partial sum per invocation, no shared-memory tree (TL_INVOCATION_SUMS).
+  bool invocation_sums = false;
+};
+const Tuning& GetTuning();
+
+// A buffer's element type: its image format when the shaders read it as an image buffer.
+enum class Elem { kFloat, kInt, kDouble, kVec4 };
+
+// A shader storage buffer (and, under Tuning::images, the buffer texture that shaders bind as
+// an image buffer).
 class Buffer {
  public:
   Buffer() = default;
   Buffer(const Buffer&) = delete;
   ~Buffer() {
+    if (tex_) api.DeleteTextures(1, &tex_);
     if (id_) api.DeleteBuffers(1, &id_);
   }
-  void Alloc(int64_t bytes, const void* data = nullptr) {
+  void Alloc(int64_t bytes, const void* data = nullptr, Elem elem = Elem::kFloat) {
     if (!id_) api.GenBuffers(1, &id_);
     bytes_ = std::max<int64_t>(bytes, 16);
+    elem_ = elem;
     api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
     api.BufferData(GL_SHADER_STORAGE_BUFFER, bytes_, data, GL_DYNAMIC_DRAW);
+    if (tex_) AttachTexture();
   }
   // Writes / reads `bytes` bytes at byte `offset` (a field of a batched buffer: f n elements).
   void Upload(const void* data, int64_t bytes, int64_t offset = 0) {
@@ -53,18 +81,42 @@ class Buffer {
     api.CopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, 0, bytes);
   }
   GLuint id() const { return id_; }
+  // Binds the buffer to image unit `unit` (read-write, in its element's format).
+  void BindImage(GLuint unit) const {
+    if (!tex_) {
+      api.GenTextures(1, &tex_);
+      AttachTexture();
+    }
+    api.BindImageTexture(unit, tex_, 0, GL_FALSE, 0, GL_READ_WRITE, Format());
+  }
 
  private:
+  GLenum Format() const {
+    switch (elem_) {
+      case Elem::kInt: return GL_R32I;
+      case Elem::kDouble: return GL_RG32UI;  // unpacked with packDouble2x32 (common.glsl)
+      case Elem::kVec4: return GL_RGBA32F;
+      default: return GL_R32F;
+    }
+  }
+  void AttachTexture() const {
+    api.BindTexture(GL_TEXTURE_BUFFER, tex_);
+    api.TexBuffer(GL_TEXTURE_BUFFER, Format(), id_);
+    api.BindTexture(GL_TEXTURE_BUFFER, 0);
+  }
+
   GLuint id_ = 0;
+  mutable GLuint tex_ = 0;
   int64_t bytes_ = 0;
+  Elem elem_ = Elem::kFloat;
 };
 
 // The program of solver/shaders/NAME.comp, compiled once per `defines` (e.g. "#define X\n").
 GLuint Program(const std::string& name, const std::string& defines = "");
 
 // Binds `buffers` to bindings 0.., sets int uniforms at locations 0.., an optional float
-// uniform, and dispatches `threads` threads (256 per group, tiled to stay under 65535 groups per
-// dimension), followed by a shader-storage barrier. Returns the number of work groups.
+// uniform, and dispatches `threads` threads (Tuning::group per group, tiled to stay under 65535
+// groups per dimension), followed by a barrier. Returns the number of work groups.
 int64_t Run(const char* name, std::initializer_list<const Buffer*> buffers,
             std::initializer_list<int> ints, int64_t threads, int float_location = -1,
             float float_value = 0, const char* defines = "");
@@ -75,6 +127,14 @@ int64_t RunBatch(const char* name, std::initializer_list<const Buffer*> buffers,
                  const char* defines = "");
 // Work groups per field that Run and RunBatch dispatch for `threads` threads.
 int64_t WorkGroups(int64_t threads);
+// Invocations of dot.comp for n elements, and the partial sums per field they leave.
+int64_t DotThreads(int64_t n);
+int64_t DotPartials(int64_t threads);
+// Invocations for a grid-stride loop over n elements (Tuning::flat_groups).
+int64_t FlatThreads(int64_t n);
+// Nodes per invocation of a column kernel on a level (common.glsl's kz), and its invocations.
+int ColumnLength(const GridShape& s);
+int64_t ColumnThreads(const GridShape& s);
 
 // Slots of the per-field conjugate-gradient scalars; mirrors common.glsl's kCg* constants.
 enum CgSlot { kCgRz, kCgPq, kCgRr, kCgRzNew, kCgBb, kCgActive, kCgIter, kCgTol2, kCgStride };
@@ -95,10 +155,10 @@ struct AxisBuffers {
       wf[2 * f] = float(t.wlo[f]);
       wf[2 * f + 1] = float(t.whi[f]);
     }
-    gstart.Alloc(gs.size() * 4, gs.data());
-    gidx.Alloc(gi.size() * 4, gi.data());
+    gstart.Alloc(gs.size() * 4, gs.data(), Elem::kInt);
+    gidx.Alloc(gi.size() * 4, gi.data(), Elem::kInt);
     gw.Alloc(gwf.size() * 4, gwf.data());
-    lohi.Alloc(lh.size() * 4, lh.data());
+    lohi.Alloc(lh.size() * 4, lh.data(), Elem::kInt);
     w.Alloc(wf.size() * 4, wf.data());
   }
 };
@@ -118,6 +178,11 @@ struct GLevel {
 
 using gl_internal::AxisBuffers;
 using gl_internal::Buffer;
+using gl_internal::ColumnLength;
+using gl_internal::ColumnThreads;
+using gl_internal::Elem;
+using gl_internal::FlatThreads;
+using gl_internal::GetTuning;
 using gl_internal::GLevel;
 using gl_internal::Run;
 using gl_internal::kCgActive;
@@ -130,6 +195,8 @@ using gl_internal::kCgRzNew;
 using gl_internal::kCgStride;
 using gl_internal::kCgTol2;
 using gl_internal::RunBatch;
+using gl_internal::DotPartials;
+using gl_internal::DotThreads;
 using gl_internal::WorkGroups;
 
 struct GlMultigridSolver::Impl {
@@ -160,7 +227,8 @@ struct GlMultigridSolver::Impl {
     const int ny = int(L.s.ny), nz = int(L.s.nz), mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
     auto pass = [&](const AxisBuffers& a, const Buffer& in, Buffer& out, int inner, int outer) {
       RunBatch("restrict_axis", {&in, &out, &a.gstart, &a.gidx, &a.gw},
-               {a.n_fine, a.n_coarse, inner, outer}, int64_t(outer) * a.n_coarse * inner, nb);
+               {a.n_fine, a.n_coarse, inner, outer},
+               FlatThreads(int64_t(outer) * a.n_coarse * inner), nb);
     };
     pass(L.t[0], f, L.tmp_a, 1, ny * nz);
     pass(L.t[1], L.tmp_a, L.tmp_b, mx, nz);
@@ -172,7 +240,8 @@ struct GlMultigridSolver::Impl {
     auto pass = [&](const AxisBuffers& a, const Buffer& in, Buffer& out, int inner, int outer,
                     int add) {
       RunBatch("prolong_axis", {&in, &out, &a.lohi, &a.w},
-               {a.n_coarse, a.n_fine, inner, outer, add}, int64_t(outer) * a.n_fine * inner, nb);
+               {a.n_coarse, a.n_fine, inner, outer, add}, FlatThreads(int64_t(outer) * a.n_fine * inner),
+               nb);
     };
     pass(L.t[2], c, L.tmp_b, mx * my, 1, 0);
     pass(L.t[1], L.tmp_b, L.tmp_a, mx, nz, 0);
@@ -188,7 +257,7 @@ struct GlMultigridSolver::Impl {
   void Stencil(GLevel& L, const Buffer& x, const Buffer& b, Buffer& out, int mode, int nb,
                bool x_double = false) {
     RunBatch("residual", {&L.cx, &L.cy, &L.cz, &L.diag, &x, &b, &out},
-             {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode}, L.n, nb,
+             {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode, ColumnLength(L.s)}, ColumnThreads(L.s), nb,
              x_double ? "#define X_DOUBLE\n" : "");
   }
 
@@ -197,12 +266,14 @@ struct GlMultigridSolver::Impl {
 
   // a . b of every field (double) into scal[f kCgStride + slot]; Dot2 also a . c into slot + 1.
   void Dot(const Buffer& a, const Buffer& b, int slot, int nb) {
-    const int64_t m = RunBatch("dot", {&a, &b, &partial}, {int(n0)}, n0, nb);
-    RunBatch("reduce", {&partial, &scal}, {int(m), slot, 1, kCgStride}, 256, nb);
+    RunBatch("dot", {&a, &b, &partial}, {int(n0)}, DotThreads(n0), nb);
+    const int64_t m = DotPartials(DotThreads(n0));
+    RunBatch("reduce", {&partial, &scal}, {int(m), slot, 1, kCgStride}, GetTuning().group, nb);
   }
   void Dot2(const Buffer& a, const Buffer& b, const Buffer& c, int slot, int nb) {
-    const int64_t m = RunBatch("dot", {&a, &b, &partial, &c}, {int(n0)}, n0, nb, "#define PAIR\n");
-    RunBatch("reduce", {&partial, &scal}, {int(m), slot, 2, kCgStride}, 256, nb);
+    RunBatch("dot", {&a, &b, &partial, &c}, {int(n0)}, DotThreads(n0), nb, "#define PAIR\n");
+    const int64_t m = DotPartials(DotThreads(n0));
+    RunBatch("reduce", {&partial, &scal}, {int(m), slot, 2, kCgStride}, GetTuning().group, nb);
   }
 
   // Multigrid-PCG on `nb` fields at once, in lockstep (every dispatch serves all of them): b

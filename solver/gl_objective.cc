@@ -39,13 +39,13 @@ class GlChannelObjective : public FrontFaceObjective {
       batch->rhs.Alloc(values * 4);
       batch->rhs.Zero();
       for (Buffer* field : {&batch->phi, &batch->psi}) {
-        field->Alloc(values * 8);
+        field->Alloc(values * 8, nullptr, Elem::kDouble);
         field->Zero();  // all-zero bits are 0.0 in double too
       }
       batches_.push_back(std::move(batch));
     }
-    grad_kappa_.Alloc(n * 8);
-    grad_mu_.Alloc(n * 8);
+    grad_kappa_.Alloc(n * 8, nullptr, Elem::kDouble);
+    grad_mu_.Alloc(n * 8, nullptr, Elem::kDouble);
     front_.assign(M, std::vector<double>(nf, 0.0));
   }
 
@@ -76,7 +76,7 @@ class GlChannelObjective : public FrontFaceObjective {
       if (!gk) continue;
       for (const SolveSummary& s : I.SolveDevice(batch->rhs, batch->psi, batch->count)) Track(s);
       Run("gradient", {&I.levels[0]->geometry, &batch->phi, &batch->psi, &grad_kappa_, &grad_mu_},
-          {int(shape_.nx), int(shape_.ny), int(shape_.nz), batch->count}, n);
+          {int(shape_.nx), int(shape_.ny), int(shape_.nz), batch->count}, gl_internal::FlatThreads(n));
     }
     if (gk) {
       grad_kappa_.Download(gk, n * 8);

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fmt/format.h>
 #include <map>
@@ -40,12 +41,17 @@ std::string NameLog(const std::string& log, const std::string& common, const std
   return out;
 }
 
-// Compiles and links one compute program from common.glsl, `defines` and the file's text.
+// Compiles and links one compute program from common.glsl, `defines` and the file's text
+// (first the Tuning's defines: TL_IMAGES, TL_INVOCATION_SUMS, TL_GROUP).
 GLuint CompileProgram(const gl::EmbeddedShader& common, const std::string& defines,
                       const std::string& file_name, const char* source) {
   GLuint shader = api.CreateShader(GL_COMPUTE_SHADER);
-  const std::string text = fmt::format("#version 430\n#line {}\n{}{}#line 1\n{}", kCommonLine,
-                                       common.source, defines, source);
+  const std::string text =
+      fmt::format("#version 430\n{}{}{}#line {}\n{}{}#line 1\n{}",
+                  GetTuning().images ? "#define TL_IMAGES\n" : "",
+                  GetTuning().invocation_sums ? "#define TL_INVOCATION_SUMS\n" : "",
+                  fmt::format("#define TL_GROUP {}\n", GetTuning().group), kCommonLine,
+                  common.source, defines, source);
   const char* sources[1] = {text.c_str()};
   api.ShaderSource(shader, 1, sources, nullptr);
   api.CompileShader(shader);
@@ -78,6 +84,27 @@ const gl::EmbeddedShader& FindShader(const std::string& name) {
   std::abort();
 }
 
+const Tuning& GetTuning() {
+  static const Tuning tuning = [] {
+    const char* forced = std::getenv("TRANSLUME_GL_TUNING");
+    const std::string f = forced ? forced : "";
+    if (!f.empty() && f != "llvmpipe" && f != "gpu")
+      throw InputError(fmt::format("TRANSLUME_GL_TUNING='{}' is not llvmpipe or gpu", f));
+    const bool cpu = f.empty() ? GlContext::Get().info().renderer.find("llvmpipe") != std::string::npos
+                               : f == "llvmpipe";
+    Tuning t;
+    if (cpu) {
+      t.images = true;
+      t.columns = true;
+      t.flat_groups = 8;
+      t.group = 64;
+      t.invocation_sums = true;
+    }
+    return t;
+  }();
+  return tuning;
+}
+
 // The program of solver/shaders/NAME.comp, compiled once with `defines` (e.g. "#define X\n").
 GLuint Program(const std::string& name, const std::string& defines) {
   static std::map<std::string, GLuint> cache;
@@ -91,15 +118,17 @@ GLuint Program(const std::string& name, const std::string& defines) {
 
 namespace {
 
-// Work groups (x, y) for `threads` threads: 256 per group, at most 65535 groups along x.
+// Work groups (x, y) for `threads` threads: Tuning::group per group, at most 65535 groups
+// along x.
 std::pair<int64_t, int64_t> Tiling(int64_t threads) {
-  const int64_t groups = std::max<int64_t>(1, (threads + 255) / 256);
+  const int64_t g = GetTuning().group;
+  const int64_t groups = std::max<int64_t>(1, (threads + g - 1) / g);
   const int64_t gx = std::min<int64_t>(groups, 65535);
   return {gx, (groups + gx - 1) / gx};
 }
 
 // Binds `buffers` to bindings 0.., sets int uniforms at locations 0.. and an optional float
-// uniform, and dispatches `threads` threads per field (256 per group, tiled to stay under 65535
+// uniform, and dispatches `threads` threads per field (Tuning::group per group, tiled under 65535
 // groups per dimension) for `fields` fields (work-group z), followed by a shader-storage
 // barrier. Returns the number of work groups per field.
 int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
@@ -108,17 +137,45 @@ int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
   const GLuint prog = Program(name, defines);
   api.UseProgram(prog);
   GLuint b = 0;
-  for (const Buffer* buf : buffers) api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, b++, buf->id());
+  const bool images = GetTuning().images;
+  for (const Buffer* buf : buffers) {
+    if (images)
+      buf->BindImage(b++);
+    else
+      api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, b++, buf->id());
+  }
   GLint loc = 0;
   for (int v : ints) api.Uniform1i(loc++, v);
   if (float_location >= 0) api.Uniform1f(float_location, float_value);
   const auto [gx, gy] = Tiling(threads);
   api.DispatchCompute(GLuint(gx), GLuint(gy), GLuint(fields));
-  api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+  api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
   return gx * gy;
 }
 
 }  // namespace
+
+int64_t FlatThreads(int64_t n) {
+  const int groups = GetTuning().flat_groups;
+  return groups > 0 ? std::min<int64_t>(n, int64_t(groups) * GetTuning().group) : n;
+}
+
+int ColumnLength(const GridShape& s) { return GetTuning().columns ? int(s.nz) : 1; }
+
+int64_t ColumnThreads(const GridShape& s) {
+  const int64_t kz = ColumnLength(s);
+  return s.nx * s.ny * ((s.nz + kz - 1) / kz);
+}
+
+// With one partial sum per invocation, two work groups per field: reduce.comp adds the
+// partial sums up in one invocation per field.
+int64_t DotThreads(int64_t n) {
+  return GetTuning().invocation_sums ? std::min<int64_t>(n, 2 * GetTuning().group) : FlatThreads(n);
+}
+
+int64_t DotPartials(int64_t threads) {
+  return WorkGroups(threads) * (GetTuning().invocation_sums ? GetTuning().group : 1);
+}
 
 int64_t WorkGroups(int64_t threads) {
   const auto [gx, gy] = Tiling(threads);
@@ -199,6 +256,11 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
   const GlInfo& info = GlContext::Get().info();
   int64_t most = std::min<int64_t>({info.max_ssbo_bytes / (I.n0 * 8), ((int64_t(1) << 31) - 1) / I.n0,
                                     info.max_work_group_count[2], 4096});
+  if (gl_internal::GetTuning().images) {  // ... and within the largest buffer texture
+    GLint texels = 0;
+    api.GetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &texels);
+    most = std::min<int64_t>(most, texels / I.n0);
+  }
   I.max_batch = int(std::max<int64_t>(1, most));
   I.Reserve(1);
 }
@@ -216,10 +278,10 @@ void GlMultigridSolver::Impl::Reserve(int fields) {
     }
   }
   for (Buffer* b : {&r, &z, &p, &q}) b->Alloc(n0 * 4 * fields);
-  xd.Alloc(n0 * 8 * fields);
-  partial.Alloc(WorkGroups(n0) * 2 * 8 * fields);
-  scal.Alloc(kCgStride * 8 * fields);
-  hist.Alloc(int64_t(options.max_iterations) * 8 * fields);
+  xd.Alloc(n0 * 8 * fields, nullptr, Elem::kDouble);
+  partial.Alloc(DotPartials(DotThreads(n0)) * 2 * 8 * fields, nullptr, Elem::kDouble);
+  scal.Alloc(kCgStride * 8 * fields, nullptr, Elem::kDouble);
+  hist.Alloc(int64_t(options.max_iterations) * 8 * fields, nullptr, Elem::kDouble);
   capacity = fields;
 }
 
@@ -238,11 +300,11 @@ void GlMultigridSolver::SetCoefficients(const float* kappa, const float* mu, dou
       GLevel& F = *I.levels[l - 1];
       I.Restrict(F, F.kappa, L.kappa, 1);
       I.Restrict(F, F.mu, L.mu, 1);
-      Run("divide", {&L.kappa, &L.rnorm}, {int(L.n)}, L.n);
-      Run("divide", {&L.mu, &L.rnorm}, {int(L.n)}, L.n);
+      Run("divide", {&L.kappa, &L.rnorm}, {int(L.n)}, FlatThreads(L.n));
+      Run("divide", {&L.mu, &L.rnorm}, {int(L.n)}, FlatThreads(L.n));
     }
     Run("assemble", {&L.kappa, &L.mu, &L.geometry, &L.cx, &L.cy, &L.cz, &L.diag},
-        {int(L.s.nx), int(L.s.ny), int(L.s.nz)}, L.n, 3, float(1.0 / (2.0 * C)));
+        {int(L.s.nx), int(L.s.ny), int(L.s.nz)}, FlatThreads(L.n), 3, float(1.0 / (2.0 * C)));
     Run("factor", {&L.cz, &L.diag, &L.inv, &L.luc}, {int(L.s.nx), int(L.s.ny), int(L.s.nz)},
         L.s.nx * L.s.ny);
   }
@@ -385,11 +447,12 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
   while (any && it < max_it) {
     Stencil(L, p, p, q, 1, nb);
     Dot(p, q, kCgPq, nb);
-    RunBatch("cg_update", {&x, &r, &p, &q, &scal}, {int(n)}, n, nb);
+    RunBatch("cg_update", {&x, &r, &p, &q, &scal}, {int(n)}, FlatThreads(n), nb);
     // Precondition before looking at the residual: both dots from one pass.
     VCycle(0, r, z, nb);
     Dot2(r, r, z, kCgRr, nb);  // rr and rz_new
-    RunBatch("cg_update", {&p, &z, &z, &z, &scal}, {int(n)}, n, nb, "#define DIRECTION\n");
+    RunBatch("cg_update", {&p, &z, &z, &z, &scal}, {int(n)}, FlatThreads(n), nb,
+             "#define DIRECTION\n");
     Run("cg_scalars", {&scal, &hist}, {nb, max_it}, nb);
     ++it;
     if (it % check_every != 0 && it < max_it) continue;
@@ -481,14 +544,14 @@ double GlMultigridSolver::TimeApply(int repetitions) {
 double GlMultigridSolver::TimeCopy(int64_t bytes, int repetitions) {
   Buffer src, dst;
   const int64_t n4 = bytes / 16;
-  src.Alloc(n4 * 16);
-  dst.Alloc(n4 * 16);
+  src.Alloc(n4 * 16, nullptr, Elem::kVec4);
+  dst.Alloc(n4 * 16, nullptr, Elem::kVec4);
   src.Zero();
   std::vector<double> times;
   api.Finish();
   for (int r = 0; r < repetitions; ++r) {
     const auto t0 = std::chrono::steady_clock::now();
-    for (int k = 0; k < 10; ++k) Run("copy", {&src, &dst}, {int(n4)}, n4);
+    for (int k = 0; k < 10; ++k) Run("copy", {&src, &dst}, {int(n4)}, FlatThreads(n4));
     api.Finish();
     times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / 10);
   }

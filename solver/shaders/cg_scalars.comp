@@ -3,8 +3,8 @@
 // kCg* slots): an active field records rr in its history (hist[f * max_iterations + it]),
 // counts the iteration and freezes once rr <= tol2; every field moves rz_new into rz (after
 // cg_update.comp's DIRECTION pass has used both).
-layout(std430, binding = 0) buffer Scal { double scal[]; };
-layout(std430, binding = 1) writeonly buffer Hist { double hist[]; };
+DOUBLES(0, Scal, scal, restrict);
+DOUBLES(1, Hist, hist, writeonly);
 layout(location = 0) uniform int fields;
 layout(location = 1) uniform int max_iterations;
 
@@ -12,11 +12,12 @@ void main() {
   uint f = ThreadIndex();
   if (f >= uint(fields)) return;
   int s = int(f) * kCgStride;
-  if (scal[s + kCgActive] != 0.0LF) {
-    int it = int(scal[s + kCgIter]);
-    if (it < max_iterations) hist[int(f) * max_iterations + it] = scal[s + kCgRr];
-    scal[s + kCgIter] = double(it + 1);
-    if (scal[s + kCgRr] <= scal[s + kCgTol2]) scal[s + kCgActive] = 0.0LF;
+  double rr = LDD(scal, s + kCgRr);
+  if (LDD(scal, s + kCgActive) != 0.0LF) {
+    int it = int(LDD(scal, s + kCgIter));
+    if (it < max_iterations) STD(hist, int(f) * max_iterations + it, rr);
+    STD(scal, s + kCgIter, double(it + 1));
+    if (rr <= LDD(scal, s + kCgTol2)) STD(scal, s + kCgActive, 0.0LF);
   }
-  scal[s + kCgRz] = scal[s + kCgRzNew];
+  STD(scal, s + kCgRz, LDD(scal, s + kCgRzNew));
 }

@@ -4,31 +4,33 @@
 //   default:   x += alpha p, r -= alpha q,  alpha = rz / pq, 0 for a frozen field
 //              (buffers x [double], r, p, q, scalars)
 //   DIRECTION: p = z + beta p,  beta = rz_new / rz   (buffers p, z, -, -, scalars)
-// x, r, p, q, z hold one field of n values per work-group z.
-layout(std430, binding = 4) readonly buffer Scal { double scal[]; };
+// x, r, p, q, z hold one field of n values per work-group z; a grid-stride loop (common.glsl).
+DOUBLES(4, Scal, scal, readonly);
 layout(location = 0) uniform int n;
 #ifdef DIRECTION
-layout(std430, binding = 0) buffer P { float p[]; };
-layout(std430, binding = 1) readonly buffer Z { float z[]; };
+FLOATS(0, P, p, restrict);
+FLOATS(1, Z, z, readonly);
 #else
-layout(std430, binding = 0) buffer X { double x[]; };
-layout(std430, binding = 1) buffer R { float r[]; };
-layout(std430, binding = 2) readonly buffer P { float p[]; };
-layout(std430, binding = 3) readonly buffer Q { float q[]; };
+DOUBLES(0, X, x, restrict);
+FLOATS(1, R, r, restrict);
+FLOATS(2, P, p, readonly);
+FLOATS(3, Q, q, readonly);
 #endif
 
 void main() {
-  uint i = ThreadIndex();
-  if (i >= uint(n)) return;
-  uint f = Field(), o = f * uint(n) + i, s = f * uint(kCgStride);
+  uint f = Field(), s = f * uint(kCgStride), o = f * uint(n);
 #ifdef DIRECTION
-  double rz = scal[s + kCgRz];
-  float beta = rz != 0.0LF ? float(scal[s + kCgRzNew] / rz) : 0.0;
-  p[o] = z[o] + beta * p[o];
+  double rz = LDD(scal, s + kCgRz);
+  float beta = rz != 0.0LF ? float(LDD(scal, s + kCgRzNew) / rz) : 0.0;
+  for (uint e = o + ThreadIndex(); e < o + uint(n); e += Stride())
+    ST(p, e, LD(z, e) + beta * LD(p, e));
 #else
-  double pq = scal[s + kCgPq];
-  double alpha = scal[s + kCgActive] != 0.0LF && pq != 0.0LF ? scal[s + kCgRz] / pq : 0.0LF;
-  x[o] += alpha * double(p[o]);
-  r[o] -= float(alpha) * q[o];
+  double pq = LDD(scal, s + kCgPq);
+  double alpha = LDD(scal, s + kCgActive) != 0.0LF && pq != 0.0LF ? LDD(scal, s + kCgRz) / pq
+                                                                  : 0.0LF;
+  for (uint e = o + ThreadIndex(); e < o + uint(n); e += Stride()) {
+    STD(x, e, LDD(x, e) + alpha * double(LD(p, e)));
+    ST(r, e, LD(r, e) - float(alpha) * LD(q, e));
+  }
 #endif
 }

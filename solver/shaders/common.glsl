@@ -4,14 +4,70 @@
 // exceed 65535 groups. Batched dispatches (several right-hand sides of one operator) add a
 // third dimension: work-group z is the field index, and every per-field buffer holds its
 // fields back to back (field f of a level with n nodes occupies [f n, (f + 1) n)).
-layout(local_size_x = 256) in;
+// TL_GROUP invocations per work group: 256, or what the host defines (64 on llvmpipe, where the
+// invocations of a mostly idle group of a small level still cost).
+#ifndef TL_GROUP
+#define TL_GROUP 256
+#endif
+layout(local_size_x = TL_GROUP) in;
 
 uint ThreadIndex() {
-  return gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 256u;
+  return gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * uint(TL_GROUP);
 }
 
 // The field (right-hand side) this invocation works on, 0 in unbatched dispatches.
 uint Field() { return gl_WorkGroupID.z; }
+
+// Invocations per field: the step of a grid-stride loop `for (e = ThreadIndex(); e < n; e +=
+// Stride())`. The host launches one invocation per element on a GPU (one pass of the loop) and
+// a few work groups per field on llvmpipe (gl_internal.h, Tuning).
+uint Stride() { return gl_NumWorkGroups.x * gl_NumWorkGroups.y * uint(TL_GROUP); }
+
+// a / b for 0 <= a < 2^31, b > 0. llvmpipe scalarises integer division (one divide per SIMD
+// lane); there it is a vector double division, exact for these ranges.
+int Div(int a, int b) {
+#ifdef TL_IMAGES
+  return int(double(a) / double(b));
+#else
+  return a / b;
+#endif
+}
+
+// Per-node kernels walk a level's nodes in z-columns of kz nodes (kz a uniform from the host:
+// 1 on a GPU, one node per invocation; nz on llvmpipe, whose fixed cost per invocation is
+// high). Invocation t covers i = t % nx, j = (t / nx) % ny, k = k0 .. k1 - 1 with
+// k0 = kz (t / (nx ny)), so neighbouring invocations take neighbouring i (coalesced).
+bool Column(int nx, int ny, int nz, int kz, out int i, out int j, out int k0, out int k1) {
+  int t = int(ThreadIndex()), nxy = nx * ny, c = Div(t, nxy), r = t - c * nxy;
+  j = Div(r, nx);
+  i = r - j * nx;
+  k0 = c * kz;
+  k1 = min(k0 + kz, nz);
+  return k0 < nz;
+}
+
+// Arrays: FLOATS(binding, Block, name, qualifier) declares name[] (qualifier readonly, writeonly
+// or restrict), read with LD(name, e) / written with ST(name, e, v); DOUBLES with LDD / STD,
+// INTS with LD. Under TL_IMAGES (the host's choice on llvmpipe, gl_internal.h) they are image
+// buffers (r32f, rg32ui holding a double's two halves, r32i) at image unit `binding`, else
+// shader storage blocks at binding `binding`.
+#ifdef TL_IMAGES
+#define FLOATS(b, B, a, q) layout(binding = b, r32f) q uniform imageBuffer a
+#define INTS(b, B, a, q) layout(binding = b, r32i) q uniform iimageBuffer a
+#define DOUBLES(b, B, a, q) layout(binding = b, rg32ui) q uniform uimageBuffer a
+#define LD(a, e) imageLoad(a, int(e)).x
+#define LDD(a, e) packDouble2x32(imageLoad(a, int(e)).xy)
+#define ST(a, e, v) imageStore(a, int(e), vec4(v))
+#define STD(a, e, v) imageStore(a, int(e), uvec4(unpackDouble2x32(v), 0u, 0u))
+#else
+#define FLOATS(b, B, a, q) layout(std430, binding = b) q buffer B { float a[]; }
+#define INTS(b, B, a, q) layout(std430, binding = b) q buffer B { int a[]; }
+#define DOUBLES(b, B, a, q) layout(std430, binding = b) q buffer B { double a[]; }
+#define LD(a, e) a[e]
+#define LDD(a, e) a[e]
+#define ST(a, e, v) a[e] = (v)
+#define STD(a, e, v) a[e] = (v)
+#endif
 
 // Per-field conjugate-gradient scalars (double), kCgStride per field, field f at f * kCgStride
 // (gl_internal.h mirrors these slots): rz = r.z, pq = p.A p, rr = r.r, rz_new = the next r.z,

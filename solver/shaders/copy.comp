@@ -1,10 +1,20 @@
 // SPDX-License-Identifier: MIT
-// dst = src: the bandwidth reference for `bench forward --backend gl`.
+// dst = src: the bandwidth reference for `bench forward --backend gl` (a grid-stride loop).
+#ifdef TL_IMAGES
+layout(binding = 0, rgba32f) readonly uniform imageBuffer src;
+layout(binding = 1, rgba32f) writeonly uniform imageBuffer dst;
+#else
 layout(std430, binding = 0) readonly buffer Src { vec4 src[]; };
 layout(std430, binding = 1) writeonly buffer Dst { vec4 dst[]; };
+#endif
 layout(location = 0) uniform int n4;
 
 void main() {
-  uint i = ThreadIndex();
-  if (i < uint(n4)) dst[i] = src[i];
+  for (uint i = ThreadIndex(); i < uint(n4); i += Stride()) {
+#ifdef TL_IMAGES
+    imageStore(dst, int(i), imageLoad(src, int(i)));
+#else
+    dst[i] = src[i];
+#endif
+  }
 }

@@ -5,38 +5,41 @@
 //   gm_p -= sum_m V_p psi_p phi_p
 // phi: forward fields, psi: adjoint fields (both double, the solver's iterates), condition m at
 // [m n, (m + 1) n). geo as in assemble.comp.
-layout(std430, binding = 0) readonly buffer Geo { float geo[]; };
-layout(std430, binding = 1) readonly buffer Phi { double phi[]; };
-layout(std430, binding = 2) readonly buffer Psi { double psi[]; };
-layout(std430, binding = 3) buffer GK { double gk[]; };
-layout(std430, binding = 4) buffer GM { double gm[]; };
+FLOATS(0, Geo, geo, readonly);
+DOUBLES(1, Phi, phi, readonly);
+DOUBLES(2, Psi, psi, readonly);
+DOUBLES(3, GK, gk, restrict);
+DOUBLES(4, GM, gm, restrict);
 layout(location = 0) uniform int nx;
 layout(location = 1) uniform int ny;
 layout(location = 2) uniform int nz;
 layout(location = 3) uniform int fields;
 
-double Face(uint p, uint q, double area_over_gap) {  // p, q: offsets into the fields
-  return 0.5LF * area_over_gap * (psi[p] - psi[q]) * (phi[p] - phi[q]);
+void Node(uint p) {
+  int r = Div(int(p), nx), i = int(p) - r * nx, k = Div(r, ny), j = r - k * ny;
+  int n = nx * ny * nz, g0 = nx + ny + nz;
+  double wx = double(LD(geo, i)), wy = double(LD(geo, nx + j)), wz = double(LD(geo, nx + ny + k));
+  // Half the area over the gap of each face (0 on the boundary), with the neighbour's offset.
+  double a[6] = double[6](0.0LF, 0.0LF, 0.0LF, 0.0LF, 0.0LF, 0.0LF);
+  const int d[6] = int[6](-1, 1, -nx, nx, -nx * ny, nx * ny);
+  if (i > 0) a[0] = wy * wz / double(LD(geo, g0 + i - 1));
+  if (i + 1 < nx) a[1] = wy * wz / double(LD(geo, g0 + i));
+  if (j > 0) a[2] = wx * wz / double(LD(geo, g0 + nx + j - 1));
+  if (j + 1 < ny) a[3] = wx * wz / double(LD(geo, g0 + nx + j));
+  if (k > 0) a[4] = wx * wy / double(LD(geo, g0 + nx + ny + k - 1));
+  if (k + 1 < nz) a[5] = wx * wy / double(LD(geo, g0 + nx + ny + k));
+  double g = 0.0LF, v = 0.0LF;
+  for (int m = 0; m < fields; ++m) {
+    int o = m * n + int(p);
+    double sp = LDD(psi, o), fp = LDD(phi, o);
+    for (int f = 0; f < 6; ++f)
+      if (a[f] != 0.0LF) g += a[f] * (sp - LDD(psi, o + d[f])) * (fp - LDD(phi, o + d[f]));
+    v += sp * fp;
+  }
+  STD(gk, p, LDD(gk, p) - 0.5LF * g);
+  STD(gm, p, LDD(gm, p) - wx * wy * wz * v);
 }
 
 void main() {
-  uint p = ThreadIndex();
-  if (p >= uint(nx * ny * nz)) return;
-  int i = int(p) % nx, j = (int(p) / nx) % ny, k = int(p) / (nx * ny);
-  uint sx = 1u, sy = uint(nx), sz = uint(nx * ny);
-  int g0 = nx + ny + nz;
-  double wx = double(geo[i]), wy = double(geo[nx + j]), wz = double(geo[nx + ny + k]);
-  double g = 0.0LF, v = 0.0LF;
-  for (int m = 0; m < fields; ++m) {
-    uint o = uint(m * nx * ny * nz) + p;
-    if (i > 0) g += Face(o, o - sx, wy * wz / double(geo[g0 + i - 1]));
-    if (i + 1 < nx) g += Face(o, o + sx, wy * wz / double(geo[g0 + i]));
-    if (j > 0) g += Face(o, o - sy, wx * wz / double(geo[g0 + nx + j - 1]));
-    if (j + 1 < ny) g += Face(o, o + sy, wx * wz / double(geo[g0 + nx + j]));
-    if (k > 0) g += Face(o, o - sz, wx * wy / double(geo[g0 + nx + ny + k - 1]));
-    if (k + 1 < nz) g += Face(o, o + sz, wx * wy / double(geo[g0 + nx + ny + k]));
-    v += psi[o] * phi[o];
-  }
-  gk[p] -= g;
-  gm[p] -= wx * wy * wz * v;
+  for (uint p = ThreadIndex(); p < uint(nx * ny * nz); p += Stride()) Node(p);
 }
