@@ -78,7 +78,7 @@ int RunForward(int argc, char** argv) {
   app.add_option("material", material_path, "Material file (.vdb)")->required();
   app.add_option("--light", light, "Light specification")->capture_default_str();
   app.add_option("--setup", setup, "back (lit back face) or front")->capture_default_str();
-  app.add_option("--backend", backend, "cpu")->capture_default_str();
+  app.add_option("--backend", backend, "cpu or gl (OpenGL compute shaders, float; docs/gpu.md)")->capture_default_str();
   app.add_option("--precision", precision, "float or double")->capture_default_str();
   app.add_option("--tolerance", tolerance, "Relative residual to reach")->capture_default_str();
   app.add_option("-o,--output", out, "Output radiance image (.exr)")->required();
