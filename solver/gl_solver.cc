@@ -105,6 +105,18 @@ const Tuning& GetTuning() {
   return tuning;
 }
 
+}  // namespace gl_internal
+
+std::string GlShaderTuning() {
+  const gl_internal::Tuning& t = gl_internal::GetTuning();
+  return t.images ? fmt::format("llvmpipe (image buffers, z-column invocations, {}-invocation "
+                                "groups; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)", t.group)
+                  : fmt::format("gpu (storage buffers, one node per invocation, {}-invocation "
+                                "groups; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)", t.group);
+}
+
+namespace gl_internal {
+
 // The program of solver/shaders/NAME.comp, compiled once with `defines` (e.g. "#define X\n").
 GLuint Program(const std::string& name, const std::string& defines) {
   static std::map<std::string, GLuint> cache;

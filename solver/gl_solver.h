@@ -11,9 +11,10 @@ namespace translume {
 
 // The `gl` backend of MultigridSolver: the same multigrid-preconditioned CG (same hierarchy,
 // zebra z-line smoother, separable transfers; see multigrid.h) as OpenGL compute shaders
-// (solver/shaders/*.comp) over shader storage buffers, float32 storage, dot products reduced in
-// double. Differences from the cpu backend: the coarsest level (<= 64 nodes where the grid
-// allows) is solved by 8 symmetric sweep pairs instead of a direct factorisation, and the
+// (solver/shaders/*.comp) over shader storage buffers (image buffers on llvmpipe:
+// GlShaderTuning), float32 storage, dot products reduced in double. Differences from the cpu
+// backend: the coarsest level (<= 64 nodes where the grid allows) is solved with a dense
+// inverse when it has at most 1024 nodes, else by 8 symmetric sweep pairs, and the
 // coefficients are assembled on the GPU, so SetCoefficients uploads only kappa and mu.
 // Several right-hand sides of one operator solve as a batch: every dispatch serves all fields
 // (kappa, mu and the stencil are read once for all), conjugate gradients run in lockstep with
@@ -52,6 +53,10 @@ class GlMultigridSolver {
  private:
   std::unique_ptr<Impl> impl_;
 };
+
+// The shader variant chosen for this device (docs/gpu.md, "Shaders on llvmpipe"), in words.
+// Creates the GL context if needed.
+std::string GlShaderTuning();
 
 // For tests: compiles `source` as a compute shader the way the backend's shaders are compiled
 // (after common.glsl); throws InputError naming `file_name` and the line on a compile error.

@@ -16,6 +16,7 @@
 #include "solver/recover.h"
 #include "solver/simulate.h"
 #include "solver/gl_context.h"
+#include "solver/gl_solver.h"
 #include "solver/image_io.h"
 #include "solver/light.h"
 #include "solver/material_io.h"
@@ -137,6 +138,7 @@ int RunInfo(int argc, char** argv) {
         for (size_t p = s.find('\n'); p != std::string::npos; p = s.find('\n', p + 3)) s.replace(p, 1, "\n  ");
         return s;
       }().c_str());
+      std::printf("  shaders: %s\n", GlShaderTuning().c_str());
     } catch (const InputError& e) {
       std::printf("gl backend: unavailable: %s\n", e.what());
     }
