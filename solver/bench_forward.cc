@@ -261,6 +261,7 @@ ForwardBenchRow BenchGl(const GridShape& shape, const ForwardBenchOptions& o,
   row.apply_bandwidth = double(solver.ApplyBytes()) / row.apply_seconds;
   const int64_t copy_bytes = std::max<int64_t>(solver.ApplyBytes(), int64_t(256) << 20);
   row.copy_bandwidth = 2.0 * double(copy_bytes) / solver.TimeCopy(copy_bytes, 11);
+  row.copy_reference = solver.CopyReference();
   if (progress)
     progress(fmt::format("{}: gl {} iterations, {:.4f} s, stencil {:.1f} GB/s = {:.0f}% of copy "
                          "{:.1f} GB/s", shape.ToString(), row.iterations, row.seconds,
@@ -321,6 +322,7 @@ std::string ForwardBenchTable(const std::vector<ForwardBenchRow>& rows) {
       out += fmt::format("{:>14} {:>14.1f} {:>14.1f} {:>11.0f}%\n", r.shape.ToString(),
                          r.apply_bandwidth / 1e9, r.copy_bandwidth / 1e9,
                          100 * r.apply_bandwidth / r.copy_bandwidth);
+    out += fmt::format("(copy: {})\n", rows[0].copy_reference);
   }
   if (!rows.empty() && rows[0].batch_fields > 0) {
     // Per right-hand side against one gl solve and the cpu peer's one solve.
@@ -358,6 +360,7 @@ std::string ForwardBenchJson(const std::vector<ForwardBenchRow>& rows) {
     if (r.copy_bandwidth > 0) {
       row["stencil_bytes_per_second"] = r.apply_bandwidth;
       row["copy_bytes_per_second"] = r.copy_bandwidth;
+      row["copy_reference"] = r.copy_reference;
       row["stencil_fraction_of_copy"] = r.apply_bandwidth / r.copy_bandwidth;
     }
     if (r.batch_fields > 0) {

@@ -51,6 +51,7 @@ struct ForwardBenchRow {
   // gl only: effective bandwidth of the stencil (ApplyBytes / apply_seconds) and of a plain
   // copy kernel measured in the same run (the device's practical peak), bytes per second.
   double apply_bandwidth = 0, copy_bandwidth = 0;
+  std::string copy_reference;  // what the copy was (GlMultigridSolver::CopyReference)
   // gl only: the batched solve of batch_fields right-hand sides (median seconds for all of
   // them, the most iterations of any field).
   int batch_fields = 0, batch_iterations = 0;

@@ -40,9 +40,12 @@ class GlMultigridSolver {
   int num_levels() const;
 
   // Benchmarks: median seconds of one stencil application on the finest level, and of one
-  // device-to-device copy of `bytes` bytes by a compute shader, each over `repetitions` runs.
+  // device-to-device copy of `bytes` bytes by a compute shader (on llvmpipe: a host memcpy on
+  // every thread, see CopyReference), each over `repetitions` runs.
   double TimeApply(int repetitions);
   double TimeCopy(int64_t bytes, int repetitions);
+  // What TimeCopy measured, in words.
+  std::string CopyReference() const;
   // Bytes one stencil application must move at least: x, cx, cy, cz, diag read, y written.
   int64_t ApplyBytes() const;
 
