@@ -11,6 +11,7 @@
 #include "tools/commands.h"
 
 int main(int argc, char** argv) {
+  translume::UsePassiveOpenMpByDefault(argv);
   translume::InitThreadsFromEnvironment();
   if (argc >= 2 && !std::strcmp(argv[1], "gl-info")) {
     try {

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "solver/threads.h"
 #include "render/material_map.h"
 #include "render/renderer.h"
 #include "solver/gl_context.h"
@@ -28,6 +29,7 @@ double Median(std::vector<double> v) {
 
 int main(int argc, char** argv) {
   using namespace translume;
+  UsePassiveOpenMpByDefault(argv);
   CLI::App app{"Polygrid renderer frame rates: three passes per frame, with and without frame "
                "coherence, for each shape and resolution.", "translume-renderbench"};
   std::vector<std::string> shapes = {"sphere", "torus"};

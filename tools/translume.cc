@@ -48,6 +48,7 @@ void PrintUsage(FILE* out) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  translume::UsePassiveOpenMpByDefault(argv);
   translume::InitThreadsFromEnvironment();
   if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h") ||
       !std::strcmp(argv[1], "help")) {
