@@ -9,6 +9,7 @@
 #include "solver/evaluate.h"
 #include "solver/light.h"
 #include "solver/simulate.h"
+#include "solver/status.h"
 #include "solver/synthetic.h"
 
 namespace translume {
@@ -36,28 +37,42 @@ Case MakeCase(const RecoveryBenchOptions& o, const std::string& preset, Setup se
   sim.setup = setup;
   sim.noise = noise;
   sim.holdout = o.holdout;
+  sim.backend = o.data_backend;
   const auto t0 = std::chrono::steady_clock::now();
   c.data = SimulateDataset(c.truth, sim);
   c.simulate_seconds = Since(t0);
   return c;
 }
 
-RecoveryBenchRow RunCase(const Case& c, const RecoveryOptions& ro, const std::string& preset,
-                         Setup setup, double noise, RecoverySummary* summary_out) {
+RecoveryBenchRow RunCase(const Case& c, const RecoveryBenchOptions& o, const RecoveryOptions& ro,
+                         const std::string& preset, Setup setup, double noise,
+                         RecoverySummary* summary_out) {
   RecoveryState st;
-  const RecoverySummary s = Recover(c.data.training, ro, &st);
+  RecoveryCallback stop_after;
+  if (o.max_seconds > 0)
+    stop_after = [&](const IterationReport& rep, const RecoveryState&) {
+      return rep.seconds < o.max_seconds;
+    };
+  const RecoverySummary s = Recover(c.data.training, ro, &st, stop_after);
   const Material rec = MaterialFromState(c.data.training, st);
   MultigridOptions mg;
   mg.tolerance = 1e-9;
   mg.max_iterations = 300;
-  const EvaluationReport ev = EvaluateRecovery(rec, &c.truth, c.data.training, c.data.holdout, mg);
+  const auto t0 = std::chrono::steady_clock::now();
+  const EvaluationReport ev =
+      EvaluateRecovery(rec, &c.truth, c.data.training, c.data.holdout, mg, o.data_backend);
   RecoveryBenchRow r;
+  r.evaluate_seconds = Since(t0);
   r.preset = preset;
   r.setup = setup;
   r.noise = noise;
   r.shape = c.truth.shape;
   r.optimizer = OptimizerName(ro.optimizer);
+  r.backend = ro.backend;
+  r.termination = TerminationName(s.termination);
+  r.message = s.message;
   r.seconds = s.seconds;
+  r.homogeneous_seconds = s.homogeneous_seconds;
   r.simulate_seconds = c.simulate_seconds;
   r.iterations = s.iterations;
   r.solves = s.solves;
@@ -79,37 +94,54 @@ std::string Layers(const std::vector<double>& v) {
 
 }  // namespace
 
+double RecoveryBenchRow::SecondsPerIteration() const {
+  return iterations > 0 ? (seconds - homogeneous_seconds) / iterations : 0.0;
+}
+
 RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
                                      void (*progress)(const std::string&)) {
+  TL_CHECK(!o.backends.empty());
   RecoveryBenchResult out;
   for (const auto& preset : o.run_cases ? o.presets : std::vector<std::string>{})
     for (Setup setup : o.setups)
       for (double noise : o.noises) {
         const Case c = MakeCase(o, preset, setup, noise);
-        RecoveryOptions ro = o.recovery;
-        if (noise > 0) {
-          ro.lambda = o.noisy_lambda;
-          ro.regularize_mu = o.noisy_regularize_mu;
-        }
-        RecoveryBenchRow r = RunCase(c, ro, preset, setup, noise, nullptr);
         if (progress)
-          progress(fmt::format("{} {}-lit noise {:g}: held-out E {:.2e} (truth {:.2e}), fit E {:.2e}, "
-                               "{} iterations, {} solves, {:.1f} s", preset, SetupName(setup),
-                               noise, r.holdout_error, r.truth_holdout_error, r.fit_error,
-                               r.iterations, r.solves, r.seconds));
-        out.rows.push_back(std::move(r));
+          progress(fmt::format("{} {}-lit noise {:g} on {}: data simulated ({}) in {:.1f} s", preset,
+                               SetupName(setup), noise, o.shape.ToString(),
+                               BackendName(o.data_backend), c.simulate_seconds));
+        for (Backend backend : o.backends) {
+          RecoveryOptions ro = o.recovery;
+          ro.backend = backend;
+          if (noise > 0) {
+            ro.lambda = o.noisy_lambda;
+            ro.regularize_mu = o.noisy_regularize_mu;
+          }
+          RecoveryBenchRow r = RunCase(c, o, ro, preset, setup, noise, nullptr);
+          if (progress)
+            progress(fmt::format("{} {}-lit noise {:g} [{}]: held-out E {:.2e} (truth {:.2e}), "
+                                 "fit E {:.2e}, {} iterations ({}: {}), {} solves, {:.1f} s "
+                                 "(homogeneous {:.1f} s, {:.3f} s/iteration; evaluation {:.1f} s)",
+                                 preset, SetupName(setup), noise, BackendName(backend),
+                                 r.holdout_error, r.truth_holdout_error, r.fit_error, r.iterations,
+                                 r.termination, r.message, r.solves, r.seconds, r.homogeneous_seconds,
+                                 r.SecondsPerIteration(), r.evaluate_seconds));
+          out.rows.push_back(std::move(r));
+        }
       }
   if (o.compare_optimizers && !o.presets.empty()) {
     // Same data, same homogeneous start; compare the heterogeneous phases.
     const Case c = MakeCase(o, o.presets[0], Setup::kBack, 0.0);
     RecoveryOptions paper = o.recovery;
+    paper.backend = o.backends.front();
     paper.optimizer = OptimizerKind::kPaper;
     paper.max_iterations = o.paper_iterations;
     RecoverySummary ps, ls;
-    RecoveryBenchRow pr = RunCase(c, paper, o.presets[0], Setup::kBack, 0.0, &ps);
+    RecoveryBenchRow pr = RunCase(c, o, paper, o.presets[0], Setup::kBack, 0.0, &ps);
     RecoveryOptions lbfgs = o.recovery;
+    lbfgs.backend = paper.backend;
     lbfgs.optimizer = OptimizerKind::kLbfgs;
-    RunCase(c, lbfgs, o.presets[0], Setup::kBack, 0.0, &ls);
+    RunCase(c, o, lbfgs, o.presets[0], Setup::kBack, 0.0, &ls);
     OptimizerComparison& cmp = out.comparison;
     cmp.ran = true;
     cmp.paper_objective = ps.final_objective;
@@ -136,14 +168,17 @@ RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
 }
 
 std::string RecoveryBenchTable(const RecoveryBenchResult& res) {
-  std::string s = fmt::format("| {:<10} | {:<5} | {:>5} | {:<9} | {:<9} | {:>7} | {:>5} | {:>6} | {:>9} | {:>9} | {:>9} | {:<24} | {:<24} |\n",
-                              "preset", "setup", "noise", "grid", "optimizer", "time s", "iters", "solves",
-                              "fit E", "held-out E", "truth E", "kappa err per layer k", "mu err per layer k");
-  s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  // s/iter: the heterogeneous phase per iteration (time s includes the homogeneous fit).
+  std::string s = fmt::format("| {:<10} | {:<5} | {:>5} | {:<9} | {:<9} | {:<7} | {:>7} | {:>7} | {:>5} | {:>6} | {:>9} | {:>9} | {:>9} | {:<24} | {:<24} |\n",
+                              "preset", "setup", "noise", "grid", "optimizer", "backend", "time s", "s/iter",
+                              "iters", "solves", "fit E", "held-out E", "truth E", "kappa err per layer k",
+                              "mu err per layer k");
+  s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& r : res.rows)
-    s += fmt::format("| {:<10} | {:<5} | {:>5g} | {:<9} | {:<9} | {:>7.1f} | {:>5} | {:>6} | {:>9.2e} | {:>9.2e} | {:>9.2e} | {:<24} | {:<24} |\n",
-                     r.preset, SetupName(r.setup), r.noise, r.shape.ToString(), r.optimizer, r.seconds,
-                     r.iterations, r.solves, r.fit_error, r.holdout_error, r.truth_holdout_error,
+    s += fmt::format("| {:<10} | {:<5} | {:>5g} | {:<9} | {:<9} | {:<7} | {:>7.1f} | {:>7.3f} | {:>5} | {:>6} | {:>9.2e} | {:>9.2e} | {:>9.2e} | {:<24} | {:<24} |\n",
+                     r.preset, SetupName(r.setup), r.noise, r.shape.ToString(), r.optimizer,
+                     BackendName(r.backend), r.seconds, r.SecondsPerIteration(), r.iterations,
+                     r.solves, r.fit_error, r.holdout_error, r.truth_holdout_error,
                      Layers(r.kappa_layer_error), Layers(r.mu_layer_error));
   const auto& c = res.comparison;
   if (c.ran) {
@@ -167,7 +202,12 @@ std::string RecoveryBenchJson(const RecoveryBenchResult& res) {
   for (const auto& r : res.rows)
     j["cases"].push_back({{"preset", r.preset}, {"setup", SetupName(r.setup)}, {"noise", r.noise},
                           {"grid", r.shape.ToString()}, {"optimizer", r.optimizer},
-                          {"seconds", r.seconds}, {"simulate_seconds", r.simulate_seconds},
+                          {"backend", BackendName(r.backend)}, {"termination", r.termination},
+                          {"message", r.message},
+                          {"seconds", r.seconds}, {"homogeneous_seconds", r.homogeneous_seconds},
+                          {"seconds_per_iteration", r.SecondsPerIteration()},
+                          {"simulate_seconds", r.simulate_seconds},
+                          {"evaluate_seconds", r.evaluate_seconds},
                           {"iterations", r.iterations}, {"solves", r.solves},
                           {"objective", r.objective}, {"fit_error", r.fit_error},
                           {"holdout_error", r.holdout_error},

@@ -1,4 +1,6 @@
 // SPDX-License-Identifier: MIT
+// Dataset files (ReadDataset, WriteDataset): OpenImageIO. The in-memory checks are in
+// dataset_validate.cc, which the GPU benchmark links without the file libraries.
 #include "solver/dataset.h"
 
 #include <cmath>
@@ -18,13 +20,6 @@ namespace {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 constexpr const char* kFormat = "translume-dataset/1";
-
-bool SafeName(const std::string& s) {
-  if (s.empty() || s.size() > 100) return false;
-  for (char c : s)
-    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-' && c != '.') return false;
-  return s != "." && s != "..";
-}
 
 // Reads an image and checks its size and channel count against the dataset grid.
 Image ReadFaceImage(const fs::path& file, const std::string& field, const GridShape& s,
@@ -63,35 +58,6 @@ T Field(const json& j, const char* key, const std::string& file) {
 }
 
 }  // namespace
-
-std::string Dataset::Validate() const {
-  if (shape.nx < 2 || shape.ny < 2 || shape.nz < 2)
-    return fmt::format("grid {} needs at least 2 nodes per axis", shape.ToString());
-  if (!(spacing_mm > 0) || !std::isfinite(spacing_mm)) return "spacing_mm must be positive";
-  if (!(C >= 1) || !std::isfinite(C)) return "C must be a finite number >= 1";
-  if (conditions.empty()) return "there are no conditions";
-  std::set<std::string> names;
-  for (const auto& c : conditions) {
-    if (!SafeName(c.name))
-      return fmt::format("condition name '{}' must be 1-100 characters of [A-Za-z0-9_.-]", c.name);
-    if (!names.insert(c.name).second) return fmt::format("condition '{}' appears twice", c.name);
-    const size_t n = size_t(shape.face_size());
-    for (int ch = 0; ch < 3; ++ch) {
-      if (c.q[ch].size() != n || c.L[ch].size() != n)
-        return fmt::format("condition '{}': q and L need {} values per channel", c.name, n);
-      for (size_t p = 0; p < n; ++p) {
-        if (!std::isfinite(c.q[ch][p]) || c.q[ch][p] < 0)
-          return fmt::format("condition '{}': q must be finite and >= 0", c.name);
-        if (!std::isfinite(c.L[ch][p]))
-          return fmt::format("condition '{}': L must be finite", c.name);
-      }
-    }
-    if (c.mask.size() != n) return fmt::format("condition '{}': mask needs {} values", c.name, n);
-    for (float m : c.mask)
-      if (!(m >= 0 && m <= 1)) return fmt::format("condition '{}': mask outside [0, 1]", c.name);
-  }
-  return "";
-}
 
 Dataset ReadDataset(const std::string& path) {
   fs::path file = path;
@@ -136,7 +102,7 @@ Dataset ReadDataset(const std::string& path) {
     if (!c.is_object()) throw InputError(where + " must be an object");
     DatasetCondition cond;
     cond.name = Field<std::string>(c, "name", where);
-    if (!SafeName(cond.name))
+    if (!IsSafeConditionName(cond.name))
       throw InputError(fmt::format("{}: name '{}' must be 1-100 characters of [A-Za-z0-9_.-]",
                                    where, cond.name));
     if (!names.insert(cond.name).second)

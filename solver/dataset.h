@@ -33,6 +33,10 @@ struct Dataset {
   std::string Validate() const;
 };
 
+// A condition name that is also safe as part of a file name: 1-100 characters of
+// [A-Za-z0-9_.-], not "." or "..".
+bool IsSafeConditionName(const std::string& name);
+
 // Reads DIR/dataset.json (`path` may name the folder or the json file). Image paths are relative
 // to the folder. Throws InputError naming the file and the field on anything wrong: unknown
 // format, missing or mistyped fields, grid < 2 nodes per axis, non-positive spacing, C < 1, an

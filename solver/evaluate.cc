@@ -75,21 +75,23 @@ void LayerErrors(const Material& rec, const Material& truth, std::vector<double>
 
 EvaluationReport EvaluateRecovery(const Material& rec, const Material* truth,
                                   const Dataset& training, const Dataset& holdout,
-                                  const MultigridOptions& mg) {
+                                  const MultigridOptions& mg, Backend backend) {
   CheckGrid(rec, training, "recovered");
   EvaluationReport r;
-  const std::vector<FacePattern> rec_train = RenderFrontFace(rec, training.setup, Lights(training), mg);
+  const std::vector<FacePattern> rec_train =
+      RenderFrontFace(rec, training.setup, Lights(training), mg, backend);
   r.fit_error = RelightingError(rec_train, Measured(training), Masks(training));
   if (!truth) return r;
   CheckGrid(*truth, training, "--truth");
   LayerErrors(rec, *truth, &r.kappa_layer_error, &r.mu_layer_error);
   r.training_error = RelightingError(
-      rec_train, RenderFrontFace(*truth, training.setup, Lights(training), mg), Masks(training));
+      rec_train, RenderFrontFace(*truth, training.setup, Lights(training), mg, backend),
+      Masks(training));
   if (holdout.conditions.empty()) return r;
   const auto q = Lights(holdout);
   const auto w = Masks(holdout);
-  const auto a = RenderFrontFace(rec, holdout.setup, q, mg);
-  const auto b = RenderFrontFace(*truth, holdout.setup, q, mg);
+  const auto a = RenderFrontFace(rec, holdout.setup, q, mg, backend);
+  const auto b = RenderFrontFace(*truth, holdout.setup, q, mg, backend);
   r.holdout_error = RelightingError(a, b, w);
   for (size_t m = 0; m < q.size(); ++m)
     r.holdout_condition_error.push_back(RelightingError({a[m]}, {b[m]}, {w[m]}));

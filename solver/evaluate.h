@@ -36,10 +36,12 @@ struct EvaluationReport {
 };
 
 // Evaluates a recovery. `holdout` may have no conditions (its errors stay -1); `truth` may be
-// null (only the fit error is computed). Throws InputError on a grid mismatch.
+// null (only the fit error is computed). `backend`: where the forward solves run. Throws
+// InputError on a grid mismatch.
 EvaluationReport EvaluateRecovery(const Material& recovered, const Material* truth,
                                   const Dataset& training, const Dataset& holdout,
-                                  const MultigridOptions& multigrid);
+                                  const MultigridOptions& multigrid,
+                                  Backend backend = Backend::kCpu);
 
 std::string EvaluationTable(const EvaluationReport& report);
 std::string EvaluationJson(const EvaluationReport& report);

@@ -16,6 +16,8 @@ Backend ParseBackend(const std::string& text) {
   throw InputError(fmt::format("--backend: unknown backend '{}' (available: cpu, gl)", text));
 }
 
+const char* BackendName(Backend backend) { return backend == Backend::kGl ? "gl" : "cpu"; }
+
 Precision ParsePrecision(const std::string& text) {
   if (text == "float") return Precision::kFloat;
   if (text == "double") return Precision::kDouble;

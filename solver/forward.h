@@ -15,6 +15,7 @@ namespace translume {
 // shaders in a headless context, float; see gl_solver.h).
 enum class Backend { kCpu, kGl };
 Backend ParseBackend(const std::string& text);
+const char* BackendName(Backend backend);  // "cpu", "gl"
 
 enum class Precision { kFloat, kDouble };
 Precision ParsePrecision(const std::string& text);

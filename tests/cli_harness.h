@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
-// Shared by the end-to-end tests: runs the `translume` binary (TRANSLUME_BINARY) as a user would,
-// each test in a fresh temporary folder.
+// Shared by the end-to-end tests: runs the `translume` binary (TRANSLUME_BINARY; the GPU
+// benchmark's tests point it at translume-gpubench) as a user would, each test in a fresh
+// temporary folder.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -10,6 +11,7 @@
 #include <array>
 #include <cstdio>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <string>
 
 namespace translume::testing_cli {
@@ -19,10 +21,10 @@ struct CommandRun {
   std::string output;  // stdout and stderr
 };
 
-// `env` is prepended to the command line (e.g. "TRANSLUME_GL=osmesa").
-inline CommandRun Translume(const std::string& args, const std::string& env = "") {
+// Runs a shell command line, collecting stdout and stderr.
+inline CommandRun Run(const std::string& command_line) {
   CommandRun r;
-  const std::string cmd = env + " " + std::string(TRANSLUME_BINARY) + " " + args + " 2>&1";
+  const std::string cmd = command_line + " 2>&1";
   FILE* pipe = popen(cmd.c_str(), "r");
   if (!pipe) return r;
   std::array<char, 4096> buf;
@@ -31,6 +33,31 @@ inline CommandRun Translume(const std::string& args, const std::string& env = ""
   const int st = pclose(pipe);
   r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
   return r;
+}
+
+// `env` is prepended to the command line (e.g. "TRANSLUME_GL=osmesa").
+inline CommandRun Translume(const std::string& args, const std::string& env = "") {
+  return Run(env + " " + std::string(TRANSLUME_BINARY) + " " + args);
+}
+
+// Runs `translume ARGS` that prints a JSON object after its progress lines (--json); fails the
+// test and returns null when it exits non-zero or prints no object.
+inline nlohmann::json TranslumeJson(const std::string& args) {
+  const CommandRun r = Translume(args);
+  EXPECT_EQ(r.status, 0) << r.output;
+  const size_t brace = r.output.find('{');
+  EXPECT_NE(brace, std::string::npos) << r.output;
+  if (r.status != 0 || brace == std::string::npos) return nullptr;
+  return nlohmann::json::parse(r.output.substr(brace));
+}
+
+// The cases of `bench recovery ARGS --no-comparison --json`: an empty array (and a failed test)
+// when the command fails or prints an optimiser comparison anyway.
+inline nlohmann::json RecoveryBenchCases(const std::string& args) {
+  const nlohmann::json j = TranslumeJson("bench recovery " + args + " --no-comparison --json");
+  if (!j.is_object() || !j.contains("cases")) return nlohmann::json::array();
+  EXPECT_FALSE(j.contains("optimizer_comparison")) << j.dump();
+  return j["cases"];
 }
 
 // A fresh folder per test, removed afterwards; P(name) is a path inside it.

@@ -212,6 +212,25 @@ TEST_F(Cli, BenchRecoverySmoke) {
   ExpectOneLineError(Translume("bench recovery --grid 8x6"), "--grid");
 }
 
+TEST_F(Cli, BenchRecoveryOneCaseWithTimeLimit) {
+  // One case (front-lit, 1 % noise), no optimiser comparison; the time limit stops the
+  // recovery after its first iteration.
+  const auto cases = testing_cli::RecoveryBenchCases(
+      "--grid 8x6x4 --presets wax --setups front --noises 0.01 --max-iterations 50 "
+      "--max-seconds 1e-6");
+  ASSERT_EQ(cases.size(), 1u);
+  const auto& c = cases[0];
+  EXPECT_EQ(c["setup"], "front");
+  EXPECT_EQ(c["noise"].get<double>(), 0.01);
+  EXPECT_EQ(c["backend"], "cpu");
+  EXPECT_EQ(c["iterations"].get<int>(), 1);
+  EXPECT_EQ(c["termination"], "stopped");
+  EXPECT_GT(c["seconds_per_iteration"].get<double>(), 0);
+  ExpectOneLineError(Translume("bench recovery --setups side"), "side");
+  ExpectOneLineError(Translume("bench recovery --backend gl,metal"), "metal");
+  ExpectOneLineError(Translume("bench recovery --comparison-only --no-comparison"), "exclude");
+}
+
 TEST_F(Cli, SolveStopsCleanlyOnSigint) {
   ASSERT_EQ(Translume("synth --preset marble --grid 24x20x6 -o " + P("m.vdb")).status, 0);
   ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 4x4 -o " + P("ds")).status, 0);

@@ -1,12 +1,16 @@
 // SPDX-License-Identifier: MIT
-// `translume bench forward`: needs only the solver core (no file IO), so it also builds into
-// the self-contained GPU benchmark binary (tools/gpubench.cc).
+// `translume bench forward` and `bench recovery`: they need only the solver and the inverse
+// problem in memory (no file IO), so they also build into the self-contained GPU benchmark
+// binary (tools/gpubench.cc).
+#include <algorithm>
 #include <cstdio>
+#include <fmt/format.h>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "solver/bench_forward.h"
+#include "solver/bench_recovery.h"
 #include "solver/forward.h"
 #include "solver/gl_context.h"
 #include "solver/status.h"
@@ -16,6 +20,16 @@
 namespace translume {
 
 void PrintBenchProgress(const std::string& line) { std::fprintf(stderr, "  %s\n", line.c_str()); }
+
+namespace {
+
+void PrintGlInfo() {
+  const GlInfo& info = GlContext::Get().info();
+  std::fprintf(stderr, "gl: %s, %s, %s\n", info.platform.c_str(), info.renderer.c_str(),
+               info.version.c_str());
+}
+
+}  // namespace
 
 void AddBenchForward(CLI::App& bench) {
   struct Flags {
@@ -60,16 +74,83 @@ void AddBenchForward(CLI::App& bench) {
     o.backend = ParseBackend(f->backend);
     if (o.cpu_time && o.backend == Backend::kGl)
       throw InputError("--cpu-time: only with --backend cpu (the gl solver runs on the GPU)");
-    if (o.backend == Backend::kGl) {
-      const GlInfo& info = GlContext::Get().info();
-      std::fprintf(stderr, "gl: %s, %s, %s\n", info.platform.c_str(), info.renderer.c_str(),
-                   info.version.c_str());
-    }
+    if (o.backend == Backend::kGl) PrintGlInfo();
     o.peers = !f->no_peers;
     std::fprintf(stderr, "bench forward: backend %s, %d threads, %s%s\n", f->backend.c_str(),
                  NumThreads(), f->precision.c_str(), o.cpu_time ? ", CPU time" : "");
     const auto rows = RunForwardBench(o, PrintBenchProgress);
     std::printf("%s\n", (f->json ? ForwardBenchJson(rows) : ForwardBenchTable(rows)).c_str());
+  });
+}
+
+void AddBenchRecovery(CLI::App& bench) {
+  struct Flags {
+    RecoveryBenchOptions o;
+    bool full = false, json = false, comparison_only = false, no_comparison = false;
+    std::string grid, data_backend = "cpu";
+    std::vector<std::string> backends = {"cpu"}, setups = {"back", "front"};
+  };
+  auto f = std::make_shared<Flags>();
+  auto* rec = bench.add_subcommand("recovery", "Synthetic recoveries (4 presets x back/front x 0/1 % "
+                                               "noise, 16 conditions) and the paper's optimiser vs lbfgs");
+  rec->fallthrough();
+  RecoveryBenchOptions& ro = f->o;
+  rec->add_flag("--json", f->json, "Print JSON instead of a table");
+  rec->add_flag("--full", f->full, "64x48x16 grids (slow) instead of the default 24x18x8");
+  rec->add_option("--grid", f->grid, "Recovery grid NXxNYxNZ (overrides --full; the paper's: "
+                                     "130x53x37 Wax I, 256x256x20 Marble)");
+  rec->add_option("--presets", ro.presets, "Presets")->delimiter(',')->capture_default_str();
+  rec->add_option("--setups", f->setups, "Lit faces: back, front")->delimiter(',')
+      ->capture_default_str();
+  rec->add_option("--noises", ro.noises, "Relative noise levels (0.01 = 1 %)")->delimiter(',')
+      ->capture_default_str();
+  rec->add_option("--backend", f->backends, "cpu or gl: where the recoveries' solves run; a list "
+                                            "(gl,cpu) recovers each case on each, the same data")
+      ->delimiter(',')->capture_default_str();
+  rec->add_option("--data-backend", f->data_backend, "cpu or gl: where the data simulation (on "
+                  "the 2x finer grid) and the evaluation run; not part of the recovery's time")
+      ->capture_default_str();
+  rec->add_option("--spacing", ro.spacing_mm, "Node spacing h in mm")->capture_default_str();
+  rec->add_option("--max-iterations", ro.recovery.max_iterations, "Iterations per recovery")
+      ->capture_default_str();
+  rec->add_option("--max-seconds", ro.max_seconds, "Stop each recovery after this many seconds "
+                  "(0: no limit); the row reports the iterations made")
+      ->capture_default_str();
+  rec->add_option("--tolerance", ro.recovery.tolerance, "Stop when an iteration lowers the "
+                  "objective by less than this fraction (tiny: run all --max-iterations)")
+      ->capture_default_str();
+  rec->add_option("--lambda", ro.recovery.lambda, "lambda for noise-free data")->capture_default_str();
+  rec->add_option("--noisy-lambda", ro.noisy_lambda, "lambda for 1 % noise")->capture_default_str();
+  rec->add_flag("--comparison-only", f->comparison_only, "Only the paper-vs-lbfgs comparison");
+  rec->add_flag("--no-comparison", f->no_comparison, "Skip the paper-vs-lbfgs comparison");
+  rec->add_option("--paper-iterations", ro.paper_iterations, "Iterations of the paper optimiser")
+      ->capture_default_str();
+  rec->callback([f] {
+    RecoveryBenchOptions o = f->o;
+    if (f->full) o.shape = {64, 48, 16};
+    if (!f->grid.empty()) o.shape = ParseGridShape(f->grid, "--grid");
+    if (f->comparison_only && f->no_comparison)
+      throw InputError("bench recovery: --comparison-only and --no-comparison exclude each other");
+    o.run_cases = !f->comparison_only;
+    o.compare_optimizers = !f->no_comparison;
+    o.setups.clear();
+    for (const auto& s : f->setups) o.setups.push_back(ParseSetup(s));
+    o.backends.clear();
+    for (const auto& b : f->backends) o.backends.push_back(ParseBackend(b));
+    if (o.backends.empty()) throw InputError("bench recovery: --backend needs a backend");
+    o.data_backend = ParseBackend(f->data_backend);
+    if (!(o.max_seconds >= 0)) throw InputError("bench recovery: --max-seconds must be >= 0");
+    for (double n : o.noises)
+      if (!(n >= 0)) throw InputError(fmt::format("bench recovery: noise {} must be >= 0", n));
+    if (std::string err = o.recovery.Validate(); !err.empty())
+      throw InputError("bench recovery: " + err);
+    if (o.data_backend == Backend::kGl ||
+        std::find(o.backends.begin(), o.backends.end(), Backend::kGl) != o.backends.end())
+      PrintGlInfo();
+    std::fprintf(stderr, "bench recovery: grid %s, %d threads\n", o.shape.ToString().c_str(),
+                 NumThreads());
+    const RecoveryBenchResult r = RunRecoveryBench(o, PrintBenchProgress);
+    std::printf("%s\n", (f->json ? RecoveryBenchJson(r) : RecoveryBenchTable(r)).c_str());
   });
 }
 

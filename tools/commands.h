@@ -21,9 +21,10 @@ int RunEvaluate(int argc, char** argv);
 int RunSimulateCapture(int argc, char** argv);
 int RunAcquire(int argc, char** argv);
 
-// `bench forward` (tools/bench_commands.cc, solver core only): registers the subcommand, whose
-// callback runs the benchmark, on a `bench` app.
+// `bench forward` and `bench recovery` (tools/bench_commands.cc, no file IO): each registers
+// the subcommand, whose callback runs the benchmark, on a `bench` app.
 void AddBenchForward(CLI::App& bench);
+void AddBenchRecovery(CLI::App& bench);
 void PrintBenchProgress(const std::string& line);
 int RunRender(int argc, char** argv);
 int RunEdit(int argc, char** argv);

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
-// translume-gpubench: `translume bench` and the gl platform report without file IO, so that it
-// runs on a GPU machine with only a driver (tools/gpu_bundle.sh; docs/gpu.md).
+// translume-gpubench: `translume bench` (forward, recovery) and the gl platform report without
+// file IO, so that it runs on a GPU machine with only a driver (tools/gpu_bundle.sh;
+// docs/gpu.md).
 #include <cstdio>
 #include <cstring>
 #include <exception>
@@ -23,14 +24,15 @@ int main(int argc, char** argv) {
     }
   }
   if (argc < 2 || std::strcmp(argv[1], "bench") != 0) {
-    std::fprintf(stderr, "usage: translume-gpubench gl-info | bench forward [options]\n");
+    std::fprintf(stderr, "usage: translume-gpubench gl-info | bench forward|recovery [options]\n");
     return 2;
   }
   try {
-    CLI::App app{"translume-gpubench bench: the forward benchmark of `translume bench`",
+    CLI::App app{"translume-gpubench bench: the forward and recovery benchmarks of `translume bench`",
                  "translume-gpubench bench"};
     app.require_subcommand(1);
     translume::AddBenchForward(app);
+    translume::AddBenchRecovery(app);
     translume::AddCommonOptions(app);
     translume::ParseOrHelp(app, argc - 1, argv + 1);
     return 0;

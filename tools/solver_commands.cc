@@ -9,7 +9,6 @@
 #include <filesystem>
 #include <fmt/format.h>
 
-#include "solver/bench_recovery.h"
 #include "solver/forward.h"
 #include "solver/dataset.h"
 #include "solver/evaluate.h"
@@ -172,41 +171,9 @@ int RunBench(int argc, char** argv) {
                "the same process on the same problem.", "translume bench"};
   app.require_subcommand(1);
   AddBenchForward(app);
-  auto* rec = app.add_subcommand("recovery", "Synthetic recoveries (4 presets x back/front x 0/1 % "
-                                             "noise, 16 conditions) and the paper's optimiser vs lbfgs");
-  rec->fallthrough();
-  RecoveryBenchOptions ro;
-  bool full = false, json = false;
-  std::string rec_grid;
-  rec->add_flag("--json", json, "Print JSON instead of a table");
-  rec->add_flag("--full", full, "64x48x16 grids (slow) instead of the default 24x18x8");
-  rec->add_option("--grid", rec_grid, "Recovery grid NXxNYxNZ (overrides --full)");
-  rec->add_option("--presets", ro.presets, "Presets")->delimiter(',');
-  std::string rec_backend = "cpu";
-  rec->add_option("--backend", rec_backend, "cpu or gl: where the recoveries' solves run")
-      ->capture_default_str();
-  rec->add_option("--spacing", ro.spacing_mm, "Node spacing h in mm")->capture_default_str();
-  rec->add_option("--max-iterations", ro.recovery.max_iterations, "Iterations per recovery")
-      ->capture_default_str();
-  rec->add_option("--lambda", ro.recovery.lambda, "lambda for noise-free data")->capture_default_str();
-  rec->add_option("--noisy-lambda", ro.noisy_lambda, "lambda for 1 % noise")->capture_default_str();
-  bool comparison_only = false;
-  rec->add_flag("--comparison-only", comparison_only, "Only the paper-vs-lbfgs comparison");
-  rec->add_option("--paper-iterations", ro.paper_iterations, "Iterations of the paper optimiser")
-      ->capture_default_str();
+  AddBenchRecovery(app);
   AddCommonOptions(app);
-  if (ParseOrHelp(app, argc, argv)) return 0;
-  if (rec->parsed()) {
-    if (full) ro.shape = {64, 48, 16};
-    ro.run_cases = !comparison_only;
-    if (!rec_grid.empty()) ro.shape = ParseGridShape(rec_grid, "--grid");
-    ro.recovery.backend = ParseBackend(rec_backend);
-    if (std::string err = ro.recovery.Validate(); !err.empty()) throw InputError("bench recovery: " + err);
-    std::fprintf(stderr, "bench recovery: grid %s, %d threads\n", ro.shape.ToString().c_str(), NumThreads());
-    const RecoveryBenchResult r = RunRecoveryBench(ro, PrintBenchProgress);
-    std::printf("%s\n", (json ? RecoveryBenchJson(r) : RecoveryBenchTable(r)).c_str());
-    return 0;
-  }
+  ParseOrHelp(app, argc, argv);
   return 0;
 }
 

@@ -1,0 +1,49 @@
+// SPDX-License-Identifier: MIT
+// The in-memory half of dataset.h (no file IO), so that code which builds datasets in memory
+// (bench recovery in translume-gpubench) links without OpenImageIO.
+#include <cctype>
+#include <cmath>
+#include <fmt/format.h>
+#include <set>
+
+#include "solver/dataset.h"
+
+namespace translume {
+
+bool IsSafeConditionName(const std::string& s) {
+  if (s.empty() || s.size() > 100) return false;
+  for (char c : s)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-' && c != '.') return false;
+  return s != "." && s != "..";
+}
+
+std::string Dataset::Validate() const {
+  if (shape.nx < 2 || shape.ny < 2 || shape.nz < 2)
+    return fmt::format("grid {} needs at least 2 nodes per axis", shape.ToString());
+  if (!(spacing_mm > 0) || !std::isfinite(spacing_mm)) return "spacing_mm must be positive";
+  if (!(C >= 1) || !std::isfinite(C)) return "C must be a finite number >= 1";
+  if (conditions.empty()) return "there are no conditions";
+  std::set<std::string> names;
+  for (const auto& c : conditions) {
+    if (!IsSafeConditionName(c.name))
+      return fmt::format("condition name '{}' must be 1-100 characters of [A-Za-z0-9_.-]", c.name);
+    if (!names.insert(c.name).second) return fmt::format("condition '{}' appears twice", c.name);
+    const size_t n = size_t(shape.face_size());
+    for (int ch = 0; ch < 3; ++ch) {
+      if (c.q[ch].size() != n || c.L[ch].size() != n)
+        return fmt::format("condition '{}': q and L need {} values per channel", c.name, n);
+      for (size_t p = 0; p < n; ++p) {
+        if (!std::isfinite(c.q[ch][p]) || c.q[ch][p] < 0)
+          return fmt::format("condition '{}': q must be finite and >= 0", c.name);
+        if (!std::isfinite(c.L[ch][p]))
+          return fmt::format("condition '{}': L must be finite", c.name);
+      }
+    }
+    if (c.mask.size() != n) return fmt::format("condition '{}': mask needs {} values", c.name, n);
+    for (float m : c.mask)
+      if (!(m >= 0 && m <= 1)) return fmt::format("condition '{}': mask outside [0, 1]", c.name);
+  }
+  return "";
+}
+
+}  // namespace translume

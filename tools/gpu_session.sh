@@ -1,0 +1,155 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
+# The prepared GPU session (docs/gpu.md, "Next GPU session"): every GPU measurement the issues
+# still lack, in one command, from the bundle that tools/gpu_bundle.sh writes (default
+# gpu-bundle/: translume-gpubench and translume-renderbench). Run from the repository root on
+# the GPU machine:
+#
+#   bash tools/gpu_session.sh [--quick] [--bundle DIR] [--budget SECONDS]
+#
+# Steps, each under its own `timeout` (one hang cannot eat the session) and all within
+# --budget seconds (default 480; a step gets at most what is left, a step with under 20 s left
+# is skipped): nvidia-smi, gl-info, the full RGB recovery with 16 conditions on the Wax I grid
+# on the gl backend, the renderbench on the 253-cube bunny (16^3 nodes and 16^3 cells per cube,
+# no frame coherence), the same recovery on the Marble grid, bench forward --backend gl on Wax
+# I, Marble and 129^3 with a batch of 16 (the cpu solver as the peer), and the cpu backend as
+# the recovery's peer on Wax I (time-capped: its seconds per iteration is the comparison).
+#
+# Output: "$OUT" (the device tool's output folder; default ./gpu-session): session.log (every
+# step's full output, in order), summary.md (the figures for docs/benchmarks.md, also printed
+# at the end): two files, well within what the device tool brings back (8).
+#
+# --quick runs the same steps on tiny sizes (a dry run here, on Mesa llvmpipe: about 1 min).
+set -uo pipefail
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+bundle=$root/gpu-bundle
+quick=0
+budget=480
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --quick) quick=1 ;;
+    --bundle) bundle=$2; shift ;;
+    --budget) budget=$2; shift ;;
+    -h|--help) sed -n '3,22p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "gpu_session.sh: unknown argument '$1' (--quick, --bundle DIR, --budget SECONDS)" >&2; exit 2 ;;
+  esac
+  shift
+done
+out=${OUT:-$root/gpu-session}
+mkdir -p "$out"
+log=$out/session.log
+summary=$out/summary.md
+: >"$log"
+: >"$summary"
+run=$bundle/run.sh
+if [ ! -x "$run" ] || [ ! -x "$bundle/translume-gpubench" ]; then
+  echo "gpu_session.sh: no translume-gpubench bundle at $bundle (build it: bash tools/gpu_bundle.sh)" >&2
+  exit 1
+fi
+# The renderbench: in the same bundle (default), else a separate render-bundle/ beside it.
+render=("$run" translume-renderbench)
+if [ ! -x "$bundle/translume-renderbench" ]; then
+  if [ -x "$root/render-bundle/translume-renderbench" ]; then
+    render=("$root/render-bundle/run.sh")
+  else
+    render=()
+  fi
+fi
+
+start=$(date +%s)
+failed=0
+say() { echo "$*" | tee -a "$log" >&2; }
+
+# step NAME LIMIT_S COMMAND...: runs COMMAND under timeout (LIMIT_S, or what is left of the
+# budget), stdout (the result table) into the summary, stdout and stderr into the log.
+step() {
+  local name=$1 limit=$2
+  shift 2
+  local left=$(( budget - ($(date +%s) - start) ))
+  [ "$limit" -gt $(( left - 5 )) ] && limit=$(( left - 5 ))
+  if [ "$limit" -lt 20 ]; then
+    say "== $name: SKIPPED (${left} s of the ${budget} s budget left)"
+    printf '\n### %s\n\nskipped: the session budget ran out\n' "$name" >>"$summary"
+    failed=1
+    return
+  fi
+  say "== $name (limit ${limit} s): $*"
+  local t0 rc so se
+  t0=$(date +%s.%N)
+  so=$(mktemp) se=$(mktemp)
+  timeout -k 10 "$limit" "$@" >"$so" 2>"$se"
+  rc=$?
+  local secs
+  secs=$(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN { printf "%.1f", b - a }')
+  cat "$se" "$so" >>"$log"
+  local status="ok"
+  if [ $rc -eq 124 ] || [ $rc -eq 137 ]; then status="TIMED OUT after ${limit} s"; failed=1
+  elif [ $rc -ne 0 ]; then status="FAILED (exit $rc)"; failed=1; fi
+  say "== $name: $status, ${secs} s"
+  {
+    printf '\n### %s (%s, %s s)\n\n`%s`\n\n' "$name" "$status" "$secs" "$*"
+    cat "$so"
+    # Failed or stopped: the last lines of stderr say why.
+    if [ "$status" != "ok" ]; then echo; tail -n 5 "$se" | sed 's/^/    /'; fi
+  } >>"$summary"
+  rm -f "$so" "$se"
+}
+
+if [ $quick = 1 ]; then
+  # One small grid: llvmpipe spends ~40 s per grid timing the 256 MiB copy kernel.
+  grids=17x13x9; repeats=1; batch=4
+  render_args=(--shapes bunny --resolutions 3,4 --frames 2 --image 64 --skip-coherent)
+  wax=(--grid 12x10x5 --max-iterations 3 --max-seconds 60)
+  marble=(--grid 16x16x4 --max-iterations 3 --max-seconds 60)
+  peer=(--grid 12x10x5 --max-iterations 3 --max-seconds 30)
+else
+  grids=130x53x37,256x256x20,129x129x129; repeats=7; batch=16
+  render_args=(--shapes bunny --resolutions 16,17 --frames 20 --skip-coherent)
+  # A full recovery: the bench's default 300 L-BFGS iterations (or convergence), with a time
+  # cap for the session (docs/gpu.md, "Next GPU session": the estimate).
+  wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 90)
+  marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 150)
+  peer=(--grid 130x53x37 --max-iterations 300 --max-seconds 30)
+fi
+# The data and the evaluation on the host's cpu (~5 s for Wax I and ~40 s for Marble on 16
+# cores, estimated from 2-core runs): with data simulated on gl, a gl recovery of wax on
+# 65x27x19 stopped after the homogeneous fit (zero step; docs/gpu.md, "Next GPU session").
+one_case=(--setups back --noises 0 --no-comparison --data-backend cpu)
+
+{
+  echo "# GPU session $(date -u '+%Y-%m-%d %H:%M UTC')$([ $quick = 1 ] && echo ' (--quick)')"
+  echo
+  echo "bundle: $(cat "$bundle/version" 2>/dev/null || echo 'version unknown')"
+  echo "host: $(nproc) cores, $(uname -m), $(awk '/MemTotal/ { printf "%.0f GiB", $2 / 1048576 }' /proc/meminfo)"
+} >>"$summary"
+
+if command -v nvidia-smi >/dev/null; then
+  step "nvidia-smi" 30 nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.max.sm,clocks.max.mem --format=csv
+else
+  say "== nvidia-smi: not found (no NVIDIA driver here)"
+  printf '\n### nvidia-smi\n\nnot found\n' >>"$summary"
+fi
+step "gl-info" 60 "$run" gl-info
+# The never-measured targets first (issue 5's recoveries, issue 7's bunny), so that an overrun
+# late in the session costs only the re-measurements.
+step "recovery Wax I (wax, gl)" 150 \
+  "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${wax[@]}"
+if [ ${#render[@]} -gt 0 ]; then
+  step "renderbench (bunny)" 120 "${render[@]}" "${render_args[@]}"
+else
+  say "== renderbench: no translume-renderbench in $bundle or render-bundle/"
+  failed=1
+fi
+step "recovery Marble (marble, gl)" 210 \
+  "$run" bench recovery --presets marble "${one_case[@]}" --backend gl "${marble[@]}"
+step "bench forward (gl, batch ${batch})" 90 \
+  "$run" bench forward --backend gl --grids "$grids" --repeats "$repeats" --batch "$batch"
+step "recovery Wax I (wax, cpu peer, time-capped)" 60 \
+  "$run" bench recovery --presets wax "${one_case[@]}" --backend cpu "${peer[@]}"
+
+total=$(( $(date +%s) - start ))
+printf '\nsession: %d s of the %d s budget%s\n' "$total" "$budget" \
+  "$([ $failed = 1 ] && echo '; SOME STEPS FAILED, TIMED OUT OR WERE SKIPPED (session.log)')" >>"$summary"
+echo
+cat "$summary"
+exit $failed
