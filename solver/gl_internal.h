@@ -170,7 +170,9 @@ struct GLevel {
   MultigridLevel geo;
   GridShape s;
   int64_t n = 0;
-  Buffer geometry, kappa, mu, cx, cy, cz, diag, inv, luc, b, x, r, rnorm, tmp_a, tmp_b;
+  // diag: the full diagonal (line factors, coarsest inverse); sigma: its absorption and Robin
+  // part alone, for the operator's difference form (assemble.comp, residual.comp).
+  Buffer geometry, kappa, mu, cx, cy, cz, diag, sigma, inv, luc, b, x, r, rnorm, tmp_a, tmp_b;
   std::array<AxisBuffers, 3> t;
 };
 
@@ -256,7 +258,7 @@ struct GlMultigridSolver::Impl {
 
   void Stencil(GLevel& L, const Buffer& x, const Buffer& b, Buffer& out, int mode, int nb,
                bool x_double = false) {
-    RunBatch("residual", {&L.cx, &L.cy, &L.cz, &L.diag, &x, &b, &out},
+    RunBatch("residual", {&L.cx, &L.cy, &L.cz, &L.sigma, &x, &b, &out},
              {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode, ColumnLength(L.s)}, ColumnThreads(L.s), nb,
              x_double ? "#define X_DOUBLE\n" : "");
   }

@@ -249,7 +249,7 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
       for (int64_t i = 0; i < L.s.n(a); ++i)
         geo.push_back(i + 1 < L.s.n(a) ? float(L.geo.grid.Gap(a, i)) : 1.0f);
     L.geometry.Alloc(geo.size() * 4, geo.data());
-    for (Buffer* b : {&L.kappa, &L.mu, &L.cx, &L.cy, &L.cz, &L.diag, &L.inv, &L.luc})
+    for (Buffer* b : {&L.kappa, &L.mu, &L.cx, &L.cy, &L.cz, &L.diag, &L.sigma, &L.inv, &L.luc})
       b->Alloc(bytes);
     if (l + 1 < I.levels.size())
       for (int a = 0; a < 3; ++a) L.t[a].Upload(L.geo.to_coarse[a]);
@@ -316,7 +316,7 @@ void GlMultigridSolver::SetCoefficients(const float* kappa, const float* mu, dou
       Run("divide", {&L.kappa, &L.rnorm}, {int(L.n)}, FlatThreads(L.n));
       Run("divide", {&L.mu, &L.rnorm}, {int(L.n)}, FlatThreads(L.n));
     }
-    Run("assemble", {&L.kappa, &L.mu, &L.geometry, &L.cx, &L.cy, &L.cz, &L.diag},
+    Run("assemble", {&L.kappa, &L.mu, &L.geometry, &L.cx, &L.cy, &L.cz, &L.diag, &L.sigma},
         {int(L.s.nx), int(L.s.ny), int(L.s.nz)}, FlatThreads(L.n), 3, float(1.0 / (2.0 * C)));
     Run("factor", {&L.cz, &L.diag, &L.inv, &L.luc}, {int(L.s.nx), int(L.s.ny), int(L.s.nz)},
         L.s.nx * L.s.ny);

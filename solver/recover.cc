@@ -136,11 +136,10 @@ class RecoveryProblem {
 
   void FitChannel(int c, int max_iterations, double* lk, double* lm) {
     // Forward-difference step in log space, about the square root of the model's relative
-    // accuracy. The cpu model is double throughout: 1e-4. The gl model assembles its diagonal in
-    // float, sum of conductances + mu h^3 + Robin terms, whose rounding (~1e-7 of the diagonal)
-    // is ~1e-3 of the absorption term where mu h^2 / kappa ~ 1e-4: at 1e-4 the mu column of the
-    // Jacobian was noise and the fit stopped far from the optimum (wax, 65x27x19, fit E 1e-2
-    // instead of 3e-3, after which L-BFGS made no progress); 1e-2 is steady there.
+    // accuracy: the cpu model is double throughout (1e-4), the gl model float (1e-2). (When the
+    // gl operator still applied a float diagonal, whose rounding was ~1e-3 of the absorption
+    // term, a 1e-4 step made the mu column of the Jacobian noise and the fit stopped far from
+    // the optimum; the difference form of residual.comp fixed that, and 1e-2 keeps a margin.)
     const double kStep = o_.backend == Backend::kGl ? 1e-2 : 1e-4;
     std::vector<double> r0, r1, r2, rt;
     double f0 = EvaluateConstant(c, *lk, *lm, &r0);

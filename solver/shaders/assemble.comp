@@ -2,7 +2,12 @@
 // The canonical operator of SPEC section 3 as a 7-point stencil (solver/stencil.h): one thread
 // per node p computes its face conductances towards +x, +y, +z,
 //   c = A_face (kappa_p + kappa_q) / 2 / gap,
-// and its diagonal: the six conductances + V_p mu_p + boundary box faces / (2 C).
+// and its diagonal: the six conductances + V_p mu_p + boundary box faces / (2 C) (the
+// smoother's line factors and the coarsest level's inverse use it), and sigma = V_p mu_p +
+// boundary box faces / (2 C) alone: residual.comp applies A in the difference form
+// sigma_p x_p + sum_q c_pq (x_p - x_q), where the float rounding of each coefficient stays
+// relative to its own term (the diagonal's rounding, ~1e-7 of it, is ~1e-3 of the absorption
+// term where mu h^2 / kappa ~ 1e-4).
 // geo holds the level's dual-box widths wx[nx] wy[ny] wz[nz], then the gaps gx[nx] gy[ny] gz[nz]
 // (gap i is between node i and i + 1; the last is unused).
 FLOATS(0, Kappa, kappa, readonly);
@@ -12,6 +17,7 @@ FLOATS(3, Cx, cx, writeonly);
 FLOATS(4, Cy, cy, writeonly);
 FLOATS(5, Cz, cz, writeonly);
 FLOATS(6, Diag, diag, writeonly);
+FLOATS(7, Sigma, sigma, writeonly);
 layout(location = 0) uniform int nx;
 layout(location = 1) uniform int ny;
 layout(location = 2) uniform int nz;
@@ -38,8 +44,9 @@ void Node(uint p) {
   ST(cx, p, cxp);
   ST(cy, p, cyp);
   ST(cz, p, czp);
-  ST(diag, p, wx * wy * wz * LD(mu, p) + robin * (bx * wy * wz + by * wx * wz + bz * wx * wy) +
-            cxp + cyp + czp + sx + sy + sz);
+  float self = wx * wy * wz * LD(mu, p) + robin * (bx * wy * wz + by * wx * wz + bz * wx * wy);
+  ST(sigma, p, self);
+  ST(diag, p, self + cxp + cyp + czp + sx + sy + sz);
 }
 
 void main() {

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
-// mode 0: out = b - A x (residual); mode 1: out = A x (operator application). Batched: x, b
+// mode 0: out = b - A x (residual); mode 1: out = A x (operator application), A in the
+// difference form A x_p = sigma_p x_p + sum_q c_pq (x_p - x_q) (assemble.comp). Batched: x, b
 // and out hold one field per work-group z (common.glsl); the coefficients are read once per
 // node for all of them by the cache. Each invocation walks a z-column of kz nodes (Column),
 // carrying x and cz of the node below in registers.
@@ -9,7 +10,7 @@
 FLOATS(0, Cx, cx, readonly);
 FLOATS(1, Cy, cy, readonly);
 FLOATS(2, Cz, cz, readonly);
-FLOATS(3, Diag, diag, readonly);
+FLOATS(3, Sigma, sigma, readonly);
 #ifdef X_DOUBLE
 DOUBLES(4, X, x, readonly);
 #define ACC double
@@ -42,11 +43,11 @@ void main() {
     int o = f0 + p;  // this node in this field
     ACC xp = k + 1 < nz ? LDX(x, o + nxy) : ACC(0.0);
     ACC czp = ACC(LD(cz, p));
-    ACC v = ACC(LD(diag, p)) * xc - czm * xm - czp * xp;
-    if (i > 0) v -= ACC(LD(cx, p - 1)) * LDX(x, o - 1);
-    if (i + 1 < nx) v -= ACC(LD(cx, p)) * LDX(x, o + 1);
-    if (j > 0) v -= ACC(LD(cy, p - nx)) * LDX(x, o - nx);
-    if (j + 1 < ny) v -= ACC(LD(cy, p)) * LDX(x, o + nx);
+    ACC v = ACC(LD(sigma, p)) * xc + czm * (xc - xm) + czp * (xc - xp);
+    if (i > 0) v += ACC(LD(cx, p - 1)) * (xc - LDX(x, o - 1));
+    if (i + 1 < nx) v += ACC(LD(cx, p)) * (xc - LDX(x, o + 1));
+    if (j > 0) v += ACC(LD(cy, p - nx)) * (xc - LDX(x, o - nx));
+    if (j + 1 < ny) v += ACC(LD(cy, p)) * (xc - LDX(x, o + nx));
     ST(y, o, float(mode == 0 ? ACC(LD(b, o)) - v : v));
     xm = xc;
     xc = xp;
