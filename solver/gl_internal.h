@@ -37,6 +37,10 @@ struct Tuning {
   int group = 256;
   // Dots leave one partial sum per invocation, no shared-memory tree (TL_INVOCATION_SUMS).
   bool invocation_sums = false;
+  // The coarse tail (tail.comp): the levels with at most this many nodes run their whole
+  // V-cycle in one dispatch, one work group per field (0: never). TRANSLUME_GL_TAIL_NODES=N
+  // overrides it.
+  int64_t tail_nodes = 0;
 };
 const Tuning& GetTuning();
 
@@ -75,10 +79,11 @@ class Buffer {
     api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
     api.ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32F, GL_RED, GL_FLOAT, nullptr);
   }
-  void CopyFrom(const Buffer& src, int64_t bytes) {
+  // Copies `bytes` bytes of src from byte src_offset to byte dst_offset of this buffer.
+  void CopyFrom(const Buffer& src, int64_t bytes, int64_t src_offset = 0, int64_t dst_offset = 0) {
     api.BindBuffer(GL_COPY_READ_BUFFER, src.id_);
     api.BindBuffer(GL_COPY_WRITE_BUFFER, id_);
-    api.CopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, 0, bytes);
+    api.CopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, src_offset, dst_offset, bytes);
   }
   GLuint id() const { return id_; }
   // Binds the buffer to image unit `unit` (read-write, in its element's format).
@@ -125,6 +130,9 @@ int64_t Run(const char* name, std::initializer_list<const Buffer*> buffers,
 int64_t RunBatch(const char* name, std::initializer_list<const Buffer*> buffers,
                  std::initializer_list<int> ints, int64_t threads, int fields,
                  const char* defines = "");
+// Compute dispatches issued by Run and RunBatch since the process started (for tests and the
+// dispatch counts in docs/benchmarks.md).
+int64_t DispatchCount();
 // Work groups per field that Run and RunBatch dispatch for `threads` threads.
 int64_t WorkGroups(int64_t threads);
 // Invocations of dot.comp for n elements, and the partial sums per field they leave.
@@ -265,6 +273,23 @@ struct GlMultigridSolver::Impl {
 
   // One V-cycle x = B b on `nb` fields of level l.
   void VCycle(size_t l, const Buffer& b, Buffer& x, int nb);
+
+  // The coarse tail (tail.comp, docs/gpu.md): levels tail_level.. (the levels with at most
+  // tail_nodes nodes, at least two of them) run their V-cycle in one dispatch; tail_level ==
+  // levels.size(): no tail. tail_coef, tail_idx: the packed coefficients, transfers and
+  // metadata (tail.comp's layout); tail_work: tail_stride values per field.
+  int64_t tail_nodes = 0;
+  size_t tail_level = 0;
+  Buffer tail_coef, tail_idx, tail_work;
+  int64_t tail_stride = 0;
+  bool coefficients_set = false;
+  std::vector<int64_t> tail_coef_offset;  // per tail level: where its cx .. sigma start in tail_coef
+  // Chooses the tail levels for tail_nodes and packs their transfers (tail_work is sized by
+  // Reserve, the coefficients copied by CopyTailCoefficients).
+  void BuildTail();
+  void CopyTailCoefficients();
+  // tail.comp on nb fields: x = B b from level tail_level down.
+  void Tail(const Buffer& b, Buffer& x, int nb);
 
   // a . b of every field (double) into scal[f kCgStride + slot]; Dot2 also a . c into slot + 1.
   void Dot(const Buffer& a, const Buffer& b, int slot, int nb) {

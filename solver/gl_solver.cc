@@ -21,25 +21,50 @@
 
 namespace translume {namespace gl_internal {
 
-// Lines of common.glsl are numbered from kCommonLine on, the file's from 1 (see
-// CompileProgram), so a log line "0:12(5): error" (Mesa) or "0(12) : error" (NVIDIA) can name its
-// file: "solver/shaders/smooth.comp:12(5): error ...".
+// Lines of common.glsl are numbered from kCommonLine on, those of an included snippet from
+// kIncludeLine on, the file's from 1 (see CompileProgram), so a log line "0:12(5): error" (Mesa)
+// or "0(12) : error" (NVIDIA) can name its file: "solver/shaders/smooth.comp:12(5): error ...".
 constexpr int kCommonLine = 100000;
+constexpr int kIncludeLine = 200000;
 
-std::string NameLog(const std::string& log, const std::string& common, const std::string& file) {
+std::string NameLog(const std::string& log, const std::string& common, const std::string& file,
+                    const std::string& included) {
   std::istringstream in(log);
   std::string line, out;
   while (std::getline(in, line)) {
     int string_no = 0, number = 0, used = 0;
     if (std::sscanf(line.c_str(), "%d:%d%n", &string_no, &number, &used) == 2 ||
         std::sscanf(line.c_str(), "%d(%d)%n", &string_no, &number, &used) == 2) {
-      const bool in_common = number >= kCommonLine;
-      line = fmt::format("{}:{}{}", in_common ? common : file,
-                         in_common ? number - kCommonLine + 1 : number, line.substr(used));
+      const bool in_include = number >= kIncludeLine, in_common = !in_include && number >= kCommonLine;
+      line = fmt::format("{}:{}{}", in_include ? included : in_common ? common : file,
+                         in_include  ? number - kIncludeLine + 1
+                         : in_common ? number - kCommonLine + 1
+                                     : number,
+                         line.substr(used));
     }
     out += line + (in.peek() == EOF ? "" : " | ");
   }
   return out;
+}
+
+const gl::EmbeddedShader& FindShader(const std::string& name);
+
+// Replaces the line `#include "NAME"` of a shader's text (at most one) by the embedded
+// solver/shaders/NAME, numbered from kIncludeLine, and sets *included to its name.
+std::string SpliceInclude(const char* source, std::string* included) {
+  std::string text = source;
+  const std::string directive = "#include \"";
+  const size_t at = text.find(directive);
+  if (at == std::string::npos || (at > 0 && text[at - 1] != '\n')) return text;
+  const size_t name_end = text.find('"', at + directive.size());
+  const size_t line_end = text.find('\n', at);
+  TL_CHECK_MSG(name_end != std::string::npos && name_end < line_end, "malformed #include");
+  const int line = 1 + int(std::count(text.begin(), text.begin() + at, '\n'));
+  const gl::EmbeddedShader& snippet =
+      FindShader("solver/shaders/" + text.substr(at + directive.size(), name_end - at - directive.size()));
+  *included = snippet.name;
+  return text.substr(0, at) + fmt::format("#line {}\n{}\n#line {}\n", kIncludeLine, snippet.source, line + 1) +
+         (line_end == std::string::npos ? "" : text.substr(line_end + 1));
 }
 
 // Compiles and links one compute program from common.glsl, `defines` and the file's text
@@ -47,12 +72,14 @@ std::string NameLog(const std::string& log, const std::string& common, const std
 GLuint CompileProgram(const gl::EmbeddedShader& common, const std::string& defines,
                       const std::string& file_name, const char* source) {
   GLuint shader = api.CreateShader(GL_COMPUTE_SHADER);
+  std::string included;
+  const std::string body = SpliceInclude(source, &included);
   const std::string text =
       fmt::format("#version 430\n{}{}{}#line {}\n{}{}#line 1\n{}",
                   GetTuning().images ? "#define TL_IMAGES\n" : "",
                   GetTuning().invocation_sums ? "#define TL_INVOCATION_SUMS\n" : "",
                   fmt::format("#define TL_GROUP {}\n", GetTuning().group), kCommonLine,
-                  common.source, defines, source);
+                  common.source, defines, body);
   const char* sources[1] = {text.c_str()};
   api.ShaderSource(shader, 1, sources, nullptr);
   api.CompileShader(shader);
@@ -63,7 +90,7 @@ GLuint CompileProgram(const gl::EmbeddedShader& common, const std::string& defin
     api.GetShaderInfoLog(shader, sizeof(log), nullptr, log);
     api.DeleteShader(shader);
     throw InputError(fmt::format("--backend gl: compiling {} failed: {}", file_name,
-                                 NameLog(log, common.name, file_name)));
+                                 NameLog(log, common.name, file_name, included)));
   }
   GLuint program = api.CreateProgram();
   api.AttachShader(program, shader);
@@ -101,6 +128,11 @@ const Tuning& GetTuning() {
       t.group = 64;
       t.invocation_sums = true;
     }
+    // One work group per field runs the tail: on llvmpipe one thread per field, so the levels
+    // where the per-level dispatches' fixed cost outweighs the work; on a GPU the levels one
+    // group of TL_GROUP invocations covers in a few nodes each.
+    t.tail_nodes = cpu ? 4096 : 4096;
+    if (const char* tail = std::getenv("TRANSLUME_GL_TAIL_NODES")) t.tail_nodes = std::atoll(tail);
     return t;
   }();
   return tuning;
@@ -130,6 +162,8 @@ GLuint Program(const std::string& name, const std::string& defines) {
 }
 
 namespace {
+
+int64_t dispatch_count = 0;
 
 // Work groups (x, y) for `threads` threads: Tuning::group per group, at most 65535 groups
 // along x.
@@ -162,11 +196,14 @@ int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
   if (float_location >= 0) api.Uniform1f(float_location, float_value);
   const auto [gx, gy] = Tiling(threads);
   api.DispatchCompute(GLuint(gx), GLuint(gy), GLuint(fields));
+  ++dispatch_count;
   api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
   return gx * gy;
 }
 
 }  // namespace
+
+int64_t DispatchCount() { return dispatch_count; }
 
 int64_t FlatThreads(int64_t n) {
   const int groups = GetTuning().flat_groups;
@@ -275,7 +312,109 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
     most = std::min<int64_t>(most, texels / I.n0);
   }
   I.max_batch = int(std::max<int64_t>(1, most));
+  I.tail_nodes = gl_internal::GetTuning().tail_nodes;
+  I.BuildTail();
   I.Reserve(1);
+}
+
+// tail.comp's metadata: kTailMeta ints per level, the per-axis part from kTailAxis on.
+constexpr int kTailMeta = 36, kTailAxis = 14;
+
+void GlMultigridSolver::Impl::BuildTail() {
+  const size_t nl = levels.size();
+  tail_level = nl;
+  for (size_t l = 0; l < nl; ++l)
+    if (levels[l]->n <= tail_nodes) {
+      tail_level = l;
+      break;
+    }
+  if (tail_level + 2 > nl) {  // fewer than two levels: the per-level path is as short
+    tail_level = nl;
+    return;
+  }
+  const size_t nt = nl - tail_level;
+  std::vector<int> idx(nt * kTailMeta, 0);
+  std::vector<float> coef;
+  tail_coef_offset.assign(nt, 0);
+  int64_t work = 0;
+  // The coefficient blocks first (filled by CopyTailCoefficients), then the weights.
+  for (size_t k = 0; k < nt; ++k) {
+    const GLevel& L = *levels[tail_level + k];
+    int* m = &idx[k * kTailMeta];
+    m[0] = int(L.s.nx), m[1] = int(L.s.ny), m[2] = int(L.s.nz);
+    tail_coef_offset[k] = int64_t(coef.size());
+    for (int c = 0; c < 6; ++c) m[3 + c] = int(coef.size() + c * L.n);  // cx cy cz inv luc sigma
+    coef.resize(coef.size() + 6 * L.n, 0.0f);
+    for (int c = 0; c < 3; ++c, work += L.n) m[9 + c] = int(work);  // b x r
+    if (k + 1 < nt) {
+      const int64_t mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
+      m[12] = int(work);
+      work += mx * L.s.ny * L.s.nz;
+      m[13] = int(work);
+      work += mx * my * L.s.nz;
+    }
+  }
+  for (size_t k = 0; k + 1 < nt; ++k) {
+    const MultigridLevel& geo = levels[tail_level + k]->geo;
+    for (int a = 0; a < 3; ++a) {
+      const AxisTransfer& tr = geo.to_coarse[a];
+      int* m = &idx[k * kTailMeta + kTailAxis + 7 * a];
+      m[0] = int(tr.n_fine), m[1] = int(tr.n_coarse);
+      m[2] = int(idx.size());
+      idx.insert(idx.end(), tr.g_start.begin(), tr.g_start.end());
+      m = &idx[k * kTailMeta + kTailAxis + 7 * a];  // (insert may reallocate)
+      m[3] = int(idx.size());
+      idx.insert(idx.end(), tr.g_idx.begin(), tr.g_idx.end());
+      m = &idx[k * kTailMeta + kTailAxis + 7 * a];
+      m[4] = int(coef.size());
+      coef.insert(coef.end(), tr.g_w.begin(), tr.g_w.end());
+      m[5] = int(idx.size());
+      for (int64_t f = 0; f < tr.n_fine; ++f) {
+        idx.push_back(int(tr.lo[f]));
+        idx.push_back(int(tr.hi[f]));
+      }
+      m = &idx[k * kTailMeta + kTailAxis + 7 * a];
+      m[6] = int(coef.size());
+      for (int64_t f = 0; f < tr.n_fine; ++f) {
+        coef.push_back(float(tr.wlo[f]));
+        coef.push_back(float(tr.whi[f]));
+      }
+    }
+  }
+  tail_idx.Alloc(int64_t(idx.size()) * 4, idx.data(), Elem::kInt);
+  tail_coef.Alloc(int64_t(coef.size()) * 4, coef.data());
+  tail_stride = work;
+}
+
+void GlMultigridSolver::Impl::CopyTailCoefficients() {
+  for (size_t l = tail_level; l < levels.size(); ++l) {
+    GLevel& L = *levels[l];
+    const int64_t at = tail_coef_offset[l - tail_level] * 4, bytes = L.n * 4;
+    int c = 0;
+    for (const Buffer* b : {&L.cx, &L.cy, &L.cz, &L.inv, &L.luc, &L.sigma})
+      tail_coef.CopyFrom(*b, bytes, 0, at + bytes * c++);
+  }
+}
+
+void GlMultigridSolver::Impl::Tail(const Buffer& b, Buffer& x, int nb) {
+  const Buffer& minv = dense_coarse ? coarse_inverse : tail_coef;  // unread without dense
+  RunBatch("tail", {&tail_coef, &tail_idx, &minv, &b, &x, &tail_work},
+           {int(levels.size() - tail_level), options.pre_smoothing, options.post_smoothing,
+            dense_coarse ? 1 : 0, coarse_sweeps, int(tail_stride), GetTuning().columns ? 1 : 0},
+           GetTuning().group, nb);
+}
+
+void GlMultigridSolver::SetCoarseTail(int64_t max_nodes) {
+  Impl& I = *impl_;
+  I.tail_nodes = max_nodes;
+  I.BuildTail();
+  if (I.tail_level == I.levels.size()) return;
+  I.tail_work.Alloc(I.tail_stride * 4 * std::max(I.capacity, 1));
+  if (I.coefficients_set) I.CopyTailCoefficients();
+}
+
+int GlMultigridSolver::coarse_tail_levels() const {
+  return int(impl_->levels.size() - impl_->tail_level);
 }
 
 void GlMultigridSolver::Impl::Reserve(int fields) {
@@ -292,6 +431,7 @@ void GlMultigridSolver::Impl::Reserve(int fields) {
   }
   for (Buffer* b : {&r, &z, &p, &q}) b->Alloc(n0 * 4 * fields);
   xd.Alloc(n0 * 8 * fields, nullptr, Elem::kDouble);
+  if (tail_level < levels.size()) tail_work.Alloc(tail_stride * 4 * fields);
   partial.Alloc(DotPartials(DotThreads(n0)) * 2 * 8 * fields, nullptr, Elem::kDouble);
   scal.Alloc(kCgStride * 8 * fields, nullptr, Elem::kDouble);
   hist.Alloc(int64_t(options.max_iterations) * 8 * fields, nullptr, Elem::kDouble);
@@ -350,6 +490,8 @@ void GlMultigridSolver::SetCoefficients(const float* kappa, const float* mu, dou
       for (int64_t c = 0; c < n; ++c) f[r * n + c] = float(inv(r, c));
     I.coarse_inverse.Alloc(n * n * 4, f.data());
   }
+  I.coefficients_set = true;
+  if (I.tail_level < I.levels.size()) I.CopyTailCoefficients();
 }
 
 void GlMultigridSolver::Apply(const float* x, float* y) {
@@ -362,6 +504,10 @@ void GlMultigridSolver::Apply(const float* x, float* y) {
 
 void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int nb) {
   GLevel& L = *levels[l];
+  if (l == tail_level) {
+    Tail(b, x, nb);
+    return;
+  }
   x.Zero();
   if (l + 1 == levels.size()) {
     if (dense_coarse) {

@@ -38,6 +38,13 @@ class GlMultigridSolver {
   int max_batch() const;
   void Apply(const float* x, float* y);
   int num_levels() const;
+  // The coarse tail (docs/gpu.md): the levels with at most max_nodes nodes (at least two of
+  // them, the coarsest included) run their part of every V-cycle as one dispatch, one work
+  // group per field, instead of ~13 dispatches per level; the same arithmetic up to float
+  // rounding. 0 turns it off. Default: the shader tuning's (TRANSLUME_GL_TAIL_NODES overrides).
+  void SetCoarseTail(int64_t max_nodes);
+  // Levels the coarse tail covers (0: none).
+  int coarse_tail_levels() const;
 
   // Benchmarks: median seconds of one stencil application on the finest level, and of one
   // device-to-device copy of `bytes` bytes by a compute shader (on llvmpipe: a host memcpy on

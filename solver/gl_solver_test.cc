@@ -4,9 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 #include "solver/gl_context.h"
+#include "solver/gl_internal.h"
 #include "solver/status.h"
 
 namespace translume {
@@ -30,6 +32,15 @@ TEST(GlSolver, ShaderCompileErrorsNameTheFileAndLine) {
     EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
   }
   EXPECT_NO_THROW(CompileGlShaderForTest("ok.comp", "void main() {}\n"));
+  // An error in an included snippet names the snippet (here: its arrays are not declared).
+  try {
+    CompileGlShaderForTest("solver/shaders/inc.comp",
+                           "#define MG_SMOOTH\n#include \"multigrid.glsl\"\nvoid main() {}\n");
+    FAIL() << "compiled a snippet without its arrays";
+  } catch (const InputError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("solver/shaders/multigrid.glsl:"), std::string::npos) << msg;
+  }
 }
 
 TEST(GlSolver, ApplyMatchesTheCpuStencil) {
@@ -131,6 +142,74 @@ TEST(GlSolver, BatchedSolveMatchesSingleSolvesAndConvergesEveryField) {
   }
   // The scaled copy of field 1 converges the same way.
   EXPECT_EQ(batch[4].iterations, batch[1].iterations);
+}
+
+// The coarse tail (tail.comp: the V-cycle of the small levels in one dispatch per V-cycle, one
+// work group per field) computes what the per-level dispatches compute: on a 4-level grid,
+// batched, with the tail covering the whole hierarchy and only its lower levels, one V-cycle
+// gives the same z within float rounding, with fewer dispatches, and the solves take the same
+// iterations to the same solution.
+TEST(GlSolver, CoarseTailMatchesThePerLevelVCycle) {
+  const GridShape s{30, 22, 12};
+  const int64_t n = s.size();
+  const int M = 4;
+  std::vector<float> kappa(n), mu(n), b(M * n, 0.0f);
+  for (int64_t p = 0; p < n; ++p) {
+    kappa[p] = 0.2f + 0.1f * std::sin(0.05f * p);
+    mu[p] = 0.02f + 0.01f * std::cos(0.03f * p);
+    for (int f = 0; f < M; ++f) b[f * n + p] = 0.001f * (1.0f + std::sin(0.2f * p + f));
+  }
+  b[n + s.index(5, 4, 0)] = 1.0f;  // a spot in field 1
+  MultigridOptions mo;
+  mo.tolerance = 1e-6;
+  GlMultigridSolver gl(s, 0.5, mo);
+  gl.SetCoefficients(kappa.data(), mu.data(), 2.6);
+  ASSERT_GE(gl.num_levels(), 4);
+  GlMultigridSolver::Impl& I = gl.impl();
+  I.Reserve(M);
+  // One V-cycle of every field: z, and the dispatches it took.
+  auto vcycle = [&](std::vector<float>& z) {
+    I.r.Upload(b.data(), M * n * 4);
+    const int64_t before = gl_internal::DispatchCount();
+    I.VCycle(0, I.r, I.z, M);
+    z.resize(M * n);
+    I.z.Download(z.data(), M * n * 4);
+    return gl_internal::DispatchCount() - before;
+  };
+  auto solve = [&](std::vector<float>& x) {
+    x.assign(M * n, 0.0f);
+    return gl.SolveBatch(M, b.data(), x.data());
+  };
+  gl.SetCoarseTail(0);
+  EXPECT_EQ(gl.coarse_tail_levels(), 0);
+  std::vector<float> z_levels, x_levels;
+  const int64_t per_level = vcycle(z_levels);
+  const std::vector<SolveSummary> s_levels = solve(x_levels);
+  double zmax = 0, xmax = 0;
+  for (float v : z_levels) zmax = std::max(zmax, double(std::abs(v)));
+  for (float v : x_levels) xmax = std::max(xmax, double(std::abs(v)));
+  for (int64_t nodes : {I.levels[0]->n, I.levels[2]->n}) {
+    SCOPED_TRACE(nodes);
+    gl.SetCoarseTail(nodes);
+    EXPECT_EQ(gl.coarse_tail_levels(), nodes == n ? gl.num_levels() : gl.num_levels() - 2);
+    std::vector<float> z_tail, x_tail;
+    const int64_t tail = vcycle(z_tail);
+    std::printf("dispatches per V-cycle on %s (%d levels): %lld per level, %lld with a tail of %d\n",
+                s.ToString().c_str(), gl.num_levels(), (long long)per_level, (long long)tail,
+                gl.coarse_tail_levels());
+    EXPECT_LT(tail, per_level);
+    double dz = 0;
+    for (int64_t p = 0; p < M * n; ++p) dz = std::max(dz, double(std::abs(z_tail[p] - z_levels[p])));
+    EXPECT_LE(dz, 1e-5 * zmax);
+    const std::vector<SolveSummary> s_tail = solve(x_tail);
+    double dx = 0;
+    for (int64_t p = 0; p < M * n; ++p) dx = std::max(dx, double(std::abs(x_tail[p] - x_levels[p])));
+    EXPECT_LE(dx, 1e-5 * xmax);
+    for (int f = 0; f < M; ++f) {
+      EXPECT_TRUE(s_tail[f].converged) << s_tail[f].BriefReport();
+      EXPECT_EQ(s_tail[f].iterations, s_levels[f].iterations) << f;
+    }
+  }
 }
 
 }  // namespace

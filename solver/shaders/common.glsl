@@ -37,13 +37,17 @@ int Div(int a, int b) {
 // 1 on a GPU, one node per invocation; nz on llvmpipe, whose fixed cost per invocation is
 // high). Invocation t covers i = t % nx, j = (t / nx) % ny, k = k0 .. k1 - 1 with
 // k0 = kz (t / (nx ny)), so neighbouring invocations take neighbouring i (coalesced).
-bool Column(int nx, int ny, int nz, int kz, out int i, out int j, out int k0, out int k1) {
-  int t = int(ThreadIndex()), nxy = nx * ny, c = Div(t, nxy), r = t - c * nxy;
+// ColumnAt takes the invocation's index t from the caller (tail.comp's loops within a group).
+bool ColumnAt(int t, int nx, int ny, int nz, int kz, out int i, out int j, out int k0, out int k1) {
+  int nxy = nx * ny, c = Div(t, nxy), r = t - c * nxy;
   j = Div(r, nx);
   i = r - j * nx;
   k0 = c * kz;
   k1 = min(k0 + kz, nz);
   return k0 < nz;
+}
+bool Column(int nx, int ny, int nz, int kz, out int i, out int j, out int k0, out int k1) {
+  return ColumnAt(int(ThreadIndex()), nx, ny, nz, kz, i, j, k0, k1);
 }
 
 // Arrays: FLOATS(binding, Block, name, qualifier) declares name[] (qualifier readonly, writeonly
