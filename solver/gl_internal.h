@@ -41,6 +41,8 @@ struct Tuning {
   // V-cycle in one dispatch, one work group per field (0: never). TRANSLUME_GL_TAIL_NODES=N
   // overrides it.
   int64_t tail_nodes = 0;
+  // Invocations of the tail's work group.
+  int tail_group = 256;
 };
 const Tuning& GetTuning();
 

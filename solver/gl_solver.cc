@@ -67,19 +67,22 @@ std::string SpliceInclude(const char* source, std::string* included) {
          (line_end == std::string::npos ? "" : text.substr(line_end + 1));
 }
 
-// Compiles and links one compute program from common.glsl, `defines` and the file's text
-// (first the Tuning's defines: TL_IMAGES, TL_INVOCATION_SUMS, TL_GROUP).
+// Compiles and links one compute program from the Tuning's defines (TL_IMAGES,
+// TL_INVOCATION_SUMS, TL_GROUP unless `defines` sets its own), `defines`, common.glsl and the
+// file's text.
 GLuint CompileProgram(const gl::EmbeddedShader& common, const std::string& defines,
                       const std::string& file_name, const char* source) {
   GLuint shader = api.CreateShader(GL_COMPUTE_SHADER);
   std::string included;
   const std::string body = SpliceInclude(source, &included);
   const std::string text =
-      fmt::format("#version 430\n{}{}{}#line {}\n{}{}#line 1\n{}",
+      fmt::format("#version 430\n{}{}{}{}#line {}\n{}#line 1\n{}",
                   GetTuning().images ? "#define TL_IMAGES\n" : "",
                   GetTuning().invocation_sums ? "#define TL_INVOCATION_SUMS\n" : "",
-                  fmt::format("#define TL_GROUP {}\n", GetTuning().group), kCommonLine,
-                  common.source, defines, body);
+                  defines.find("#define TL_GROUP ") == std::string::npos
+                      ? fmt::format("#define TL_GROUP {}\n", GetTuning().group)
+                      : "",
+                  defines, kCommonLine, common.source, body);
   const char* sources[1] = {text.c_str()};
   api.ShaderSource(shader, 1, sources, nullptr);
   api.CompileShader(shader);
@@ -132,7 +135,9 @@ const Tuning& GetTuning() {
     // where the per-level dispatches' fixed cost outweighs the work; on a GPU the levels one
     // group of TL_GROUP invocations covers in a few nodes each.
     t.tail_nodes = cpu ? 4096 : 4096;
+    t.tail_group = cpu ? 8 : 256;
     if (const char* tail = std::getenv("TRANSLUME_GL_TAIL_NODES")) t.tail_nodes = std::atoll(tail);
+    if (const char* g = std::getenv("TRANSLUME_GL_TAIL_GROUP")) t.tail_group = std::atoi(g);
     return t;
   }();
   return tuning;
@@ -398,10 +403,13 @@ void GlMultigridSolver::Impl::CopyTailCoefficients() {
 
 void GlMultigridSolver::Impl::Tail(const Buffer& b, Buffer& x, int nb) {
   const Buffer& minv = dense_coarse ? coarse_inverse : tail_coef;  // unread without dense
+  // One work group of tail_group invocations per field (Run's tiling makes one group of
+  // `group` threads).
+  const std::string group = fmt::format("#define TL_GROUP {}\n", GetTuning().tail_group);
   RunBatch("tail", {&tail_coef, &tail_idx, &minv, &b, &x, &tail_work},
            {int(levels.size() - tail_level), options.pre_smoothing, options.post_smoothing,
             dense_coarse ? 1 : 0, coarse_sweeps, int(tail_stride), GetTuning().columns ? 1 : 0},
-           GetTuning().group, nb);
+           GetTuning().group, nb, group.c_str());
 }
 
 void GlMultigridSolver::SetCoarseTail(int64_t max_nodes) {
