@@ -170,6 +170,25 @@ namespace {
 
 int64_t dispatch_count = 0;
 
+// TRANSLUME_GL_PROFILE=1: every dispatch is followed by glFinish and timed; at exit, stderr
+// gets the dispatches and seconds per shader (a diagnostic: the finishes serialise the queue).
+struct Profile {
+  bool on = [] {
+    const char* v = std::getenv("TRANSLUME_GL_PROFILE");
+    return v && *v && std::string(v) != "0";
+  }();
+  std::map<std::string, std::pair<int64_t, double>> by_shader;  // dispatches, seconds
+  ~Profile() {
+    if (!on) return;
+    std::vector<std::pair<std::string, std::pair<int64_t, double>>> rows(by_shader.begin(), by_shader.end());
+    std::sort(rows.begin(), rows.end(), [](auto& a, auto& b) { return a.second.second > b.second.second; });
+    for (const auto& [name, v] : rows)
+      std::fprintf(stderr, "gl profile: %-14s %9lld dispatches %9.3f s %8.1f us each\n", name.c_str(),
+                   (long long)v.first, v.second, 1e6 * v.second / double(std::max<int64_t>(v.first, 1)));
+  }
+};
+Profile profile;
+
 // Work groups (x, y) for `threads` threads: Tuning::group per group, at most 65535 groups
 // along x.
 std::pair<int64_t, int64_t> Tiling(int64_t threads) {
@@ -200,8 +219,15 @@ int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
   for (int v : ints) api.Uniform1i(loc++, v);
   if (float_location >= 0) api.Uniform1f(float_location, float_value);
   const auto [gx, gy] = Tiling(threads);
+  const auto t0 = profile.on ? std::chrono::steady_clock::now() : std::chrono::steady_clock::time_point{};
   api.DispatchCompute(GLuint(gx), GLuint(gy), GLuint(fields));
   ++dispatch_count;
+  if (profile.on) {
+    api.Finish();
+    auto& [count, seconds] = profile.by_shader[name];
+    ++count;
+    seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
   api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
   return gx * gy;
 }
