@@ -149,46 +149,20 @@ int64_t ColumnThreads(const GridShape& s);
 // Slots of the per-field conjugate-gradient scalars; mirrors common.glsl's kCg* constants.
 enum CgSlot { kCgRz, kCgPq, kCgRr, kCgRzNew, kCgBb, kCgActive, kCgIter, kCgTol2, kCgStride };
 
-struct AxisBuffers {
-  Buffer gstart, gidx, gw, lohi, w;
-  int n_fine = 0, n_coarse = 0;
-  void Upload(const AxisTransfer& t) {
-    n_fine = int(t.n_fine);
-    n_coarse = int(t.n_coarse);
-    std::vector<int> gs(t.g_start.begin(), t.g_start.end()), gi(t.g_idx.begin(), t.g_idx.end());
-    std::vector<float> gwf(t.g_w.begin(), t.g_w.end());
-    std::vector<int> lh(2 * t.n_fine);
-    std::vector<float> wf(2 * t.n_fine);
-    for (int64_t f = 0; f < t.n_fine; ++f) {
-      lh[2 * f] = int(t.lo[f]);
-      lh[2 * f + 1] = int(t.hi[f]);
-      wf[2 * f] = float(t.wlo[f]);
-      wf[2 * f + 1] = float(t.whi[f]);
-    }
-    gstart.Alloc(gs.size() * 4, gs.data(), Elem::kInt);
-    gidx.Alloc(gi.size() * 4, gi.data(), Elem::kInt);
-    gw.Alloc(gwf.size() * 4, gwf.data());
-    lohi.Alloc(lh.size() * 4, lh.data(), Elem::kInt);
-    w.Alloc(wf.size() * 4, wf.data());
-  }
-};
-
 // One level of the hierarchy. Per node: geometry, kappa, mu, the stencil (cx, cy, cz, diag),
-// the line factors (inv, luc) and rnorm; per field of a batch (Impl::Reserve): b, x, r and the
-// transfer temporaries tmp_a, tmp_b.
+// the line factors (inv, luc) and rnorm; per field of a batch (Impl::Reserve): b, x, r. The
+// transfers to the next level are packed for all levels (Impl::xfer_idx, xfer_w).
 struct GLevel {
   MultigridLevel geo;
   GridShape s;
   int64_t n = 0;
   // diag: the full diagonal (line factors, coarsest inverse); sigma: its absorption and Robin
   // part alone, for the operator's difference form (assemble.comp, residual.comp).
-  Buffer geometry, kappa, mu, cx, cy, cz, diag, sigma, inv, luc, b, x, r, rnorm, tmp_a, tmp_b;
-  std::array<AxisBuffers, 3> t;
+  Buffer geometry, kappa, mu, cx, cy, cz, diag, sigma, inv, luc, b, x, r, rnorm;
 };
 
 }  // namespace gl_internal
 
-using gl_internal::AxisBuffers;
 using gl_internal::Buffer;
 using gl_internal::ColumnLength;
 using gl_internal::ColumnThreads;
@@ -235,29 +209,14 @@ struct GlMultigridSolver::Impl {
   // Grows the per-field buffers to hold `fields` fields (contents are lost when they grow).
   void Reserve(int fields);
 
-  void Restrict(GLevel& L, const Buffer& f, Buffer& c, int nb) {
-    const int ny = int(L.s.ny), nz = int(L.s.nz), mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
-    auto pass = [&](const AxisBuffers& a, const Buffer& in, Buffer& out, int inner, int outer) {
-      RunBatch("restrict_axis", {&in, &out, &a.gstart, &a.gidx, &a.gw},
-               {a.n_fine, a.n_coarse, inner, outer},
-               FlatThreads(int64_t(outer) * a.n_coarse * inner), nb);
-    };
-    pass(L.t[0], f, L.tmp_a, 1, ny * nz);
-    pass(L.t[1], L.tmp_a, L.tmp_b, mx, nz);
-    pass(L.t[2], L.tmp_b, c, mx * my, 1);
+  // c = R f (level l to l + 1) and f += P c (level l + 1 to l) on nb fields: one dispatch
+  // each (transfer.comp).
+  void Restrict(size_t l, const Buffer& f, Buffer& c, int nb) {
+    RunBatch("transfer", {&f, &c, &xfer_idx, &xfer_w}, {int(l), 0}, FlatThreads(levels[l + 1]->n), nb);
   }
-
-  void ProlongAdd(GLevel& L, const Buffer& c, Buffer& f, int nb) {
-    const int ny = int(L.s.ny), nz = int(L.s.nz), mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
-    auto pass = [&](const AxisBuffers& a, const Buffer& in, Buffer& out, int inner, int outer,
-                    int add) {
-      RunBatch("prolong_axis", {&in, &out, &a.lohi, &a.w},
-               {a.n_coarse, a.n_fine, inner, outer, add}, FlatThreads(int64_t(outer) * a.n_fine * inner),
-               nb);
-    };
-    pass(L.t[2], c, L.tmp_b, mx * my, 1, 0);
-    pass(L.t[1], L.tmp_b, L.tmp_a, mx, nz, 0);
-    pass(L.t[0], L.tmp_a, f, 1, ny * nz, 1);
+  void ProlongAdd(size_t l, const Buffer& c, Buffer& f, int nb) {
+    RunBatch("transfer", {&c, &f, &xfer_idx, &xfer_w}, {int(l), 1}, FlatThreads(levels[l]->n), nb,
+             "#define PROLONG\n");
   }
 
   void Smooth(GLevel& L, const Buffer& b, Buffer& x, int color, int nb) {
@@ -276,19 +235,23 @@ struct GlMultigridSolver::Impl {
   // One V-cycle x = B b on `nb` fields of level l.
   void VCycle(size_t l, const Buffer& b, Buffer& x, int nb);
 
+  // The transfers between the levels, packed (multigrid.glsl's MG_TRANSFER): xfer_idx holds a
+  // metadata row per level (with the tail's offsets), then gstart, gidx and lohi of every
+  // level's three axes; xfer_w the weights gw and w.
+  Buffer xfer_idx, xfer_w;
   // The coarse tail (tail.comp, docs/gpu.md): levels tail_level.. (the levels with at most
   // tail_nodes nodes, at least two of them) run their V-cycle in one dispatch; tail_level ==
-  // levels.size(): no tail. tail_coef, tail_idx: the packed coefficients, transfers and
-  // metadata (tail.comp's layout); tail_work: tail_stride values per field.
+  // levels.size(): no tail. tail_coef: their coefficients, packed; tail_work: tail_stride
+  // values per field.
   int64_t tail_nodes = 0;
   size_t tail_level = 0;
-  Buffer tail_coef, tail_idx, tail_work;
+  Buffer tail_coef, tail_work;
   int64_t tail_stride = 0;
   bool coefficients_set = false;
   std::vector<int64_t> tail_coef_offset;  // per tail level: where its cx .. sigma start in tail_coef
-  // Chooses the tail levels for tail_nodes and packs their transfers (tail_work is sized by
-  // Reserve, the coefficients copied by CopyTailCoefficients).
-  void BuildTail();
+  // Chooses the tail levels for tail_nodes and packs the transfers and the tail's layout
+  // (tail_work is sized by Reserve, the coefficients copied by CopyTailCoefficients).
+  void PackLevels();
   void CopyTailCoefficients();
   // tail.comp on nb fields: x = B b from level tail_level down.
   void Tail(const Buffer& b, Buffer& x, int nb);

@@ -319,15 +319,13 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
     L.geometry.Alloc(geo.size() * 4, geo.data());
     for (Buffer* b : {&L.kappa, &L.mu, &L.cx, &L.cy, &L.cz, &L.diag, &L.sigma, &L.inv, &L.luc})
       b->Alloc(bytes);
-    if (l + 1 < I.levels.size())
-      for (int a = 0; a < 3; ++a) L.t[a].Upload(L.geo.to_coarse[a]);
     if (l > 0) {
       // R applied to ones from the finer level: the weights that make restricted kappa and mu
       // averages.
       GLevel& F = *I.levels[l - 1];
+      const int64_t mx = F.geo.to_coarse[0].n_coarse, my = F.geo.to_coarse[1].n_coarse;
       std::vector<float> ones(F.n, 1.0f);
-      std::vector<float> rn(L.n), ta(F.t[0].n_coarse * F.s.ny * F.s.nz),
-          tb(F.t[0].n_coarse * F.t[1].n_coarse * F.s.nz);
+      std::vector<float> rn(L.n), ta(mx * F.s.ny * F.s.nz), tb(mx * my * F.s.nz);
       Restrict3(F.geo, ones.data(), rn.data(), ta.data(), tb.data());
       L.rnorm.Alloc(bytes, rn.data());
     }
@@ -344,14 +342,15 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
   }
   I.max_batch = int(std::max<int64_t>(1, most));
   I.tail_nodes = gl_internal::GetTuning().tail_nodes;
-  I.BuildTail();
+  I.PackLevels();
   I.Reserve(1);
 }
 
-// tail.comp's metadata: kTailMeta ints per level, the per-axis part from kTailAxis on.
-constexpr int kTailMeta = 36, kTailAxis = 14;
+// multigrid.glsl's metadata rows: kMgMeta ints per level, the per-axis part from kMgAxis on
+// (tail.comp's offsets: coefficients from 3, work values from 9).
+constexpr int kMgMeta = 36, kMgAxis = 14;
 
-void GlMultigridSolver::Impl::BuildTail() {
+void GlMultigridSolver::Impl::PackLevels() {
   const size_t nl = levels.size();
   tail_level = nl;
   for (size_t l = 0; l < nl; ++l)
@@ -359,68 +358,52 @@ void GlMultigridSolver::Impl::BuildTail() {
       tail_level = l;
       break;
     }
-  if (tail_level + 2 > nl) {  // fewer than two levels: the per-level path is as short
-    tail_level = nl;
-    return;
-  }
-  const size_t nt = nl - tail_level;
-  std::vector<int> idx(nt * kTailMeta, 0);
-  std::vector<float> coef;
-  tail_coef_offset.assign(nt, 0);
-  int64_t work = 0;
-  // The coefficient blocks first (filled by CopyTailCoefficients), then the weights.
-  for (size_t k = 0; k < nt; ++k) {
-    const GLevel& L = *levels[tail_level + k];
-    int* m = &idx[k * kTailMeta];
-    m[0] = int(L.s.nx), m[1] = int(L.s.ny), m[2] = int(L.s.nz);
-    tail_coef_offset[k] = int64_t(coef.size());
-    for (int c = 0; c < 6; ++c) m[3 + c] = int(coef.size() + c * L.n);  // cx cy cz inv luc sigma
-    coef.resize(coef.size() + 6 * L.n, 0.0f);
-    for (int c = 0; c < 3; ++c, work += L.n) m[9 + c] = int(work);  // b x r
-    if (k + 1 < nt) {
-      const int64_t mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
-      m[12] = int(work);
-      work += mx * L.s.ny * L.s.nz;
-      m[13] = int(work);
-      work += mx * my * L.s.nz;
+  if (tail_level + 2 > nl) tail_level = nl;  // fewer than two levels: the per-level path is as short
+  std::vector<int> idx(nl * kMgMeta, 0);
+  std::vector<float> wts;
+  auto row = [&](size_t l) { return &idx[l * kMgMeta]; };
+  tail_coef_offset.assign(nl, 0);
+  int64_t coef = 0, work = 0;
+  for (size_t l = 0; l < nl; ++l) {
+    const GLevel& L = *levels[l];
+    row(l)[0] = int(L.s.nx), row(l)[1] = int(L.s.ny), row(l)[2] = int(L.s.nz);
+    if (l >= tail_level) {
+      tail_coef_offset[l] = coef;
+      for (int c = 0; c < 6; ++c) row(l)[3 + c] = int(coef + c * L.n);  // cx cy cz inv luc sigma
+      coef += 6 * L.n;
+      for (int c = 0; c < 3; ++c, work += L.n) row(l)[9 + c] = int(work);  // b x r
     }
-  }
-  for (size_t k = 0; k + 1 < nt; ++k) {
-    const MultigridLevel& geo = levels[tail_level + k]->geo;
+    if (l + 1 == nl) continue;
     for (int a = 0; a < 3; ++a) {
-      const AxisTransfer& tr = geo.to_coarse[a];
-      int* m = &idx[k * kTailMeta + kTailAxis + 7 * a];
-      m[0] = int(tr.n_fine), m[1] = int(tr.n_coarse);
-      m[2] = int(idx.size());
+      const AxisTransfer& tr = L.geo.to_coarse[a];
+      const int m = int(l) * kMgMeta + kMgAxis + 7 * a;
+      idx[m] = int(tr.n_fine), idx[m + 1] = int(tr.n_coarse);
+      idx[m + 2] = int(idx.size());
       idx.insert(idx.end(), tr.g_start.begin(), tr.g_start.end());
-      m = &idx[k * kTailMeta + kTailAxis + 7 * a];  // (insert may reallocate)
-      m[3] = int(idx.size());
+      idx[m + 3] = int(idx.size());
       idx.insert(idx.end(), tr.g_idx.begin(), tr.g_idx.end());
-      m = &idx[k * kTailMeta + kTailAxis + 7 * a];
-      m[4] = int(coef.size());
-      coef.insert(coef.end(), tr.g_w.begin(), tr.g_w.end());
-      m[5] = int(idx.size());
+      idx[m + 4] = int(wts.size());
+      wts.insert(wts.end(), tr.g_w.begin(), tr.g_w.end());
+      idx[m + 5] = int(idx.size());
+      idx[m + 6] = int(wts.size());
       for (int64_t f = 0; f < tr.n_fine; ++f) {
         idx.push_back(int(tr.lo[f]));
         idx.push_back(int(tr.hi[f]));
-      }
-      m = &idx[k * kTailMeta + kTailAxis + 7 * a];
-      m[6] = int(coef.size());
-      for (int64_t f = 0; f < tr.n_fine; ++f) {
-        coef.push_back(float(tr.wlo[f]));
-        coef.push_back(float(tr.whi[f]));
+        wts.push_back(float(tr.wlo[f]));
+        wts.push_back(float(tr.whi[f]));
       }
     }
   }
-  tail_idx.Alloc(int64_t(idx.size()) * 4, idx.data(), Elem::kInt);
-  tail_coef.Alloc(int64_t(coef.size()) * 4, coef.data());
+  xfer_idx.Alloc(int64_t(idx.size()) * 4, idx.data(), Elem::kInt);
+  xfer_w.Alloc(int64_t(wts.size()) * 4, wts.data());
+  if (tail_level < nl) tail_coef.Alloc(coef * 4);
   tail_stride = work;
 }
 
 void GlMultigridSolver::Impl::CopyTailCoefficients() {
   for (size_t l = tail_level; l < levels.size(); ++l) {
     GLevel& L = *levels[l];
-    const int64_t at = tail_coef_offset[l - tail_level] * 4, bytes = L.n * 4;
+    const int64_t at = tail_coef_offset[l] * 4, bytes = L.n * 4;
     int c = 0;
     for (const Buffer* b : {&L.cx, &L.cy, &L.cz, &L.inv, &L.luc, &L.sigma})
       tail_coef.CopyFrom(*b, bytes, 0, at + bytes * c++);
@@ -432,8 +415,8 @@ void GlMultigridSolver::Impl::Tail(const Buffer& b, Buffer& x, int nb) {
   // One work group of tail_group invocations per field (Run's tiling makes one group of
   // `group` threads).
   const std::string group = fmt::format("#define TL_GROUP {}\n", GetTuning().tail_group);
-  RunBatch("tail", {&tail_coef, &tail_idx, &minv, &b, &x, &tail_work},
-           {int(levels.size() - tail_level), options.pre_smoothing, options.post_smoothing,
+  RunBatch("tail", {&tail_coef, &xfer_idx, &xfer_w, &minv, &b, &x, &tail_work},
+           {int(tail_level), int(levels.size() - tail_level), options.pre_smoothing, options.post_smoothing,
             dense_coarse ? 1 : 0, coarse_sweeps, int(tail_stride), GetTuning().columns ? 1 : 0},
            GetTuning().group, nb, group.c_str());
 }
@@ -441,7 +424,7 @@ void GlMultigridSolver::Impl::Tail(const Buffer& b, Buffer& x, int nb) {
 void GlMultigridSolver::SetCoarseTail(int64_t max_nodes) {
   Impl& I = *impl_;
   I.tail_nodes = max_nodes;
-  I.BuildTail();
+  I.PackLevels();
   if (I.tail_level == I.levels.size()) return;
   I.tail_work.Alloc(I.tail_stride * 4 * std::max(I.capacity, 1));
   if (I.coefficients_set) I.CopyTailCoefficients();
@@ -457,11 +440,6 @@ void GlMultigridSolver::Impl::Reserve(int fields) {
   for (size_t l = 0; l < levels.size(); ++l) {
     GLevel& L = *levels[l];
     for (Buffer* b : {&L.b, &L.x, &L.r}) b->Alloc(L.n * 4 * fields);
-    if (l + 1 < levels.size()) {
-      const int64_t mx = L.t[0].n_coarse, my = L.t[1].n_coarse;
-      L.tmp_a.Alloc(mx * L.s.ny * L.s.nz * 4 * fields);
-      L.tmp_b.Alloc(mx * my * L.s.nz * 4 * fields);
-    }
   }
   for (Buffer* b : {&r, &z, &p, &q}) b->Alloc(n0 * 4 * fields);
   xd.Alloc(n0 * 8 * fields, nullptr, Elem::kDouble);
@@ -485,8 +463,8 @@ void GlMultigridSolver::SetCoefficients(const float* kappa, const float* mu, dou
       L.mu.Upload(mu, L.n * 4);
     } else {
       GLevel& F = *I.levels[l - 1];
-      I.Restrict(F, F.kappa, L.kappa, 1);
-      I.Restrict(F, F.mu, L.mu, 1);
+      I.Restrict(l - 1, F.kappa, L.kappa, 1);
+      I.Restrict(l - 1, F.mu, L.mu, 1);
       Run("divide", {&L.kappa, &L.rnorm}, {int(L.n)}, FlatThreads(L.n));
       Run("divide", {&L.mu, &L.rnorm}, {int(L.n)}, FlatThreads(L.n));
     }
@@ -562,9 +540,9 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
   }
   Stencil(L, x, b, L.r, 0, nb);
   GLevel& C = *levels[l + 1];
-  Restrict(L, L.r, C.b, nb);
+  Restrict(l, L.r, C.b, nb);
   VCycle(l + 1, C.b, C.x, nb);
-  ProlongAdd(L, C.x, x, nb);
+  ProlongAdd(l, C.x, x, nb);
   for (int s = 0; s < options.post_smoothing; ++s) {
     Smooth(L, b, x, 1, nb);
     Smooth(L, b, x, 0, nb);

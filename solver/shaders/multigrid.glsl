@@ -1,14 +1,13 @@
 // SPDX-License-Identifier: MIT
 // The per-node bodies of the multigrid kernels, written once for the per-level shaders
-// (smooth.comp, residual.comp, restrict_axis.comp, prolong_axis.comp, dense_solve.comp: one
+// (smooth.comp, residual.comp, transfer.comp, dense_solve.comp: one
 // dispatch per step and level) and the coarse tail (tail.comp: every step of every small level
 // in one dispatch). A shader pulls this file in with `#include "multigrid.glsl"` (gl_solver.cc's
 // CompileProgram splices it in) after declaring the arrays (FLOATS / INTS, common.glsl) that the
 // parts it enables read, all named with an mg_ prefix:
 //   MG_SMOOTH    mg_cx, mg_cy, mg_cz, mg_inv, mg_luc, mg_b, mg_x   (SmoothColumn, SmoothLine)
 //   MG_RESIDUAL  mg_cx, mg_cy, mg_cz, mg_sigma, mg_x, mg_b, mg_y   (ResidualColumn)
-//   MG_RESTRICT  mg_src, mg_gstart, mg_gidx, mg_gw                 (RestrictValue)
-//   MG_PROLONG   mg_src, mg_lohi, mg_w                             (ProlongValue)
+//   MG_TRANSFER  mg_src, mg_idx (int), mg_wts                      (Restrict3Value, Prolong3Value)
 //   MG_DENSE     mg_minv, mg_b                                     (DenseRow)
 // Every array is addressed with an offset, so the arrays may be the level's own buffers
 // (offsets 0) or a few packed buffers holding several levels (tail.comp aliases the names to
@@ -94,32 +93,64 @@ void ResidualColumn(MgLevel L, int i, int j, int k0, int k1, int mode, int x0, i
 }
 #endif
 
-#ifdef MG_RESTRICT
-// Restriction (transpose of linear interpolation) along one axis, `outer` blocks of n_in nodes
-// of `inner` contiguous values in, blocks of n_out nodes out: value e of the output. Coarse node
-// c gathers fine nodes gidx[gstart[c] .. gstart[c + 1]) with weights gw
-// (solver/multigrid_hierarchy.h). in0: this field's offset in src; gs0, gi0, gw0: the axis'
-// offsets in gstart, gidx and gw (gstart's entries count from gi0 / gw0).
-float RestrictValue(int e, int n_in, int n_out, int inner, int in0, int gs0, int gi0, int gw0) {
-  int ec = Div(e, inner), v = e - ec * inner, o = Div(ec, n_out), c = ec - o * n_out;
-  int base = in0 + o * n_in * inner + v;
+#ifdef MG_TRANSFER
+// The whole transfer between level l and l + 1 (the cpu solver's three separable axis passes,
+// multigrid_hierarchy.h, nested in one loop: the same products summed in the same order).
+// mg_idx holds a metadata row of kMgMeta ints per level (gl_solver.cc's BuildTransfers): nx, ny,
+// nz, the tail's offsets (tail.comp), and from kMgAxis on per axis a 7 ints: n_fine, n_coarse,
+// the offsets in mg_idx of gstart and gidx, of gw in mg_wts, of lohi in mg_idx and of w in
+// mg_wts. Coarse node c of an axis gathers fine nodes gidx[gstart[c] .. gstart[c + 1]) (gstart
+// counting from the axis' gidx and gw); fine node f interpolates coarse lohi[2f], lohi[2f+1]
+// with weights w[2f], w[2f+1].
+const int kMgMeta = 36, kMgAxis = 14;
+struct MgAxis {
+  int n_fine, n_coarse, gstart, gidx, gw, lohi, w;
+};
+int MgMeta(int l, int k) { return LD(mg_idx, l * kMgMeta + k); }
+MgAxis MgLoadAxis(int l, int a) {
+  int m = l * kMgMeta + kMgAxis + 7 * a;
+  return MgAxis(LD(mg_idx, m), LD(mg_idx, m + 1), LD(mg_idx, m + 2), LD(mg_idx, m + 3),
+                LD(mg_idx, m + 4), LD(mg_idx, m + 5), LD(mg_idx, m + 6));
+}
+
+// Restriction R = P^T: coarse node e (of X.n_coarse Y.n_coarse Z.n_coarse) from the fine
+// values at in0 (X.n_fine Y.n_fine Z.n_fine of them).
+float Restrict3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
+  int mxy = X.n_coarse * Y.n_coarse, ck = Div(e, mxy), r = e - ck * mxy, cj = Div(r, X.n_coarse);
+  int ci = r - cj * X.n_coarse, nx = X.n_fine, nxy = nx * Y.n_fine;
   float s = 0.0;
-  for (int g = LD(mg_gstart, gs0 + c); g < LD(mg_gstart, gs0 + c + 1); ++g)
-    s += LD(mg_gw, gw0 + g) * LD(mg_src, base + LD(mg_gidx, gi0 + g) * inner);
+  for (int gz = LD(mg_idx, Z.gstart + ck); gz < LD(mg_idx, Z.gstart + ck + 1); ++gz) {
+    int kz = in0 + nxy * LD(mg_idx, Z.gidx + gz);
+    float sy = 0.0;
+    for (int gy = LD(mg_idx, Y.gstart + cj); gy < LD(mg_idx, Y.gstart + cj + 1); ++gy) {
+      int jy = kz + nx * LD(mg_idx, Y.gidx + gy);
+      float sx = 0.0;
+      for (int gx = LD(mg_idx, X.gstart + ci); gx < LD(mg_idx, X.gstart + ci + 1); ++gx)
+        sx += LD(mg_wts, X.gw + gx) * LD(mg_src, jy + LD(mg_idx, X.gidx + gx));
+      sy += LD(mg_wts, Y.gw + gy) * sx;
+    }
+    s += LD(mg_wts, Z.gw + gz) * sy;
+  }
   return s;
 }
-#endif
 
-#ifdef MG_PROLONG
-// Linear interpolation along one axis from n_in coarse to n_out fine nodes (`outer` blocks of
-// `inner` contiguous values): value e of the output, fine node f being
-// w[2f] coarse[lohi[2f]] + w[2f+1] coarse[lohi[2f+1]]. in0: this field's offset in src; lh0,
-// w0: the axis' offsets in lohi and w.
-float ProlongValue(int e, int n_in, int n_out, int inner, int in0, int lh0, int w0) {
-  int ef = Div(e, inner), v = e - ef * inner, o = Div(ef, n_out), f = ef - o * n_out;
-  int base = in0 + o * n_in * inner + v;
-  return LD(mg_w, w0 + 2 * f) * LD(mg_src, base + LD(mg_lohi, lh0 + 2 * f) * inner) +
-         LD(mg_w, w0 + 2 * f + 1) * LD(mg_src, base + LD(mg_lohi, lh0 + 2 * f + 1) * inner);
+// Prolongation P (trilinear): fine node e (of X.n_fine Y.n_fine Z.n_fine) from the coarse
+// values at in0.
+float Prolong3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
+  int nxy = X.n_fine * Y.n_fine, k = Div(e, nxy), r = e - k * nxy, j = Div(r, X.n_fine);
+  int i = r - j * X.n_fine, mx = X.n_coarse, mxy = mx * Y.n_coarse;
+  float sy[2];
+  for (int a = 0; a < 2; ++a) {
+    int ci = LD(mg_idx, X.lohi + 2 * i + a);
+    float sz[2];
+    for (int b = 0; b < 2; ++b) {
+      int cj = in0 + ci + mx * LD(mg_idx, Y.lohi + 2 * j + b);
+      sz[b] = LD(mg_wts, Z.w + 2 * k) * LD(mg_src, cj + mxy * LD(mg_idx, Z.lohi + 2 * k)) +
+              LD(mg_wts, Z.w + 2 * k + 1) * LD(mg_src, cj + mxy * LD(mg_idx, Z.lohi + 2 * k + 1));
+    }
+    sy[a] = LD(mg_wts, Y.w + 2 * j) * sz[0] + LD(mg_wts, Y.w + 2 * j + 1) * sz[1];
+  }
+  return LD(mg_wts, X.w + 2 * i) * sy[0] + LD(mg_wts, X.w + 2 * i + 1) * sy[1];
 }
 #endif
 
