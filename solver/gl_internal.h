@@ -247,8 +247,8 @@ struct GlMultigridSolver::Impl {
   size_t tail_level = 0;
   Buffer tail_coef, tail_work;
   int64_t tail_stride = 0;
-  bool coefficients_set = false;
-  std::vector<int64_t> tail_coef_offset;  // per tail level: where its cx .. sigma start in tail_coef
+  std::vector<int64_t> tail_coef_offset;  // per level (tail levels only): its cx .. sigma in tail_coef
+  bool coefficients_set = false;          // SetCoefficients ran (tail_coef can be filled)
   // Chooses the tail levels for tail_nodes and packs the transfers and the tail's layout
   // (tail_work is sized by Reserve, the coefficients copied by CopyTailCoefficients).
   void PackLevels();
