@@ -147,6 +147,8 @@ ForwardBenchRow BenchOne(const GridShape& shape, const ForwardBenchOptions& o,
   MultigridOptions mo;
   mo.tolerance = o.tolerance;
   mo.pre_smoothing = mo.post_smoothing = o.smoothing;
+  mo.coarse_smoothing = o.coarse_smoothing;
+  mo.z_coarsening = o.z_coarsening;
   MultigridSolver<T> solver(shape, m.spacing_mm, mo);
   solver.SetCoefficients(kappa.data(), mu.data(), m.C);
   std::vector<T> b(problem.b.begin(), problem.b.end()), x(n), y(n);
@@ -238,6 +240,8 @@ ForwardBenchRow BenchGl(const GridShape& shape, const ForwardBenchOptions& o,
   MultigridOptions mo;
   mo.tolerance = o.tolerance;
   mo.pre_smoothing = mo.post_smoothing = o.smoothing;
+  mo.coarse_smoothing = o.coarse_smoothing;
+  mo.z_coarsening = o.z_coarsening;
   GlMultigridSolver solver(shape, m.spacing_mm, mo);
   solver.SetCoefficients(m.kappa[1].data(), m.mu[1].data(), m.C);
   std::vector<float> b(problem.b.begin(), problem.b.end()), x(n);

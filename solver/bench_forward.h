@@ -1,11 +1,13 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "solver/forward.h"
 #include "solver/grid.h"
+#include "solver/multigrid.h"
 
 namespace translume {
 
@@ -19,7 +21,12 @@ struct ForwardBenchOptions {
   double jacobi_factor = 100;
   double jacobi_cap_seconds = 60;
   double tolerance = 1e-6;
-  int smoothing = 2;  // our solver's V(smoothing, smoothing) cycle
+  // Our solver's cycle: V(smoothing, smoothing) on the finest level, V(coarse_smoothing,
+  // coarse_smoothing) below, and how z coarsens; 0 / unset: the backend's default
+  // (MultigridOptions).
+  int smoothing = 0;
+  int coarse_smoothing = 0;
+  std::optional<ZCoarsening> z_coarsening;
   // Time with the process's CPU clock instead of the wall clock (cpu backend; meaningful with
   // one thread, where it is the solve's own time however busy the machine is).
   bool cpu_time = false;

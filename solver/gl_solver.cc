@@ -230,9 +230,9 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
                                  shape.ToString()));
   GlContext::Get();
   Impl& I = *impl_;
-  I.options = options;
+  I.options = options.WithCycleDefaults(true);
   I.n0 = shape.size();
-  for (MultigridLevel& geo : BuildMultigridHierarchy(shape, h, 64)) {
+  for (MultigridLevel& geo : BuildMultigridHierarchy(shape, h, 64, *I.options.z_coarsening)) {
     auto L = std::make_unique<GLevel>();
     L->geo = std::move(geo);
     L->s = L->geo.grid.shape;
@@ -376,7 +376,8 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
     }
     return;
   }
-  for (int s = 0; s < options.pre_smoothing; ++s) {
+  const int nu = l == 0 ? options.pre_smoothing : options.coarse_smoothing;
+  for (int s = 0; s < nu; ++s) {
     Smooth(L, b, x, 0, nb);
     Smooth(L, b, x, 1, nb);
   }
@@ -385,7 +386,7 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
   Restrict(L, L.r, C.b, nb);
   VCycle(l + 1, C.b, C.x, nb);
   ProlongAdd(L, C.x, x, nb);
-  for (int s = 0; s < options.post_smoothing; ++s) {
+  for (int s = 0; s < nu; ++s) {
     Smooth(L, b, x, 1, nb);
     Smooth(L, b, x, 0, nb);
   }
