@@ -35,17 +35,18 @@ enum class ZCoarsening {
   // z only once x and y cannot coarsen any more: x-y semi-coarsening. With the z-line smoother
   // this is the robust pairing (the smoother must then only damp modes rough in x or y, which
   // zebra line relaxation does well, while modes rough in z stay on every coarse grid). The
-  // levels shrink 4x instead of 8x, but a V(1,1) cycle then reduces the error ~0.1 per cycle
-  // where full coarsening needs V(2,2) for that (docs/benchmarks.md, "Forward solver").
+  // levels shrink 4x instead of 8x, but a V(1,1) cycle then reduces the error about as much as
+  // V(2,2) with full coarsening (docs/benchmarks.md, "Forward solver").
   kLast,
 };
 
 // Vertex-centred coarsening of the uniform grid (shape, h): every other node per coarsened
-// axis; for an even count the last coarse interval is either the last fine one or the last
-// three merged, whichever is nearer the regular coarse interval in length (ratio, on a log
-// scale), so that the irregular end interval stays within ~[0.6, 1.6] of the regular one on every
-// level instead of growing towards 2 (which slows the V-cycle down markedly). x and y stay within 1.5x of each other; z as `z` says. Stops
-// at <= coarsest_nodes nodes or when no axis can coarsen. Finest level first.
+// axis. For an even count the last coarse interval is either the last fine one or the last
+// three merged, whichever is nearer the regular coarse interval in length (as a ratio), so
+// that the irregular end stays within ~[0.6, 1.6] of the regular interval on every level
+// instead of growing towards 2x (which slows the V-cycle down). x and y stay within 1.5x of
+// each other; z as `z` says. Stops at <= coarsest_nodes nodes or when no axis can coarsen.
+// Finest level first.
 std::vector<MultigridLevel> BuildMultigridHierarchy(const GridShape& shape, double h,
                                                     int64_t coarsest_nodes,
                                                     ZCoarsening z = ZCoarsening::kWithXY);
