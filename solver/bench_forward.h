@@ -59,6 +59,10 @@ struct ForwardBenchRow {
   // copy kernel measured in the same run (the device's practical peak), bytes per second.
   double apply_bandwidth = 0, copy_bandwidth = 0;
   std::string copy_reference;  // what the copy was (GlMultigridSolver::CopyReference)
+  // gl only: the gl solution against the cpu solver's in double solved to 1e-12 on the same
+  // problem: relative L2 error over every node, and the largest error on the front face (the
+  // radiance there) relative to the face's largest value.
+  double gl_error_l2 = 0, gl_error_front = 0;
   // gl only: the batched solve of batch_fields right-hand sides (median seconds for all of
   // them, the most iterations of any field).
   int batch_fields = 0, batch_iterations = 0;
