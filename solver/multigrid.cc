@@ -66,7 +66,8 @@ double UpdateResidualRows(const GridShape& s, double alpha, const T* q, T* r, P*
   return rr;
 }
 
-// x += alpha p (the update CG deferred), then p = vx + beta p, row by row.
+// x += alpha p (the update CG deferred), then p = vx + beta p, row by row (alpha = beta = 0,
+// a restart: p = vx without reading p or x).
 template <typename T, typename P>
 void UpdateDirectionRows(const GridShape& s, double alpha, double beta, const P* vx, double* x,
                          T* p) {
@@ -80,6 +81,10 @@ void UpdateDirectionRows(const GridShape& s, double alpha, double beta, const P*
       MergeRow(nx, vx + nx * (k + s.nz * j), z);
       double* __restrict xr = x + o;
       T* __restrict pr = p + o;
+      if (alpha == 0 && beta == 0) {  // a (re)start: p = z only
+        for (int64_t i = 0; i < nx; ++i) pr[i] = T(z[i]);
+        continue;
+      }
       for (int64_t i = 0; i < nx; ++i) {
         xr[i] += alpha * double(pr[i]);
         pr[i] = T(z[i]) + bt * pr[i];
