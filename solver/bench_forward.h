@@ -1,11 +1,13 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "solver/forward.h"
 #include "solver/grid.h"
+#include "solver/multigrid.h"
 
 namespace translume {
 
@@ -19,7 +21,12 @@ struct ForwardBenchOptions {
   double jacobi_factor = 100;
   double jacobi_cap_seconds = 60;
   double tolerance = 1e-6;
-  int smoothing = 2;  // our solver's V(smoothing, smoothing) cycle
+  // Our solver's cycle: V(smoothing, smoothing) on the finest level, V(coarse_smoothing,
+  // coarse_smoothing) below, and how z coarsens; 0 / unset: the backend's default
+  // (MultigridOptions).
+  int smoothing = 0;
+  int coarse_smoothing = 0;
+  std::optional<ZCoarsening> z_coarsening;
   // Time with the process's CPU clock instead of the wall clock (cpu backend; meaningful with
   // one thread, where it is the solve's own time however busy the machine is).
   bool cpu_time = false;
@@ -52,6 +59,10 @@ struct ForwardBenchRow {
   // copy kernel measured in the same run (the device's practical peak), bytes per second.
   double apply_bandwidth = 0, copy_bandwidth = 0;
   std::string copy_reference;  // what the copy was (GlMultigridSolver::CopyReference)
+  // gl only: the gl solution against the cpu solver's in double solved to 1e-12 on the same
+  // problem: relative L2 error over every node, and the largest error on the front face (the
+  // radiance there) relative to the face's largest value.
+  double gl_error_l2 = 0, gl_error_front = 0;
   // gl only: the batched solve of batch_fields right-hand sides (median seconds for all of
   // them, the most iterations of any field).
   int batch_fields = 0, batch_iterations = 0;

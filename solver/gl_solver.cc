@@ -298,9 +298,9 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
                                  shape.ToString()));
   GlContext::Get();
   Impl& I = *impl_;
-  I.options = options;
+  I.options = options.WithCycleDefaults(true);
   I.n0 = shape.size();
-  for (MultigridLevel& geo : BuildMultigridHierarchy(shape, h, 64)) {
+  for (MultigridLevel& geo : BuildMultigridHierarchy(shape, h, 64, *I.options.z_coarsening)) {
     auto L = std::make_unique<GLevel>();
     L->geo = std::move(geo);
     L->s = L->geo.grid.shape;
@@ -416,7 +416,7 @@ void GlMultigridSolver::Impl::Tail(const Buffer& b, Buffer& x, int nb) {
   // `group` threads).
   const std::string group = fmt::format("#define TL_GROUP {}\n", GetTuning().tail_group);
   RunBatch("tail", {&tail_coef, &xfer_idx, &xfer_w, &minv, &b, &x, &tail_work},
-           {int(tail_level), int(levels.size() - tail_level), options.pre_smoothing, options.post_smoothing,
+           {int(tail_level), int(levels.size() - tail_level), options.pre_smoothing, options.coarse_smoothing,
             dense_coarse ? 1 : 0, coarse_sweeps, int(tail_stride), GetTuning().columns ? 1 : 0},
            GetTuning().group, nb, group.c_str());
 }
@@ -534,7 +534,8 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
     }
     return;
   }
-  for (int s = 0; s < options.pre_smoothing; ++s) {
+  const int nu = l == 0 ? options.pre_smoothing : options.coarse_smoothing;
+  for (int s = 0; s < nu; ++s) {
     Smooth(L, b, x, 0, nb);
     Smooth(L, b, x, 1, nb);
   }
@@ -543,7 +544,7 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
   Restrict(l, L.r, C.b, nb);
   VCycle(l + 1, C.b, C.x, nb);
   ProlongAdd(l, C.x, x, nb);
-  for (int s = 0; s < options.post_smoothing; ++s) {
+  for (int s = 0; s < nu; ++s) {
     Smooth(L, b, x, 1, nb);
     Smooth(L, b, x, 0, nb);
   }

@@ -145,7 +145,7 @@ TEST(GlSolver, BatchedSolveMatchesSingleSolvesAndConvergesEveryField) {
 }
 
 // The coarse tail (tail.comp: the V-cycle of the small levels in one dispatch per V-cycle, one
-// work group per field) computes what the per-level dispatches compute: on a 4-level grid,
+// work group per field) computes what the per-level dispatches compute: on a grid of 4+ levels,
 // batched, with the tail covering the whole hierarchy and only its lower levels, one V-cycle
 // gives the same z within float rounding, with fewer dispatches, and the solves take the same
 // iterations to the same solution.
@@ -162,6 +162,9 @@ TEST(GlSolver, CoarseTailMatchesThePerLevelVCycle) {
   b[n + s.index(5, 4, 0)] = 1.0f;  // a spot in field 1
   MultigridOptions mo;
   mo.tolerance = 1e-6;
+  // V(1,1) on the finest level, V(2,2) below: the tail takes each level's own count.
+  mo.pre_smoothing = mo.post_smoothing = 1;
+  mo.coarse_smoothing = 2;
   GlMultigridSolver gl(s, 0.5, mo);
   gl.SetCoefficients(kappa.data(), mu.data(), 2.6);
   ASSERT_GE(gl.num_levels(), 4);

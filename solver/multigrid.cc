@@ -66,7 +66,8 @@ double UpdateResidualRows(const GridShape& s, double alpha, const T* q, T* r, P*
   return rr;
 }
 
-// x += alpha p (the update CG deferred), then p = vx + beta p, row by row.
+// x += alpha p (the update CG deferred), then p = vx + beta p, row by row (alpha = beta = 0,
+// a restart: p = vx without reading p or x).
 template <typename T, typename P>
 void UpdateDirectionRows(const GridShape& s, double alpha, double beta, const P* vx, double* x,
                          T* p) {
@@ -80,6 +81,10 @@ void UpdateDirectionRows(const GridShape& s, double alpha, double beta, const P*
       MergeRow(nx, vx + nx * (k + s.nz * j), z);
       double* __restrict xr = x + o;
       T* __restrict pr = p + o;
+      if (alpha == 0 && beta == 0) {  // a (re)start: p = z only
+        for (int64_t i = 0; i < nx; ++i) pr[i] = T(z[i]);
+        continue;
+      }
       for (int64_t i = 0; i < nx; ++i) {
         xr[i] += alpha * double(pr[i]);
         pr[i] = T(z[i]) + bt * pr[i];
@@ -92,10 +97,19 @@ void UpdateDirectionRows(const GridShape& s, double alpha, double beta, const P*
 std::string MultigridOptions::Validate() const {
   if (!(tolerance > 0) || !(tolerance < 1)) return fmt::format("tolerance must be in (0, 1), got {}", tolerance);
   if (max_iterations < 1) return "max_iterations must be >= 1";
-  if (pre_smoothing < 1 || post_smoothing < 1) return "pre_smoothing and post_smoothing must be >= 1";
+  if (pre_smoothing < 0 || post_smoothing < 0 || coarse_smoothing < 0)
+    return "pre_smoothing, post_smoothing and coarse_smoothing must be >= 1 (or 0: the backend's default)";
   if (pre_smoothing != post_smoothing) return "pre_smoothing must equal post_smoothing (CG needs a symmetric V-cycle)";
   if (coarsest_nodes < 8) return "coarsest_nodes must be >= 8";
   return "";
+}
+
+MultigridOptions MultigridOptions::WithCycleDefaults(bool gl) const {
+  MultigridOptions o = *this;
+  if (o.pre_smoothing == 0) o.pre_smoothing = o.post_smoothing = gl ? 2 : 1;
+  if (o.coarse_smoothing == 0) o.coarse_smoothing = 2;
+  if (!o.z_coarsening) o.z_coarsening = gl ? ZCoarsening::kWithXY : ZCoarsening::kLast;
+  return o;
 }
 
 std::string SolveSummary::BriefReport() const {
@@ -187,7 +201,7 @@ void MultigridSolver<T>::ProlongAdd(const Level& L, const T* c, T* f) const {
 template <typename T>
 MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
                                     const MultigridOptions& options)
-    : options_(options) {
+    : options_(options.WithCycleDefaults(false)) {
   if (std::string err = options_.Validate(); !err.empty())
     throw InputError("multigrid options: " + err);
   TL_CHECK(shape.nx >= 2 && shape.ny >= 2 && shape.nz >= 2 && h > 0);
@@ -199,7 +213,8 @@ MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
   }
   // Mixed precision: only the finest level in T (coarsest_nodes = its size stops coarsening).
   for (MultigridLevel& geo :
-       BuildMultigridHierarchy(shape, h, mixed ? shape.size() : options_.coarsest_nodes)) {
+       BuildMultigridHierarchy(shape, h, mixed ? shape.size() : options_.coarsest_nodes,
+                               *options_.z_coarsening)) {
     auto level = std::make_unique<Level>();
     level->geo = std::move(geo);
     levels_.push_back(std::move(level));
@@ -467,15 +482,16 @@ void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x) {
     return;
   }
   // Pre-smoothing from x = 0, colour 0 first; the last sweep also restricts its residual
-  // along x. Post-smoothing colour 1 first: the cycle is symmetric.
-  for (int s = 0; s < options_.pre_smoothing; ++s)
-    Sweep(L, b, x, 0, s == 0, s + 1 == options_.pre_smoothing ? L.tmp_a.data() : nullptr);
+  // along x. Post-smoothing colour 1 first, as many sweeps: the cycle is symmetric.
+  const int nu = l == 0 ? options_.pre_smoothing : options_.coarse_smoothing;
+  for (int s = 0; s < nu; ++s)
+    Sweep(L, b, x, 0, s == 0, s + 1 == nu ? L.tmp_a.data() : nullptr);
   Level& Cl = *levels_[l + 1];
   TransferYZ(L.geo, true, static_cast<const T*>(L.tmp_a.data()), Cl.b.data(), false,
              L.tmp_b.data());
   VCycle(l + 1, Cl.b.data(), Cl.x.data());
   ProlongAdd(L, Cl.x.data(), x);
-  for (int s = 0; s < options_.post_smoothing; ++s) Sweep(L, b, x, 1, false, nullptr);
+  for (int s = 0; s < nu; ++s) Sweep(L, b, x, 1, false, nullptr);
 }
 
 template <typename T>

@@ -2,9 +2,11 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "solver/multigrid_hierarchy.h"
 #include "solver/stencil.h"
 
 namespace translume {
@@ -13,10 +15,17 @@ struct MultigridOptions {
   // Stop when ||b - A x|| <= tolerance * ||b|| (2-norms).
   double tolerance = 1e-6;
   int max_iterations = 100;
-  // z-line Gauss-Seidel sweeps (red + black) before and after the coarse-grid correction.
-  // V(2,2) needs ~5 iterations to 1e-6 where V(1,1) needs ~8, and is ~15% faster overall.
-  int pre_smoothing = 2;
-  int post_smoothing = 2;
+  // The cycle: z-line Gauss-Seidel sweeps (red + black) before and after the coarse-grid
+  // correction on the finest level (pre, post) and on every coarser level (coarse), and how z
+  // coarsens (multigrid_hierarchy.h). 0 / unset: the backend's choice (WithCycleDefaults). The
+  // cpu solver, bound by memory traffic, takes x-y semi-coarsening with V(1,1) on the finest
+  // level and V(2,2) below: ~5 iterations to 1e-6, as full coarsening with V(2,2) needed, for
+  // ~15% less work. The gl solver, bound by its number of dispatches, takes full coarsening
+  // (fewer levels) with V(2,2) everywhere. docs/benchmarks.md, "Forward solver", has both.
+  int pre_smoothing = 0;
+  int post_smoothing = 0;
+  int coarse_smoothing = 0;
+  std::optional<ZCoarsening> z_coarsening;
   // Stop coarsening at this many nodes; the coarsest level is solved exactly (sparse Cholesky).
   int64_t coarsest_nodes = 1500;
   // Double solvers only: precondition with a float V-cycle (half the memory traffic of the
@@ -25,6 +34,8 @@ struct MultigridOptions {
 
   // Empty if valid, else the broken constraint.
   std::string Validate() const;
+  // These options with the cycle's unset fields filled in for the cpu or the gl solver.
+  MultigridOptions WithCycleDefaults(bool gl) const;
 };
 
 struct SolveSummary {

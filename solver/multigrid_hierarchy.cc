@@ -2,6 +2,7 @@
 #include "solver/multigrid_hierarchy.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "solver/status.h"
 
@@ -16,10 +17,18 @@ AxisTransfer MakeAxisTransfer(const std::vector<double>& fine, bool coarsen,
   std::vector<int64_t> keep;
   if (!coarsen) {
     for (int64_t i = 0; i < n; ++i) keep.push_back(i);
-  } else {
-    const int64_t last_even = (n % 2 == 1) ? n - 1 : n - 4;
-    for (int64_t i = 0; i <= last_even; i += 2) keep.push_back(i);
+  } else if (n % 2 == 1 || n < 4) {
+    for (int64_t i = 0; i < n; i += 2) keep.push_back(i);
     if (keep.back() != n - 1) keep.push_back(n - 1);
+  } else {
+    // An odd number of intervals: all but the last one or three pair up. Of the two coarse
+    // end intervals (the fine one alone, or three merged) take the one nearer in length to
+    // the regular coarse interval.
+    const double regular = fine[2] - fine[0];
+    const double alone = fine[n - 1] - fine[n - 2], merged = fine[n - 1] - fine[n - 4];
+    const bool merge = std::abs(std::log(merged / regular)) < std::abs(std::log(alone / regular));
+    for (int64_t i = 0; i <= (merge ? n - 4 : n - 2); i += 2) keep.push_back(i);
+    keep.push_back(n - 1);
   }
   coarse->clear();
   for (int64_t i : keep) coarse->push_back(fine[i]);
@@ -62,7 +71,7 @@ AxisTransfer MakeAxisTransfer(const std::vector<double>& fine, bool coarsen,
 
 double MeanGap(const std::vector<double>& c) { return (c.back() - c.front()) / double(c.size() - 1); }
 
-std::array<bool, 3> ChooseCoarsening(const TensorGrid& g) {
+std::array<bool, 3> ChooseCoarsening(const TensorGrid& g, ZCoarsening z) {
   std::array<double, 3> gap;
   std::array<bool, 3> can;
   for (int a = 0; a < 3; ++a) {
@@ -72,7 +81,7 @@ std::array<bool, 3> ChooseCoarsening(const TensorGrid& g) {
   std::array<bool, 3> out;
   out[0] = can[0] && (!can[1] || gap[0] <= 1.5 * gap[1]);
   out[1] = can[1] && (!can[0] || gap[1] <= 1.5 * gap[0]);
-  out[2] = can[2] && gap[2] <= 1.01 * std::min(gap[0], gap[1]);
+  out[2] = z == ZCoarsening::kWithXY && can[2] && gap[2] <= 1.01 * std::min(gap[0], gap[1]);
   if (!out[0] && !out[1] && can[2] && !can[0] && !can[1]) out[2] = true;
   return out;
 }
@@ -80,12 +89,12 @@ std::array<bool, 3> ChooseCoarsening(const TensorGrid& g) {
 }  // namespace
 
 std::vector<MultigridLevel> BuildMultigridHierarchy(const GridShape& shape, double h,
-                                                    int64_t coarsest_nodes) {
+                                                    int64_t coarsest_nodes, ZCoarsening z) {
   TL_CHECK(shape.nx >= 2 && shape.ny >= 2 && shape.nz >= 2 && h > 0);
   std::vector<MultigridLevel> levels(1);
   levels[0].grid = TensorGrid::Uniform(shape, h);
   while (levels.back().grid.shape.size() > coarsest_nodes) {
-    const std::array<bool, 3> coarsen = ChooseCoarsening(levels.back().grid);
+    const std::array<bool, 3> coarsen = ChooseCoarsening(levels.back().grid, z);
     if (!coarsen[0] && !coarsen[1] && !coarsen[2]) break;
     MultigridLevel next;
     for (int a = 0; a < 3; ++a)

@@ -28,13 +28,28 @@ struct MultigridLevel {
   std::array<AxisTransfer, 3> to_coarse;
 };
 
+// How the hierarchy coarsens z relative to x and y.
+enum class ZCoarsening {
+  // z along with x and y while its spacing is no coarser than theirs: full coarsening on cubes.
+  kWithXY,
+  // z only once x and y cannot coarsen any more: x-y semi-coarsening. With the z-line smoother
+  // this is the robust pairing (the smoother must then only damp modes rough in x or y, which
+  // zebra line relaxation does well, while modes rough in z stay on every coarse grid). The
+  // levels shrink 4x instead of 8x, but a V(1,1) cycle then reduces the error about as much as
+  // V(2,2) with full coarsening (docs/benchmarks.md, "Forward solver").
+  kLast,
+};
+
 // Vertex-centred coarsening of the uniform grid (shape, h): every other node per coarsened
-// axis (for an even count the last node stays and the one before it goes, so neighbouring
-// intervals stay within 1.5x). Semi-coarsening keeps x and y within 1.5x of each other and z no
-// coarser than them (the z-line smoother absorbs strong z coupling). Stops at
-// <= coarsest_nodes nodes or when no axis can coarsen. Finest level first.
+// axis. For an even count the last coarse interval is either the last fine one or the last
+// three merged, whichever is nearer the regular coarse interval in length (as a ratio), so
+// that the irregular end stays within ~[0.6, 1.6] of the regular interval on every level
+// instead of growing towards 2x (which slows the V-cycle down). x and y stay within 1.5x of
+// each other; z as `z` says. Stops at <= coarsest_nodes nodes or when no axis can coarsen.
+// Finest level first.
 std::vector<MultigridLevel> BuildMultigridHierarchy(const GridShape& shape, double h,
-                                                    int64_t coarsest_nodes);
+                                                    int64_t coarsest_nodes,
+                                                    ZCoarsening z = ZCoarsening::kWithXY);
 
 // Separable transfer along one axis. The data is `outer` blocks of n nodes along the axis, each
 // node `inner` contiguous values (x: inner = 1; y: inner = nx'; z: inner = nx' ny', where the

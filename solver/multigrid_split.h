@@ -10,10 +10,12 @@
 // and does no work for the other colour.
 
 #include <algorithm>
+#include <cstdlib>
 #include <cstdint>
 #include <vector>
 
 #include "solver/multigrid_hierarchy.h"
+#include "solver/status.h"
 
 namespace translume {
 
@@ -75,10 +77,12 @@ inline void HalfRowKernel(int64_t len, bool first_has_left, bool last_has_right,
 }
 
 // Transfers along x between a fine level's split rows and the next coarser level's split rows
-// (vertex-centred coarsening, multigrid_hierarchy.h). Away from the ends, fine node 2c is
+// (vertex-centred coarsening, multigrid_hierarchy.h). Away from the end, fine node 2c is
 // coarse node c and odd fine node 2m + 1 lies between coarse nodes m and m + 1 with weights
-// wlo[m], whi[m]; the few coarse nodes near the ends that gather otherwise use the transfer's
-// general tables.
+// wlo[m], whi[m] (an odd fine node that is itself coarse node m or m + 1 has weights 1, 0 or
+// 0, 1). Coarse node 0 and the coarse nodes from regular_end on (the irregular end: see
+// BuildMultigridHierarchy) restrict from the transfer's general tables, and the even fine nodes
+// from even_end on prolong from them.
 template <typename T>
 struct SplitTransferX {
   bool coarsened = false;
@@ -86,24 +90,38 @@ struct SplitTransferX {
   std::vector<T> wlo, whi;              // per odd fine node m (padded with zeros)
   std::vector<int64_t> irregular;       // coarse nodes restricted from the general tables
   int64_t regular_end = 0;              // coarse nodes [1, regular_end) are regular
-  bool last_even_irregular = false;     // nf even: fine node nf - 2 lies between nc-2, nc-1
+  int64_t even_end = 0;                 // even fine nodes [0, even_end) are coarse nodes
   const AxisTransfer* t = nullptr;
 
   explicit SplitTransferX(const AxisTransfer& at) : coarsened(at.coarsened), nf(at.n_fine),
                                                     nc(at.n_coarse), t(&at) {
     if (!coarsened) return;
-    const int64_t ho = nf / 2;
+    const int64_t ho = nf / 2, he = (nf + 1) / 2;
     wlo.assign(std::max(ho, nc) + 1, T(0));
     whi.assign(std::max(ho, nc) + 1, T(0));
+    auto is_coarse = [&](int64_t f, int64_t c) { return at.lo[f] == c && at.whi[f] == 0; };
     for (int64_t m = 0; m < ho; ++m) {
-      wlo[m] = T(at.wlo[2 * m + 1]);
-      whi[m] = T(at.whi[2 * m + 1]);
+      const int64_t f = 2 * m + 1;
+      if (is_coarse(f, m + 1)) {
+        whi[m] = T(1);
+      } else {
+        TL_CHECK(at.lo[f] == m && (at.whi[f] == 0 || at.hi[f] == m + 1));
+        wlo[m] = T(at.wlo[f]);
+        whi[m] = T(at.whi[f]);
+      }
     }
-    const bool even = nf % 2 == 0;
-    regular_end = even ? std::max<int64_t>(1, nc - 2) : nc;
+    while (even_end < he && is_coarse(2 * even_end, even_end)) ++even_end;
+    // Coarse node c is regular if it is fine node 2c and gathers only fine nodes 2c +- 1 too.
+    auto regular = [&](int64_t c) {
+      if (2 * c >= nf || !is_coarse(2 * c, c)) return false;
+      for (int64_t g = at.g_start[c]; g < at.g_start[c + 1]; ++g)
+        if (std::abs(at.g_idx[g] - 2 * c) > 1) return false;
+      return true;
+    };
+    regular_end = 1;
+    while (regular_end < nc && regular(regular_end)) ++regular_end;
     irregular.push_back(0);
-    for (int64_t c = std::max<int64_t>(1, regular_end); c < nc; ++c) irregular.push_back(c);
-    last_even_irregular = even;
+    for (int64_t c = regular_end; c < nc; ++c) irregular.push_back(c);
   }
 
   // Fine split row (nf values, then one readable padding value) -> coarse natural row (nc).
@@ -131,12 +149,11 @@ struct SplitTransferX {
     T* __restrict o = out + he;
     const T* __restrict wl = wlo.data();
     const T* __restrict wh = whi.data();
-    const int64_t e_end = last_even_irregular ? he - 1 : he;
-    for (int64_t m = 0; m < e_end; ++m) e[m] += nat[m];
+    for (int64_t m = 0; m < even_end; ++m) e[m] += nat[m];
     for (int64_t m = 0; m < ho; ++m) o[m] += wl[m] * nat[m] + wh[m] * nat[m + 1];
-    if (last_even_irregular) {
-      const int64_t f = nf - 2;
-      e[he - 1] += T(t->wlo[f]) * nat[t->lo[f]] + T(t->whi[f]) * nat[t->hi[f]];
+    for (int64_t m = even_end; m < he; ++m) {
+      const int64_t f = 2 * m;
+      e[m] += T(t->wlo[f]) * nat[t->lo[f]] + T(t->whi[f]) * nat[t->hi[f]];
     }
   }
 };

@@ -5,6 +5,9 @@
 
 #include <cmath>
 #include <numbers>
+#include <random>
+
+#include "solver/multigrid_split.h"
 
 namespace translume {
 namespace {
@@ -118,6 +121,70 @@ TEST(Multigrid, WarmStartNeedsFewerIterations) {
   EXPECT_TRUE(warm.converged);
   EXPECT_LT(warm.initial_residual, 0.05);
   EXPECT_LT(warm.iterations, cold.iterations);
+}
+
+// Every level's intervals along every axis stay within ~[0.6, 1.6] of its first (regular) one,
+// whatever the node counts: the irregular end does not grow from level to level.
+TEST(MultigridHierarchy, IrregularEndsStayBounded) {
+  for (int64_t n : {64, 100, 130, 256, 37, 53, 6, 4}) {
+    for (ZCoarsening z : {ZCoarsening::kLast, ZCoarsening::kWithXY}) {
+      const auto levels = BuildMultigridHierarchy({n, n, 5}, 0.5, 8, z);
+      ASSERT_GE(levels.size(), 2u);
+      for (const MultigridLevel& L : levels)
+        for (int a = 0; a < 2; ++a) {
+          const std::vector<double>& c = L.grid.coord[a];
+          if (c.size() < 3) continue;
+          for (size_t i = 1; i + 1 < c.size(); ++i) {
+            const double ratio = (c[i + 1] - c[i]) / (c[1] - c[0]);
+            EXPECT_GE(ratio, 0.6) << "n " << n << " level of " << c.size() << " nodes";
+            EXPECT_LE(ratio, 1.62) << "n " << n << " level of " << c.size() << " nodes";
+          }
+        }
+    }
+  }
+}
+
+// x-y semi-coarsening keeps z until x and y are exhausted; full coarsening coarsens a cube's z
+// along with x and y.
+TEST(MultigridHierarchy, SemiCoarseningKeepsZ) {
+  const auto semi = BuildMultigridHierarchy({33, 33, 33}, 1.0, 1500, ZCoarsening::kLast);
+  ASSERT_GE(semi.size(), 3u);
+  EXPECT_EQ(semi[1].grid.shape.nz, 33);
+  EXPECT_EQ(semi[1].grid.shape.nx, 17);
+  const auto full = BuildMultigridHierarchy({33, 33, 33}, 1.0, 1500, ZCoarsening::kWithXY);
+  EXPECT_EQ(full[1].grid.shape.nz, 17);
+}
+
+// The cpu smoother's split-row transfers along x equal the general separable ones (row by row,
+// natural layout) for every fine count, both choices of the irregular end included.
+TEST(MultigridHierarchy, SplitTransfersMatchTheGeneralOnes) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  int alone = 0;  // transfers whose last coarse interval is the last fine one
+  for (int64_t n = 3; n <= 300; ++n) {
+    for (const MultigridLevel& L :
+         BuildMultigridHierarchy({n, 3, 2}, 1.0, 1, ZCoarsening::kLast)) {
+      const AxisTransfer& t = L.to_coarse[0];
+      if (!t.coarsened) continue;
+      const int64_t nf = t.n_fine;
+      alone += nf % 2 == 0 && t.n_coarse == nf / 2 + 1;
+      const SplitTransferX<double> tx(t);
+      std::vector<double> fine(nf), split(nf + 1, 0.0), coarse(t.n_coarse + 1, 0.0);
+      for (double& v : fine) v = u(rng);
+      for (int64_t c = 0; c < t.n_coarse; ++c) coarse[c] = u(rng);
+      SplitRow(nf, fine.data(), split.data());
+      std::vector<double> got(t.n_coarse), want(t.n_coarse);
+      tx.Restrict(split.data(), got.data());
+      RestrictAxis(t, fine.data(), want.data(), 1, 1);
+      for (int64_t c = 0; c < t.n_coarse; ++c) EXPECT_NEAR(got[c], want[c], 1e-12) << nf << " " << c;
+      std::vector<double> pf(fine), ps(split), merged(nf);
+      ProlongAxis(t, coarse.data(), pf.data(), 1, 1, true);
+      tx.ProlongAdd(coarse.data(), ps.data());
+      MergeRow(nf, ps.data(), merged.data());
+      for (int64_t f = 0; f < nf; ++f) EXPECT_NEAR(merged[f], pf[f], 1e-12) << nf << " " << f;
+    }
+  }
+  EXPECT_GT(alone, 10);
 }
 
 TEST(Multigrid, OptionsValidationNamesTheConstraint) {

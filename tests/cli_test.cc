@@ -200,6 +200,22 @@ TEST_F(Cli, BenchForwardSmoke) {
   ExpectOneLineError(Translume("bench forward --backend gl --cpu-time"), "--cpu-time");
 }
 
+// The gl benchmark reports the stencil's bandwidth against a copy, and how far its solution is
+// from the cpu solver's in double (the GPU issue: radiance within 1e-4).
+TEST_F(Cli, BenchForwardGlReportsBandwidthAndAccuracy) {
+  const CommandRun r =
+      Translume("bench forward --backend gl --grids 17x13x9 --repeats 1 --batch 2 --no-peers --json");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output.substr(r.output.find('[')));
+  ASSERT_EQ(j.size(), 1u);
+  EXPECT_LE(j[0]["residual"].get<double>(), 1e-6);
+  EXPECT_GT(j[0]["stencil_fraction_of_copy"].get<double>(), 0.0);
+  EXPECT_GT(j[0]["gl_error_l2"].get<double>(), 0.0);  // float storage: never exactly equal
+  EXPECT_LT(j[0]["gl_error_l2"].get<double>(), 1e-5);
+  EXPECT_LT(j[0]["gl_error_front"].get<double>(), 1e-4);
+  EXPECT_EQ(j[0]["batch_fields"].get<int>(), 2);
+}
+
 TEST_F(Cli, BenchRecoverySmoke) {
   const CommandRun r = Translume("bench recovery --grid 8x6x4 --presets wax --max-iterations 3 "
                                  "--paper-iterations 2 --json");

@@ -36,7 +36,7 @@ void AddBenchForward(CLI::App& bench) {
     ForwardBenchOptions o;
     std::vector<std::string> grids;
     bool json = false, no_peers = false;
-    std::string precision = "double", backend = "cpu";
+    std::string precision = "double", backend = "cpu", coarsening;
   };
   auto f = std::make_shared<Flags>();
   auto* fwd = bench.add_subcommand("forward", "Forward solve to 1e-6: multigrid-PCG vs Eigen CG "
@@ -62,9 +62,15 @@ void AddBenchForward(CLI::App& bench) {
   fwd->add_option("--batch", f->o.batch, "gl: also solve this many right-hand sides (4x4 region "
                                          "lights) as one batch; 0 skips")
       ->capture_default_str();
-  fwd->add_option("--smoothing", f->o.smoothing, "Our solver's V(N, N) cycle: smoothing sweeps "
-                  "before and after each coarse correction")
-      ->capture_default_str()->check(CLI::Range(1, 8));
+  fwd->add_option("--smoothing", f->o.smoothing, "Our solver's V(N, N) cycle on the finest level: "
+                  "smoothing sweeps before and after the coarse correction (default: cpu 1, gl 2)")
+      ->check(CLI::Range(1, 8));
+  fwd->add_option("--coarse-smoothing", f->o.coarse_smoothing,
+                  "The same on every coarser level (default 2)")
+      ->check(CLI::Range(1, 8));
+  fwd->add_option("--coarsening", f->coarsening, "xy: x-y semi-coarsening, z last; full: z with "
+                  "x and y (default: cpu xy, gl full)")
+      ->check(CLI::IsMember({"xy", "full"}));
   fwd->add_flag("--no-peers", f->no_peers, "Skip the Eigen and Jacobi peers");
   fwd->add_flag("--json", f->json, "Print JSON instead of a table");
   fwd->callback([f] {
@@ -76,6 +82,8 @@ void AddBenchForward(CLI::App& bench) {
       throw InputError("--cpu-time: only with --backend cpu (the gl solver runs on the GPU)");
     if (o.backend == Backend::kGl) PrintGlInfo();
     o.peers = !f->no_peers;
+    if (!f->coarsening.empty())
+      o.z_coarsening = f->coarsening == "full" ? ZCoarsening::kWithXY : ZCoarsening::kLast;
     std::fprintf(stderr, "bench forward: backend %s, %d threads, %s%s\n", f->backend.c_str(),
                  NumThreads(), f->precision.c_str(), o.cpu_time ? ", CPU time" : "");
     const auto rows = RunForwardBench(o, PrintBenchProgress);

@@ -3,10 +3,10 @@
 // (the last the coarsest), for one field per work group (work-group z = the field; one group
 // per field, its invocations looping over each step's columns or values, a barrier between
 // steps). The steps and their per-node math are the per-level path's (gl_solver.cc's VCycle;
-// multigrid.glsl): on each level pre smoothing half-sweep pairs (colours 0, 1), the residual,
-// the restriction to the next level's b; on the coarsest the dense inverse (dense != 0) or
-// coarse_sweeps sweep quadruples (0, 1, 1, 0); back up the prolongation added into x and post
-// smoothing pairs (1, 0).
+// multigrid.glsl): on each level nu smoothing half-sweep pairs (colours 0, 1; nu = nu_fine on
+// level 0 of the hierarchy, nu_coarse below, MultigridOptions), the residual, the restriction
+// to the next level's b; on the coarsest the dense inverse (dense != 0) or coarse_sweeps sweep
+// quadruples (0, 1, 1, 0); back up the prolongation added into x and nu pairs (1, 0).
 //
 // Memory (gl_solver.cc's BuildTransfers and BuildTail, counts in values):
 // - coef (float): per tail level cx, cy, cz, inv, luc, sigma, copied from the level's buffers
@@ -27,8 +27,8 @@ FLOATS(5, XOut, x_out, writeonly);
 FLOATS(6, Work, work, coherent);
 layout(location = 0) uniform int first;   // the first tail level
 layout(location = 1) uniform int levels;  // tail levels (>= 2), the last the coarsest
-layout(location = 2) uniform int pre;
-layout(location = 3) uniform int post;
+layout(location = 2) uniform int nu_fine;
+layout(location = 3) uniform int nu_coarse;
 layout(location = 4) uniform int dense;
 layout(location = 5) uniform int coarse_sweeps;
 layout(location = 6) uniform int stride;   // work values per field
@@ -86,7 +86,7 @@ void main() {
   Sync();
   for (int l = first; l < last; ++l) {
     MgLevel L = Level(l);
-    for (int s = 0; s < pre; ++s) {
+    for (int s = 0; s < (l == 0 ? nu_fine : nu_coarse); ++s) {
       HalfSweep(l, 0);
       HalfSweep(l, 1);
     }
@@ -121,7 +121,7 @@ void main() {
     for (int e = lid; e < Nodes(l); e += group)
       ST(work, x0 + e, LD(work, x0 + e) + Prolong3Value(e, X, Y, Z, c0));
     Sync();
-    for (int s = 0; s < post; ++s) {
+    for (int s = 0; s < (l == 0 ? nu_fine : nu_coarse); ++s) {
       HalfSweep(l, 1);
       HalfSweep(l, 0);
     }
