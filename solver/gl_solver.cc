@@ -134,7 +134,7 @@ const Tuning& GetTuning() {
     // One work group per field runs the tail: on llvmpipe one thread per field, so the levels
     // where the per-level dispatches' fixed cost outweighs the work; on a GPU the levels one
     // group of TL_GROUP invocations covers in a few nodes each.
-    t.tail_nodes = cpu ? 4096 : 4096;
+    t.tail_nodes = 4096;
     t.tail_group = cpu ? 8 : 256;
     if (const char* tail = std::getenv("TRANSLUME_GL_TAIL_NODES")) t.tail_nodes = std::atoll(tail);
     if (const char* g = std::getenv("TRANSLUME_GL_TAIL_GROUP")) t.tail_group = std::atoi(g);
