@@ -96,7 +96,7 @@ void ResidualColumn(MgLevel L, int i, int j, int k0, int k1, int mode, int x0, i
 #ifdef MG_TRANSFER
 // The whole transfer between level l and l + 1 (the cpu solver's three separable axis passes,
 // multigrid_hierarchy.h, nested in one loop: the same products summed in the same order).
-// mg_idx holds a metadata row of kMgMeta ints per level (gl_solver.cc's BuildTransfers): nx, ny,
+// mg_idx holds a metadata row of kMgMeta ints per level (gl_solver.cc's Impl::PackLevels): nx, ny,
 // nz, the tail's offsets (tail.comp), and from kMgAxis on per axis a 7 ints: n_fine, n_coarse,
 // the offsets in mg_idx of gstart and gidx, of gw in mg_wts, of lohi in mg_idx and of w in
 // mg_wts. Coarse node c of an axis gathers fine nodes gidx[gstart[c] .. gstart[c + 1]) (gstart

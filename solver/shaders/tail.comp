@@ -8,7 +8,7 @@
 // to the next level's b; on the coarsest the dense inverse (dense != 0) or coarse_sweeps sweep
 // quadruples (0, 1, 1, 0); back up the prolongation added into x and nu pairs (1, 0).
 //
-// Memory (gl_solver.cc's BuildTransfers and BuildTail, counts in values):
+// Memory (gl_solver.cc's Impl::PackLevels and Impl::CopyTailCoefficients, counts in values):
 // - coef (float): per tail level cx, cy, cz, inv, luc, sigma, copied from the level's buffers
 //   after every coefficient update;
 // - mg_idx (int) and mg_wts (float): the packed transfers of every level (multigrid.glsl,
