@@ -298,7 +298,7 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
                                  shape.ToString()));
   GlContext::Get();
   Impl& I = *impl_;
-  I.options = options.WithCycleDefaults(true);
+  I.options = options.WithCycleDefaults(true, shape.size());
   I.n0 = shape.size();
   for (MultigridLevel& geo : BuildMultigridHierarchy(shape, h, 64, *I.options.z_coarsening)) {
     auto L = std::make_unique<GLevel>();

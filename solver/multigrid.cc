@@ -104,11 +104,16 @@ std::string MultigridOptions::Validate() const {
   return "";
 }
 
-MultigridOptions MultigridOptions::WithCycleDefaults(bool gl) const {
+MultigridOptions MultigridOptions::WithCycleDefaults(bool gl, int64_t nodes) const {
+  // Below this many nodes the cpu solver keeps full coarsening with V(2,2): on small grids the
+  // x-y cycle needs a 6th iteration (it has few coarse levels to smooth on) and its larger
+  // coarsest level costs more, 5-40 % slower on 24x18x8 .. 64x48x16 (docs/benchmarks.md).
+  constexpr int64_t kSemiCoarseningNodes = 100000;
+  const bool semi = !gl && nodes >= kSemiCoarseningNodes;
   MultigridOptions o = *this;
-  if (o.pre_smoothing == 0) o.pre_smoothing = o.post_smoothing = gl ? 2 : 1;
+  if (o.pre_smoothing == 0) o.pre_smoothing = o.post_smoothing = semi ? 1 : 2;
   if (o.coarse_smoothing == 0) o.coarse_smoothing = 2;
-  if (!o.z_coarsening) o.z_coarsening = gl ? ZCoarsening::kWithXY : ZCoarsening::kLast;
+  if (!o.z_coarsening) o.z_coarsening = semi ? ZCoarsening::kLast : ZCoarsening::kWithXY;
   return o;
 }
 
@@ -201,7 +206,7 @@ void MultigridSolver<T>::ProlongAdd(const Level& L, const T* c, T* f) const {
 template <typename T>
 MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
                                     const MultigridOptions& options)
-    : options_(options.WithCycleDefaults(false)) {
+    : options_(options.WithCycleDefaults(false, shape.size())) {
   if (std::string err = options_.Validate(); !err.empty())
     throw InputError("multigrid options: " + err);
   TL_CHECK(shape.nx >= 2 && shape.ny >= 2 && shape.nz >= 2 && h > 0);

@@ -19,9 +19,11 @@ struct MultigridOptions {
   // correction on the finest level (pre, post) and on every coarser level (coarse), and how z
   // coarsens (multigrid_hierarchy.h). 0 / unset: the backend's choice (WithCycleDefaults). The
   // cpu solver, bound by memory traffic, takes x-y semi-coarsening with V(1,1) on the finest
-  // level and V(2,2) below: ~5 iterations to 1e-6, as full coarsening with V(2,2) needed, for
-  // ~15% less work. The gl solver, bound by its number of dispatches, takes full coarsening
-  // (fewer levels) with V(2,2) everywhere. docs/benchmarks.md, "Forward solver", has both.
+  // level and V(2,2) below on grids of 100000 nodes or more: ~5 iterations to 1e-6, as full
+  // coarsening with V(2,2) needed, for 5-20 % less time; on smaller grids, where that cycle
+  // needs a 6th iteration, full coarsening with V(2,2). The gl solver, bound by its number of
+  // dispatches, takes full coarsening (fewer levels) with V(2,2) everywhere.
+  // docs/benchmarks.md, "Forward solver", has the measurements.
   int pre_smoothing = 0;
   int post_smoothing = 0;
   int coarse_smoothing = 0;
@@ -34,8 +36,9 @@ struct MultigridOptions {
 
   // Empty if valid, else the broken constraint.
   std::string Validate() const;
-  // These options with the cycle's unset fields filled in for the cpu or the gl solver.
-  MultigridOptions WithCycleDefaults(bool gl) const;
+  // These options with the cycle's unset fields filled in for the cpu or the gl solver on a
+  // grid of `nodes` nodes.
+  MultigridOptions WithCycleDefaults(bool gl, int64_t nodes) const;
 };
 
 struct SolveSummary {

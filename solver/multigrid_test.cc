@@ -187,6 +187,28 @@ TEST(MultigridHierarchy, SplitTransfersMatchTheGeneralOnes) {
   EXPECT_GT(alone, 10);
 }
 
+// The cycle each backend fills in, and settings the caller made are kept.
+TEST(Multigrid, CycleDefaultsPerBackendAndGridSize) {
+  const MultigridOptions unset;
+  const MultigridOptions small = unset.WithCycleDefaults(false, 64 * 48 * 16);
+  EXPECT_EQ(small.pre_smoothing, 2);
+  EXPECT_EQ(*small.z_coarsening, ZCoarsening::kWithXY);
+  const MultigridOptions large = unset.WithCycleDefaults(false, 130 * 53 * 37);
+  EXPECT_EQ(large.pre_smoothing, 1);
+  EXPECT_EQ(large.post_smoothing, 1);
+  EXPECT_EQ(large.coarse_smoothing, 2);
+  EXPECT_EQ(*large.z_coarsening, ZCoarsening::kLast);
+  const MultigridOptions gl = unset.WithCycleDefaults(true, 130 * 53 * 37);
+  EXPECT_EQ(gl.pre_smoothing, 2);
+  EXPECT_EQ(*gl.z_coarsening, ZCoarsening::kWithXY);
+  MultigridOptions set;
+  set.pre_smoothing = set.post_smoothing = 3;
+  set.z_coarsening = ZCoarsening::kLast;
+  const MultigridOptions kept = set.WithCycleDefaults(true, 100);
+  EXPECT_EQ(kept.pre_smoothing, 3);
+  EXPECT_EQ(*kept.z_coarsening, ZCoarsening::kLast);
+}
+
 TEST(Multigrid, OptionsValidationNamesTheConstraint) {
   MultigridOptions o;
   EXPECT_EQ(o.Validate(), "");
