@@ -109,11 +109,13 @@ MultigridOptions MultigridOptions::WithCycleDefaults(bool gl, int64_t nodes) con
   // x-y cycle needs a 6th iteration (it has few coarse levels to smooth on) and its larger
   // coarsest level costs more, 5-40 % slower on 24x18x8 .. 64x48x16 (docs/benchmarks.md).
   constexpr int64_t kSemiCoarseningNodes = 100000;
-  const bool semi = !gl && nodes >= kSemiCoarseningNodes;
   MultigridOptions o = *this;
-  if (o.pre_smoothing == 0) o.pre_smoothing = o.post_smoothing = semi ? 1 : 2;
+  if (!o.z_coarsening)
+    o.z_coarsening = !gl && nodes >= kSemiCoarseningNodes ? ZCoarsening::kLast : ZCoarsening::kWithXY;
+  // V(1,1) on the finest level with x-y semi-coarsening, V(2,2) with full coarsening.
+  if (o.pre_smoothing == 0)
+    o.pre_smoothing = o.post_smoothing = *o.z_coarsening == ZCoarsening::kLast ? 1 : 2;
   if (o.coarse_smoothing == 0) o.coarse_smoothing = 2;
-  if (!o.z_coarsening) o.z_coarsening = semi ? ZCoarsening::kLast : ZCoarsening::kWithXY;
   return o;
 }
 

@@ -22,7 +22,8 @@ struct MultigridOptions {
   // level and V(2,2) below on grids of 100000 nodes or more: ~5 iterations to 1e-6, as full
   // coarsening with V(2,2) needed, for 5-20 % less time; on smaller grids, where that cycle
   // needs a 6th iteration, full coarsening with V(2,2). The gl solver, bound by its number of
-  // dispatches, takes full coarsening (fewer levels) with V(2,2) everywhere.
+  // dispatches, takes full coarsening (fewer levels) with V(2,2) everywhere. An unset
+  // smoothing count follows the coarsening: 1 on the finest level with kLast, else 2.
   // docs/benchmarks.md, "Forward solver", has the measurements.
   int pre_smoothing = 0;
   int post_smoothing = 0;

@@ -207,6 +207,9 @@ TEST(Multigrid, CycleDefaultsPerBackendAndGridSize) {
   const MultigridOptions kept = set.WithCycleDefaults(true, 100);
   EXPECT_EQ(kept.pre_smoothing, 3);
   EXPECT_EQ(*kept.z_coarsening, ZCoarsening::kLast);
+  MultigridOptions xy;  // x-y coarsening asked for on a small grid: its V(1,1) finest level
+  xy.z_coarsening = ZCoarsening::kLast;
+  EXPECT_EQ(xy.WithCycleDefaults(false, 100).pre_smoothing, 1);
 }
 
 TEST(Multigrid, OptionsValidationNamesTheConstraint) {

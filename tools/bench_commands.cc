@@ -63,13 +63,14 @@ void AddBenchForward(CLI::App& bench) {
                                          "lights) as one batch; 0 skips")
       ->capture_default_str();
   fwd->add_option("--smoothing", f->o.smoothing, "Our solver's V(N, N) cycle on the finest level: "
-                  "smoothing sweeps before and after the coarse correction (default: cpu 1, gl 2)")
+                  "smoothing sweeps before and after the coarse correction (default: 1 with x-y "
+                  "coarsening, else 2)")
       ->check(CLI::Range(1, 8));
   fwd->add_option("--coarse-smoothing", f->o.coarse_smoothing,
                   "The same on every coarser level (default 2)")
       ->check(CLI::Range(1, 8));
   fwd->add_option("--coarsening", f->coarsening, "xy: x-y semi-coarsening, z last; full: z with "
-                  "x and y (default: cpu xy, gl full)")
+                  "x and y (default: xy for cpu grids of 100000 nodes or more, else full)")
       ->check(CLI::IsMember({"xy", "full"}));
   fwd->add_flag("--no-peers", f->no_peers, "Skip the Eigen and Jacobi peers");
   fwd->add_flag("--json", f->json, "Print JSON instead of a table");
