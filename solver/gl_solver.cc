@@ -534,7 +534,7 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
     }
     return;
   }
-  const int nu = l == 0 ? options.pre_smoothing : options.coarse_smoothing;
+  const int nu = options.SweepsOnLevel(l);
   for (int s = 0; s < nu; ++s) {
     Smooth(L, b, x, 0, nb);
     Smooth(L, b, x, 1, nb);
@@ -698,19 +698,33 @@ SolveSummary GlMultigridSolver::Solve(const float* b_host, float* x_host) {
 
 int GlMultigridSolver::max_batch() const { return impl_->max_batch; }
 
-double GlMultigridSolver::TimeApply(int repetitions) {
-  Impl& I = *impl_;
-  GLevel& L = *I.levels[0];
+namespace {
+
+// Median wall time of `repetitions` runs of `body`, which runs what it times `per_run` times
+// (the result is per time); gl work is finished before and inside each run.
+template <typename F>
+double MedianSeconds(int repetitions, int per_run, F&& body) {
   std::vector<double> times;
   api.Finish();
   for (int r = 0; r < repetitions; ++r) {
     const auto t0 = std::chrono::steady_clock::now();
-    for (int k = 0; k < 10; ++k) I.Stencil(L, L.x, L.x, I.q, 1, 1);
+    body();
     api.Finish();
-    times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / 10);
+    times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() /
+                    per_run);
   }
   std::sort(times.begin(), times.end());
   return times[times.size() / 2];
+}
+
+}  // namespace
+
+double GlMultigridSolver::TimeApply(int repetitions) {
+  Impl& I = *impl_;
+  GLevel& L = *I.levels[0];
+  return MedianSeconds(repetitions, 10, [&] {
+    for (int k = 0; k < 10; ++k) I.Stencil(L, L.x, L.x, I.q, 1, 1);
+  });
 }
 
 double GlMultigridSolver::TimeCopy(int64_t bytes, int repetitions) {
@@ -719,35 +733,23 @@ double GlMultigridSolver::TimeCopy(int64_t bytes, int repetitions) {
     // thread (a copy shader there is bound by llvmpipe's cost per access, not by memory: it read
     // below the stencil's own rate).
     std::vector<char> src(size_t(bytes), 1), dst(size_t(bytes), 0);
-    std::vector<double> times;
-    for (int r = 0; r < repetitions; ++r) {
-      const auto t0 = std::chrono::steady_clock::now();
+    return MedianSeconds(repetitions, 1, [&] {
 #pragma omp parallel
       {
         const int64_t nt = omp_get_num_threads(), id = omp_get_thread_num();
         const int64_t a = bytes * id / nt, b = bytes * (id + 1) / nt;
         std::memcpy(dst.data() + a, src.data() + a, size_t(b - a));
       }
-      times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-    }
-    std::sort(times.begin(), times.end());
-    return times[times.size() / 2];
+    });
   }
   Buffer src, dst;
   const int64_t n4 = bytes / 16;
   src.Alloc(n4 * 16, nullptr, Elem::kVec4);
   dst.Alloc(n4 * 16, nullptr, Elem::kVec4);
   src.Zero();
-  std::vector<double> times;
-  api.Finish();
-  for (int r = 0; r < repetitions; ++r) {
-    const auto t0 = std::chrono::steady_clock::now();
+  return MedianSeconds(repetitions, 10, [&] {
     for (int k = 0; k < 10; ++k) Run("copy", {&src, &dst}, {int(n4)}, FlatThreads(n4));
-    api.Finish();
-    times.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / 10);
-  }
-  std::sort(times.begin(), times.end());
-  return times[times.size() / 2];
+  });
 }
 
 int64_t GlMultigridSolver::ApplyBytes() const { return impl_->n0 * 4 * 6; }

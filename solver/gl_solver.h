@@ -53,7 +53,7 @@ class GlMultigridSolver {
   double TimeCopy(int64_t bytes, int repetitions);
   // What TimeCopy measured, in words.
   std::string CopyReference() const;
-  // Bytes one stencil application must move at least: x, cx, cy, cz, diag read, y written.
+  // Bytes one stencil application must move at least: x, cx, cy, cz, sigma read, y written.
   int64_t ApplyBytes() const;
 
   // The device state, for the other gl sources (gl_internal.h).

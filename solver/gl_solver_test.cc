@@ -21,26 +21,27 @@ TEST(GlContext, ReportsACompute43Context) {
   EXPECT_GE(info.max_work_group_count[0], 65535);
 }
 
-TEST(GlSolver, ShaderCompileErrorsNameTheFileAndLine) {
+// The error compiling `source` as `file_name` reports ("" and a failed test if it compiles).
+std::string CompileError(const std::string& file_name, const std::string& source) {
   try {
-    CompileGlShaderForTest("solver/shaders/broken.comp",
-                           "// a comment\nvoid main() {\n  undefined_thing = 1.0;\n}\n");
-    FAIL() << "compiled a broken shader";
+    CompileGlShaderForTest(file_name, source);
   } catch (const InputError& e) {
-    const std::string msg = e.what();
-    EXPECT_NE(msg.find("solver/shaders/broken.comp:3"), std::string::npos) << msg;
-    EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+    return e.what();
   }
+  ADD_FAILURE() << file_name << " compiled";
+  return "";
+}
+
+TEST(GlSolver, ShaderCompileErrorsNameTheFileAndLine) {
+  const std::string msg = CompileError("solver/shaders/broken.comp",
+                                       "// a comment\nvoid main() {\n  undefined_thing = 1.0;\n}\n");
+  EXPECT_NE(msg.find("solver/shaders/broken.comp:3"), std::string::npos) << msg;
+  EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
   EXPECT_NO_THROW(CompileGlShaderForTest("ok.comp", "void main() {}\n"));
   // An error in an included snippet names the snippet (here: its arrays are not declared).
-  try {
-    CompileGlShaderForTest("solver/shaders/inc.comp",
-                           "#define MG_SMOOTH\n#include \"multigrid.glsl\"\nvoid main() {}\n");
-    FAIL() << "compiled a snippet without its arrays";
-  } catch (const InputError& e) {
-    const std::string msg = e.what();
-    EXPECT_NE(msg.find("solver/shaders/multigrid.glsl:"), std::string::npos) << msg;
-  }
+  const std::string inc = CompileError("solver/shaders/inc.comp",
+                                       "#define MG_SMOOTH\n#include \"multigrid.glsl\"\nvoid main() {}\n");
+  EXPECT_NE(inc.find("solver/shaders/multigrid.glsl:"), std::string::npos) << inc;
 }
 
 TEST(GlSolver, ApplyMatchesTheCpuStencil) {

@@ -490,7 +490,7 @@ void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x) {
   }
   // Pre-smoothing from x = 0, colour 0 first; the last sweep also restricts its residual
   // along x. Post-smoothing colour 1 first, as many sweeps: the cycle is symmetric.
-  const int nu = l == 0 ? options_.pre_smoothing : options_.coarse_smoothing;
+  const int nu = options_.SweepsOnLevel(l);
   for (int s = 0; s < nu; ++s)
     Sweep(L, b, x, 0, s == 0, s + 1 == nu ? L.tmp_a.data() : nullptr);
   Level& Cl = *levels_[l + 1];

@@ -37,6 +37,8 @@ struct MultigridOptions {
 
   // Empty if valid, else the broken constraint.
   std::string Validate() const;
+  // Sweeps before (and after) the coarse-grid correction on level `level` (0 = finest).
+  int SweepsOnLevel(size_t level) const { return level == 0 ? pre_smoothing : coarse_smoothing; }
   // These options with the cycle's unset fields filled in for the cpu or the gl solver on a
   // grid of `nodes` nodes.
   MultigridOptions WithCycleDefaults(bool gl, int64_t nodes) const;
