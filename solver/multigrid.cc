@@ -370,7 +370,7 @@ void MultigridSolver<T>::LineRow(const Level& L, const T* b, T* x, int64_t j, in
   const bool even = ((color + j) & 1) == 0;
   const int64_t off = even ? 0 : he, len = even ? he : nx - he;
   const int64_t left = even ? he - 1 : 0, right = even ? he : 1;  // neighbours, from the row start
-  const bool first_has_left = !even, last_has_right = even ? nx % 2 == 0 : nx % 2 == 1;
+  const bool fix_first = even && nx % 2 == 0;
   const T* zeros = L.zeros.data();
   for (int64_t k = 0; k < nz; ++k) {
     const int64_t row = nx * (k + nz * j), p = row + off;
@@ -383,7 +383,7 @@ void MultigridSolver<T>::LineRow(const Level& L, const T* b, T* x, int64_t j, in
       T* __restrict xs = x + p;
       for (int64_t m = 0; m < len; ++m) xs[m] = (bp[m] + czm[m] * xzm[m]) * inv[m];
     } else {
-      HalfRowKernel<T, false>(len, first_has_left, last_has_right, b + p,
+      HalfRowKernel<T, false>(len, fix_first, b + p,
                               L.sxr.data() + row + left, x + row + left, L.sxr.data() + p,
                               x + row + right, j > 0 ? L.sy.data() + p - dy : zeros,
                               j > 0 ? x + p - dy : zeros, j + 1 < ny ? L.sy.data() + p : zeros,
@@ -420,7 +420,7 @@ void MultigridSolver<T>::ResidualRow(const Level& L, const T* b, const T* x, int
         continue;
       }
       const int64_t left = even ? he - 1 : 0, right = even ? he : 1;
-      HalfRowKernel<T, true>(len, !even, even ? nx % 2 == 0 : nx % 2 == 1, b + p,
+      HalfRowKernel<T, true>(len, even && nx % 2 == 0, b + p,
                              L.sxr.data() + row + left, x + row + left, L.sxr.data() + p,
                              x + row + right, j > 0 ? L.sy.data() + p - dy : zeros,
                              j > 0 ? x + p - dy : zeros, j + 1 < ny ? L.sy.data() + p : zeros,

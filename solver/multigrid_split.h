@@ -38,12 +38,17 @@ inline void MergeRow(int64_t nx, const T* in, U* out) {
 //   out = (b + cl xl + cr xr + cym xym + cyp xyp + czm xzm) * inv
 // where xzm is the previous plane's eliminated half-row, or the residual (kResidual true):
 //   out = b + cl xl + cr xr + cym xym + cyp xyp + czm xzm + czp xzp - dg xs.
-// xl[m] and xr[m] are the x-neighbours of node m (in the other half); the first node has no
-// left neighbour unless first_has_left, the last no right one unless last_has_right, and those
-// terms are left out (not read). Missing y/z rows point at zeros.
+// xl[m] and xr[m] are the x-neighbours of node m (in the other half) and cl[m], cr[m] their
+// couplings. Every m reads both, so the loop runs vectorised from end to end without peeled
+// scalar ends (on short rows these cost as much as the rest): a missing right neighbour has
+// coupling 0 (cx is 0 on the last x plane) and reads a finite value past the half (the next
+// row's first, or the level's padding element after the last row). The one missing left
+// neighbour, that of the even half's first node (i = 0), reads the coupling at the end of the
+// row, which is 0 only for odd nx: `fix_first` (even half, even nx) recomputes that node
+// without it. Missing y/z rows point at zeros.
 // (Inlined, the __restrict qualifiers are lost; `ivdep` keeps the loops vectorised.)
 template <typename T, bool kResidual>
-inline void HalfRowKernel(int64_t len, bool first_has_left, bool last_has_right,
+inline void HalfRowKernel(int64_t len, bool fix_first,
                           const T* __restrict b, const T* __restrict cl, const T* __restrict xl,
                           const T* __restrict cr, const T* __restrict xr,
                           const T* __restrict cym, const T* __restrict xym,
@@ -69,11 +74,12 @@ inline void HalfRowKernel(int64_t len, bool first_has_left, bool last_has_right,
     if constexpr (kResidual) out[m] += x_terms;
     else out[m] = (core(m) + x_terms) * inv[m];
   };
-  const int64_t m0 = first_has_left ? 0 : 1, m1 = last_has_right ? len : len - 1;
-  if (!first_has_left) put(0, len > 1 || last_has_right ? cr[0] * xr[0] : T(0));
 #pragma GCC ivdep
-  for (int64_t m = m0; m < m1; ++m) put(m, cl[m] * xl[m] + cr[m] * xr[m]);
-  if (!last_has_right && len - 1 >= m0) put(len - 1, cl[len - 1] * xl[len - 1]);
+  for (int64_t m = 0; m < len; ++m) put(m, cl[m] * xl[m] + cr[m] * xr[m]);
+  if (fix_first && len > 0) {
+    if constexpr (kResidual) out[0] = core(0) + cr[0] * xr[0];
+    else out[0] = (core(0) + cr[0] * xr[0]) * inv[0];
+  }
 }
 
 // Transfers along x between a fine level's split rows and the next coarser level's split rows
