@@ -20,9 +20,10 @@ namespace {
 
 template <typename A, typename B>
 double Dot(const A* a, const B* b, int64_t n) {
+  constexpr int64_t kBlock = 4096;
   double s = 0;
-#pragma omp parallel for simd reduction(+ : s) schedule(static)
-  for (int64_t i = 0; i < n; ++i) s += double(a[i]) * double(b[i]);
+#pragma omp parallel for reduction(+ : s) schedule(static)
+  for (int64_t i = 0; i < n; i += kBlock) s += RowDot(a + i, b + i, std::min(kBlock, n - i));
   return s;
 }
 
@@ -57,10 +58,7 @@ double UpdateResidualRows(const GridShape& s, double alpha, const T* q, T* r, P*
         const T* __restrict q_row = q + o;
         for (int64_t i = 0; i < nx; ++i) rr_row[i] -= a * q_row[i];
       }
-      double sum = 0;
-#pragma omp simd reduction(+ : sum)
-      for (int64_t i = 0; i < nx; ++i) sum += double(rr_row[i]) * double(rr_row[i]);
-      rr += sum;
+      rr += RowDot(rr_row, rr_row, nx);
       SplitRow(nx, rr_row, vb + nx * (k + s.nz * j));
     }
   return rr;

@@ -113,10 +113,7 @@ double ApplyStencilDot(const Stencil<T>& A, const T* x, T* y) {
     for (int64_t j = 0; j < ny; ++j) {
       StencilRow<T, T, false>(A, nullptr, x, y, j, k, zeros.data(), zeros.data());
       const int64_t row = nx * (j + ny * k);
-      double s = 0;  // the row is still in L1
-#pragma omp simd reduction(+ : s)
-      for (int64_t i = row; i < row + nx; ++i) s += double(x[i]) * double(y[i]);
-      dot += s;
+      dot += RowDot(x + row, y + row, nx);  // the row is still in L1
     }
   return dot;
 }
