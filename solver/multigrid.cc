@@ -249,7 +249,8 @@ MultigridSolver<T>::MultigridSolver(const GridShape& shape, double h,
   }
   const int64_t n0 = shape.size();
   r_.resize(n0);
-  p_.resize(n0);
+  if (mixed) p_float_.resize(n0);
+  else p_.resize(n0);
   q_.resize(n0);
 }
 
@@ -543,8 +544,15 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
     auto* vb = V.levels_[0]->b.data();
     auto* vx = V.levels_[0]->x.data();
     T* r = r_.data();
-    T* p = p_.data();
     T* q = q_.data();
+    // The search direction p is held in the V-cycle's precision: A p is computed in T from
+    // its values as stored and x advances along them, so r stays the residual of x; rounding p
+    // to float only perturbs its conjugacy at the 1e-7 level. It saves a quarter of CG's
+    // memory traffic outside the V-cycle.
+    using P = std::remove_reference_t<decltype(*vb)>;
+    P* p;
+    if constexpr (std::is_same_v<P, T>) p = p_.data();
+    else p = p_float_.data();
     auto norm_of_r = [&] { return std::sqrt(UpdateResidualRows<T>(s, 0.0, nullptr, r, vb)); };
     // From a zero guess r = b, and A x need not be computed.
     bool zero_guess = true;
@@ -577,7 +585,7 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
         UpdateDirectionRows(s, alpha, rz_new / rz, vx, x, p);
         rz = rz_new;
       }
-      alpha = rz / ApplyStencilDot(L0.A, p, q);  // q = A p
+      alpha = rz / ApplyStencilDot<T, P>(L0.A, p, q);  // q = A p
       rnorm = std::sqrt(UpdateResidualRows(s, alpha, q, r, vb));
       ++sum.iterations;
       sum.history.push_back(rnorm / bnorm);

@@ -118,6 +118,7 @@ class MultigridSolver {
   std::unique_ptr<MultigridSolver<float>> float_preconditioner_;
   std::vector<float> rf_, zf_;
   std::vector<T> r_, p_, q_;
+  std::vector<float> p_float_;  // CG's p instead of p_ with mixed precision (Solve)
   bool has_coefficients_ = false;
 };
 

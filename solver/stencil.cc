@@ -103,15 +103,16 @@ void ApplyStencil(const Stencil<T>& A, const T* x, T* y) {
       StencilRow<T, T, false>(A, nullptr, x, y, j, k, zeros.data(), zeros.data());
 }
 
-template <typename T>
-double ApplyStencilDot(const Stencil<T>& A, const T* x, T* y) {
+template <typename T, typename X>
+double ApplyStencilDot(const Stencil<T>& A, const X* x, T* y) {
   const int64_t nx = A.shape.nx, ny = A.shape.ny, nz = A.shape.nz;
-  const std::vector<T> zeros(nx, T(0));
+  const std::vector<X> zx(nx, X(0));
+  const std::vector<T> zc(nx, T(0));
   double dot = 0;
 #pragma omp parallel for collapse(2) schedule(static) reduction(+ : dot)
   for (int64_t k = 0; k < nz; ++k)
     for (int64_t j = 0; j < ny; ++j) {
-      StencilRow<T, T, false>(A, nullptr, x, y, j, k, zeros.data(), zeros.data());
+      StencilRow<T, X, false>(A, nullptr, x, y, j, k, zx.data(), zc.data());
       const int64_t row = nx * (j + ny * k);
       dot += RowDot(x + row, y + row, nx);  // the row is still in L1
     }
@@ -165,7 +166,7 @@ void AccumulateOperatorGradient(const TensorGrid& g, const T* phi, const T* psi,
 #define TL_INSTANTIATE(T)                                                                     \
   template void AssembleStencil<T>(const TensorGrid&, const T*, const T*, double, Stencil<T>*); \
   template void ApplyStencil<T>(const Stencil<T>&, const T*, T*);                             \
-  template double ApplyStencilDot<T>(const Stencil<T>&, const T*, T*);                        \
+  template double ApplyStencilDot<T, T>(const Stencil<T>&, const T*, T*);                     \
   template void StencilResidual<T, T>(const Stencil<T>&, const T*, const T*, T*);           \
   template void LitFaceSource<T>(const TensorGrid&, int64_t, double, const float*, T*);      \
   template void AccumulateOperatorGradient<T>(const TensorGrid&, const T*, const T*, double, T*, T*);
@@ -173,5 +174,6 @@ TL_INSTANTIATE(float)
 TL_INSTANTIATE(double)
 #undef TL_INSTANTIATE
 template void StencilResidual<float, double>(const Stencil<float>&, const float*, const double*, float*);
+template double ApplyStencilDot<double, float>(const Stencil<double>&, const float*, double*);
 
 }  // namespace translume

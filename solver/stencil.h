@@ -97,9 +97,10 @@ template <typename T>
 void ApplyStencil(const Stencil<T>& A, const T* x, T* y);
 
 // y = A x like ApplyStencil, and returns the dot product x . y (accumulated in double) from the
-// same pass over memory (conjugate gradients' p . A p). Multithreaded.
-template <typename T>
-double ApplyStencilDot(const Stencil<T>& A, const T* x, T* y);
+// same pass over memory (conjugate gradients' p . A p). x may be float for a double stencil
+// (y is then computed in double from the float values). Multithreaded.
+template <typename T, typename X = T>
+double ApplyStencilDot(const Stencil<T>& A, const X* x, T* y);
 
 // r = b - A x, accumulated in double. x may be double for a float stencil (a float solver's
 // iterate is kept in double; see MultigridSolver). Multithreaded.
