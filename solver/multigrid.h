@@ -32,7 +32,8 @@ struct MultigridOptions {
   // Stop coarsening at this many nodes; the coarsest level is solved exactly (sparse Cholesky).
   int64_t coarsest_nodes = 1500;
   // Double solvers only: precondition with a float V-cycle (half the memory traffic of the
-  // hierarchy; CG, the residuals and the iterate stay in double, so the accuracy is unchanged).
+  // hierarchy; CG's residuals and iterate stay in double, so the accuracy is unchanged; only the
+  // search direction is float, like the V-cycle's output it is built from).
   bool mixed_precision = true;
 
   // Empty if valid, else the broken constraint.
