@@ -143,7 +143,24 @@ struct MultigridSolver<T>::Level {
   mutable std::vector<T> tmp_a, tmp_b;
   std::vector<T> zeros;                  // one x-row of zeros (missing neighbours)
   std::unique_ptr<SplitTransferX<T>> tx;  // x transfers towards the next coarser level
-  std::unique_ptr<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>> direct;
+  // The coarsest level's exact solve, natural layout: A = P^-1 L D L^T P, factored in double
+  // (Eigen's SimplicialLDLT, AMD ordering) and applied in T (a float factor halves the traffic
+  // of the triangular solves, which dominate a small grid's coarsest level).
+  struct Direct {
+    Eigen::SparseMatrix<T> L;  // unit lower triangular (diagonal not used)
+    Eigen::Matrix<T, Eigen::Dynamic, 1> inv_d;
+    Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> P, P_inv;
+    mutable Eigen::Matrix<T, Eigen::Dynamic, 1> work;
+    void Solve(const T* b, T* x) const {
+      const int64_t n = inv_d.size();
+      work = P * Eigen::Map<const Eigen::Matrix<T, Eigen::Dynamic, 1>>(b, n);
+      L.template triangularView<Eigen::UnitLower>().solveInPlace(work);
+      work.array() *= inv_d.array();
+      L.transpose().template triangularView<Eigen::UnitUpper>().solveInPlace(work);
+      Eigen::Map<Eigen::Matrix<T, Eigen::Dynamic, 1>>(x, n) = P_inv * work;
+    }
+  };
+  std::unique_ptr<Direct> direct;
 };
 
 template <typename T>
@@ -318,9 +335,15 @@ void MultigridSolver<T>::SetCoefficients(const T* kappa, const T* mu, double C) 
           }
       Eigen::SparseMatrix<double> M(n, n);
       M.setFromTriplets(trip.begin(), trip.end());
-      L.direct = std::make_unique<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>>();
-      L.direct->compute(M.template selfadjointView<Eigen::Lower>());
-      TL_CHECK_MSG(L.direct->info() == Eigen::Success, "coarsest-level factorisation failed");
+      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt;
+      ldlt.compute(M.template selfadjointView<Eigen::Lower>());
+      TL_CHECK_MSG(ldlt.info() == Eigen::Success, "coarsest-level factorisation failed");
+      auto d = std::make_unique<typename Level::Direct>();
+      d->L = Eigen::SparseMatrix<double>(ldlt.matrixL()).template cast<T>();
+      d->inv_d = ldlt.vectorD().cwiseInverse().template cast<T>();
+      d->P = ldlt.permutationP();
+      d->P_inv = ldlt.permutationPinv();
+      L.direct = std::move(d);
     }
   }
   if (float_preconditioner_) {
@@ -477,14 +500,15 @@ void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x) {
   if (l + 1 == levels_.size()) {
     // Exact solve; the rows are split here too.
     const GridShape& s = L.grid.shape;
-    Eigen::VectorXd rhs(n);
+    T* rhs = Scratch<T>(size_t(2 * n));
+    T* sol = rhs + n;
     for (int64_t k = 0; k < s.nz; ++k)
       for (int64_t j = 0; j < s.ny; ++j)
-        MergeRow(s.nx, b + s.nx * (k + s.nz * j), rhs.data() + s.nx * (j + s.ny * k));
-    const Eigen::VectorXd sol = L.direct->solve(rhs);
+        MergeRow(s.nx, b + s.nx * (k + s.nz * j), rhs + s.nx * (j + s.ny * k));
+    L.direct->Solve(rhs, sol);
     for (int64_t k = 0; k < s.nz; ++k)
       for (int64_t j = 0; j < s.ny; ++j)
-        SplitRow(s.nx, sol.data() + s.nx * (j + s.ny * k), x + s.nx * (k + s.nz * j));
+        SplitRow(s.nx, sol + s.nx * (j + s.ny * k), x + s.nx * (k + s.nz * j));
     return;
   }
   // Pre-smoothing from x = 0, colour 0 first; the last sweep also restricts its residual

@@ -134,6 +134,37 @@ TEST(Multigrid, VCycleIsSymmetricOnOddAndEvenRows) {
   }
 }
 
+// A grid at or below coarsest_nodes is one level, and the V-cycle is the exact solve (the
+// sparse LDL^T factor applied in T): A (M r) = r to T's rounding.
+template <typename T>
+void ExpectCoarsestSolveIsExact(double tol) {
+  const GridShape s{9, 7, 5};
+  MultigridOptions o;
+  o.mixed_precision = false;
+  MultigridSolver<T> mg(s, 0.1, o);
+  ASSERT_EQ(mg.num_levels(), 1);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> U(-1, 1);
+  std::vector<T> K(s.size()), M(s.size()), r(s.size()), z(s.size()), Az(s.size());
+  for (auto& v : K) v = T(0.2 + 0.15 * U(rng));
+  for (auto& v : M) v = T(0.02 + 0.015 * U(rng));
+  for (auto& v : r) v = T(U(rng));
+  mg.SetCoefficients(K.data(), M.data(), 2.6);
+  mg.Precondition(r.data(), z.data());
+  mg.Apply(z.data(), Az.data());
+  double err = 0, norm = 0;
+  for (int64_t p = 0; p < s.size(); ++p) {
+    err += std::pow(double(Az[p]) - double(r[p]), 2);
+    norm += std::pow(double(r[p]), 2);
+  }
+  EXPECT_LE(std::sqrt(err / norm), tol);
+}
+
+TEST(Multigrid, CoarsestSolveIsExact) {
+  ExpectCoarsestSolveIsExact<double>(1e-12);
+  ExpectCoarsestSolveIsExact<float>(1e-4);
+}
+
 TEST(Multigrid, FloatAgreesWithDouble) {
   const GridShape s{33, 25, 17};
   std::vector<double> xd;
