@@ -349,6 +349,8 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
 // multigrid.glsl's metadata rows: kMgMeta ints per level, the per-axis part from kMgAxis on
 // (tail.comp's offsets: coefficients from 3, work values from 9).
 constexpr int kMgMeta = 36, kMgAxis = 14;
+// multigrid.glsl's kMgTaps: the most fine nodes one coarse node gathers along one axis.
+constexpr int64_t kMgTaps = 4;
 
 void GlMultigridSolver::Impl::PackLevels() {
   const size_t nl = levels.size();
@@ -376,6 +378,8 @@ void GlMultigridSolver::Impl::PackLevels() {
     if (l + 1 == nl) continue;
     for (int a = 0; a < 3; ++a) {
       const AxisTransfer& tr = L.geo.to_coarse[a];
+      for (int64_t c = 0; c < tr.n_coarse; ++c)
+        TL_CHECK(tr.g_start[c + 1] - tr.g_start[c] <= kMgTaps);
       const int m = int(l) * kMgMeta + kMgAxis + 7 * a;
       idx[m] = int(tr.n_fine), idx[m + 1] = int(tr.n_coarse);
       idx[m + 2] = int(idx.size());

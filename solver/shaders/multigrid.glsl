@@ -113,23 +113,44 @@ MgAxis MgLoadAxis(int l, int a) {
                 LD(mg_idx, m + 4), LD(mg_idx, m + 5), LD(mg_idx, m + 6));
 }
 
+// The fine nodes that coarse node c of axis A gathers, with their weights: loaded once per
+// output value and axis, so the nested sums below read only values (at most kMgTaps per axis:
+// 3 where the axis is regular, 4 beside a coarse interval of three fine ones; gl_solver.cc's
+// PackLevels checks).
+const int kMgTaps = 4;
+struct MgTaps {
+  int n;
+  int f[kMgTaps];
+  float w[kMgTaps];
+};
+MgTaps MgGather(MgAxis A, int c) {
+  MgTaps t;
+  int g0 = LD(mg_idx, A.gstart + c);
+  t.n = LD(mg_idx, A.gstart + c + 1) - g0;
+  for (int g = 0; g < t.n; ++g) {
+    t.f[g] = LD(mg_idx, A.gidx + g0 + g);
+    t.w[g] = LD(mg_wts, A.gw + g0 + g);
+  }
+  return t;
+}
+
 // Restriction R = P^T: coarse node e (of X.n_coarse Y.n_coarse Z.n_coarse) from the fine
 // values at in0 (X.n_fine Y.n_fine Z.n_fine of them).
 float Restrict3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
   int mxy = X.n_coarse * Y.n_coarse, ck = Div(e, mxy), r = e - ck * mxy, cj = Div(r, X.n_coarse);
   int ci = r - cj * X.n_coarse, nx = X.n_fine, nxy = nx * Y.n_fine;
+  MgTaps tx = MgGather(X, ci), ty = MgGather(Y, cj), tz = MgGather(Z, ck);
   float s = 0.0;
-  for (int gz = LD(mg_idx, Z.gstart + ck); gz < LD(mg_idx, Z.gstart + ck + 1); ++gz) {
-    int kz = in0 + nxy * LD(mg_idx, Z.gidx + gz);
+  for (int gz = 0; gz < tz.n; ++gz) {
+    int kz = in0 + nxy * tz.f[gz];
     float sy = 0.0;
-    for (int gy = LD(mg_idx, Y.gstart + cj); gy < LD(mg_idx, Y.gstart + cj + 1); ++gy) {
-      int jy = kz + nx * LD(mg_idx, Y.gidx + gy);
+    for (int gy = 0; gy < ty.n; ++gy) {
+      int jy = kz + nx * ty.f[gy];
       float sx = 0.0;
-      for (int gx = LD(mg_idx, X.gstart + ci); gx < LD(mg_idx, X.gstart + ci + 1); ++gx)
-        sx += LD(mg_wts, X.gw + gx) * LD(mg_src, jy + LD(mg_idx, X.gidx + gx));
-      sy += LD(mg_wts, Y.gw + gy) * sx;
+      for (int gx = 0; gx < tx.n; ++gx) sx += tx.w[gx] * LD(mg_src, jy + tx.f[gx]);
+      sy += ty.w[gy] * sx;
     }
-    s += LD(mg_wts, Z.gw + gz) * sy;
+    s += tz.w[gz] * sy;
   }
   return s;
 }
@@ -139,16 +160,19 @@ float Restrict3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
 float Prolong3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
   int nxy = X.n_fine * Y.n_fine, k = Div(e, nxy), r = e - k * nxy, j = Div(r, X.n_fine);
   int i = r - j * X.n_fine, mx = X.n_coarse, mxy = mx * Y.n_coarse;
+  int cx[2] = int[2](LD(mg_idx, X.lohi + 2 * i), LD(mg_idx, X.lohi + 2 * i + 1));
+  int cy[2] = int[2](LD(mg_idx, Y.lohi + 2 * j), LD(mg_idx, Y.lohi + 2 * j + 1));
+  int z0 = mxy * LD(mg_idx, Z.lohi + 2 * k), z1 = mxy * LD(mg_idx, Z.lohi + 2 * k + 1);
+  float wy0 = LD(mg_wts, Y.w + 2 * j), wy1 = LD(mg_wts, Y.w + 2 * j + 1);
+  float wz0 = LD(mg_wts, Z.w + 2 * k), wz1 = LD(mg_wts, Z.w + 2 * k + 1);
   float sy[2];
   for (int a = 0; a < 2; ++a) {
-    int ci = LD(mg_idx, X.lohi + 2 * i + a);
     float sz[2];
     for (int b = 0; b < 2; ++b) {
-      int cj = in0 + ci + mx * LD(mg_idx, Y.lohi + 2 * j + b);
-      sz[b] = LD(mg_wts, Z.w + 2 * k) * LD(mg_src, cj + mxy * LD(mg_idx, Z.lohi + 2 * k)) +
-              LD(mg_wts, Z.w + 2 * k + 1) * LD(mg_src, cj + mxy * LD(mg_idx, Z.lohi + 2 * k + 1));
+      int cj = in0 + cx[a] + mx * cy[b];
+      sz[b] = wz0 * LD(mg_src, cj + z0) + wz1 * LD(mg_src, cj + z1);
     }
-    sy[a] = LD(mg_wts, Y.w + 2 * j) * sz[0] + LD(mg_wts, Y.w + 2 * j + 1) * sz[1];
+    sy[a] = wy0 * sz[0] + wy1 * sz[1];
   }
   return LD(mg_wts, X.w + 2 * i) * sy[0] + LD(mg_wts, X.w + 2 * i + 1) * sy[1];
 }
