@@ -464,8 +464,8 @@ void MultigridSolver<T>::ResidualRow(const Level& L, const T* b, const T* x, int
 
 template <typename T>
 void MultigridSolver<T>::Sweep(const Level& L, const T* b, T* x, int first, bool from_zero,
-                               T* restricted) const {
-  const int64_t ny = L.grid.shape.ny;
+                               T* restricted, double* bx) const {
+  const int64_t ny = L.grid.shape.ny, row_values = L.grid.shape.nx * L.grid.shape.nz;
   // Stages per row j: 0 = colour `first`'s lines, 1 = the other colour's, 2 = the residual.
   // Stage 1 of row j needs stage 0 of rows j-1..j+1 and must precede stage 0 of row j+2, which
   // reads its old values; stage 2 needs stage 1 of rows j-1..j+1. Each thread walks its block
@@ -477,14 +477,23 @@ void MultigridSolver<T>::Sweep(const Level& L, const T* b, T* x, int first, bool
   {
     const int64_t nt = omp_get_num_threads(), id = omp_get_thread_num();
     const int64_t j0 = ny * id / nt, j1 = ny * (id + 1) / nt;
+    double dot = 0;  // b . x over the rows this thread finished
+    auto finish_row = [&](int64_t j) {
+      LineRow(L, b, x, j, 1 - first, false);
+      if (bx) dot += RowDot(b + row_values * j, x + row_values * j, row_values);
+    };
     for (int64_t j = j0; j < j1; ++j) {
       LineRow(L, b, x, j, first, from_zero);
-      if (j - 1 >= j0 + 1) LineRow(L, b, x, j - 1, 1 - first, false);
+      if (j - 1 >= j0 + 1) finish_row(j - 1);
       if (restricted && j - 2 >= j0 + 2) ResidualRow(L, b, x, j - 2, 1 - first, restricted);
     }
 #pragma omp barrier
-    if (j1 > j0) LineRow(L, b, x, j0, 1 - first, false);
-    if (j1 - 1 > j0) LineRow(L, b, x, j1 - 1, 1 - first, false);
+    if (j1 > j0) finish_row(j0);
+    if (j1 - 1 > j0) finish_row(j1 - 1);
+    if (bx) {
+#pragma omp atomic
+      *bx += dot;
+    }
     if (restricted) {
 #pragma omp barrier
       for (int64_t j = j0; j < j1; ++j)
@@ -494,9 +503,10 @@ void MultigridSolver<T>::Sweep(const Level& L, const T* b, T* x, int first, bool
 }
 
 template <typename T>
-void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x) {
+void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x, double* bx) {
   Level& L = *levels_[l];
   const int64_t n = L.grid.shape.size();
+  if (bx) *bx = 0;
   if (l + 1 == levels_.size()) {
     // Exact solve; the rows are split here too.
     const GridShape& s = L.grid.shape;
@@ -509,6 +519,7 @@ void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x) {
     for (int64_t k = 0; k < s.nz; ++k)
       for (int64_t j = 0; j < s.ny; ++j)
         SplitRow(s.nx, sol + s.nx * (j + s.ny * k), x + s.nx * (k + s.nz * j));
+    if (bx) *bx = Dot(b, x, n);
     return;
   }
   // Pre-smoothing from x = 0, colour 0 first; the last sweep also restricts its residual
@@ -521,7 +532,7 @@ void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x) {
              L.tmp_b.data());
   VCycle(l + 1, Cl.b.data(), Cl.x.data());
   ProlongAdd(L, Cl.x.data(), x);
-  for (int s = 0; s < nu; ++s) Sweep(L, b, x, 1, false, nullptr);
+  for (int s = 0; s < nu; ++s) Sweep(L, b, x, 1, false, nullptr, s + 1 == nu ? bx : nullptr);
 }
 
 template <typename T>
@@ -589,8 +600,9 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
     const double tol = options_.tolerance * bnorm;
     // z = M r and r . z (both in the level layout).
     auto precondition = [&] {
-      V.VCycle(0, vb, vx);
-      return Dot(vb, vx, n);
+      double rz = 0;
+      V.VCycle(0, vb, vx, &rz);
+      return rz;
     };
     auto update_x = [&](double alpha) {
 #pragma omp parallel for schedule(static)

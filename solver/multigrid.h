@@ -95,13 +95,17 @@ class MultigridSolver {
   template <typename>
   friend class MultigridSolver;
   struct Level;
-  void VCycle(size_t l, const T* b, T* x);
+  // bx: if not null, receives b . x after the cycle (accumulated in double; conjugate
+  // gradients' r . z), summed as the last sweep finishes each row.
+  void VCycle(size_t l, const T* b, T* x, double* bx = nullptr);
   // V-cycle internals work on split rows (solver/multigrid_split.h); b and x are the level's.
   // One Gauss-Seidel sweep over both colours of z-lines (colour c: the columns with
   // (i + j) % 2 == c), colour `first` first, fused into one pass over memory. from_zero: x is
   // taken as zero on entry. restricted: if not null, also writes the residual b - A x after the
   // sweep, restricted along x, into it ((coarse nx) * ny * nz values).
-  void Sweep(const Level& L, const T* b, T* x, int first, bool from_zero, T* restricted) const;
+  // bx: if not null, receives b . x after the sweep, summed row by row as each row is final.
+  void Sweep(const Level& L, const T* b, T* x, int first, bool from_zero, T* restricted,
+             double* bx = nullptr) const;
   // The line solves of colour `color`'s columns in row j (all planes).
   void LineRow(const Level& L, const T* b, T* x, int64_t j, int color, bool from_zero) const;
   // Residual of row j (all planes), restricted along x into `restricted`. Colour `solved`'s
