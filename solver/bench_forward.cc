@@ -137,6 +137,16 @@ struct BenchProblem {
   std::vector<T> Field(const std::vector<float>& v) const { return {v.begin(), v.end()}; }
 };
 
+// Our solver's options as the benchmark asks (either backend): tolerance and cycle.
+MultigridOptions SolverOptions(const ForwardBenchOptions& o) {
+  MultigridOptions mo;
+  mo.tolerance = o.tolerance;
+  mo.pre_smoothing = mo.post_smoothing = o.smoothing;
+  mo.coarse_smoothing = o.coarse_smoothing;
+  mo.z_coarsening = o.z_coarsening;
+  return mo;
+}
+
 template <typename T>
 ForwardBenchRow BenchOne(const GridShape& shape, const ForwardBenchOptions& o,
                          void (*progress)(const std::string&)) {
@@ -144,11 +154,7 @@ ForwardBenchRow BenchOne(const GridShape& shape, const ForwardBenchOptions& o,
   const Material& m = problem.material;
   const int64_t n = shape.size();
   const std::vector<T> kappa = problem.Field<T>(m.kappa[1]), mu = problem.Field<T>(m.mu[1]);
-  MultigridOptions mo;
-  mo.tolerance = o.tolerance;
-  mo.pre_smoothing = mo.post_smoothing = o.smoothing;
-  mo.coarse_smoothing = o.coarse_smoothing;
-  mo.z_coarsening = o.z_coarsening;
+  const MultigridOptions mo = SolverOptions(o);
   MultigridSolver<T> solver(shape, m.spacing_mm, mo);
   solver.SetCoefficients(kappa.data(), mu.data(), m.C);
   std::vector<T> b(problem.b.begin(), problem.b.end()), x(n), y(n);
@@ -265,11 +271,7 @@ ForwardBenchRow BenchGl(const GridShape& shape, const ForwardBenchOptions& o,
   const BenchProblem problem(shape);
   const Material& m = problem.material;
   const int64_t n = shape.size();
-  MultigridOptions mo;
-  mo.tolerance = o.tolerance;
-  mo.pre_smoothing = mo.post_smoothing = o.smoothing;
-  mo.coarse_smoothing = o.coarse_smoothing;
-  mo.z_coarsening = o.z_coarsening;
+  const MultigridOptions mo = SolverOptions(o);
   GlMultigridSolver solver(shape, m.spacing_mm, mo);
   solver.SetCoefficients(m.kappa[1].data(), m.mu[1].data(), m.C);
   std::vector<float> b(problem.b.begin(), problem.b.end()), x(n);

@@ -582,8 +582,8 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
     T* q = q_.data();
     // The search direction p is held in the V-cycle's precision: A p is computed in T from
     // its values as stored and x advances along them, so r stays the residual of x; rounding p
-    // to float only perturbs its conjugacy at the 1e-7 level. It saves a quarter of CG's
-    // memory traffic outside the V-cycle.
+    // to float only perturbs its conjugacy at the 1e-7 level. It saves 12 of CG's ~110 bytes
+    // per node and iteration outside the V-cycle.
     using P = std::remove_reference_t<decltype(*vb)>;
     P* p;
     if constexpr (std::is_same_v<P, T>) p = p_.data();
