@@ -13,7 +13,7 @@ MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision 
   const double n = double(shape.size());
   const double t = precision == Precision::kDouble ? 8 : 4;
   // Per level: kappa, mu, cx, cy, cz, diag, the smoother's copy of the stencil in its own
-  // layout (4 arrays), lu_c, lu_inv, b, x, transfer temporaries (~1).
+  // layout (4 arrays), lu_inv, b, x, transfer temporaries (~2).
   const double hierarchy = 15 * t * n * 4.0 / 3.0;
   // Finest level extras: CG vectors r, p, q; the caller's kappa, mu, b, phi.
   const double solve = hierarchy + 7 * t * n;
