@@ -144,6 +144,7 @@ MultigridOptions SolverOptions(const ForwardBenchOptions& o) {
   mo.pre_smoothing = mo.post_smoothing = o.smoothing;
   mo.coarse_smoothing = o.coarse_smoothing;
   mo.z_coarsening = o.z_coarsening;
+  mo.full_multigrid_start = o.full_multigrid_start;
   return mo;
 }
 

@@ -90,6 +90,20 @@ void UpdateDirectionRows(const GridShape& s, double alpha, double beta, const P*
     }
 }
 
+// x += vx (moved from the level layout), row by row.
+template <typename P>
+void AddRows(const GridShape& s, const P* vx, double* x) {
+  const int64_t nx = s.nx;
+#pragma omp parallel for collapse(2) schedule(static)
+  for (int64_t k = 0; k < s.nz; ++k)
+    for (int64_t j = 0; j < s.ny; ++j) {
+      P* __restrict z = Scratch<P>(size_t(nx));
+      MergeRow(nx, vx + nx * (k + s.nz * j), z);
+      double* __restrict xr = x + nx * (j + s.ny * k);
+      for (int64_t i = 0; i < nx; ++i) xr[i] += double(z[i]);
+    }
+}
+
 }  // namespace
 
 std::string MultigridOptions::Validate() const {
@@ -97,6 +111,7 @@ std::string MultigridOptions::Validate() const {
   if (max_iterations < 1) return "max_iterations must be >= 1";
   if (pre_smoothing < 0 || post_smoothing < 0 || coarse_smoothing < 0)
     return "pre_smoothing, post_smoothing and coarse_smoothing must be >= 1 (or 0: the backend's default)";
+  if (full_multigrid_sweeps < 0) return "full_multigrid_sweeps must be >= 0";
   if (pre_smoothing != post_smoothing) return "pre_smoothing must equal post_smoothing (CG needs a symmetric V-cycle)";
   if (coarsest_nodes < 8) return "coarsest_nodes must be >= 8";
   return "";
@@ -507,7 +522,47 @@ void MultigridSolver<T>::Sweep(const Level& L, const T* b, T* x, int first, bool
 }
 
 template <typename T>
-void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x, double* bx) {
+void MultigridSolver<T>::RestrictRhs(const Level& L, const T* fine, T* coarse) const {
+  if (!L.tx->coarsened) {
+    TransferYZ(L.geo, true, fine, coarse, false, L.tmp_b.data());
+    return;
+  }
+  const GridShape& s = L.grid.shape;
+  const int64_t nx = s.nx, mx = L.tx->nc, rows = s.ny * s.nz;
+  const int threads = s.size() >= kParallelNodes ? omp_get_max_threads() : 1;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int64_t row = 0; row < rows; ++row) {
+    T* nat = Scratch<T>(size_t(mx));
+    // (Reads one value past the row, the next row's first or the level's padding, with
+    // weight 0.)
+    L.tx->Restrict(fine + nx * row, nat);
+    SplitRow(mx, nat, L.tmp_a.data() + mx * row);
+  }
+  TransferYZ(L.geo, true, static_cast<const T*>(L.tmp_a.data()), coarse, false, L.tmp_b.data());
+}
+
+template <typename T>
+void MultigridSolver<T>::FullMultigrid() {
+  const size_t nl = levels_.size();
+  for (size_t l = 0; l + 1 < nl; ++l)
+    RestrictRhs(*levels_[l], levels_[l]->b.data(), levels_[l + 1]->b.data());
+  VCycle(nl - 1, levels_[nl - 1]->b.data(), levels_[nl - 1]->x.data());  // exact
+  for (size_t l = nl - 1; l-- > 0;) {
+    Level& L = *levels_[l];
+    std::fill(L.x.begin(), L.x.end(), T(0));
+    ProlongAdd(L, levels_[l + 1]->x.data(), L.x.data());
+    if (l > 0) {
+      VCycle(l, L.b.data(), L.x.data(), nullptr, false, 1);
+    } else {
+      for (int s = 0; s < options_.full_multigrid_sweeps; ++s)
+        Sweep(L, L.b.data(), L.x.data(), s % 2, false, nullptr);
+    }
+  }
+}
+
+template <typename T>
+void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x, double* bx, bool from_zero,
+                                int sweeps) {
   Level& L = *levels_[l];
   const int64_t n = L.grid.shape.size();
   if (bx) *bx = 0;
@@ -526,15 +581,16 @@ void MultigridSolver<T>::VCycle(size_t l, const T* b, T* x, double* bx) {
     if (bx) *bx = Dot(b, x, n);
     return;
   }
-  // Pre-smoothing from x = 0, colour 0 first; the last sweep also restricts its residual
-  // along x. Post-smoothing colour 1 first, as many sweeps: the cycle is symmetric.
-  const int nu = options_.SweepsOnLevel(l);
+  // Pre-smoothing (from x = 0 unless given a guess), colour 0 first; the last sweep also
+  // restricts its residual along x. Post-smoothing colour 1 first, as many sweeps: the cycle is
+  // symmetric.
+  const int nu = sweeps > 0 ? sweeps : options_.SweepsOnLevel(l);
   for (int s = 0; s < nu; ++s)
-    Sweep(L, b, x, 0, s == 0, s + 1 == nu ? L.tmp_a.data() : nullptr);
+    Sweep(L, b, x, 0, from_zero && s == 0, s + 1 == nu ? L.tmp_a.data() : nullptr);
   Level& Cl = *levels_[l + 1];
   TransferYZ(L.geo, true, static_cast<const T*>(L.tmp_a.data()), Cl.b.data(), false,
              L.tmp_b.data());
-  VCycle(l + 1, Cl.b.data(), Cl.x.data());
+  VCycle(l + 1, Cl.b.data(), Cl.x.data(), nullptr, true, sweeps);
   ProlongAdd(L, Cl.x.data(), x);
   for (int s = 0; s < nu; ++s) Sweep(L, b, x, 1, false, nullptr, s + 1 == nu ? bx : nullptr);
 }
@@ -602,6 +658,14 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
     sum.initial_residual = rnorm / bnorm;
     if (sum.initial_residual <= options_.tolerance) return finish(true, "", rnorm);
     const double tol = options_.tolerance * bnorm;
+    if (options_.full_multigrid_start) {
+      // vb holds r; x += the full-multigrid approximation of A^-1 r, then the new residual.
+      V.FullMultigrid();
+      AddRows(s, vx, x);
+      StencilResidual(L0.A, b, x, r);
+      rnorm = norm_of_r();
+      if (rnorm <= tol) return finish(true, "", rnorm);
+    }
     // z = M r and r . z (both in the level layout).
     auto precondition = [&] {
       double rz = 0;

@@ -35,6 +35,17 @@ struct MultigridOptions {
   // hierarchy; CG's residuals and iterate stay in double, so the accuracy is unchanged; only the
   // search direction is float, like the V-cycle's output it is built from).
   bool mixed_precision = true;
+  // Before CG, one full-multigrid pass (nested iteration; Brandt 1977, Trottenberg et al. 2001,
+  // section 2.6) on the initial residual: restricted to every level, solved exactly on the
+  // coarsest, then on each finer level the coarser solution, prolonged, is the initial guess
+  // of one V(1,1) cycle; on the finest level full_multigrid_sweeps smoothing sweeps replace
+  // the V-cycle (they remove the prolongation's rough error; CG does the rest). From a zero
+  // guess CG's first iteration then ends at a relative residual of ~1e-4 .. 6e-4 (~5e-2
+  // without); the pass costs about one iteration and saves one or two of the ~5 to 1e-6
+  // (docs/benchmarks.md, "Forward solver"). cpu solver only (the gl solver starts CG from
+  // the caller's guess).
+  bool full_multigrid_start = true;
+  int full_multigrid_sweeps = 2;
 
   // Empty if valid, else the broken constraint.
   std::string Validate() const;
@@ -96,8 +107,18 @@ class MultigridSolver {
   friend class MultigridSolver;
   struct Level;
   // bx: if not null, receives b . x after the cycle (accumulated in double; conjugate
-  // gradients' r . z), summed as the last sweep finishes each row.
-  void VCycle(size_t l, const T* b, T* x, double* bx = nullptr);
+  // gradients' r . z), summed as the last sweep finishes each row. from_zero: x is zero on
+  // entry (the preconditioner), else it holds an initial guess (full multigrid). sweeps > 0:
+  // V(sweeps, sweeps) on this level and below instead of the options' cycle.
+  void VCycle(size_t l, const T* b, T* x, double* bx = nullptr, bool from_zero = true,
+              int sweeps = 0);
+  // The full-multigrid pass (MultigridOptions::full_multigrid_start) for the finest level's
+  // right-hand side b, leaving its approximate solution in the finest level's x (level layout).
+  // Overwrites every level's b and x.
+  void FullMultigrid();
+  // Values on level L restricted to the next coarser level, both in their level layout (full
+  // multigrid's right-hand sides; the V-cycle restricts residuals as its sweeps compute them).
+  void RestrictRhs(const Level& L, const T* fine, T* coarse) const;
   // V-cycle internals work on split rows (solver/multigrid_split.h); b and x are the level's.
   // One Gauss-Seidel sweep over both colours of z-lines (colour c: the columns with
   // (i + j) % 2 == c), colour `first` first, fused into one pass over memory. from_zero: x is

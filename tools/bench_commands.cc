@@ -35,7 +35,7 @@ void AddBenchForward(CLI::App& bench) {
   struct Flags {
     ForwardBenchOptions o;
     std::vector<std::string> grids;
-    bool json = false, no_peers = false;
+    bool json = false, no_peers = false, no_full_multigrid = false;
     std::string precision = "double", backend = "cpu", coarsening;
   };
   auto f = std::make_shared<Flags>();
@@ -72,6 +72,8 @@ void AddBenchForward(CLI::App& bench) {
   fwd->add_option("--coarsening", f->coarsening, "xy: x-y semi-coarsening, z last; full: z with "
                   "x and y (default: xy for cpu grids of 100000 nodes or more, else full)")
       ->check(CLI::IsMember({"xy", "full"}));
+  fwd->add_flag("--no-full-multigrid", f->no_full_multigrid,
+                "cpu: start CG from the caller's guess (zero), not from a full-multigrid pass");
   fwd->add_flag("--no-peers", f->no_peers, "Skip the Eigen and Jacobi peers");
   fwd->add_flag("--json", f->json, "Print JSON instead of a table");
   fwd->callback([f] {
@@ -83,6 +85,7 @@ void AddBenchForward(CLI::App& bench) {
       throw InputError("--cpu-time: only with --backend cpu (the gl solver runs on the GPU)");
     if (o.backend == Backend::kGl) PrintGlInfo();
     o.peers = !f->no_peers;
+    o.full_multigrid_start = !f->no_full_multigrid;
     if (!f->coarsening.empty())
       o.z_coarsening = f->coarsening == "full" ? ZCoarsening::kWithXY : ZCoarsening::kLast;
     std::fprintf(stderr, "bench forward: backend %s, %d threads, %s%s\n", f->backend.c_str(),
