@@ -27,7 +27,7 @@ struct ForwardBenchOptions {
   int smoothing = 0;
   int coarse_smoothing = 0;
   std::optional<ZCoarsening> z_coarsening;
-  // Start CG from the full-multigrid pass (MultigridOptions::full_multigrid_start; cpu).
+  // Start CG from the full-multigrid pass (MultigridOptions::full_multigrid_start).
   bool full_multigrid_start = true;
   // Time with the process's CPU clock instead of the wall clock (cpu backend; meaningful with
   // one thread, where it is the solve's own time however busy the machine is).

@@ -232,8 +232,15 @@ struct GlMultigridSolver::Impl {
              x_double ? "#define X_DOUBLE\n" : "");
   }
 
-  // One V-cycle x = B b on `nb` fields of level l.
-  void VCycle(size_t l, const Buffer& b, Buffer& x, int nb);
+  // One V-cycle x = B b on `nb` fields of level l. from_zero false: x holds an initial guess
+  // (full multigrid). sweeps > 0: V(sweeps, sweeps) on this level and below, down to the
+  // coarse tail, instead of the options' cycle.
+  void VCycle(size_t l, const Buffer& b, Buffer& x, int nb, bool from_zero = true, int sweeps = 0);
+  // The cpu solver's full-multigrid pass (MultigridOptions::full_multigrid_start) for the
+  // finest-level right-hand sides r: z = its approximate solution. Uses every level's b and x.
+  // With a coarse tail, one V-cycle over the tail's levels stands in for the exact coarse solve
+  // (the tail runs as one dispatch), so the pass differs from the per-level one there.
+  void FullMultigrid(const Buffer& r, Buffer& z, int nb);
 
   // The transfers between the levels, packed (multigrid.glsl's MG_TRANSFER): xfer_idx holds a
   // metadata row per level (with the tail's offsets), then gstart, gidx and lohi of every

@@ -518,13 +518,14 @@ void GlMultigridSolver::Apply(const float* x, float* y) {
   I.q.Download(y, L.n * 4);
 }
 
-void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int nb) {
+void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int nb,
+                                     bool from_zero, int sweeps) {
   GLevel& L = *levels[l];
   if (l == tail_level) {
     Tail(b, x, nb);
     return;
   }
-  x.Zero();
+  if (from_zero || l + 1 == levels.size()) x.Zero();
   if (l + 1 == levels.size()) {
     if (dense_coarse) {
       RunBatch("dense_solve", {&coarse_inverse, &b, &x}, {int(L.n)}, L.n, nb);
@@ -538,7 +539,7 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
     }
     return;
   }
-  const int nu = options.SweepsOnLevel(l);
+  const int nu = sweeps > 0 ? sweeps : options.SweepsOnLevel(l);
   for (int s = 0; s < nu; ++s) {
     Smooth(L, b, x, 0, nb);
     Smooth(L, b, x, 1, nb);
@@ -546,11 +547,36 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
   Stencil(L, x, b, L.r, 0, nb);
   GLevel& C = *levels[l + 1];
   Restrict(l, L.r, C.b, nb);
-  VCycle(l + 1, C.b, C.x, nb);
+  VCycle(l + 1, C.b, C.x, nb, true, sweeps);
   ProlongAdd(l, C.x, x, nb);
   for (int s = 0; s < nu; ++s) {
     Smooth(L, b, x, 1, nb);
     Smooth(L, b, x, 0, nb);
+  }
+}
+
+void GlMultigridSolver::Impl::FullMultigrid(const Buffer& r, Buffer& z, int nb) {
+  // Down to the coarse tail (one V-cycle over the tail's levels there) or the coarsest level.
+  const size_t top = std::min(tail_level, levels.size() - 1);
+  const Buffer* fine = &r;
+  for (size_t l = 0; l < top; ++l) {
+    Restrict(l, *fine, levels[l + 1]->b, nb);
+    fine = &levels[l + 1]->b;
+  }
+  VCycle(top, levels[top]->b, levels[top]->x, nb);
+  for (size_t l = top; l-- > 0;) {
+    GLevel& L = *levels[l];
+    Buffer& x = l == 0 ? z : L.x;
+    x.Zero();
+    ProlongAdd(l, levels[l + 1]->x, x, nb);
+    if (l > 0) {
+      VCycle(l, L.b, x, nb, false, 1);
+    } else {
+      for (int s = 0; s < options.full_multigrid_sweeps; ++s) {
+        Smooth(L, r, z, s % 2, nb);
+        Smooth(L, r, z, 1 - s % 2, nb);
+      }
+    }
   }
 }
 
@@ -618,7 +644,27 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
   int it = 0;
   if (any) {
     scal.Upload(sc.data(), int64_t(sc.size()) * 8);
-    restart();
+    // (With the coarse tail covering every level the pass would be one V-cycle from zero,
+    // which CG's first iteration does better.)
+    if (options.full_multigrid_start && std::min(tail_level, levels.size() - 1) > 0) {
+      // x += the full-multigrid approximation of A^-1 r on the active fields, then their new
+      // true residuals (a field may already meet the tolerance).
+      FullMultigrid(r, z, nb);
+      RunBatch("cg_update", {&x, &r, &z, &z, &scal}, {int(n)}, FlatThreads(n), nb, "#define ADD\n");
+      true_residual();
+      any = false;
+      for (int f = 0; f < nb; ++f) {
+        if (done[f]) continue;
+        if (at(f, kCgRr) <= at(f, kCgTol2)) {
+          at(f, kCgActive) = 0;
+          finish(f, true, "");
+        } else {
+          any = true;
+        }
+      }
+      scal.Upload(sc.data(), int64_t(sc.size()) * 8);
+    }
+    if (any) restart();
   }
   while (any && it < max_it) {
     Stencil(L, p, p, q, 1, nb);

@@ -42,8 +42,8 @@ struct MultigridOptions {
   // the V-cycle (they remove the prolongation's rough error; CG does the rest). From a zero
   // guess CG's first iteration then ends at a relative residual of ~1e-4 .. 6e-4 (~5e-2
   // without); the pass costs about one iteration and saves one or two of the ~5 to 1e-6
-  // (docs/benchmarks.md, "Forward solver"). cpu solver only (the gl solver starts CG from
-  // the caller's guess).
+  // (docs/benchmarks.md, "Forward solver"). The gl solver does the same, with one V-cycle
+  // over its coarse tail as the coarse solve.
   bool full_multigrid_start = true;
   int full_multigrid_sweeps = 2;
 

@@ -73,7 +73,7 @@ void AddBenchForward(CLI::App& bench) {
                   "x and y (default: xy for cpu grids of 100000 nodes or more, else full)")
       ->check(CLI::IsMember({"xy", "full"}));
   fwd->add_flag("--no-full-multigrid", f->no_full_multigrid,
-                "cpu: start CG from the caller's guess (zero), not from a full-multigrid pass");
+                "Start CG from the caller's guess (zero), not from a full-multigrid pass");
   fwd->add_flag("--no-peers", f->no_peers, "Skip the Eigen and Jacobi peers");
   fwd->add_flag("--json", f->json, "Print JSON instead of a table");
   fwd->callback([f] {

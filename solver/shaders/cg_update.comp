@@ -4,6 +4,7 @@
 //   default:   x += alpha p, r -= alpha q,  alpha = rz / pq, 0 for a frozen field
 //              (buffers x [double], r, p, q, scalars)
 //   DIRECTION: p = z + beta p,  beta = rz_new / rz   (buffers p, z, -, -, scalars)
+//   ADD:       x += p on active fields (the full-multigrid start; buffers x, -, p, -, scalars)
 // x, r, p, q, z hold one field of n values per work-group z; a grid-stride loop (common.glsl).
 DOUBLES(4, Scal, scal, readonly);
 layout(location = 0) uniform int n;
@@ -24,6 +25,10 @@ void main() {
   float beta = rz != 0.0LF ? float(LDD(scal, s + kCgRzNew) / rz) : 0.0;
   for (uint e = o + ThreadIndex(); e < o + uint(n); e += Stride())
     ST(p, e, LD(z, e) + beta * LD(p, e));
+#elif defined(ADD)
+  if (LDD(scal, s + kCgActive) == 0.0LF) return;
+  for (uint e = o + ThreadIndex(); e < o + uint(n); e += Stride())
+    STD(x, e, LDD(x, e) + double(LD(p, e)));
 #else
   double pq = LDD(scal, s + kCgPq);
   double alpha = LDD(scal, s + kCgActive) != 0.0LF && pq != 0.0LF ? LDD(scal, s + kCgRz) / pq
