@@ -14,6 +14,7 @@
 #include "solver/multigrid_hierarchy.h"
 #include "solver/multigrid_split.h"
 #include "solver/status.h"
+#include "solver/threads.h"
 
 namespace translume {
 namespace {
@@ -22,14 +23,11 @@ template <typename A, typename B>
 double Dot(const A* a, const B* b, int64_t n) {
   constexpr int64_t kBlock = 4096;
   double s = 0;
-#pragma omp parallel for reduction(+ : s) schedule(static)
+#pragma omp parallel for reduction(+ : s) schedule(static) if (n >= kParallelNodes)
   for (int64_t i = 0; i < n; i += kBlock) s += RowDot(a + i, b + i, std::min(kBlock, n - i));
   return s;
 }
 
-// Levels with fewer nodes than this are smoothed on one thread (a parallel region and its
-// barriers cost more than the work there).
-constexpr int64_t kParallelNodes = 20000;
 
 // Per-thread scratch of at least n values (one row of z-lines and one residual row).
 template <typename T>
@@ -49,7 +47,8 @@ double UpdateResidualRows(const GridShape& s, double alpha, const T* q, T* r, P*
   const int64_t nx = s.nx;
   const T a = T(alpha);
   double rr = 0;
-#pragma omp parallel for collapse(2) reduction(+ : rr) schedule(static)
+#pragma omp parallel for collapse(2) reduction(+ : rr) schedule(static) \
+    if (s.size() >= kParallelNodes)
   for (int64_t k = 0; k < s.nz; ++k)
     for (int64_t j = 0; j < s.ny; ++j) {
       const int64_t o = nx * (j + s.ny * k);
@@ -71,7 +70,7 @@ void UpdateDirectionRows(const GridShape& s, double alpha, double beta, const P*
                          T* p) {
   const int64_t nx = s.nx;
   const T bt = T(beta);
-#pragma omp parallel for collapse(2) schedule(static)
+#pragma omp parallel for collapse(2) schedule(static) if (s.size() >= kParallelNodes)
   for (int64_t k = 0; k < s.nz; ++k)
     for (int64_t j = 0; j < s.ny; ++j) {
       const int64_t o = nx * (j + s.ny * k);
@@ -94,7 +93,7 @@ void UpdateDirectionRows(const GridShape& s, double alpha, double beta, const P*
 template <typename P>
 void AddRows(const GridShape& s, const P* vx, double* x) {
   const int64_t nx = s.nx;
-#pragma omp parallel for collapse(2) schedule(static)
+#pragma omp parallel for collapse(2) schedule(static) if (s.size() >= kParallelNodes)
   for (int64_t k = 0; k < s.nz; ++k)
     for (int64_t j = 0; j < s.ny; ++j) {
       P* __restrict z = Scratch<P>(size_t(nx));
@@ -317,7 +316,7 @@ void MultigridSolver<T>::SetCoefficients(const T* kappa, const T* mu, double C) 
     if (l + 1 < levels_.size()) {
       // The smoother's copy of A in the split layout, then the z-lines' factors from it.
       for (auto* v : {&L.sdiag, &L.sxr, &L.sy, &L.sz, &L.lu_inv}) v->resize(n);
-#pragma omp parallel for collapse(2) schedule(static)
+#pragma omp parallel for collapse(2) schedule(static) if (s.size() >= kParallelNodes)
       for (int64_t k = 0; k < s.nz; ++k)
         for (int64_t j = 0; j < s.ny; ++j) {
           const int64_t o = s.nx * (j + s.ny * k), d = s.nx * (k + s.nz * j);
@@ -326,7 +325,7 @@ void MultigridSolver<T>::SetCoefficients(const T* kappa, const T* mu, double C) 
           SplitRow(s.nx, L.A.cy.data() + o, L.sy.data() + d);
           SplitRow(s.nx, L.A.cz.data() + o, L.sz.data() + d);
         }
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (s.size() >= kParallelNodes)
       for (int64_t col = 0; col < nxy; ++col) {  // col = (position in the row, j)
         const int64_t base = col % s.nx + s.nx * s.nz * (col / s.nx);
         for (int64_t k = 0; k < s.nz; ++k) {
@@ -379,12 +378,12 @@ void MultigridSolver<T>::Precondition(const T* r, T* z) {
     const GridShape& s = L.grid.shape;
     // The V-cycle works in the level layout.
     const int64_t nx = s.nx;
-#pragma omp parallel for collapse(2) schedule(static)
+#pragma omp parallel for collapse(2) schedule(static) if (s.size() >= kParallelNodes)
     for (int64_t k = 0; k < s.nz; ++k)
       for (int64_t j = 0; j < s.ny; ++j)
         SplitRow(nx, r + nx * (j + s.ny * k), L.b.data() + nx * (k + s.nz * j));
     VCycle(0, L.b.data(), L.x.data());
-#pragma omp parallel for collapse(2) schedule(static)
+#pragma omp parallel for collapse(2) schedule(static) if (s.size() >= kParallelNodes)
     for (int64_t k = 0; k < s.nz; ++k)
       for (int64_t j = 0; j < s.ny; ++j)
         MergeRow(nx, L.x.data() + nx * (k + s.nz * j), z + nx * (j + s.ny * k));
@@ -393,10 +392,10 @@ void MultigridSolver<T>::Precondition(const T* r, T* z) {
   const int64_t n = levels_[0]->grid.shape.size();
   rf_.resize(n);  // (Solve does not use these)
   zf_.resize(n);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (n >= kParallelNodes)
   for (int64_t i = 0; i < n; ++i) rf_[i] = float(r[i]);
   float_preconditioner_->Precondition(rf_.data(), zf_.data());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (n >= kParallelNodes)
   for (int64_t i = 0; i < n; ++i) z[i] = T(zf_[i]);
 }
 
@@ -673,7 +672,7 @@ SolveSummary MultigridSolver<T>::Solve(const T* b, T* x_out) {
       return rz;
     };
     auto update_x = [&](double alpha) {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (n >= kParallelNodes)
       for (int64_t i = 0; i < n; ++i) x[i] += alpha * double(p[i]);
     };
     int restarts = 0;

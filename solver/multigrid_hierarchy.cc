@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "solver/status.h"
+#include "solver/threads.h"
 
 namespace translume {
 namespace {
@@ -107,18 +108,15 @@ std::vector<MultigridLevel> BuildMultigridHierarchy(const GridShape& shape, doub
   return levels;
 }
 
-// Loops with fewer values than this run on one thread: a parallel region costs more there.
-constexpr int64_t kParallelValues = 16384;
-
 template <typename T>
 void RestrictAxis(const AxisTransfer& t, const T* in, T* out, int64_t inner, int64_t outer) {
   const int64_t n_in = t.n_fine, n_out = t.n_coarse;
   if (inner == 1) {  // along x: one contiguous row per block
-#pragma omp parallel for schedule(static) if (outer * n_in >= kParallelValues)
+#pragma omp parallel for schedule(static) if (outer * n_in >= kParallelNodes)
     for (int64_t o = 0; o < outer; ++o) RestrictRow(t, in + o * n_in, out + o * n_out);
     return;
   }
-#pragma omp parallel for collapse(2) schedule(static) if (outer * n_in * inner >= kParallelValues)
+#pragma omp parallel for collapse(2) schedule(static) if (outer * n_in * inner >= kParallelNodes)
   for (int64_t o = 0; o < outer; ++o)
     for (int64_t c = 0; c < n_out; ++c) {
       const T* src = in + o * n_in * inner;
@@ -137,7 +135,7 @@ void ProlongAxis(const AxisTransfer& t, const T* in, T* out, int64_t inner, int6
                  bool add) {
   const int64_t n_in = t.n_coarse, n_out = t.n_fine;
   if (inner == 1) {  // along x: one contiguous row per block
-#pragma omp parallel for schedule(static) if (outer * n_out >= kParallelValues)
+#pragma omp parallel for schedule(static) if (outer * n_out >= kParallelNodes)
     for (int64_t o = 0; o < outer; ++o) {
       const T* src = in + o * n_in;
       T* dst = out + o * n_out;
@@ -148,7 +146,7 @@ void ProlongAxis(const AxisTransfer& t, const T* in, T* out, int64_t inner, int6
     }
     return;
   }
-#pragma omp parallel for collapse(2) schedule(static) if (outer * n_out * inner >= kParallelValues)
+#pragma omp parallel for collapse(2) schedule(static) if (outer * n_out * inner >= kParallelNodes)
   for (int64_t o = 0; o < outer; ++o)
     for (int64_t f = 0; f < n_out; ++f) {
       const T* a = in + (o * n_in + t.lo[f]) * inner;

@@ -5,6 +5,7 @@
 #include <type_traits>
 
 #include "solver/status.h"
+#include "solver/threads.h"
 
 namespace translume {
 
@@ -97,7 +98,8 @@ template <typename T>
 void ApplyStencil(const Stencil<T>& A, const T* x, T* y) {
   const int64_t nx = A.shape.nx, ny = A.shape.ny, nz = A.shape.nz;
   const std::vector<T> zeros(nx, T(0));
-#pragma omp parallel for collapse(2) schedule(static)
+#pragma omp parallel for collapse(2) schedule(static) \
+    if (A.shape.size() >= kParallelNodes)
   for (int64_t k = 0; k < nz; ++k)
     for (int64_t j = 0; j < ny; ++j)
       StencilRow<T, T, false>(A, nullptr, x, y, j, k, zeros.data(), zeros.data());
@@ -109,7 +111,8 @@ double ApplyStencilDot(const Stencil<T>& A, const X* x, T* y) {
   const std::vector<X> zx(nx, X(0));
   const std::vector<T> zc(nx, T(0));
   double dot = 0;
-#pragma omp parallel for collapse(2) schedule(static) reduction(+ : dot)
+#pragma omp parallel for collapse(2) schedule(static) reduction(+ : dot) \
+    if (A.shape.size() >= kParallelNodes)
   for (int64_t k = 0; k < nz; ++k)
     for (int64_t j = 0; j < ny; ++j) {
       StencilRow<T, X, false>(A, nullptr, x, y, j, k, zx.data(), zc.data());
@@ -124,7 +127,8 @@ void StencilResidual(const Stencil<T>& A, const T* b, const X* x, T* r) {
   const int64_t nx = A.shape.nx, ny = A.shape.ny, nz = A.shape.nz;
   const std::vector<X> zx(nx, X(0));
   const std::vector<T> zc(nx, T(0));
-#pragma omp parallel for collapse(2) schedule(static)
+#pragma omp parallel for collapse(2) schedule(static) \
+    if (A.shape.size() >= kParallelNodes)
   for (int64_t k = 0; k < nz; ++k)
     for (int64_t j = 0; j < ny; ++j) StencilRow<T, X, true>(A, b, x, r, j, k, zx.data(), zc.data());
 }

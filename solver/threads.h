@@ -1,7 +1,16 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 
+#include <cstdint>
+
 namespace translume {
+
+// Loops over fewer values (grid nodes) than this run on one thread (OpenMP `if` and
+// `num_threads` clauses in the solver): opening a parallel region costs a few microseconds
+// with spinning threads and tens with sleeping ones (OMP_WAIT_POLICY=passive, our default:
+// ~75 us on the 2-core VM), more than one pass over that many nodes takes on one core.
+// docs/solver.md, "Threads", has the measurements.
+inline constexpr int64_t kParallelNodes = 100000;
 
 // Threads used by every multithreaded loop (OpenMP). Default: TRANSLUME_THREADS if set, else
 // OMP_NUM_THREADS if set, else the number of hardware threads. `translume --threads N` sets it.
