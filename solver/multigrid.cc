@@ -165,6 +165,8 @@ struct MultigridSolver<T>::Level {
   // (Eigen's SimplicialLDLT, AMD ordering) and applied in T (a float factor halves the traffic
   // of the triangular solves, which dominate a small grid's coarsest level).
   struct Direct {
+    // The factorisation, kept so that new coefficients (same pattern) skip the AMD ordering.
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt;
     Eigen::SparseMatrix<T> L;  // unit lower triangular (diagonal not used)
     Eigen::Matrix<T, Eigen::Dynamic, 1> inv_d;
     Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> P, P_inv;
@@ -352,15 +354,17 @@ void MultigridSolver<T>::SetCoefficients(const T* kappa, const T* mu, double C) 
           }
       Eigen::SparseMatrix<double> M(n, n);
       M.setFromTriplets(trip.begin(), trip.end());
-      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt;
-      ldlt.compute(M.template selfadjointView<Eigen::Lower>());
-      TL_CHECK_MSG(ldlt.info() == Eigen::Success, "coarsest-level factorisation failed");
-      auto d = std::make_unique<typename Level::Direct>();
-      d->L = Eigen::SparseMatrix<double>(ldlt.matrixL()).template cast<T>();
-      d->inv_d = ldlt.vectorD().cwiseInverse().template cast<T>();
-      d->P = ldlt.permutationP();
-      d->P_inv = ldlt.permutationPinv();
-      L.direct = std::move(d);
+      if (!L.direct) {
+        L.direct = std::make_unique<typename Level::Direct>();
+        L.direct->ldlt.analyzePattern(M);  // (M holds the lower triangle: ldlt's UpLo)
+      }
+      typename Level::Direct& d = *L.direct;
+      d.ldlt.factorize(M);
+      TL_CHECK_MSG(d.ldlt.info() == Eigen::Success, "coarsest-level factorisation failed");
+      d.L = Eigen::SparseMatrix<double>(d.ldlt.matrixL()).template cast<T>();
+      d.inv_d = d.ldlt.vectorD().cwiseInverse().template cast<T>();
+      d.P = d.ldlt.permutationP();
+      d.P_inv = d.ldlt.permutationPinv();
     }
   }
   if (float_preconditioner_) {

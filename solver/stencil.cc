@@ -2,6 +2,7 @@
 #include "solver/stencil.h"
 
 #include <algorithm>
+#include <array>
 #include <type_traits>
 
 #include "solver/status.h"
@@ -29,17 +30,37 @@ double TensorGrid::Width(int axis, int64_t i) const {
 
 namespace {
 
+// Per-axis geometry of a tensor grid, computed once per pass instead of per node: the dual-box
+// widths and the inverse gaps (area over gap of a face = product of the other two widths times
+// the inverse gap; AssembleStencil and AccumulateOperatorGradient both form it this way, so
+// the gradient stays the exact derivative of the assembly).
+struct AxisGeometry {
+  std::array<std::vector<double>, 3> width, inv_gap;  // inv_gap[a][i]: between i and i + 1
+  explicit AxisGeometry(const TensorGrid& g) {
+    for (int a = 0; a < 3; ++a) {
+      const int64_t n = g.shape.n(a);
+      width[a].resize(n);
+      inv_gap[a].assign(n, 0.0);
+      for (int64_t i = 0; i < n; ++i) {
+        width[a][i] = g.Width(a, i);
+        if (i + 1 < n) inv_gap[a][i] = 1.0 / g.Gap(a, i);
+      }
+    }
+  }
+};
+
 // Visits every node with its dual-box widths, planes in parallel:
 // f(i, j, k, p, wx, wy, wz) with p the linear index.
 template <typename F>
-void ForEachNode(const TensorGrid& g, F&& f) {
+void ForEachNode(const TensorGrid& g, const AxisGeometry& geo, F&& f) {
   const GridShape& s = g.shape;
-#pragma omp parallel for schedule(static)
+  const double* wxs = geo.width[0].data();
+#pragma omp parallel for schedule(static) if (s.size() >= kParallelNodes)
   for (int64_t k = 0; k < s.nz; ++k) {
-    const double wz = g.Width(2, k);
+    const double wz = geo.width[2][k];
     for (int64_t j = 0; j < s.ny; ++j) {
-      const double wy = g.Width(1, j);
-      for (int64_t i = 0; i < s.nx; ++i) f(i, j, k, i + s.nx * (j + s.ny * k), g.Width(0, i), wy, wz);
+      const double wy = geo.width[1][j];
+      for (int64_t i = 0; i < s.nx; ++i) f(i, j, k, i + s.nx * (j + s.ny * k), wxs[i], wy, wz);
     }
   }
 }
@@ -57,21 +78,25 @@ void AssembleStencil(const TensorGrid& g, const T* kappa, const T* mu, double C,
   st->cz.assign(s.size(), T(0));
   st->diag.assign(s.size(), T(0));
   const double robin = 1.0 / (2.0 * C);
+  const AxisGeometry geo(g);
+  const double *igx = geo.inv_gap[0].data(), *igy = geo.inv_gap[1].data(),
+               *igz = geo.inv_gap[2].data();
+  T *cx = st->cx.data(), *cy = st->cy.data(), *cz = st->cz.data(), *diag = st->diag.data();
   // Conductances first (each face once), then the diagonal from them.
-  ForEachNode(g, [&](int64_t i, int64_t j, int64_t k, int64_t p, double wx, double wy, double wz) {
-    if (i + 1 < nx) st->cx[p] = FaceConductance<T>(wy * wz / g.Gap(0, i), kappa[p], kappa[p + 1]);
-    if (j + 1 < ny) st->cy[p] = FaceConductance<T>(wx * wz / g.Gap(1, j), kappa[p], kappa[p + nx]);
-    if (k + 1 < nz) st->cz[p] = FaceConductance<T>(wx * wy / g.Gap(2, k), kappa[p], kappa[p + nxy]);
+  ForEachNode(g, geo, [=](int64_t i, int64_t j, int64_t k, int64_t p, double wx, double wy, double wz) {
+    if (i + 1 < nx) cx[p] = FaceConductance<T>(wy * wz * igx[i], kappa[p], kappa[p + 1]);
+    if (j + 1 < ny) cy[p] = FaceConductance<T>(wx * wz * igy[j], kappa[p], kappa[p + nx]);
+    if (k + 1 < nz) cz[p] = FaceConductance<T>(wx * wy * igz[k], kappa[p], kappa[p + nxy]);
   });
-  ForEachNode(g, [&](int64_t i, int64_t j, int64_t k, int64_t p, double wx, double wy, double wz) {
+  ForEachNode(g, geo, [=](int64_t i, int64_t j, int64_t k, int64_t p, double wx, double wy, double wz) {
     const int bx = (i == 0) + (i == nx - 1), by = (j == 0) + (j == ny - 1),
               bz = (k == 0) + (k == nz - 1);
     double d = wx * wy * wz * double(mu[p]) + robin * (bx * wy * wz + by * wx * wz + bz * wx * wy);
-    T c = st->cx[p] + st->cy[p] + st->cz[p];
-    if (i > 0) c += st->cx[p - 1];
-    if (j > 0) c += st->cy[p - nx];
-    if (k > 0) c += st->cz[p - nxy];
-    st->diag[p] = T(d) + c;
+    T c = cx[p] + cy[p] + cz[p];
+    if (i > 0) c += cx[p - 1];
+    if (j > 0) c += cy[p - nx];
+    if (k > 0) c += cz[p - nxy];
+    diag[p] = T(d) + c;
   });
 }
 
@@ -149,19 +174,22 @@ void AccumulateOperatorGradient(const TensorGrid& g, const T* phi, const T* psi,
                                 T* grad_kappa, T* grad_mu) {
   const GridShape& s = g.shape;
   const int64_t nx = s.nx, ny = s.ny, nz = s.nz, nxy = nx * ny;
-  ForEachNode(g, [&](int64_t i, int64_t j, int64_t k, int64_t p, double wx, double wy, double wz) {
+  const AxisGeometry geo(g);
+  const double *igx = geo.inv_gap[0].data(), *igy = geo.inv_gap[1].data(),
+               *igz = geo.inv_gap[2].data();
+  ForEachNode(g, geo, [=](int64_t i, int64_t j, int64_t k, int64_t p, double wx, double wy, double wz) {
     // One face between p and q with area / gap `aog`: dc_pq/dkappa_p (psi_p - psi_q)(phi_p - phi_q).
-    auto face = [&](int64_t q, double aog) {
+    auto face = [=](int64_t q, double aog) {
       const double dc = double(FaceConductance<T>(aog, T(1), T(0)));
       return dc * (double(psi[p]) - double(psi[q])) * (double(phi[p]) - double(phi[q]));
     };
     double gk = 0;
-    if (i > 0) gk += face(p - 1, wy * wz / g.Gap(0, i - 1));
-    if (i + 1 < nx) gk += face(p + 1, wy * wz / g.Gap(0, i));
-    if (j > 0) gk += face(p - nx, wx * wz / g.Gap(1, j - 1));
-    if (j + 1 < ny) gk += face(p + nx, wx * wz / g.Gap(1, j));
-    if (k > 0) gk += face(p - nxy, wx * wy / g.Gap(2, k - 1));
-    if (k + 1 < nz) gk += face(p + nxy, wx * wy / g.Gap(2, k));
+    if (i > 0) gk += face(p - 1, wy * wz * igx[i - 1]);
+    if (i + 1 < nx) gk += face(p + 1, wy * wz * igx[i]);
+    if (j > 0) gk += face(p - nx, wx * wz * igy[j - 1]);
+    if (j + 1 < ny) gk += face(p + nx, wx * wz * igy[j]);
+    if (k > 0) gk += face(p - nxy, wx * wy * igz[k - 1]);
+    if (k + 1 < nz) gk += face(p + nxy, wx * wy * igz[k]);
     grad_kappa[p] += T(scale * gk);
     grad_mu[p] += T(scale * wx * wy * wz * double(psi[p]) * double(phi[p]));
   });
