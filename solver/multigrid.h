@@ -19,7 +19,8 @@ struct MultigridOptions {
   // correction on the finest level (pre, post) and on every coarser level (coarse), and how z
   // coarsens (multigrid_hierarchy.h). 0 / unset: the backend's choice (WithCycleDefaults). The
   // cpu solver, bound by memory traffic, takes x-y semi-coarsening with V(1,1) on the finest
-  // level and V(2,2) below on grids of 100000 nodes or more: ~5 iterations to 1e-6, as full
+  // level and V(2,2) below on grids of 100000 nodes or more: ~5 iterations to 1e-6 (without
+  // the full-multigrid start below; 3-4 with it), as full
   // coarsening with V(2,2) needed, for 5-20 % less time; on smaller grids, where that cycle
   // needs a 6th iteration, full coarsening with V(2,2). The gl solver, bound by its number of
   // dispatches, takes full coarsening (fewer levels) with V(2,2) everywhere. An unset
@@ -40,8 +41,8 @@ struct MultigridOptions {
   // coarsest, then on each finer level the coarser solution, prolonged, is the initial guess
   // of one V(1,1) cycle; on the finest level full_multigrid_sweeps smoothing sweeps replace
   // the V-cycle (they remove the prolongation's rough error; CG does the rest). From a zero
-  // guess CG's first iteration then ends at a relative residual of ~1e-4 .. 6e-4 (~5e-2
-  // without); the pass costs about one iteration and saves one or two of the ~5 to 1e-6
+  // guess CG's first iteration then ends at a relative residual of ~1e-4 .. 6e-4 (5e-2 ..
+  // 0.15 without); the pass costs about one iteration and saves one or two of the ~5 to 1e-6
   // (docs/benchmarks.md, "Forward solver"). The gl solver does the same, with one V-cycle
   // over its coarse tail as the coarse solve.
   bool full_multigrid_start = true;
