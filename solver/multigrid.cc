@@ -28,7 +28,6 @@ double Dot(const A* a, const B* b, int64_t n) {
   return s;
 }
 
-
 // Per-thread scratch of at least n values (one row of z-lines and one residual row).
 template <typename T>
 T* Scratch(size_t n) {
@@ -230,8 +229,7 @@ void MultigridSolver<T>::ProlongAdd(const Level& L, const T* c, T* f) const {
   }
   TransferYZ(L.geo, false, c, L.tmp_a.data(), false, L.tmp_b.data());  // (mx, nz, ny)
   const int64_t nx = s.nx, mx = L.tx->nc, rows = s.ny * s.nz;
-  const int threads = s.size() >= kParallelNodes ? omp_get_max_threads() : 1;
-#pragma omp parallel for schedule(static) num_threads(threads)
+#pragma omp parallel for schedule(static) if (s.size() >= kParallelNodes)
   for (int64_t row = 0; row < rows; ++row) {
     T* nat = Scratch<T>(size_t(mx + 1));
     MergeRow(mx, L.tmp_a.data() + mx * row, nat);
@@ -494,8 +492,7 @@ void MultigridSolver<T>::Sweep(const Level& L, const T* b, T* x, int first, bool
   // of rows with the stages one row apart (the rows it just touched are still in cache), and
   // the rows on block edges, which need a neighbour's rows, wait for a barrier. The result is
   // exactly that of two separate half-sweeps.
-  const int threads = L.grid.shape.size() >= kParallelNodes ? omp_get_max_threads() : 1;
-#pragma omp parallel num_threads(threads)
+#pragma omp parallel if (L.grid.shape.size() >= kParallelNodes)
   {
     const int64_t nt = omp_get_num_threads(), id = omp_get_thread_num();
     const int64_t j0 = ny * id / nt, j1 = ny * (id + 1) / nt;
@@ -532,8 +529,7 @@ void MultigridSolver<T>::RestrictRhs(const Level& L, const T* fine, T* coarse) c
   }
   const GridShape& s = L.grid.shape;
   const int64_t nx = s.nx, mx = L.tx->nc, rows = s.ny * s.nz;
-  const int threads = s.size() >= kParallelNodes ? omp_get_max_threads() : 1;
-#pragma omp parallel for schedule(static) num_threads(threads)
+#pragma omp parallel for schedule(static) if (s.size() >= kParallelNodes)
   for (int64_t row = 0; row < rows; ++row) {
     T* nat = Scratch<T>(size_t(mx));
     // (Reads one value past the row, the next row's first or the level's padding, with
