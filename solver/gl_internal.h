@@ -3,6 +3,7 @@
 // state, shared by the solver and the inverse problem's objective. Includes GL headers.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <initializer_list>
 #include <memory>
@@ -241,6 +242,8 @@ struct GlMultigridSolver::Impl {
   // With a coarse tail, one V-cycle over the tail's levels stands in for the exact coarse solve
   // (the tail runs as one dispatch), so the pass differs from the per-level one there.
   void FullMultigrid(const Buffer& r, Buffer& z, int nb);
+  // The level the pass solves on before going up: the coarse tail's first or the coarsest.
+  size_t FullMultigridTop() const { return std::min(tail_level, levels.size() - 1); }
 
   // The transfers between the levels, packed (multigrid.glsl's MG_TRANSFER): xfer_idx holds a
   // metadata row per level (with the tail's offsets), then gstart, gidx and lohi of every

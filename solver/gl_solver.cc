@@ -557,7 +557,7 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
 
 void GlMultigridSolver::Impl::FullMultigrid(const Buffer& r, Buffer& z, int nb) {
   // Down to the coarse tail (one V-cycle over the tail's levels there) or the coarsest level.
-  const size_t top = std::min(tail_level, levels.size() - 1);
+  const size_t top = FullMultigridTop();
   const Buffer* fine = &r;
   for (size_t l = 0; l < top; ++l) {
     Restrict(l, *fine, levels[l + 1]->b, nb);
@@ -646,7 +646,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
     scal.Upload(sc.data(), int64_t(sc.size()) * 8);
     // (With the coarse tail covering every level the pass would be one V-cycle from zero,
     // which CG's first iteration does better.)
-    if (options.full_multigrid_start && std::min(tail_level, levels.size() - 1) > 0) {
+    if (options.full_multigrid_start && FullMultigridTop() > 0) {
       // x += the full-multigrid approximation of A^-1 r on the active fields, then their new
       // true residuals (a field may already meet the tolerance).
       FullMultigrid(r, z, nb);
