@@ -42,8 +42,10 @@ struct Tuning {
   // V-cycle in one dispatch, one work group per field (0: never). TRANSLUME_GL_TAIL_NODES=N
   // overrides it.
   int64_t tail_nodes = 0;
-  // Invocations of the tail's work group.
+  // Invocations of the tail's work group, and the fields it solves (1, or 4 with the values of
+  // four fields interleaved as one vec4 per node; tail.comp's TAIL_FIELDS).
   int tail_group = 256;
+  int tail_fields = 1;
 };
 const Tuning& GetTuning();
 
@@ -252,10 +254,13 @@ struct GlMultigridSolver::Impl {
   // The coarse tail (tail.comp, docs/gpu.md): levels tail_level.. (the levels with at most
   // tail_nodes nodes, at least two of them) run their V-cycle in one dispatch; tail_level ==
   // levels.size(): no tail. tail_coef: their coefficients, packed; tail_work: tail_stride
-  // values per field.
+  // values per field; tail_work4: tail_stride vec4 per four fields (tail_fields 4).
+  // tail_fields: Tuning::tail_fields, the fields one tail work group solves in batches of
+  // three or more fields (fewer fields leave too few work groups for the threads of llvmpipe).
   int64_t tail_nodes = 0;
+  int tail_fields = 1;
   size_t tail_level = 0;
-  Buffer tail_coef, tail_work;
+  Buffer tail_coef, tail_work, tail_work4;
   int64_t tail_stride = 0;
   std::vector<int64_t> tail_coef_offset;  // per level (tail levels only): its cx .. sigma in tail_coef
   bool coefficients_set = false;          // SetCoefficients ran (tail_coef can be filled)
@@ -263,7 +268,9 @@ struct GlMultigridSolver::Impl {
   // (tail_work is sized by Reserve, the coefficients copied by CopyTailCoefficients).
   void PackLevels();
   void CopyTailCoefficients();
-  // tail.comp on nb fields: x = B b from level tail_level down.
+  // Sizes tail_work and tail_work4 for `fields` fields.
+  void AllocTailWork(int fields);
+  // tail.comp on nb fields: x = B b from level tail_level down (tail_fields per work group).
   void Tail(const Buffer& b, Buffer& x, int nb);
 
   // a . b of every field (double) into scal[f kCgStride + slot]; Dot2 also a . c into slot + 1.

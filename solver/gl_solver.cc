@@ -136,8 +136,10 @@ const Tuning& GetTuning() {
     // group of TL_GROUP invocations covers in a few nodes each.
     t.tail_nodes = 4096;
     t.tail_group = cpu ? 8 : 256;
+    t.tail_fields = cpu ? 4 : 1;
     if (const char* tail = std::getenv("TRANSLUME_GL_TAIL_NODES")) t.tail_nodes = std::atoll(tail);
     if (const char* g = std::getenv("TRANSLUME_GL_TAIL_GROUP")) t.tail_group = std::atoi(g);
+    if (const char* f = std::getenv("TRANSLUME_GL_TAIL_FIELDS")) t.tail_fields = std::atoi(f) == 4 ? 4 : 1;
     return t;
   }();
   return tuning;
@@ -342,6 +344,7 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
   }
   I.max_batch = int(std::max<int64_t>(1, most));
   I.tail_nodes = gl_internal::GetTuning().tail_nodes;
+  I.tail_fields = gl_internal::GetTuning().tail_fields;
   I.PackLevels();
   I.Reserve(1);
 }
@@ -418,11 +421,18 @@ void GlMultigridSolver::Impl::Tail(const Buffer& b, Buffer& x, int nb) {
   const Buffer& minv = dense_coarse ? coarse_inverse : tail_coef;  // unread without dense
   // One work group of tail_group invocations per field (Run's tiling makes one group of
   // `group` threads).
-  const std::string group = fmt::format("#define TL_GROUP {}\n", GetTuning().tail_group);
-  RunBatch("tail", {&tail_coef, &xfer_idx, &xfer_w, &minv, &b, &x, &tail_work},
+  const bool four = tail_fields == 4 && nb >= 3;
+  const std::string defines =
+      fmt::format("#define TL_GROUP {}\n#define TAIL_FIELDS {}\n", GetTuning().tail_group, four ? 4 : 1);
+  RunBatch("tail", {&tail_coef, &xfer_idx, &xfer_w, &minv, &b, &x, four ? &tail_work4 : &tail_work},
            {int(tail_level), int(levels.size() - tail_level), options.pre_smoothing, options.coarse_smoothing,
-            dense_coarse ? 1 : 0, coarse_sweeps, int(tail_stride), GetTuning().columns ? 1 : 0},
-           GetTuning().group, nb, group.c_str());
+            dense_coarse ? 1 : 0, coarse_sweeps, int(tail_stride), GetTuning().columns ? 1 : 0, nb},
+           GetTuning().group, four ? (nb + 3) / 4 : nb, defines.c_str());
+}
+
+void GlMultigridSolver::Impl::AllocTailWork(int fields) {
+  tail_work.Alloc(tail_stride * 4 * fields);
+  tail_work4.Alloc(tail_stride * 16 * ((fields + 3) / 4), nullptr, Elem::kVec4);
 }
 
 void GlMultigridSolver::SetCoarseTail(int64_t max_nodes) {
@@ -430,7 +440,7 @@ void GlMultigridSolver::SetCoarseTail(int64_t max_nodes) {
   I.tail_nodes = max_nodes;
   I.PackLevels();
   if (I.tail_level == I.levels.size()) return;
-  I.tail_work.Alloc(I.tail_stride * 4 * std::max(I.capacity, 1));
+  I.AllocTailWork(std::max(I.capacity, 1));
   if (I.coefficients_set) I.CopyTailCoefficients();
 }
 
@@ -447,7 +457,7 @@ void GlMultigridSolver::Impl::Reserve(int fields) {
   }
   for (Buffer* b : {&r, &z, &p, &q}) b->Alloc(n0 * 4 * fields);
   xd.Alloc(n0 * 8 * fields, nullptr, Elem::kDouble);
-  if (tail_level < levels.size()) tail_work.Alloc(tail_stride * 4 * fields);
+  if (tail_level < levels.size()) AllocTailWork(fields);
   partial.Alloc(DotPartials(DotThreads(n0)) * 2 * 8 * fields, nullptr, Elem::kDouble);
   scal.Alloc(kCgStride * 8 * fields, nullptr, Elem::kDouble);
   hist.Alloc(int64_t(options.max_iterations) * 8 * fields, nullptr, Elem::kDouble);

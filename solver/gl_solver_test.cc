@@ -179,14 +179,15 @@ TEST(GlSolver, BatchedSolveMatchesSingleSolvesAndConvergesEveryField) {
 }
 
 // The coarse tail (tail.comp: the V-cycle of the small levels in one dispatch per V-cycle, one
-// work group per field) computes what the per-level dispatches compute: on a grid of 4+ levels,
-// batched, with the tail covering the whole hierarchy and only its lower levels, one V-cycle
-// gives the same z within float rounding, with fewer dispatches, and the solves take the same
-// iterations to the same solution.
+// or four fields per work group) computes what the per-level dispatches compute: on a grid of
+// 4+ levels, batched (five fields: one group of four and one of a single field), with the tail
+// covering the whole hierarchy and only its lower levels, one V-cycle gives the same z within
+// float rounding, with fewer dispatches, and the solves take the same iterations to the same
+// solution.
 TEST(GlSolver, CoarseTailMatchesThePerLevelVCycle) {
   const GridShape s{30, 22, 12};
   const int64_t n = s.size();
-  const int M = 4;
+  const int M = 5;
   std::vector<float> kappa(n), mu(n), b(M * n, 0.0f);
   for (int64_t p = 0; p < n; ++p) {
     kappa[p] = 0.2f + 0.1f * std::sin(0.05f * p);
@@ -228,8 +229,10 @@ TEST(GlSolver, CoarseTailMatchesThePerLevelVCycle) {
   double zmax = 0, xmax = 0;
   for (float v : z_levels) zmax = std::max(zmax, double(std::abs(v)));
   for (float v : x_levels) xmax = std::max(xmax, double(std::abs(v)));
-  for (int64_t nodes : {I.levels[0]->n, I.levels[2]->n}) {
-    SCOPED_TRACE(nodes);
+  for (int64_t nodes : {I.levels[0]->n, I.levels[2]->n})
+  for (int fields : {1, 4}) {
+    SCOPED_TRACE(::testing::Message() << nodes << " nodes, " << fields << " fields per group");
+    I.tail_fields = fields;
     gl.SetCoarseTail(nodes);
     EXPECT_EQ(gl.coarse_tail_levels(), nodes == n ? gl.num_levels() : gl.num_levels() - 2);
     std::vector<float> z_tail, x_tail;

@@ -52,14 +52,16 @@ bool Column(int nx, int ny, int nz, int kz, out int i, out int j, out int k0, ou
 
 // Arrays: FLOATS(binding, Block, name, qualifier) declares name[] (qualifier readonly, writeonly
 // or restrict), read with LD(name, e) / written with ST(name, e, v); DOUBLES with LDD / STD,
-// INTS with LD. Under TL_IMAGES (the host's choice on llvmpipe, gl_internal.h) they are image
-// buffers (r32f, rg32ui holding a double's two halves, r32i) at image unit `binding`, else
-// shader storage blocks at binding `binding`.
+// INTS with LD, VEC4S (four floats per element) with LD4 / ST. Under TL_IMAGES (the host's
+// choice on llvmpipe, gl_internal.h) they are image buffers (r32f, rg32ui holding a double's two
+// halves, r32i, rgba32f) at image unit `binding`, else shader storage blocks at binding `binding`.
 #ifdef TL_IMAGES
 #define FLOATS(b, B, a, q) layout(binding = b, r32f) q uniform imageBuffer a
 #define INTS(b, B, a, q) layout(binding = b, r32i) q uniform iimageBuffer a
 #define DOUBLES(b, B, a, q) layout(binding = b, rg32ui) q uniform uimageBuffer a
+#define VEC4S(b, B, a, q) layout(binding = b, rgba32f) q uniform imageBuffer a
 #define LD(a, e) imageLoad(a, int(e)).x
+#define LD4(a, e) imageLoad(a, int(e))
 #define LDD(a, e) packDouble2x32(imageLoad(a, int(e)).xy)
 #define ST(a, e, v) imageStore(a, int(e), vec4(v))
 #define STD(a, e, v) imageStore(a, int(e), uvec4(unpackDouble2x32(v), 0u, 0u))
@@ -67,7 +69,9 @@ bool Column(int nx, int ny, int nz, int kz, out int i, out int j, out int k0, ou
 #define FLOATS(b, B, a, q) layout(std430, binding = b) q buffer B { float a[]; }
 #define INTS(b, B, a, q) layout(std430, binding = b) q buffer B { int a[]; }
 #define DOUBLES(b, B, a, q) layout(std430, binding = b) q buffer B { double a[]; }
+#define VEC4S(b, B, a, q) layout(std430, binding = b) q buffer B { vec4 a[]; }
 #define LD(a, e) a[e]
+#define LD4(a, e) a[e]
 #define LDD(a, e) a[e]
 #define ST(a, e, v) a[e] = (v)
 #define STD(a, e, v) a[e] = (v)

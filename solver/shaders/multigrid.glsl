@@ -12,6 +12,16 @@
 // Every array is addressed with an offset, so the arrays may be the level's own buffers
 // (offsets 0) or a few packed buffers holding several levels (tail.comp aliases the names to
 // them with #define; the prefix keeps those macros off other identifiers).
+//
+// The field values (mg_b, mg_x, mg_y, mg_src) are MG_VALUE, loaded with MG_LDV: float and LD
+// (one field per value) unless the includer defines them, as tail.comp does with vec4 and LD4
+// to carry four fields per node (the coefficients and transfer weights, read once, then serve
+// all four). MG_DVALUE is the matching double type.
+#ifndef MG_VALUE
+#define MG_VALUE float
+#define MG_DVALUE double
+#define MG_LDV LD
+#endif
 
 // Where a level's coefficients are: its shape and the offsets of its cx, cy, cz, inv, luc and
 // sigma values in their arrays (node p of the level at offset + p).
@@ -35,23 +45,24 @@ bool SmoothColumn(int t, int nx, int ny, int color, out int i, out int j) {
 // value of the node below (forward) or above (backward) is carried in a register.
 void SmoothLine(MgLevel L, int i, int j, int b0, int x0) {
   int nx = L.nx, ny = L.ny, nz = L.nz, nxy = nx * ny;
-  float below = 0.0, cz_below = 0.0;
+  MG_VALUE below = MG_VALUE(0.0);
+  float cz_below = 0.0;
   int p = i + nx * j;
   for (int k = 0; k < nz; ++k, p += nxy) {
     int q = x0 + p;
-    float d = LD(mg_b, b0 + p) + cz_below * below;
-    if (i > 0) d += LD(mg_cx, L.cx + p - 1) * LD(mg_x, q - 1);
-    if (i + 1 < nx) d += LD(mg_cx, L.cx + p) * LD(mg_x, q + 1);
-    if (j > 0) d += LD(mg_cy, L.cy + p - nx) * LD(mg_x, q - nx);
-    if (j + 1 < ny) d += LD(mg_cy, L.cy + p) * LD(mg_x, q + nx);
+    MG_VALUE d = MG_LDV(mg_b, b0 + p) + cz_below * below;
+    if (i > 0) d += LD(mg_cx, L.cx + p - 1) * MG_LDV(mg_x, q - 1);
+    if (i + 1 < nx) d += LD(mg_cx, L.cx + p) * MG_LDV(mg_x, q + 1);
+    if (j > 0) d += LD(mg_cy, L.cy + p - nx) * MG_LDV(mg_x, q - nx);
+    if (j + 1 < ny) d += LD(mg_cy, L.cy + p) * MG_LDV(mg_x, q + nx);
     below = d * LD(mg_inv, L.inv + p);
     ST(mg_x, q, below);
     cz_below = LD(mg_cz, L.cz + p);
   }
-  float above = below;
+  MG_VALUE above = below;
   p -= 2 * nxy;
   for (int k = nz - 2; k >= 0; --k, p -= nxy) {
-    above = LD(mg_x, x0 + p) + LD(mg_luc, L.luc + p) * above;
+    above = MG_LDV(mg_x, x0 + p) + LD(mg_luc, L.luc + p) * above;
     ST(mg_x, x0 + p, above);
   }
 }
@@ -59,33 +70,36 @@ void SmoothLine(MgLevel L, int i, int j, int b0, int x0) {
 
 #ifdef MG_RESIDUAL
 #ifndef ACC
-#define ACC float
-#define LDX LD
+#define ACC MG_VALUE
+#define ACC_C float
+#define LDX MG_LDV
 #endif
 // Nodes k0 .. k1 - 1 of column (i, j) (common.glsl's Column): mode 0: y = b - A x (residual),
 // mode 1: y = A x, A in the difference form A x_p = sigma_p x_p + sum_q c_pq (x_p - x_q)
 // (assemble.comp). x0, b0, y0: this field's level offsets in x, b and y. x and cz of the node
-// below are carried in registers. ACC is the accumulator type and LDX loads x (float and LD
-// unless the shader defines them: residual.comp's X_DOUBLE).
+// below are carried in registers. ACC is the accumulator type, ACC_C the coefficients' type
+// in its sums and LDX loads x (MG_VALUE, float and MG_LDV unless the shader defines them:
+// residual.comp's X_DOUBLE).
 void ResidualColumn(MgLevel L, int i, int j, int k0, int k1, int mode, int x0, int b0, int y0) {
   int nx = L.nx, ny = L.ny, nz = L.nz, nxy = nx * ny;
   int p = i + nx * j + nxy * k0;
-  ACC xm = 0.0, czm = 0.0;  // x and cz of the node below
+  ACC xm = ACC(0.0);  // x and cz of the node below
+  ACC_C czm = ACC_C(0.0);
   if (k0 > 0) {
     xm = LDX(mg_x, x0 + p - nxy);
-    czm = ACC(LD(mg_cz, L.cz + p - nxy));
+    czm = ACC_C(LD(mg_cz, L.cz + p - nxy));
   }
   ACC xc = LDX(mg_x, x0 + p);
   for (int k = k0; k < k1; ++k, p += nxy) {
     int o = x0 + p;  // this node in this field
     ACC xp = k + 1 < nz ? LDX(mg_x, o + nxy) : ACC(0.0);
-    ACC czp = ACC(LD(mg_cz, L.cz + p));
-    ACC v = ACC(LD(mg_sigma, L.sigma + p)) * xc + czm * (xc - xm) + czp * (xc - xp);
-    if (i > 0) v += ACC(LD(mg_cx, L.cx + p - 1)) * (xc - LDX(mg_x, o - 1));
-    if (i + 1 < nx) v += ACC(LD(mg_cx, L.cx + p)) * (xc - LDX(mg_x, o + 1));
-    if (j > 0) v += ACC(LD(mg_cy, L.cy + p - nx)) * (xc - LDX(mg_x, o - nx));
-    if (j + 1 < ny) v += ACC(LD(mg_cy, L.cy + p)) * (xc - LDX(mg_x, o + nx));
-    ST(mg_y, y0 + p, float(mode == 0 ? ACC(LD(mg_b, b0 + p)) - v : v));
+    ACC_C czp = ACC_C(LD(mg_cz, L.cz + p));
+    ACC v = ACC_C(LD(mg_sigma, L.sigma + p)) * xc + czm * (xc - xm) + czp * (xc - xp);
+    if (i > 0) v += ACC_C(LD(mg_cx, L.cx + p - 1)) * (xc - LDX(mg_x, o - 1));
+    if (i + 1 < nx) v += ACC_C(LD(mg_cx, L.cx + p)) * (xc - LDX(mg_x, o + 1));
+    if (j > 0) v += ACC_C(LD(mg_cy, L.cy + p - nx)) * (xc - LDX(mg_x, o - nx));
+    if (j + 1 < ny) v += ACC_C(LD(mg_cy, L.cy + p)) * (xc - LDX(mg_x, o + nx));
+    ST(mg_y, y0 + p, MG_VALUE(mode == 0 ? ACC(MG_LDV(mg_b, b0 + p)) - v : v));
     xm = xc;
     xc = xp;
     czm = czp;
@@ -136,18 +150,18 @@ MgTaps MgGather(MgAxis A, int c) {
 
 // Restriction R = P^T: coarse node e (of X.n_coarse Y.n_coarse Z.n_coarse) from the fine
 // values at in0 (X.n_fine Y.n_fine Z.n_fine of them).
-float Restrict3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
+MG_VALUE Restrict3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
   int mxy = X.n_coarse * Y.n_coarse, ck = Div(e, mxy), r = e - ck * mxy, cj = Div(r, X.n_coarse);
   int ci = r - cj * X.n_coarse, nx = X.n_fine, nxy = nx * Y.n_fine;
   MgTaps tx = MgGather(X, ci), ty = MgGather(Y, cj), tz = MgGather(Z, ck);
-  float s = 0.0;
+  MG_VALUE s = MG_VALUE(0.0);
   for (int gz = 0; gz < tz.n; ++gz) {
     int kz = in0 + nxy * tz.f[gz];
-    float sy = 0.0;
+    MG_VALUE sy = MG_VALUE(0.0);
     for (int gy = 0; gy < ty.n; ++gy) {
       int jy = kz + nx * ty.f[gy];
-      float sx = 0.0;
-      for (int gx = 0; gx < tx.n; ++gx) sx += tx.w[gx] * LD(mg_src, jy + tx.f[gx]);
+      MG_VALUE sx = MG_VALUE(0.0);
+      for (int gx = 0; gx < tx.n; ++gx) sx += tx.w[gx] * MG_LDV(mg_src, jy + tx.f[gx]);
       sy += ty.w[gy] * sx;
     }
     s += tz.w[gz] * sy;
@@ -157,7 +171,7 @@ float Restrict3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
 
 // Prolongation P (trilinear): fine node e (of X.n_fine Y.n_fine Z.n_fine) from the coarse
 // values at in0.
-float Prolong3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
+MG_VALUE Prolong3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
   int nxy = X.n_fine * Y.n_fine, k = Div(e, nxy), r = e - k * nxy, j = Div(r, X.n_fine);
   int i = r - j * X.n_fine, mx = X.n_coarse, mxy = mx * Y.n_coarse;
   int cx[2] = int[2](LD(mg_idx, X.lohi + 2 * i), LD(mg_idx, X.lohi + 2 * i + 1));
@@ -165,12 +179,12 @@ float Prolong3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
   int z0 = mxy * LD(mg_idx, Z.lohi + 2 * k), z1 = mxy * LD(mg_idx, Z.lohi + 2 * k + 1);
   float wy0 = LD(mg_wts, Y.w + 2 * j), wy1 = LD(mg_wts, Y.w + 2 * j + 1);
   float wz0 = LD(mg_wts, Z.w + 2 * k), wz1 = LD(mg_wts, Z.w + 2 * k + 1);
-  float sy[2];
+  MG_VALUE sy[2];
   for (int a = 0; a < 2; ++a) {
-    float sz[2];
+    MG_VALUE sz[2];
     for (int b = 0; b < 2; ++b) {
       int cj = in0 + cx[a] + mx * cy[b];
-      sz[b] = wz0 * LD(mg_src, cj + z0) + wz1 * LD(mg_src, cj + z1);
+      sz[b] = wz0 * MG_LDV(mg_src, cj + z0) + wz1 * MG_LDV(mg_src, cj + z1);
     }
     sy[a] = wy0 * sz[0] + wy1 * sz[1];
   }
@@ -181,9 +195,9 @@ float Prolong3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
 #ifdef MG_DENSE
 // Row i of x = M b, M (n x n, row-major at m0 in minv) the explicit inverse of the coarsest
 // operator; b0: this field's offset in b. Double sums.
-float DenseRow(int i, int n, int m0, int b0) {
-  double s = 0.0LF;
-  for (int j = 0; j < n; ++j) s += double(LD(mg_minv, m0 + i * n + j)) * double(LD(mg_b, b0 + j));
-  return float(s);
+MG_VALUE DenseRow(int i, int n, int m0, int b0) {
+  MG_DVALUE s = MG_DVALUE(0.0LF);
+  for (int j = 0; j < n; ++j) s += double(LD(mg_minv, m0 + i * n + j)) * MG_DVALUE(MG_LDV(mg_b, b0 + j));
+  return MG_VALUE(s);
 }
 #endif

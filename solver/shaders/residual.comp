@@ -14,6 +14,7 @@ FLOATS(3, Sigma, mg_sigma, readonly);
 #ifdef X_DOUBLE
 DOUBLES(4, X, mg_x, readonly);
 #define ACC double
+#define ACC_C double
 #define LDX LDD
 #else
 FLOATS(4, X, mg_x, readonly);
