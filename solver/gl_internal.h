@@ -268,6 +268,9 @@ struct GlMultigridSolver::Impl {
   // (tail_work is sized by Reserve, the coefficients copied by CopyTailCoefficients).
   void PackLevels();
   void CopyTailCoefficients();
+  // Whether SolveDevice runs each CG iteration of nb fields as one dispatch (tail.comp's
+  // CG_ITERATION): the tail covers the whole hierarchy and groups of four fields are in use.
+  bool CgIterationInTail(int nb) const;
   // Sizes tail_work and tail_work4 for `fields` fields.
   void AllocTailWork(int fields);
   // tail.comp on nb fields: x = B b from level tail_level down (tail_fields per work group).

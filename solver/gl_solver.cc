@@ -404,7 +404,9 @@ void GlMultigridSolver::Impl::PackLevels() {
   xfer_idx.Alloc(int64_t(idx.size()) * 4, idx.data(), Elem::kInt);
   xfer_w.Alloc(int64_t(wts.size()) * 4, wts.data());
   if (tail_level < nl) tail_coef.Alloc(coef * 4);
-  tail_stride = work;
+  // With the whole hierarchy in the tail, a fused CG iteration (CgIterationInTail) keeps p and
+  // q of the finest level after the levels' b, x, r.
+  tail_stride = work + (tail_level == 0 ? 2 * levels[0]->n : 0);
 }
 
 void GlMultigridSolver::Impl::CopyTailCoefficients() {
@@ -428,6 +430,10 @@ void GlMultigridSolver::Impl::Tail(const Buffer& b, Buffer& x, int nb) {
            {int(tail_level), int(levels.size() - tail_level), options.pre_smoothing, options.coarse_smoothing,
             dense_coarse ? 1 : 0, coarse_sweeps, int(tail_stride), GetTuning().columns ? 1 : 0, nb},
            GetTuning().group, four ? (nb + 3) / 4 : nb, defines.c_str());
+}
+
+bool GlMultigridSolver::Impl::CgIterationInTail(int nb) const {
+  return tail_level == 0 && tail_fields == 4 && nb >= 3;
 }
 
 void GlMultigridSolver::Impl::AllocTailWork(int fields) {
@@ -676,16 +682,26 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
     }
     if (any) restart();
   }
+  const bool fused = CgIterationInTail(nb);
   while (any && it < max_it) {
-    Stencil(L, p, p, q, 1, nb);
-    Dot(p, q, kCgPq, nb);
-    RunBatch("cg_update", {&x, &r, &p, &q, &scal}, {int(n)}, FlatThreads(n), nb);
-    // Precondition before looking at the residual: both dots from one pass.
-    VCycle(0, r, z, nb);
-    Dot2(r, r, z, kCgRr, nb);  // rr and rz_new
-    RunBatch("cg_update", {&p, &z, &z, &z, &scal}, {int(n)}, FlatThreads(n), nb,
-             "#define DIRECTION\n");
-    Run("cg_scalars", {&scal, &hist}, {nb, max_it}, nb);
+    if (fused) {
+      const std::string defines =
+          fmt::format("#define TL_GROUP {}\n#define TAIL_FIELDS 4\n#define CG_ITERATION\n", GetTuning().tail_group);
+      RunBatch("tail", {&tail_coef, &xfer_idx, &xfer_w, dense_coarse ? &coarse_inverse : &tail_coef, &r, &p, &tail_work4, &x, &scal, &hist},
+               {0, int(levels.size()), options.pre_smoothing, options.coarse_smoothing, dense_coarse ? 1 : 0,
+                coarse_sweeps, int(tail_stride), GetTuning().columns ? 1 : 0, nb, max_it},
+               GetTuning().group, (nb + 3) / 4, defines.c_str());
+    } else {
+      Stencil(L, p, p, q, 1, nb);
+      Dot(p, q, kCgPq, nb);
+      RunBatch("cg_update", {&x, &r, &p, &q, &scal}, {int(n)}, FlatThreads(n), nb);
+      // Precondition before looking at the residual: both dots from one pass.
+      VCycle(0, r, z, nb);
+      Dot2(r, r, z, kCgRr, nb);  // rr and rz_new
+      RunBatch("cg_update", {&p, &z, &z, &z, &scal}, {int(n)}, FlatThreads(n), nb,
+               "#define DIRECTION\n");
+      Run("cg_scalars", {&scal, &hist}, {nb, max_it}, nb);
+    }
     ++it;
     if (it % check_every != 0 && it < max_it) continue;
     read();

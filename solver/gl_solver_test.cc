@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <vector>
 
 #include "solver/gl_context.h"
@@ -13,6 +14,51 @@
 
 namespace translume {
 namespace {
+
+// A smoothly varying heterogeneous material on n nodes (kappa 0.1 .. 0.3, mu 0.01 .. 0.03).
+void VaryingMaterial(int64_t n, std::vector<float>& kappa, std::vector<float>& mu) {
+  kappa.resize(n);
+  mu.resize(n);
+  for (int64_t p = 0; p < n; ++p) {
+    kappa[p] = 0.2f + 0.1f * std::sin(0.05f * p);
+    mu[p] = 0.02f + 0.01f * std::cos(0.03f * p);
+  }
+}
+
+// m >= 5 right-hand sides of grid s, back to back, and initial guesses (zero but for field 2):
+// a back light, a front spot, a smooth interior source, a zero field, field 1 times 1e3, then
+// smooth interior sources.
+void VariedBatch(const GridShape& s, int m, std::vector<float>& b, std::vector<float>& x0) {
+  const int64_t n = s.size();
+  b.assign(m * n, 0.0f);
+  x0.assign(m * n, 0.0f);
+  for (int64_t f = 0; f < s.face_size(); ++f) b[f + n - s.face_size()] = 0.01f;  // back light
+  b[n + s.index(5, 4, 0)] = 1.0f;                                                  // spot
+  for (int64_t p = 0; p < n; ++p) {
+    b[2 * n + p] = 0.001f * (1.0f + std::sin(0.2f * p));
+    x0[2 * n + p] = 0.05f * std::cos(0.1f * p);
+    b[4 * n + p] = 1e3f * b[n + p];  // field 3 stays zero
+    for (int f = 5; f < m; ++f) b[f * n + p] = 0.001f * (1.0f + std::sin(0.2f * p + f));
+  }
+}
+
+// A batch on grid s: VaryingMaterial, VariedBatch's m fields, and a gl solver for them with
+// tolerance 1e-6 (h = 0.5 mm, C = 2.6).
+struct VariedProblem {
+  VariedProblem(const GridShape& shape, int m) : s(shape), n(shape.size()), M(m) {
+    VaryingMaterial(n, kappa, mu);
+    VariedBatch(s, M, b, x0);
+    mo.tolerance = 1e-6;
+    gl = std::make_unique<GlMultigridSolver>(s, 0.5, mo);
+    gl->SetCoefficients(kappa.data(), mu.data(), 2.6);
+  }
+  GridShape s;
+  int64_t n;
+  int M;
+  std::vector<float> kappa, mu, b, x0;
+  MultigridOptions mo;
+  std::unique_ptr<GlMultigridSolver> gl;
+};
 
 TEST(GlContext, ReportsACompute43Context) {
   const GlInfo& info = GlContext::Get().info();
@@ -87,11 +133,8 @@ TEST(GlSolver, WarmStartAndIterationsMatchTheCpuSolver) {
 TEST(GlSolver, FullMultigridStartSavesIterationsAndKeepsTheSolution) {
   const GridShape s{33, 33, 17};
   const int64_t n = s.size();
-  std::vector<float> kappa(n), mu(n), b(n, 0.0f);
-  for (int64_t p = 0; p < n; ++p) {
-    kappa[p] = 0.2f + 0.1f * std::sin(0.05f * p);
-    mu[p] = 0.02f + 0.01f * std::cos(0.03f * p);
-  }
+  std::vector<float> kappa, mu, b(n, 0.0f);
+  VaryingMaterial(n, kappa, mu);
   for (int64_t f = 0; f < s.face_size(); ++f) b[f + n - s.face_size()] = 0.01f;  // back light
   for (bool tail : {true, false}) {
     SCOPED_TRACE(tail ? "default tail" : "no tail");
@@ -120,25 +163,12 @@ TEST(GlSolver, FullMultigridStartSavesIterationsAndKeepsTheSolution) {
 // own solve gives: the same iterations, the same x within the solver's tolerance, and a true
 // residual (recomputed here in double) below the tolerance for every field.
 TEST(GlSolver, BatchedSolveMatchesSingleSolvesAndConvergesEveryField) {
-  const GridShape s{24, 18, 10};
-  const int64_t n = s.size();
-  const int M = 5;
-  std::vector<float> kappa(n), mu(n), b(M * n, 0.0f), x0(M * n, 0.0f);
-  for (int64_t p = 0; p < n; ++p) {
-    kappa[p] = 0.2f + 0.1f * std::sin(0.05f * p);
-    mu[p] = 0.02f + 0.01f * std::cos(0.03f * p);
-  }
-  for (int64_t f = 0; f < s.face_size(); ++f) b[f + n - s.face_size()] = 0.01f;  // back light
-  b[n + s.index(5, 4, 0)] = 1.0f;                                                  // spot
-  for (int64_t p = 0; p < n; ++p) {
-    b[2 * n + p] = 0.001f * (1.0f + std::sin(0.2f * p));
-    x0[2 * n + p] = 0.05f * std::cos(0.1f * p);
-  }
-  for (int64_t p = 0; p < n; ++p) b[4 * n + p] = 1e3f * b[n + p];  // field 3 stays zero
-  MultigridOptions mo;
-  mo.tolerance = 1e-6;
-  GlMultigridSolver gl(s, 0.5, mo);
-  gl.SetCoefficients(kappa.data(), mu.data(), 2.6);
+  VariedProblem P({24, 18, 10}, 5);
+  const GridShape& s = P.s;
+  const int64_t n = P.n;
+  const int M = P.M;
+  const std::vector<float>& kappa = P.kappa, &mu = P.mu, &b = P.b, &x0 = P.x0;
+  GlMultigridSolver& gl = *P.gl;
   std::vector<float> xb = x0;
   const std::vector<SolveSummary> batch = gl.SolveBatch(M, b.data(), xb.data());
   ASSERT_EQ(int(batch.size()), M);
@@ -188,12 +218,10 @@ TEST(GlSolver, CoarseTailMatchesThePerLevelVCycle) {
   const GridShape s{30, 22, 12};
   const int64_t n = s.size();
   const int M = 5;
-  std::vector<float> kappa(n), mu(n), b(M * n, 0.0f);
-  for (int64_t p = 0; p < n; ++p) {
-    kappa[p] = 0.2f + 0.1f * std::sin(0.05f * p);
-    mu[p] = 0.02f + 0.01f * std::cos(0.03f * p);
+  std::vector<float> kappa, mu, b(M * n, 0.0f);
+  VaryingMaterial(n, kappa, mu);
+  for (int64_t p = 0; p < n; ++p)
     for (int f = 0; f < M; ++f) b[f * n + p] = 0.001f * (1.0f + std::sin(0.2f * p + f));
-  }
   b[n + s.index(5, 4, 0)] = 1.0f;  // a spot in field 1
   MultigridOptions mo;
   mo.tolerance = 1e-6;
@@ -253,6 +281,57 @@ TEST(GlSolver, CoarseTailMatchesThePerLevelVCycle) {
       EXPECT_EQ(s_tail[f].iterations, s_levels[f].iterations) << f;
     }
   }
+}
+
+// With the whole hierarchy in the coarse tail and four fields per tail group, each conjugate-
+// gradient iteration runs as one dispatch (tail.comp's CG_ITERATION) instead of ~9. On six
+// fields (VariedBatch: a group of four, a partial group of two) it gives the dispatched
+// iteration's results: the same iterations, histories and solutions within float rounding.
+TEST(GlSolver, OneDispatchCgIterationMatchesTheDispatchedOne) {
+  VariedProblem P({20, 16, 8}, 6);
+  const int64_t n = P.n;
+  const int M = P.M;
+  GlMultigridSolver& gl = *P.gl;
+  GlMultigridSolver::Impl& I = gl.impl();
+  ASSERT_EQ(gl.coarse_tail_levels(), gl.num_levels());
+  auto solve = [&](int tail_fields, std::vector<float>& x, int64_t& dispatches) {
+    I.tail_fields = tail_fields;
+    x = P.x0;
+    const int64_t before = gl_internal::DispatchCount();
+    std::vector<SolveSummary> sums = gl.SolveBatch(M, P.b.data(), x.data());
+    dispatches = gl_internal::DispatchCount() - before;
+    return sums;
+  };
+  std::vector<float> xd, xf;
+  int64_t nd = 0, nf = 0;
+  const std::vector<SolveSummary> dispatched = solve(1, xd, nd);
+  const std::vector<SolveSummary> fused = solve(4, xf, nf);
+  ASSERT_TRUE(I.CgIterationInTail(M));
+  int iterations = 0;
+  for (int f = 0; f < M; ++f) {
+    SCOPED_TRACE(f);
+    EXPECT_TRUE(fused[f].converged) << fused[f].BriefReport();
+    EXPECT_EQ(fused[f].message, dispatched[f].message);
+    EXPECT_EQ(fused[f].iterations, dispatched[f].iterations);
+    ASSERT_EQ(fused[f].history.size(), dispatched[f].history.size());
+    for (size_t i = 0; i < fused[f].history.size(); ++i)
+      EXPECT_NEAR(fused[f].history[i], dispatched[f].history[i], 1e-3 * dispatched[f].history[i]) << i;
+    double dd = 0, xx = 0;
+    for (int64_t p = f * n; p < (f + 1) * n; ++p) {
+      dd += (double(xf[p]) - xd[p]) * (double(xf[p]) - xd[p]);
+      xx += double(xd[p]) * xd[p];
+    }
+    if (f == 3) {
+      EXPECT_EQ(dd + xx, 0.0);
+      continue;
+    }
+    EXPECT_GT(fused[f].iterations, 0);
+    EXPECT_LE(std::sqrt(dd / xx), 1e-5);
+    iterations = std::max(iterations, fused[f].iterations);
+  }
+  std::printf("%s, %d fields, %d iterations: %lld dispatches, %lld with one per iteration\n",
+              P.s.ToString().c_str(), M, iterations, (long long)nd, (long long)nf);
+  EXPECT_LE(nf + 7 * iterations, nd);
 }
 
 }  // namespace

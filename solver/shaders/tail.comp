@@ -38,15 +38,24 @@ FLOATS(0, Coef, coef, readonly);
 INTS(1, Idx, mg_idx, readonly);
 FLOATS(2, Wts, mg_wts, readonly);
 FLOATS(3, Minv, mg_minv, readonly);
+#ifdef CG_ITERATION
+FLOATS(4, R, r_f, restrict);
+FLOATS(5, P, p_f, restrict);
+DOUBLES(7, X, xd, restrict);
+DOUBLES(8, Scal, scal, restrict);
+DOUBLES(9, Hist, hist, writeonly);
+layout(location = 9) uniform int max_iterations;
+#else
 FLOATS(4, BIn, b_in, readonly);
 FLOATS(5, XOut, x_out, writeonly);
+#endif
 layout(location = 0) uniform int first;   // the first tail level
 layout(location = 1) uniform int levels;  // tail levels (>= 2), the last the coarsest
 layout(location = 2) uniform int nu_fine;
 layout(location = 3) uniform int nu_coarse;
 layout(location = 4) uniform int dense;
 layout(location = 5) uniform int coarse_sweeps;
-layout(location = 6) uniform int stride;   // work values per field
+layout(location = 6) uniform int stride;   // work values per group
 layout(location = 7) uniform int columns;  // residual: 1 one z-column per step, 0 one node
 layout(location = 8) uniform int fields;   // fields in the batch
 #define mg_cx coef
@@ -82,6 +91,7 @@ void Sync() {
 
 int lid, group, fw;  // this invocation in the group, the group's size, this group's work
 
+#ifndef CG_ITERATION
 // Node e of the first tail level's b (of n0 nodes) for this group's fields, and x_out = v.
 MG_VALUE LoadIn(int e, int n0) {
 #if TAIL_FIELDS == 4
@@ -105,6 +115,7 @@ void StoreOut(int e, int n0, MG_VALUE v) {
   ST(x_out, int(Field()) * n0 + e, v);
 #endif
 }
+#endif
 
 void HalfSweep(int l, int color) {
   MgLevel L = Level(l);
@@ -115,28 +126,29 @@ void HalfSweep(int l, int color) {
   Sync();
 }
 
-void main() {
-  lid = int(gl_LocalInvocationID.x);
-  group = int(gl_WorkGroupSize.x);
-  fw = int(Field()) * stride;
-  int last = first + levels - 1, n0 = Nodes(first);
-  for (int e = lid; e < n0; e += group) ST(work, fw + MgMeta(first, kB) + e, LoadIn(e, n0));
+// y = b - A x (mode 0) or y = A x (mode 1) on level l, x, b, y at these offsets in work.
+void StencilLevel(int l, int mode, int x0, int b0, int y0) {
+  MgLevel L = Level(l);
+  int kz = columns != 0 ? L.nz : 1;
+  for (int t = lid; t < L.nx * L.ny * ((L.nz + kz - 1) / kz); t += group) {
+    int i, j, k0, k1;
+    if (ColumnAt(t, L.nx, L.ny, L.nz, kz, i, j, k0, k1)) ResidualColumn(L, i, j, k0, k1, mode, x0, b0, y0);
+  }
+  Sync();
+}
+
+// The V-cycle x = B b on the group's work, b of level `first` already there.
+void VCycleWork() {
+  int last = first + levels - 1;
   for (int l = first; l <= last; ++l)
     for (int e = lid; e < Nodes(l); e += group) ST(work, fw + MgMeta(l, kX) + e, MG_VALUE(0.0));
   Sync();
   for (int l = first; l < last; ++l) {
-    MgLevel L = Level(l);
     for (int s = 0; s < (l == 0 ? nu_fine : nu_coarse); ++s) {
       HalfSweep(l, 0);
       HalfSweep(l, 1);
     }
-    int kz = columns != 0 ? L.nz : 1;
-    for (int t = lid; t < L.nx * L.ny * ((L.nz + kz - 1) / kz); t += group) {
-      int i, j, k0, k1;
-      if (ColumnAt(t, L.nx, L.ny, L.nz, kz, i, j, k0, k1))
-        ResidualColumn(L, i, j, k0, k1, 0, fw + MgMeta(l, kX), fw + MgMeta(l, kB), fw + MgMeta(l, kR));
-    }
-    Sync();
+    StencilLevel(l, 0, fw + MgMeta(l, kX), fw + MgMeta(l, kB), fw + MgMeta(l, kR));
     MgAxis X = MgLoadAxis(l, 0), Y = MgLoadAxis(l, 1), Z = MgLoadAxis(l, 2);
     for (int e = lid; e < Nodes(l + 1); e += group)
       ST(work, fw + MgMeta(l + 1, kB) + e, Restrict3Value(e, X, Y, Z, fw + MgMeta(l, kR)));
@@ -166,5 +178,111 @@ void main() {
       HalfSweep(l, 0);
     }
   }
+}
+
+#ifdef CG_ITERATION
+// One iteration of SolveDevice's batched conjugate gradients (gl_solver.cc) in one dispatch,
+// where the tail is the whole hierarchy (first == 0, TAIL_FIELDS 4): the stencil q = A p, the
+// dot p.q, cg_update.comp's x += alpha p and r -= alpha q, the V-cycle z = B r, the dots r.r
+// and r.z, the direction p = z + beta p and cg_scalars.comp's bookkeeping, with the same
+// per-field arithmetic. p, q and z stay in work (P, Q: the last 2 n0 values of the group's
+// work; z: level 0's x); r, p and x (double) are the caller's per-field buffers, and scal and
+// hist the per-field scalars and histories (common.glsl's kCg* slots). The dots are summed in
+// double, each invocation's share then the group's (GroupSum).
+shared dvec4 group_sums[TL_GROUP];
+
+// The sum of s over the group's invocations, the same in every invocation.
+dvec4 GroupSum(dvec4 s) {
+  group_sums[lid] = s;
+  memoryBarrierShared();
+  barrier();
+  dvec4 t = dvec4(0.0LF);
+  for (int q = 0; q < group; ++q) t += group_sums[q];
+  barrier();
+  return t;
+}
+
+bool Live(int c) { return 4 * int(Field()) + c < fields; }
+int FieldAt(int c, int n0, int e) { return (4 * int(Field()) + c) * n0 + e; }
+int ScalAt(int c, int slot) { return (4 * int(Field()) + c) * kCgStride + slot; }
+
+void CgIteration() {
+  int n0 = Nodes(0), wp = fw + stride - 2 * n0, wq = fw + stride - n0;
+  int wb = fw + MgMeta(0, kB), wz = fw + MgMeta(0, kX);
+  for (int e = lid; e < n0; e += group) {
+    vec4 v = vec4(0.0);
+    for (int c = 0; c < 4; ++c)
+      if (Live(c)) v[c] = LD(p_f, FieldAt(c, n0, e));
+    ST(work, wp + e, v);
+  }
+  Sync();
+  StencilLevel(0, 1, wp, wp, wq);
+  dvec4 s = dvec4(0.0LF);
+  for (int e = lid; e < n0; e += group) s += dvec4(LD4(work, wp + e)) * dvec4(LD4(work, wq + e));
+  dvec4 pq = GroupSum(s);
+  dvec4 alpha = dvec4(0.0LF);
+  for (int c = 0; c < 4; ++c)
+    if (Live(c) && LDD(scal, ScalAt(c, kCgActive)) != 0.0LF && pq[c] != 0.0LF)
+      alpha[c] = LDD(scal, ScalAt(c, kCgRz)) / pq[c];
+  for (int e = lid; e < n0; e += group) {
+    vec4 p = LD4(work, wp + e), q = LD4(work, wq + e), r = vec4(0.0);
+    for (int c = 0; c < 4; ++c) {
+      if (!Live(c)) continue;
+      int o = FieldAt(c, n0, e);
+      STD(xd, o, LDD(xd, o) + alpha[c] * double(p[c]));
+      r[c] = LD(r_f, o) - float(alpha[c]) * q[c];
+      ST(r_f, o, r[c]);
+    }
+    ST(work, wb + e, r);
+  }
+  VCycleWork();
+  dvec4 rr = dvec4(0.0LF), rz = dvec4(0.0LF);
+  for (int e = lid; e < n0; e += group) {
+    dvec4 r = dvec4(LD4(work, wb + e));
+    rr += r * r;
+    rz += r * dvec4(LD4(work, wz + e));
+  }
+  rr = GroupSum(rr);
+  rz = GroupSum(rz);
+  vec4 beta = vec4(0.0);
+  for (int c = 0; c < 4; ++c) {
+    double rz_old = Live(c) ? LDD(scal, ScalAt(c, kCgRz)) : 0.0LF;
+    if (rz_old != 0.0LF) beta[c] = float(rz[c] / rz_old);
+  }
+  for (int e = lid; e < n0; e += group) {
+    vec4 p = LD4(work, wz + e) + beta * LD4(work, wp + e);
+    for (int c = 0; c < 4; ++c)
+      if (Live(c)) ST(p_f, FieldAt(c, n0, e), p[c]);
+  }
+  barrier();  // every invocation has read the scalars
+  if (lid != 0) return;
+  for (int c = 0; c < 4; ++c) {
+    if (!Live(c)) continue;
+    int f = 4 * int(Field()) + c;
+    STD(scal, ScalAt(c, kCgPq), pq[c]);
+    STD(scal, ScalAt(c, kCgRr), rr[c]);
+    STD(scal, ScalAt(c, kCgRzNew), rz[c]);
+    if (LDD(scal, ScalAt(c, kCgActive)) != 0.0LF) {
+      int it = int(LDD(scal, ScalAt(c, kCgIter)));
+      if (it < max_iterations) STD(hist, f * max_iterations + it, rr[c]);
+      STD(scal, ScalAt(c, kCgIter), double(it + 1));
+      if (rr[c] <= LDD(scal, ScalAt(c, kCgTol2))) STD(scal, ScalAt(c, kCgActive), 0.0LF);
+    }
+    STD(scal, ScalAt(c, kCgRz), rz[c]);
+  }
+}
+#endif
+
+void main() {
+  lid = int(gl_LocalInvocationID.x);
+  group = int(gl_WorkGroupSize.x);
+  fw = int(Field()) * stride;
+#ifdef CG_ITERATION
+  CgIteration();
+#else
+  int n0 = Nodes(first);
+  for (int e = lid; e < n0; e += group) ST(work, fw + MgMeta(first, kB) + e, LoadIn(e, n0));
+  VCycleWork();
   for (int e = lid; e < n0; e += group) StoreOut(e, n0, MG_LDV(work, fw + MgMeta(first, kX) + e));
+#endif
 }
