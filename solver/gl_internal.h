@@ -14,6 +14,7 @@
 #include "solver/gl_shaders.h"
 #include "solver/gl_solver.h"
 #include "solver/multigrid_hierarchy.h"
+#include "solver/status.h"
 
 namespace translume {
 namespace gl_internal {
@@ -42,10 +43,11 @@ struct Tuning {
   // V-cycle in one dispatch, one work group per field (0: never). TRANSLUME_GL_TAIL_NODES=N
   // overrides it.
   int64_t tail_nodes = 0;
-  // Invocations of the tail's work group, and the fields it solves (1, or 4 with the values of
-  // four fields interleaved as one vec4 per node; tail.comp's TAIL_FIELDS).
+  // Invocations of the tail's work group.
   int tail_group = 256;
-  int tail_fields = 1;
+  // Fields per value in the V-cycles of a batch of three or more fields: 1, or 4 with four
+  // fields' values interleaved as one vec4 per node (common.glsl's FIELDS4).
+  int pack_fields = 1;
 };
 const Tuning& GetTuning();
 
@@ -60,9 +62,10 @@ class Buffer {
   Buffer(const Buffer&) = delete;
   ~Buffer() {
     if (tex_) api.DeleteTextures(1, &tex_);
-    if (id_) api.DeleteBuffers(1, &id_);
+    if (id_ && owner_) api.DeleteBuffers(1, &id_);
   }
   void Alloc(int64_t bytes, const void* data = nullptr, Elem elem = Elem::kFloat) {
+    TL_CHECK(owner_);
     if (!id_) api.GenBuffers(1, &id_);
     bytes_ = std::max<int64_t>(bytes, 16);
     elem_ = elem;
@@ -91,6 +94,17 @@ class Buffer {
     api.CopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, src_offset, dst_offset, bytes);
   }
   GLuint id() const { return id_; }
+  // Makes this buffer a view of `of`'s storage that shaders read as `elem` (a float buffer as
+  // vec4: four fields per node, common.glsl's FIELDS4). The view owns nothing and cannot be
+  // allocated; make it again after `of` is reallocated.
+  void ViewOf(const Buffer& of, Elem elem) {
+    if (owner_ && id_) api.DeleteBuffers(1, &id_);
+    owner_ = false;
+    id_ = of.id_;
+    bytes_ = of.bytes_;
+    elem_ = elem;
+    if (tex_) AttachTexture();
+  }
   // Binds the buffer to image unit `unit` (read-write, in its element's format).
   void BindImage(GLuint unit) const {
     if (!tex_) {
@@ -119,6 +133,7 @@ class Buffer {
   mutable GLuint tex_ = 0;
   int64_t bytes_ = 0;
   Elem elem_ = Elem::kFloat;
+  bool owner_ = true;
 };
 
 // The program of solver/shaders/NAME.comp, compiled once per `defines` (e.g. "#define X\n").
@@ -162,6 +177,10 @@ struct GLevel {
   // diag: the full diagonal (line factors, coarsest inverse); sigma: its absorption and Robin
   // part alone, for the operator's difference form (assemble.comp, residual.comp).
   Buffer geometry, kappa, mu, cx, cy, cz, diag, sigma, inv, luc, b, x, r, rnorm;
+  // b, x, r of a packed V-cycle (Impl::pack_fields 4): views of this level's b, x, r as vec4,
+  // four fields per node, except on level 0, whose b holds the solve's right-hand sides: there
+  // b4 views the CG vector q (free during a V-cycle).
+  Buffer b4, x4, r4;
 };
 
 }  // namespace gl_internal
@@ -209,41 +228,65 @@ struct GlMultigridSolver::Impl {
   // (tens of microseconds) against 1-2 ms per iteration, so 1 is the better bet there too.
   int check_every = 1;
 
-  // Grows the per-field buffers to hold `fields` fields (contents are lost when they grow).
+  // Grows the per-field buffers to hold `fields` fields (contents are lost when they grow);
+  // the level buffers and q hold whole groups of four where pack_fields is 4.
   void Reserve(int fields);
+  // Sets pack_fields (1 or 4) and regrows the buffers for it.
+  void SetPackFields(int k);
+  // Whether the V-cycles of nb fields run packed, four fields per vec4 (FIELDS4): pack_fields
+  // is 4 and nb >= 3 (fewer fields would leave llvmpipe's threads too few work groups).
+  bool Packed(int nb) const { return pack_fields == 4 && nb >= 3; }
+  // True while a packed V-cycle runs on the levels' b4, x4, r4 (Precondition, FullMultigrid):
+  // the multigrid dispatches then take FIELDS4 and one work group per four fields.
+  bool packed = false;
+  int Groups(int nb) const { return packed ? (nb + 3) / 4 : nb; }
+  std::string Fields4() const { return packed ? "#define FIELDS4\n" : ""; }
+  Buffer& LevelB(GLevel& L) { return packed ? L.b4 : L.b; }
+  Buffer& LevelX(GLevel& L) { return packed ? L.x4 : L.x; }
+  Buffer& LevelR(GLevel& L) { return packed ? L.r4 : L.r; }
+  // packed = the nb per-field values of `per_field` (n0 each) four to a vec4, or the reverse.
+  void Pack(const Buffer& per_field, Buffer& packed4, int nb);
+  void Unpack(const Buffer& packed4, Buffer& per_field, int nb);
 
   // c = R f (level l to l + 1) and f += P c (level l + 1 to l) on nb fields: one dispatch
   // each (transfer.comp).
   void Restrict(size_t l, const Buffer& f, Buffer& c, int nb) {
-    RunBatch("transfer", {&f, &c, &xfer_idx, &xfer_w}, {int(l), 0}, FlatThreads(levels[l + 1]->n), nb);
+    RunBatch("transfer", {&f, &c, &xfer_idx, &xfer_w}, {int(l), 0}, FlatThreads(levels[l + 1]->n), Groups(nb),
+             Fields4().c_str());
   }
   void ProlongAdd(size_t l, const Buffer& c, Buffer& f, int nb) {
-    RunBatch("transfer", {&c, &f, &xfer_idx, &xfer_w}, {int(l), 1}, FlatThreads(levels[l]->n), nb,
-             "#define PROLONG\n");
+    RunBatch("transfer", {&c, &f, &xfer_idx, &xfer_w}, {int(l), 1}, FlatThreads(levels[l]->n), Groups(nb),
+             (Fields4() + "#define PROLONG\n").c_str());
   }
 
   void Smooth(GLevel& L, const Buffer& b, Buffer& x, int color, int nb) {
     const int half = int((L.s.nx + 1) / 2);
     RunBatch("smooth", {&L.cx, &L.cy, &L.cz, &L.inv, &L.luc, &b, &x},
-             {int(L.s.nx), int(L.s.ny), int(L.s.nz), color}, int64_t(half) * L.s.ny, nb);
+             {int(L.s.nx), int(L.s.ny), int(L.s.nz), color}, int64_t(half) * L.s.ny, Groups(nb), Fields4().c_str());
   }
 
+  // x_double (the CG iterate, never packed): x in double, the sums too (residual.comp).
   void Stencil(GLevel& L, const Buffer& x, const Buffer& b, Buffer& out, int mode, int nb,
                bool x_double = false) {
     RunBatch("residual", {&L.cx, &L.cy, &L.cz, &L.sigma, &x, &b, &out},
-             {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode, ColumnLength(L.s)}, ColumnThreads(L.s), nb,
-             x_double ? "#define X_DOUBLE\n" : "");
+             {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode, ColumnLength(L.s)}, ColumnThreads(L.s), Groups(nb),
+             (Fields4() + (x_double ? "#define X_DOUBLE\n" : "")).c_str());
   }
 
   // One V-cycle x = B b on `nb` fields of level l. from_zero false: x holds an initial guess
   // (full multigrid). sweeps > 0: V(sweeps, sweeps) on this level and below, down to the
-  // coarse tail, instead of the options' cycle.
+  // coarse tail, instead of the options' cycle. b and x in the current layout (`packed`).
   void VCycle(size_t l, const Buffer& b, Buffer& x, int nb, bool from_zero = true, int sweeps = 0);
+  // z = B r on the finest level's nb per-field values (one V-cycle), packed where Packed(nb)
+  // and the tail does not start on the finest level (whose tail packs its own fields).
+  void Precondition(const Buffer& r, Buffer& z, int nb);
   // The cpu solver's full-multigrid pass (MultigridOptions::full_multigrid_start) for the
-  // finest-level right-hand sides r: z = its approximate solution. Uses every level's b and x.
+  // finest-level right-hand sides r (per field): z = its approximate solution (per field),
+  // packed where Packed(nb). Uses every level's b and x.
   // With a coarse tail, one V-cycle over the tail's levels stands in for the exact coarse solve
   // (the tail runs as one dispatch), so the pass differs from the per-level one there.
   void FullMultigrid(const Buffer& r, Buffer& z, int nb);
+  void FullMultigridLevels(const Buffer& r, Buffer& z, int nb);  // in the current layout
   // The level the pass solves on before going up: the coarse tail's first or the coarsest.
   size_t FullMultigridTop() const { return std::min(tail_level, levels.size() - 1); }
 
@@ -254,11 +297,10 @@ struct GlMultigridSolver::Impl {
   // The coarse tail (tail.comp, docs/gpu.md): levels tail_level.. (the levels with at most
   // tail_nodes nodes, at least two of them) run their V-cycle in one dispatch; tail_level ==
   // levels.size(): no tail. tail_coef: their coefficients, packed; tail_work: tail_stride
-  // values per field; tail_work4: tail_stride vec4 per four fields (tail_fields 4).
-  // tail_fields: Tuning::tail_fields, the fields one tail work group solves in batches of
-  // three or more fields (fewer fields leave too few work groups for the threads of llvmpipe).
+  // values per field; tail_work4: tail_stride vec4 per four fields (Packed batches).
+  // pack_fields: Tuning::pack_fields unless SetPackFields changed it.
   int64_t tail_nodes = 0;
-  int tail_fields = 1;
+  int pack_fields = 1;
   size_t tail_level = 0;
   Buffer tail_coef, tail_work, tail_work4;
   int64_t tail_stride = 0;
@@ -269,11 +311,12 @@ struct GlMultigridSolver::Impl {
   void PackLevels();
   void CopyTailCoefficients();
   // Whether SolveDevice runs each CG iteration of nb fields as one dispatch (tail.comp's
-  // CG_ITERATION): the tail covers the whole hierarchy and groups of four fields are in use.
+  // CG_ITERATION): the tail covers the whole hierarchy and the batch is Packed.
   bool CgIterationInTail(int nb) const;
   // Sizes tail_work and tail_work4 for `fields` fields.
   void AllocTailWork(int fields);
-  // tail.comp on nb fields: x = B b from level tail_level down (tail_fields per work group).
+  // tail.comp on nb fields: x = B b from level tail_level down, four fields per work group
+  // where Packed(nb) (b and x per field, or packed while `packed`).
   void Tail(const Buffer& b, Buffer& x, int nb);
 
   // a . b of every field (double) into scal[f kCgStride + slot]; Dot2 also a . c into slot + 1.

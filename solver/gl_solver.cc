@@ -136,10 +136,10 @@ const Tuning& GetTuning() {
     // group of TL_GROUP invocations covers in a few nodes each.
     t.tail_nodes = 4096;
     t.tail_group = cpu ? 8 : 256;
-    t.tail_fields = cpu ? 4 : 1;
+    t.pack_fields = cpu ? 4 : 1;
     if (const char* tail = std::getenv("TRANSLUME_GL_TAIL_NODES")) t.tail_nodes = std::atoll(tail);
     if (const char* g = std::getenv("TRANSLUME_GL_TAIL_GROUP")) t.tail_group = std::atoi(g);
-    if (const char* f = std::getenv("TRANSLUME_GL_TAIL_FIELDS")) t.tail_fields = std::atoi(f) == 4 ? 4 : 1;
+    if (const char* f = std::getenv("TRANSLUME_GL_PACK_FIELDS")) t.pack_fields = std::atoi(f) == 4 ? 4 : 1;
     return t;
   }();
   return tuning;
@@ -344,7 +344,7 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
   }
   I.max_batch = int(std::max<int64_t>(1, most));
   I.tail_nodes = gl_internal::GetTuning().tail_nodes;
-  I.tail_fields = gl_internal::GetTuning().tail_fields;
+  I.pack_fields = gl_internal::GetTuning().pack_fields;
   I.PackLevels();
   I.Reserve(1);
 }
@@ -423,9 +423,9 @@ void GlMultigridSolver::Impl::Tail(const Buffer& b, Buffer& x, int nb) {
   const Buffer& minv = dense_coarse ? coarse_inverse : tail_coef;  // unread without dense
   // One work group of tail_group invocations per field (Run's tiling makes one group of
   // `group` threads).
-  const bool four = tail_fields == 4 && nb >= 3;
-  const std::string defines =
-      fmt::format("#define TL_GROUP {}\n#define TAIL_FIELDS {}\n", GetTuning().tail_group, four ? 4 : 1);
+  const bool four = Packed(nb);
+  const std::string defines = fmt::format("#define TL_GROUP {}\n{}{}", GetTuning().tail_group,
+                                          four ? "#define FIELDS4\n" : "", packed ? "#define PACKED_IO\n" : "");
   RunBatch("tail", {&tail_coef, &xfer_idx, &xfer_w, &minv, &b, &x, four ? &tail_work4 : &tail_work},
            {int(tail_level), int(levels.size() - tail_level), options.pre_smoothing, options.coarse_smoothing,
             dense_coarse ? 1 : 0, coarse_sweeps, int(tail_stride), GetTuning().columns ? 1 : 0, nb},
@@ -433,7 +433,7 @@ void GlMultigridSolver::Impl::Tail(const Buffer& b, Buffer& x, int nb) {
 }
 
 bool GlMultigridSolver::Impl::CgIterationInTail(int nb) const {
-  return tail_level == 0 && tail_fields == 4 && nb >= 3;
+  return tail_level == 0 && Packed(nb);
 }
 
 void GlMultigridSolver::Impl::AllocTailWork(int fields) {
@@ -457,17 +457,41 @@ int GlMultigridSolver::coarse_tail_levels() const {
 void GlMultigridSolver::Impl::Reserve(int fields) {
   TL_CHECK(fields >= 1 && fields <= max_batch);
   if (fields <= capacity) return;
+  const int64_t slots = pack_fields == 4 ? (fields + 3) / 4 * 4 : fields;  // whole groups of four
   for (size_t l = 0; l < levels.size(); ++l) {
     GLevel& L = *levels[l];
-    for (Buffer* b : {&L.b, &L.x, &L.r}) b->Alloc(L.n * 4 * fields);
+    for (Buffer* b : {&L.b, &L.x, &L.r}) b->Alloc(L.n * 4 * slots);
   }
-  for (Buffer* b : {&r, &z, &p, &q}) b->Alloc(n0 * 4 * fields);
+  for (Buffer* b : {&r, &z, &p}) b->Alloc(n0 * 4 * fields);
+  q.Alloc(n0 * 4 * slots);
+  for (size_t l = 0; l < levels.size(); ++l) {
+    GLevel& L = *levels[l];
+    L.b4.ViewOf(l == 0 ? q : L.b, Elem::kVec4);
+    L.x4.ViewOf(L.x, Elem::kVec4);
+    L.r4.ViewOf(L.r, Elem::kVec4);
+  }
   xd.Alloc(n0 * 8 * fields, nullptr, Elem::kDouble);
   if (tail_level < levels.size()) AllocTailWork(fields);
   partial.Alloc(DotPartials(DotThreads(n0)) * 2 * 8 * fields, nullptr, Elem::kDouble);
   scal.Alloc(kCgStride * 8 * fields, nullptr, Elem::kDouble);
   hist.Alloc(int64_t(options.max_iterations) * 8 * fields, nullptr, Elem::kDouble);
   capacity = fields;
+}
+
+void GlMultigridSolver::Impl::SetPackFields(int k) {
+  TL_CHECK(k == 1 || k == 4);
+  pack_fields = k;
+  const int fields = capacity;
+  capacity = 0;
+  Reserve(fields);
+}
+
+void GlMultigridSolver::Impl::Pack(const Buffer& per_field, Buffer& packed4, int nb) {
+  RunBatch("pack", {&per_field, &packed4}, {int(n0), nb}, FlatThreads(n0), (nb + 3) / 4);
+}
+
+void GlMultigridSolver::Impl::Unpack(const Buffer& packed4, Buffer& per_field, int nb) {
+  RunBatch("pack", {&per_field, &packed4}, {int(n0), nb}, FlatThreads(n0), (nb + 3) / 4, "#define UNPACK\n");
 }
 
 GlMultigridSolver::~GlMultigridSolver() = default;
@@ -544,7 +568,7 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
   if (from_zero || l + 1 == levels.size()) x.Zero();
   if (l + 1 == levels.size()) {
     if (dense_coarse) {
-      RunBatch("dense_solve", {&coarse_inverse, &b, &x}, {int(L.n)}, L.n, nb);
+      RunBatch("dense_solve", {&coarse_inverse, &b, &x}, {int(L.n)}, L.n, Groups(nb), Fields4().c_str());
       return;
     }
     for (int s = 0; s < coarse_sweeps; ++s) {
@@ -560,33 +584,59 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
     Smooth(L, b, x, 0, nb);
     Smooth(L, b, x, 1, nb);
   }
-  Stencil(L, x, b, L.r, 0, nb);
+  Stencil(L, x, b, LevelR(L), 0, nb);
   GLevel& C = *levels[l + 1];
-  Restrict(l, L.r, C.b, nb);
-  VCycle(l + 1, C.b, C.x, nb, true, sweeps);
-  ProlongAdd(l, C.x, x, nb);
+  Restrict(l, LevelR(L), LevelB(C), nb);
+  VCycle(l + 1, LevelB(C), LevelX(C), nb, true, sweeps);
+  ProlongAdd(l, LevelX(C), x, nb);
   for (int s = 0; s < nu; ++s) {
     Smooth(L, b, x, 1, nb);
     Smooth(L, b, x, 0, nb);
   }
 }
 
+void GlMultigridSolver::Impl::Precondition(const Buffer& r, Buffer& z, int nb) {
+  if (!Packed(nb) || tail_level == 0) {
+    VCycle(0, r, z, nb);
+    return;
+  }
+  GLevel& L = *levels[0];
+  Pack(r, L.b4, nb);
+  packed = true;
+  VCycle(0, L.b4, L.x4, nb);
+  packed = false;
+  Unpack(L.x4, z, nb);
+}
+
 void GlMultigridSolver::Impl::FullMultigrid(const Buffer& r, Buffer& z, int nb) {
+  if (!Packed(nb) || tail_level == 0) {
+    FullMultigridLevels(r, z, nb);
+    return;
+  }
+  GLevel& L = *levels[0];
+  Pack(r, L.b4, nb);
+  packed = true;
+  FullMultigridLevels(L.b4, L.x4, nb);
+  packed = false;
+  Unpack(L.x4, z, nb);
+}
+
+void GlMultigridSolver::Impl::FullMultigridLevels(const Buffer& r, Buffer& z, int nb) {
   // Down to the coarse tail (one V-cycle over the tail's levels there) or the coarsest level.
   const size_t top = FullMultigridTop();
   const Buffer* fine = &r;
   for (size_t l = 0; l < top; ++l) {
-    Restrict(l, *fine, levels[l + 1]->b, nb);
-    fine = &levels[l + 1]->b;
+    Restrict(l, *fine, LevelB(*levels[l + 1]), nb);
+    fine = &LevelB(*levels[l + 1]);
   }
-  VCycle(top, levels[top]->b, levels[top]->x, nb);
+  VCycle(top, LevelB(*levels[top]), LevelX(*levels[top]), nb);
   for (size_t l = top; l-- > 0;) {
     GLevel& L = *levels[l];
-    Buffer& x = l == 0 ? z : L.x;
+    Buffer& x = l == 0 ? z : LevelX(L);
     x.Zero();
-    ProlongAdd(l, levels[l + 1]->x, x, nb);
+    ProlongAdd(l, LevelX(*levels[l + 1]), x, nb);
     if (l > 0) {
-      VCycle(l, L.b, x, nb, false, 1);
+      VCycle(l, LevelB(L), x, nb, false, 1);
     } else {
       for (int s = 0; s < options.full_multigrid_sweeps; ++s) {
         Smooth(L, r, z, s % 2, nb);
@@ -630,7 +680,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
     read();
   };
   auto restart = [&] {
-    VCycle(0, r, z, nb);
+    Precondition(r, z, nb);
     p.CopyFrom(z, n * 4 * nb);
     Dot(r, z, kCgRz, nb);
   };
@@ -686,7 +736,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
   while (any && it < max_it) {
     if (fused) {
       const std::string defines =
-          fmt::format("#define TL_GROUP {}\n#define TAIL_FIELDS 4\n#define CG_ITERATION\n", GetTuning().tail_group);
+          fmt::format("#define TL_GROUP {}\n#define FIELDS4\n#define CG_ITERATION\n", GetTuning().tail_group);
       RunBatch("tail", {&tail_coef, &xfer_idx, &xfer_w, dense_coarse ? &coarse_inverse : &tail_coef, &r, &p, &tail_work4, &x, &scal, &hist},
                {0, int(levels.size()), options.pre_smoothing, options.coarse_smoothing, dense_coarse ? 1 : 0,
                 coarse_sweeps, int(tail_stride), GetTuning().columns ? 1 : 0, nb, max_it},
@@ -696,7 +746,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
       Dot(p, q, kCgPq, nb);
       RunBatch("cg_update", {&x, &r, &p, &q, &scal}, {int(n)}, FlatThreads(n), nb);
       // Precondition before looking at the residual: both dots from one pass.
-      VCycle(0, r, z, nb);
+      Precondition(r, z, nb);
       Dot2(r, r, z, kCgRr, nb);  // rr and rz_new
       RunBatch("cg_update", {&p, &z, &z, &z, &scal}, {int(n)}, FlatThreads(n), nb,
                "#define DIRECTION\n");

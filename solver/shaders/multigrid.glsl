@@ -14,9 +14,9 @@
 // them with #define; the prefix keeps those macros off other identifiers).
 //
 // The field values (mg_b, mg_x, mg_y, mg_src) are MG_VALUE, loaded with MG_LDV: float and LD
-// (one field per value) unless the includer defines them, as tail.comp does with vec4 and LD4
-// to carry four fields per node (the coefficients and transfer weights, read once, then serve
-// all four). MG_DVALUE is the matching double type.
+// (one field per value), or vec4 and LD4 under FIELDS4 (common.glsl: four fields per node, so
+// that the coefficients and transfer weights, read once, serve all four). MG_DVALUE is the
+// matching double type.
 #ifndef MG_VALUE
 #define MG_VALUE float
 #define MG_DVALUE double

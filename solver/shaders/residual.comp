@@ -2,7 +2,8 @@
 // mode 0: out = b - A x (residual); mode 1: out = A x (operator application), A in the
 // difference form A x_p = sigma_p x_p + sum_q c_pq (x_p - x_q) (assemble.comp; the per-node
 // body is multigrid.glsl's ResidualColumn). Batched: x, b and out hold one field per work-group
-// z (common.glsl); the coefficients are read once per node for all of them by the cache. Each
+// z, or four under FIELDS4 (common.glsl); the coefficients are read once per node for all of
+// them by the cache. Each
 // invocation walks a z-column of kz nodes (Column).
 // With X_DOUBLE defined, x is double and the sum accumulates in double: the conjugate-gradient
 // iterate is kept in double so that its residual can reach 1e-6 (a float iterate stalls at a
@@ -17,10 +18,10 @@ DOUBLES(4, X, mg_x, readonly);
 #define ACC_C double
 #define LDX LDD
 #else
-FLOATS(4, X, mg_x, readonly);
+VALUES(4, X, mg_x, readonly);
 #endif
-FLOATS(5, B, mg_b, readonly);
-FLOATS(6, Out, mg_y, writeonly);
+VALUES(5, B, mg_b, readonly);
+VALUES(6, Out, mg_y, writeonly);
 layout(location = 0) uniform int nx;
 layout(location = 1) uniform int ny;
 layout(location = 2) uniform int nz;

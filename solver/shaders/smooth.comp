@@ -2,14 +2,14 @@
 // One half-sweep of red-black (zebra) z-line Gauss-Seidel on one level: every column (i, j)
 // with (i + j) % 2 == color solves its tridiagonal z-system exactly, the neighbouring columns
 // (the other colour) held fixed (multigrid.glsl's SmoothLine). One column per invocation.
-// Batched: b and x hold one field per work-group z (common.glsl).
+// Batched: b and x hold one field per work-group z, or four under FIELDS4 (common.glsl).
 FLOATS(0, Cx, mg_cx, readonly);
 FLOATS(1, Cy, mg_cy, readonly);
 FLOATS(2, Cz, mg_cz, readonly);
 FLOATS(3, Inv, mg_inv, readonly);
 FLOATS(4, Luc, mg_luc, readonly);
-FLOATS(5, B, mg_b, readonly);
-FLOATS(6, X, mg_x, restrict);
+VALUES(5, B, mg_b, readonly);
+VALUES(6, X, mg_x, restrict);
 layout(location = 0) uniform int nx;
 layout(location = 1) uniform int ny;
 layout(location = 2) uniform int nz;

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
 // The coarse tail of a V-cycle in one dispatch: x = B b on levels first .. first + levels - 1
-// (the last the coarsest), for TAIL_FIELDS fields per work group (work-group z = the group;
+// (the last the coarsest), for one or four (FIELDS4) fields per work group (work-group z = the group;
 // its invocations loop over each step's columns or values, a barrier between steps). The steps and their per-node math are the per-level path's (gl_solver.cc's VCycle;
 // multigrid.glsl): on each level nu smoothing half-sweep pairs (colours 0, 1; nu = nu_fine on
 // level 0 of the hierarchy, nu_coarse below, MultigridOptions), the residual, the restriction
@@ -18,26 +18,26 @@
 //   level;
 // - b_in / x_out: the first tail level's b and x, one field of n values at f n.
 //
-// TAIL_FIELDS (the host's define, 1 or 4, Tuning::tail_fields): the fields one work group
-// solves. With 4, group g solves fields 4 g .. 4 g + 3 (those below `fields`) and work holds
-// their values interleaved, one vec4 per node (field 4 g + c in component c), so that every
-// load of a coefficient, index or weight serves four fields and one load brings a node's four
-// values (multigrid.glsl's MG_VALUE).
-#ifndef TAIL_FIELDS
-#define TAIL_FIELDS 1
+// FIELDS4 (common.glsl; Tuning::pack_fields): a work group solves four fields, g: fields
+// 4 g .. 4 g + 3 (those below `fields`), and work holds their values interleaved, one vec4
+// per node, so that every load of a coefficient, index or weight serves four fields and one
+// load brings a node's four values. b_in and x_out then hold one field per n values (the
+// caller's per-field buffers), or with PACKED_IO four (a packed V-cycle's level buffers).
+#if defined(FIELDS4) && defined(PACKED_IO)
+VALUES(4, BIn, b_in, readonly);
+VALUES(5, XOut, x_out, writeonly);
+#elif !defined(CG_ITERATION)
+FLOATS(4, BIn, b_in, readonly);
+FLOATS(5, XOut, x_out, writeonly);
 #endif
-#if TAIL_FIELDS == 4
-#define MG_VALUE vec4
-#define MG_DVALUE dvec4
-#define MG_LDV LD4
-VEC4S(6, Work, work, coherent);
-#else
-FLOATS(6, Work, work, coherent);
-#endif
+VALUES(6, Work, work, coherent);
 FLOATS(0, Coef, coef, readonly);
 INTS(1, Idx, mg_idx, readonly);
 FLOATS(2, Wts, mg_wts, readonly);
 FLOATS(3, Minv, mg_minv, readonly);
+#if defined(CG_ITERATION) && !defined(FIELDS4)
+#error CG_ITERATION needs FIELDS4
+#endif
 #ifdef CG_ITERATION
 FLOATS(4, R, r_f, restrict);
 FLOATS(5, P, p_f, restrict);
@@ -45,9 +45,6 @@ DOUBLES(7, X, xd, restrict);
 DOUBLES(8, Scal, scal, restrict);
 DOUBLES(9, Hist, hist, writeonly);
 layout(location = 9) uniform int max_iterations;
-#else
-FLOATS(4, BIn, b_in, readonly);
-FLOATS(5, XOut, x_out, writeonly);
 #endif
 layout(location = 0) uniform int first;   // the first tail level
 layout(location = 1) uniform int levels;  // tail levels (>= 2), the last the coarsest
@@ -94,25 +91,25 @@ int lid, group, fw;  // this invocation in the group, the group's size, this gro
 #ifndef CG_ITERATION
 // Node e of the first tail level's b (of n0 nodes) for this group's fields, and x_out = v.
 MG_VALUE LoadIn(int e, int n0) {
-#if TAIL_FIELDS == 4
+#if defined(PACKED_IO) || !defined(FIELDS4)
+  return MG_LDV(b_in, int(Field()) * n0 + e);
+#else
   vec4 v = vec4(0.0);
   for (int c = 0; c < 4; ++c) {
     int f = 4 * int(Field()) + c;
     if (f < fields) v[c] = LD(b_in, f * n0 + e);
   }
   return v;
-#else
-  return LD(b_in, int(Field()) * n0 + e);
 #endif
 }
 void StoreOut(int e, int n0, MG_VALUE v) {
-#if TAIL_FIELDS == 4
+#if defined(PACKED_IO) || !defined(FIELDS4)
+  ST(x_out, int(Field()) * n0 + e, v);
+#else
   for (int c = 0; c < 4; ++c) {
     int f = 4 * int(Field()) + c;
     if (f < fields) ST(x_out, f * n0 + e, v[c]);
   }
-#else
-  ST(x_out, int(Field()) * n0 + e, v);
 #endif
 }
 #endif
@@ -182,7 +179,7 @@ void VCycleWork() {
 
 #ifdef CG_ITERATION
 // One iteration of SolveDevice's batched conjugate gradients (gl_solver.cc) in one dispatch,
-// where the tail is the whole hierarchy (first == 0, TAIL_FIELDS 4): the stencil q = A p, the
+// where the tail is the whole hierarchy (first == 0, FIELDS4): the stencil q = A p, the
 // dot p.q, cg_update.comp's x += alpha p and r -= alpha q, the V-cycle z = B r, the dots r.r
 // and r.z, the direction p = z + beta p and cg_scalars.comp's bookkeeping, with the same
 // per-field arithmetic. p, q and z stay in work (P, Q: the last 2 n0 values of the group's

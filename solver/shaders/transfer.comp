@@ -3,9 +3,10 @@
 // (multigrid.glsl's Restrict3Value / Prolong3Value over the packed transfers mg_idx, mg_wts):
 // by default the restriction dst = R src (src: the level's values, dst: the coarse level's);
 // with PROLONG defined the prolongation dst (+)= P src (add != 0 adds into dst). A grid-stride
-// loop over the output values. Batched: one field of each level per work-group z.
-FLOATS(0, In, mg_src, readonly);
-FLOATS(1, Out, dst, restrict);
+// loop over the output values. Batched: one field of each level per work-group z, or four
+// under FIELDS4 (common.glsl).
+VALUES(0, In, mg_src, readonly);
+VALUES(1, Out, dst, restrict);
 INTS(2, Idx, mg_idx, readonly);
 FLOATS(3, Wts, mg_wts, readonly);
 layout(location = 0) uniform int level;
@@ -20,8 +21,8 @@ void main() {
 #ifdef PROLONG
   for (uint e = ThreadIndex(); e < uint(fine); e += Stride()) {
     int d = f * fine + int(e);
-    float s = Prolong3Value(int(e), X, Y, Z, f * coarse);
-    ST(dst, d, add != 0 ? LD(dst, d) + s : s);
+    MG_VALUE s = Prolong3Value(int(e), X, Y, Z, f * coarse);
+    ST(dst, d, add != 0 ? MG_LDV(dst, d) + s : s);
   }
 #else
   for (uint e = ThreadIndex(); e < uint(coarse); e += Stride())
