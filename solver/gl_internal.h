@@ -215,6 +215,11 @@ struct GlMultigridSolver::Impl {
   // kCgStride doubles) and hist (max_iterations recursive rr values).
   Buffer r, z, p, q, partial, scal, hist;
   Buffer xd;
+  // A packed solve (Packed(nb)) runs on four fields per value throughout (common.glsl's
+  // FIELDS4): r4, z4, p4, q4 are vec4 views of r, z, p, q (which then hold whole groups of
+  // four), b_packed and x_packed the packed right-hand sides and iterates (x: four consecutive
+  // doubles per node), packed from and unpacked into the caller's per-field b and x.
+  Buffer r4, z4, p4, q4, b_packed, x_packed;
   Buffer coarse_inverse;  // dense inverse of the coarsest operator (when small enough)
   bool dense_coarse = false;
   int64_t n0 = 0;
@@ -244,9 +249,10 @@ struct GlMultigridSolver::Impl {
   Buffer& LevelB(GLevel& L) { return packed ? L.b4 : L.b; }
   Buffer& LevelX(GLevel& L) { return packed ? L.x4 : L.x; }
   Buffer& LevelR(GLevel& L) { return packed ? L.r4 : L.r; }
-  // packed = the nb per-field values of `per_field` (n0 each) four to a vec4, or the reverse.
-  void Pack(const Buffer& per_field, Buffer& packed4, int nb);
-  void Unpack(const Buffer& packed4, Buffer& per_field, int nb);
+  // packed = the nb per-field values of `per_field` (n0 each) four to a vec4, or the reverse;
+  // with `doubles` both hold doubles (four consecutive ones per node when packed).
+  void Pack(const Buffer& per_field, Buffer& packed4, int nb, bool doubles = false);
+  void Unpack(const Buffer& packed4, Buffer& per_field, int nb, bool doubles = false);
 
   // c = R f (level l to l + 1) and f += P c (level l + 1 to l) on nb fields: one dispatch
   // each (transfer.comp).
@@ -320,15 +326,21 @@ struct GlMultigridSolver::Impl {
   void Tail(const Buffer& b, Buffer& x, int nb);
 
   // a . b of every field (double) into scal[f kCgStride + slot]; Dot2 also a . c into slot + 1.
+  // (In the current layout: `packed`.)
   void Dot(const Buffer& a, const Buffer& b, int slot, int nb) {
-    RunBatch("dot", {&a, &b, &partial}, {int(n0)}, DotThreads(n0), nb);
+    RunBatch("dot", {&a, &b, &partial}, {int(n0), nb}, DotThreads(n0), Groups(nb), Fields4().c_str());
     const int64_t m = DotPartials(DotThreads(n0));
     RunBatch("reduce", {&partial, &scal}, {int(m), slot, 1, kCgStride}, GetTuning().group, nb);
   }
   void Dot2(const Buffer& a, const Buffer& b, const Buffer& c, int slot, int nb) {
-    RunBatch("dot", {&a, &b, &partial, &c}, {int(n0)}, DotThreads(n0), nb, "#define PAIR\n");
+    RunBatch("dot", {&a, &b, &partial, &c}, {int(n0), nb}, DotThreads(n0), Groups(nb),
+             (Fields4() + "#define PAIR\n").c_str());
     const int64_t m = DotPartials(DotThreads(n0));
     RunBatch("reduce", {&partial, &scal}, {int(m), slot, 2, kCgStride}, GetTuning().group, nb);
+  }
+  // cg_update.comp in `mode` ("" or "#define DIRECTION\n" or "#define ADD\n"), current layout.
+  void CgUpdate(std::initializer_list<const Buffer*> buffers, const char* mode, int nb) {
+    RunBatch("cg_update", buffers, {int(n0), nb}, FlatThreads(n0), Groups(nb), (Fields4() + mode).c_str());
   }
 
   // Multigrid-PCG on `nb` fields at once, in lockstep (every dispatch serves all of them): b

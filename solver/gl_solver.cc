@@ -462,8 +462,15 @@ void GlMultigridSolver::Impl::Reserve(int fields) {
     GLevel& L = *levels[l];
     for (Buffer* b : {&L.b, &L.x, &L.r}) b->Alloc(L.n * 4 * slots);
   }
-  for (Buffer* b : {&r, &z, &p}) b->Alloc(n0 * 4 * fields);
-  q.Alloc(n0 * 4 * slots);
+  for (Buffer* b : {&r, &z, &p, &q}) b->Alloc(n0 * 4 * slots);
+  r4.ViewOf(r, Elem::kVec4);
+  z4.ViewOf(z, Elem::kVec4);
+  p4.ViewOf(p, Elem::kVec4);
+  q4.ViewOf(q, Elem::kVec4);
+  if (pack_fields == 4) {
+    b_packed.Alloc(n0 * 4 * slots, nullptr, Elem::kVec4);
+    x_packed.Alloc(n0 * 8 * slots, nullptr, Elem::kDouble);
+  }
   for (size_t l = 0; l < levels.size(); ++l) {
     GLevel& L = *levels[l];
     L.b4.ViewOf(l == 0 ? q : L.b, Elem::kVec4);
@@ -486,12 +493,14 @@ void GlMultigridSolver::Impl::SetPackFields(int k) {
   Reserve(fields);
 }
 
-void GlMultigridSolver::Impl::Pack(const Buffer& per_field, Buffer& packed4, int nb) {
-  RunBatch("pack", {&per_field, &packed4}, {int(n0), nb}, FlatThreads(n0), (nb + 3) / 4);
+void GlMultigridSolver::Impl::Pack(const Buffer& per_field, Buffer& packed4, int nb, bool doubles) {
+  RunBatch("pack", {&per_field, &packed4}, {int(n0), nb}, FlatThreads(n0), (nb + 3) / 4,
+           doubles ? "#define DOUBLE\n" : "");
 }
 
-void GlMultigridSolver::Impl::Unpack(const Buffer& packed4, Buffer& per_field, int nb) {
-  RunBatch("pack", {&per_field, &packed4}, {int(n0), nb}, FlatThreads(n0), (nb + 3) / 4, "#define UNPACK\n");
+void GlMultigridSolver::Impl::Unpack(const Buffer& packed4, Buffer& per_field, int nb, bool doubles) {
+  RunBatch("pack", {&per_field, &packed4}, {int(n0), nb}, FlatThreads(n0), (nb + 3) / 4,
+           doubles ? "#define UNPACK\n#define DOUBLE\n" : "#define UNPACK\n");
 }
 
 GlMultigridSolver::~GlMultigridSolver() = default;
@@ -596,7 +605,7 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
 }
 
 void GlMultigridSolver::Impl::Precondition(const Buffer& r, Buffer& z, int nb) {
-  if (!Packed(nb) || tail_level == 0) {
+  if (packed || !Packed(nb) || tail_level == 0) {
     VCycle(0, r, z, nb);
     return;
   }
@@ -609,7 +618,7 @@ void GlMultigridSolver::Impl::Precondition(const Buffer& r, Buffer& z, int nb) {
 }
 
 void GlMultigridSolver::Impl::FullMultigrid(const Buffer& r, Buffer& z, int nb) {
-  if (!Packed(nb) || tail_level == 0) {
+  if (packed || !Packed(nb) || tail_level == 0) {
     FullMultigridLevels(r, z, nb);
     return;
   }
@@ -653,10 +662,26 @@ void GlMultigridSolver::Impl::FullMultigridLevels(const Buffer& r, Buffer& z, in
 // check_every iterations; when no field is active it verifies every frozen field's true
 // residual b - A x (double x) and restarts those that miss the tolerance (at most 3 times,
 // then "stagnated"), as the cpu solver does.
-std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, Buffer& x, int nb) {
+std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_fields, Buffer& x_fields,
+                                                               int nb) {
   const auto t0 = std::chrono::steady_clock::now();
   Reserve(nb);
   GLevel& L = *levels[0];
+  // The layout of the whole solve: packed (four fields per value) or one field per n values.
+  struct Layout {
+    bool& flag;
+    Layout(bool& f, bool on) : flag(f) { flag = on; }
+    ~Layout() { flag = false; }
+  } layout(packed, Packed(nb));
+  if (packed) {
+    Pack(b_fields, b_packed, nb);
+    Pack(x_fields, x_packed, nb, true);
+  }
+  const Buffer& b = packed ? b_packed : b_fields;
+  Buffer& x = packed ? x_packed : x_fields;
+  Buffer &r = packed ? r4 : this->r, &z = packed ? z4 : this->z;
+  Buffer &p = packed ? p4 : this->p, &q = packed ? q4 : this->q;
+  const int64_t slots = packed ? (nb + 3) / 4 * 4 : nb;
   const int64_t n = n0;
   const int max_it = options.max_iterations;
   const double tol = options.tolerance;
@@ -681,7 +706,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
   };
   auto restart = [&] {
     Precondition(r, z, nb);
-    p.CopyFrom(z, n * 4 * nb);
+    p.CopyFrom(z, n * 4 * slots);
     Dot(r, z, kCgRz, nb);
   };
 
@@ -693,7 +718,8 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
     const double bb = at(f, kCgBb);
     if (bb == 0) {
       const std::vector<double> zeros(n, 0.0);
-      x.Upload(zeros.data(), n * 8, int64_t(f) * n * 8);
+      x_fields.Upload(zeros.data(), n * 8, int64_t(f) * n * 8);
+      if (packed) Pack(x_fields, x_packed, nb, true);
       at(f, kCgRr) = 0;
       finish(f, true, "zero right-hand side");
       continue;
@@ -716,7 +742,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
       // x += the full-multigrid approximation of A^-1 r on the active fields, then their new
       // true residuals (a field may already meet the tolerance).
       FullMultigrid(r, z, nb);
-      RunBatch("cg_update", {&x, &r, &z, &z, &scal}, {int(n)}, FlatThreads(n), nb, "#define ADD\n");
+      CgUpdate({&x, &r, &z, &z, &scal}, "#define ADD\n", nb);
       true_residual();
       any = false;
       for (int f = 0; f < nb; ++f) {
@@ -744,12 +770,11 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
     } else {
       Stencil(L, p, p, q, 1, nb);
       Dot(p, q, kCgPq, nb);
-      RunBatch("cg_update", {&x, &r, &p, &q, &scal}, {int(n)}, FlatThreads(n), nb);
+      CgUpdate({&x, &r, &p, &q, &scal}, "", nb);
       // Precondition before looking at the residual: both dots from one pass.
       Precondition(r, z, nb);
       Dot2(r, r, z, kCgRr, nb);  // rr and rz_new
-      RunBatch("cg_update", {&p, &z, &z, &z, &scal}, {int(n)}, FlatThreads(n), nb,
-               "#define DIRECTION\n");
+      CgUpdate({&p, &z, &z, &z, &scal}, "#define DIRECTION\n", nb);
       Run("cg_scalars", {&scal, &hist}, {nb, max_it}, nb);
     }
     ++it;
@@ -782,6 +807,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b, 
     for (int f = 0; f < nb; ++f)
       if (!done[f]) finish(f, false, fmt::format("reached max_iterations = {}", max_it));
   }
+  if (packed) Unpack(x_packed, x_fields, nb, true);
   std::vector<double> h(int64_t(nb) * max_it);
   if (it > 0) hist.Download(h.data(), int64_t(h.size()) * 8);
   const double seconds =

@@ -5,37 +5,75 @@
 //              (buffers x [double], r, p, q, scalars)
 //   DIRECTION: p = z + beta p,  beta = rz_new / rz   (buffers p, z, -, -, scalars)
 //   ADD:       x += p on active fields (the full-multigrid start; buffers x, -, p, -, scalars)
-// x, r, p, q, z hold one field of n values per work-group z; a grid-stride loop (common.glsl).
+// x, r, p, q, z hold one field of n values per work-group z, or under FIELDS4 four fields per
+// vec4 (x: four consecutive doubles per node) with one coefficient per field of the group;
+// fields past `fields` take 0. A grid-stride loop (common.glsl).
 DOUBLES(4, Scal, scal, readonly);
 layout(location = 0) uniform int n;
+layout(location = 1) uniform int fields;
 #ifdef DIRECTION
-FLOATS(0, P, p, restrict);
-FLOATS(1, Z, z, readonly);
+VALUES(0, P, p, restrict);
+VALUES(1, Z, z, readonly);
 #else
 DOUBLES(0, X, x, restrict);
-FLOATS(1, R, r, restrict);
-FLOATS(2, P, p, readonly);
-FLOATS(3, Q, q, readonly);
+VALUES(1, R, r, restrict);
+VALUES(2, P, p, readonly);
+VALUES(3, Q, q, readonly);
 #endif
 
-void main() {
-  uint f = Field(), s = f * uint(kCgStride), o = f * uint(n);
-#ifdef DIRECTION
-  double rz = LDD(scal, s + kCgRz);
-  float beta = rz != 0.0LF ? float(LDD(scal, s + kCgRzNew) / rz) : 0.0;
-  for (uint e = o + ThreadIndex(); e < o + uint(n); e += Stride())
-    ST(p, e, LD(z, e) + beta * LD(p, e));
-#elif defined(ADD)
-  if (LDD(scal, s + kCgActive) == 0.0LF) return;
-  for (uint e = o + ThreadIndex(); e < o + uint(n); e += Stride())
-    STD(x, e, LDD(x, e) + double(LD(p, e)));
+#ifdef FIELDS4
+#define K 4
+#define DCOEF dvec4
 #else
-  double pq = LDD(scal, s + kCgPq);
-  double alpha = LDD(scal, s + kCgActive) != 0.0LF && pq != 0.0LF ? LDD(scal, s + kCgRz) / pq
-                                                                  : 0.0LF;
-  for (uint e = o + ThreadIndex(); e < o + uint(n); e += Stride()) {
-    STD(x, e, LDD(x, e) + alpha * double(LD(p, e)));
-    ST(r, e, LD(r, e) - float(alpha) * LD(q, e));
-  }
+#define K 1
+#define DCOEF double
 #endif
+
+// Slot `slot` of component c's field, or false past the last field.
+bool Slot(int c, int slot, out double v) {
+  int f = int(Field()) * K + c;
+  v = f < fields ? LDD(scal, f * kCgStride + slot) : 0.0LF;
+  return f < fields;
+}
+
+void main() {
+  uint o = Field() * uint(n);
+  DCOEF coef = DCOEF(0.0LF);
+  for (int c = 0; c < K; ++c) {
+    double v0, v1, on;
+    double s = 0.0LF;
+#ifdef DIRECTION
+    if (Slot(c, kCgRz, v0) && v0 != 0.0LF && Slot(c, kCgRzNew, v1)) s = v1 / v0;  // beta
+#elif defined(ADD)
+    if (Slot(c, kCgActive, on) && on != 0.0LF) s = 1.0LF;
+#else
+    if (Slot(c, kCgActive, on) && on != 0.0LF && Slot(c, kCgPq, v0) && v0 != 0.0LF &&
+        Slot(c, kCgRz, v1))
+      s = v1 / v0;  // alpha
+#endif
+#ifdef FIELDS4
+    coef[c] = s;
+#else
+    coef = s;
+#endif
+  }
+#if defined(ADD) && !defined(FIELDS4)
+  if (coef == 0.0LF) return;
+#endif
+  for (uint e = o + ThreadIndex(); e < o + uint(n); e += Stride()) {
+#ifdef DIRECTION
+    ST(p, e, MG_LDV(z, e) + MG_VALUE(coef) * MG_LDV(p, e));
+#else
+#ifdef FIELDS4
+    dvec4 pe = dvec4(LD4(p, e));
+    for (int c = 0; c < 4; ++c)
+      if (coef[c] != 0.0LF) STD(x, 4u * e + uint(c), LDD(x, 4u * e + uint(c)) + coef[c] * pe[c]);
+#else
+    STD(x, e, LDD(x, e) + coef * double(LD(p, e)));
+#endif
+#ifndef ADD
+    ST(r, e, MG_LDV(r, e) - MG_VALUE(coef) * MG_LDV(q, e));
+#endif
+#endif
+  }
 }

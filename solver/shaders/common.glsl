@@ -77,19 +77,23 @@ bool Column(int nx, int ny, int nz, int kz, out int i, out int j, out int k0, ou
 #define STD(a, e, v) a[e] = (v)
 #endif
 
-// FIELDS4 (the host's define for a batched V-cycle, Tuning::pack_fields): the field values of
-// the multigrid kernels come four fields to a vec4 per node, work-group z counting groups of
-// four fields (field 4 g + c in component c of group g; a level's group holds n vec4). The
-// coefficients stay one float per node, read once for four fields. VALUES declares a value
-// array (VEC4S or FLOATS); MG_VALUE, MG_DVALUE and MG_LDV are its type, double type and load
-// (multigrid.glsl).
+// FIELDS4 (the host's define for a batch, Tuning::pack_fields): the field values come four
+// fields to a vec4 per node, work-group z counting groups of four fields (field 4 g + c in
+// component c of group g; a buffer's group holds n vec4). The coefficients stay one float per
+// node, read once for four fields. VALUES declares a value array (VEC4S or FLOATS); MG_VALUE,
+// MG_DVALUE and MG_LDV are its type, double type and load (multigrid.glsl). Double values
+// (the CG iterate) come four fields to four consecutive doubles: LDD4 reads node e's four.
 #ifdef FIELDS4
 #define VALUES VEC4S
 #define MG_VALUE vec4
 #define MG_DVALUE dvec4
 #define MG_LDV LD4
+#define LDD4(a, e) dvec4(LDD(a, 4 * (e)), LDD(a, 4 * (e) + 1), LDD(a, 4 * (e) + 2), LDD(a, 4 * (e) + 3))
 #else
 #define VALUES FLOATS
+#define MG_VALUE float
+#define MG_DVALUE double
+#define MG_LDV LD
 #endif
 
 // Per-field conjugate-gradient scalars (double), kCgStride per field, field f at f * kCgStride

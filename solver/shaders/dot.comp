@@ -3,37 +3,62 @@
 // invocation first summing its elements of a grid-stride loop (common.glsl), then one sum per
 // work group from a shared-memory tree; with TL_INVOCATION_SUMS (llvmpipe, where barriers are
 // coroutine switches) one sum per invocation instead. Batched: a, b, c hold one field of n
-// values per work-group z; partial sum g of field f (G per field) is at partial[(f G + g) W + k],
-// W = 1 or 2 sums.
-FLOATS(0, A, a, readonly);
-FLOATS(1, B, b, readonly);
+// values per work-group z, or four fields per vec4 under FIELDS4 (common.glsl: the sums are
+// then dvec4, one component per field); partial sum g of field f (G per field) is at
+// partial[(f G + g) W + k], W = 1 or 2 sums, for fields f < `fields` only.
+VALUES(0, A, a, readonly);
+VALUES(1, B, b, readonly);
 DOUBLES(2, Partial, partial, writeonly);
+#ifdef FIELDS4
+#define DSUM dvec4
+#define K 4
+#else
+#define DSUM double
+#define K 1
+#endif
 #ifdef PAIR
-FLOATS(3, C, c, readonly);
+VALUES(3, C, c, readonly);
 const uint W = 2u;
-shared double sdata1[TL_GROUP];
+shared DSUM sdata1[TL_GROUP];
 #else
 const uint W = 1u;
 #endif
 layout(location = 0) uniform int n;
-shared double sdata[TL_GROUP];
+layout(location = 1) uniform int fields;
+shared DSUM sdata[TL_GROUP];
+
+// Stores this group's (or invocation's) sums s0, s1 as partial sum g of G of each field.
+void Store(uint g, uint G, DSUM s0, DSUM s1) {
+  for (int c = 0; c < K; ++c) {
+    uint f = Field() * uint(K) + uint(c);
+    if (f >= uint(fields)) return;
+    uint at = (f * G + g) * W;
+#ifdef FIELDS4
+    STD(partial, at, s0[c]);
+#ifdef PAIR
+    STD(partial, at + 1u, s1[c]);
+#endif
+#else
+    STD(partial, at, s0);
+#ifdef PAIR
+    STD(partial, at + 1u, s1);
+#endif
+#endif
+  }
+}
 
 void main() {
   uint l = gl_LocalInvocationID.x, f0 = Field() * uint(n);
-  double s0 = 0.0LF, s1 = 0.0LF;
+  DSUM s0 = DSUM(0.0LF), s1 = DSUM(0.0LF);
   for (uint e = ThreadIndex(); e < uint(n); e += Stride()) {
-    double ae = double(LD(a, f0 + e));
-    s0 += ae * double(LD(b, f0 + e));
+    DSUM ae = DSUM(MG_LDV(a, f0 + e));
+    s0 += ae * DSUM(MG_LDV(b, f0 + e));
 #ifdef PAIR
-    s1 += ae * double(LD(c, f0 + e));
+    s1 += ae * DSUM(MG_LDV(c, f0 + e));
 #endif
   }
 #ifdef TL_INVOCATION_SUMS
-  uint at = (Field() * Stride() + ThreadIndex()) * W;
-  STD(partial, at, s0);
-#ifdef PAIR
-  STD(partial, at + 1u, s1);
-#endif
+  Store(ThreadIndex(), Stride(), s0, s1);
   return;
 #endif
   sdata[l] = s0;
@@ -53,10 +78,10 @@ void main() {
   if (l == 0u) {
     uint groups = gl_NumWorkGroups.x * gl_NumWorkGroups.y;
     uint g = gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
-    uint at = (Field() * groups + g) * W;
-    STD(partial, at, sdata[0]);
 #ifdef PAIR
-    STD(partial, at + 1u, sdata1[0]);
+    Store(g, groups, sdata[0], sdata1[0]);
+#else
+    Store(g, groups, sdata[0], s1);
 #endif
   }
 }

@@ -17,11 +17,6 @@
 // (one field per value), or vec4 and LD4 under FIELDS4 (common.glsl: four fields per node, so
 // that the coefficients and transfer weights, read once, serve all four). MG_DVALUE is the
 // matching double type.
-#ifndef MG_VALUE
-#define MG_VALUE float
-#define MG_DVALUE double
-#define MG_LDV LD
-#endif
 
 // Where a level's coefficients are: its shape and the offsets of its cx, cy, cz, inv, luc and
 // sigma values in their arrays (node p of the level at offset + p).

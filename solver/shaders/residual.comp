@@ -7,12 +7,18 @@
 // invocation walks a z-column of kz nodes (Column).
 // With X_DOUBLE defined, x is double and the sum accumulates in double: the conjugate-gradient
 // iterate is kept in double so that its residual can reach 1e-6 (a float iterate stalls at a
-// few 1e-6: A amplifies the rounding of x).
+// few 1e-6: A amplifies the rounding of x). Under FIELDS4 its four fields' values are four
+// consecutive doubles per node (common.glsl's LDD4).
 FLOATS(0, Cx, mg_cx, readonly);
 FLOATS(1, Cy, mg_cy, readonly);
 FLOATS(2, Cz, mg_cz, readonly);
 FLOATS(3, Sigma, mg_sigma, readonly);
-#ifdef X_DOUBLE
+#if defined(X_DOUBLE) && defined(FIELDS4)
+DOUBLES(4, X, mg_x, readonly);
+#define ACC dvec4
+#define ACC_C double
+#define LDX LDD4
+#elif defined(X_DOUBLE)
 DOUBLES(4, X, mg_x, readonly);
 #define ACC double
 #define ACC_C double

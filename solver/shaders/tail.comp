@@ -39,8 +39,8 @@ FLOATS(3, Minv, mg_minv, readonly);
 #error CG_ITERATION needs FIELDS4
 #endif
 #ifdef CG_ITERATION
-FLOATS(4, R, r_f, restrict);
-FLOATS(5, P, p_f, restrict);
+VALUES(4, R, r_f, restrict);
+VALUES(5, P, p_f, restrict);
 DOUBLES(7, X, xd, restrict);
 DOUBLES(8, Scal, scal, restrict);
 DOUBLES(9, Hist, hist, writeonly);
@@ -183,9 +183,10 @@ void VCycleWork() {
 // dot p.q, cg_update.comp's x += alpha p and r -= alpha q, the V-cycle z = B r, the dots r.r
 // and r.z, the direction p = z + beta p and cg_scalars.comp's bookkeeping, with the same
 // per-field arithmetic. p, q and z stay in work (P, Q: the last 2 n0 values of the group's
-// work; z: level 0's x); r, p and x (double) are the caller's per-field buffers, and scal and
-// hist the per-field scalars and histories (common.glsl's kCg* slots). The dots are summed in
-// double, each invocation's share then the group's (GroupSum).
+// work; z: level 0's x); r, p (vec4) and x (four doubles per node) are the caller's packed
+// buffers (FIELDS4), and scal and hist the per-field scalars and histories (common.glsl's
+// kCg* slots). The dots are summed in double, each invocation's share then the group's
+// (GroupSum).
 shared dvec4 group_sums[TL_GROUP];
 
 // The sum of s over the group's invocations, the same in every invocation.
@@ -200,18 +201,12 @@ dvec4 GroupSum(dvec4 s) {
 }
 
 bool Live(int c) { return 4 * int(Field()) + c < fields; }
-int FieldAt(int c, int n0, int e) { return (4 * int(Field()) + c) * n0 + e; }
 int ScalAt(int c, int slot) { return (4 * int(Field()) + c) * kCgStride + slot; }
 
 void CgIteration() {
-  int n0 = Nodes(0), wp = fw + stride - 2 * n0, wq = fw + stride - n0;
+  int n0 = Nodes(0), wp = fw + stride - 2 * n0, wq = fw + stride - n0, o = int(Field()) * n0;
   int wb = fw + MgMeta(0, kB), wz = fw + MgMeta(0, kX);
-  for (int e = lid; e < n0; e += group) {
-    vec4 v = vec4(0.0);
-    for (int c = 0; c < 4; ++c)
-      if (Live(c)) v[c] = LD(p_f, FieldAt(c, n0, e));
-    ST(work, wp + e, v);
-  }
+  for (int e = lid; e < n0; e += group) ST(work, wp + e, LD4(p_f, o + e));
   Sync();
   StencilLevel(0, 1, wp, wp, wq);
   dvec4 s = dvec4(0.0LF);
@@ -222,14 +217,12 @@ void CgIteration() {
     if (Live(c) && LDD(scal, ScalAt(c, kCgActive)) != 0.0LF && pq[c] != 0.0LF)
       alpha[c] = LDD(scal, ScalAt(c, kCgRz)) / pq[c];
   for (int e = lid; e < n0; e += group) {
-    vec4 p = LD4(work, wp + e), q = LD4(work, wq + e), r = vec4(0.0);
+    vec4 p = LD4(work, wp + e), r = LD4(r_f, o + e) - vec4(alpha) * LD4(work, wq + e);
     for (int c = 0; c < 4; ++c) {
-      if (!Live(c)) continue;
-      int o = FieldAt(c, n0, e);
-      STD(xd, o, LDD(xd, o) + alpha[c] * double(p[c]));
-      r[c] = LD(r_f, o) - float(alpha[c]) * q[c];
-      ST(r_f, o, r[c]);
+      int at = 4 * (o + e) + c;
+      if (Live(c)) STD(xd, at, LDD(xd, at) + alpha[c] * double(p[c]));
     }
+    ST(r_f, o + e, r);
     ST(work, wb + e, r);
   }
   VCycleWork();
@@ -246,11 +239,7 @@ void CgIteration() {
     double rz_old = Live(c) ? LDD(scal, ScalAt(c, kCgRz)) : 0.0LF;
     if (rz_old != 0.0LF) beta[c] = float(rz[c] / rz_old);
   }
-  for (int e = lid; e < n0; e += group) {
-    vec4 p = LD4(work, wz + e) + beta * LD4(work, wp + e);
-    for (int c = 0; c < 4; ++c)
-      if (Live(c)) ST(p_f, FieldAt(c, n0, e), p[c]);
-  }
+  for (int e = lid; e < n0; e += group) ST(p_f, o + e, LD4(work, wz + e) + beta * LD4(work, wp + e));
   barrier();  // every invocation has read the scalars
   if (lid != 0) return;
   for (int c = 0; c < 4; ++c) {
