@@ -240,7 +240,11 @@ struct GlMultigridSolver::Impl {
   void SetPackFields(int k);
   // Whether the V-cycles of nb fields run packed, four fields per vec4 (FIELDS4): pack_fields
   // is 4 and nb >= 3 (fewer fields would leave llvmpipe's threads too few work groups).
-  bool Packed(int nb) const { return pack_fields == 4 && nb >= 3; }
+  // The rounding up to whole groups must stay within max_batch (the buffers' limits).
+  bool Packed(int nb) const { return pack_fields == 4 && nb >= 3 && (nb + 3) / 4 * 4 <= max_batch; }
+  // The fields' slots of a packed batch of `fields` (whole groups of four, within max_batch;
+  // else `fields`).
+  int Slots4(int fields) const { return (fields + 3) / 4 * 4 <= max_batch ? (fields + 3) / 4 * 4 : fields; }
   // True while a packed V-cycle runs on the levels' b4, x4, r4 (Precondition, FullMultigrid):
   // the multigrid dispatches then take FIELDS4 and one work group per four fields.
   bool packed = false;

@@ -342,6 +342,8 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
     api.GetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &texels);
     most = std::min<int64_t>(most, texels / I.n0);
   }
+  // Packed batches (Impl::Packed) hold whole groups of four fields.
+  if (gl_internal::GetTuning().pack_fields == 4 && most >= 4) most = most / 4 * 4;
   I.max_batch = int(std::max<int64_t>(1, most));
   I.tail_nodes = gl_internal::GetTuning().tail_nodes;
   I.pack_fields = gl_internal::GetTuning().pack_fields;
@@ -457,7 +459,7 @@ int GlMultigridSolver::coarse_tail_levels() const {
 void GlMultigridSolver::Impl::Reserve(int fields) {
   TL_CHECK(fields >= 1 && fields <= max_batch);
   if (fields <= capacity) return;
-  const int64_t slots = pack_fields == 4 ? (fields + 3) / 4 * 4 : fields;  // whole groups of four
+  const int64_t slots = pack_fields == 4 ? Slots4(fields) : fields;
   for (size_t l = 0; l < levels.size(); ++l) {
     GLevel& L = *levels[l];
     for (Buffer* b : {&L.b, &L.x, &L.r}) b->Alloc(L.n * 4 * slots);
