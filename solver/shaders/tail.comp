@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // The coarse tail of a V-cycle in one dispatch: x = B b on levels first .. first + levels - 1
-// (the last the coarsest), for one or four (FIELDS4) fields per work group (work-group z = the group;
-// its invocations loop over each step's columns or values, a barrier between steps). The steps and their per-node math are the per-level path's (gl_solver.cc's VCycle;
+// (the last the coarsest), for one or four (FIELDS4) fields per work group (work-group z = the
+// group; its invocations loop over each step's columns or values, a barrier between steps).
+// The steps and their per-node math are the per-level path's (gl_solver.cc's VCycle;
 // multigrid.glsl): on each level nu smoothing half-sweep pairs (colours 0, 1; nu = nu_fine on
 // level 0 of the hierarchy, nu_coarse below, MultigridOptions), the residual, the restriction
 // to the next level's b; on the coarsest the dense inverse (dense != 0) or coarse_sweeps sweep
@@ -15,8 +16,10 @@
 //   coef of cx, cy, cz, inv, luc, sigma (kCoef..) and the offsets in a group's work of b, x, r
 //   (kB, kX, kR), then the transfers;
 // - work (coherent): `stride` values per group, group g's at g stride: b, x, r of every tail
-//   level;
-// - b_in / x_out: the first tail level's b and x, one field of n values at f n.
+//   level (and, when the tail starts on the finest level, that level's p and q last:
+//   CG_ITERATION);
+// - b_in / x_out: the first tail level's b and x, one field of n values at f n (or packed,
+//   below).
 //
 // FIELDS4 (common.glsl; Tuning::pack_fields): a work group solves four fields, g: fields
 // 4 g .. 4 g + 3 (those below `fields`), and work holds their values interleaved, one vec4
