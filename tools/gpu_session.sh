@@ -12,8 +12,9 @@
 # is skipped): nvidia-smi, gl-info, the full RGB recovery with 16 conditions on the Wax I grid
 # on the gl backend, the renderbench on the 253-cube bunny (16^3 nodes and 16^3 cells per cube,
 # no frame coherence), the same recovery on the Marble grid, bench forward --backend gl on Wax
-# I, Marble and 129^3 with a batch of 16 (the cpu solver as the peer), and the cpu backend as
-# the recovery's peer on Wax I (time-capped: its seconds per iteration is the comparison).
+# I, Marble and 129^3 with a batch of 16 (the cpu solver as the peer), the cpu backend as
+# the recovery's peer on Wax I (time-capped: its seconds per iteration is the comparison), and
+# the Wax I and Marble batches again with four fields per value (TRANSLUME_GL_PACK_FIELDS=4).
 #
 # Output: "$OUT" (the device tool's output folder; default ./gpu-session): session.log (every
 # step's full output, in order), summary.md (the figures for docs/benchmarks.md, also printed
@@ -30,7 +31,7 @@ while [ $# -gt 0 ]; do
     --quick) quick=1 ;;
     --bundle) bundle=$2; shift ;;
     --budget) budget=$2; shift ;;
-    -h|--help) sed -n '3,22p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '3,23p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "gpu_session.sh: unknown argument '$1' (--quick, --bundle DIR, --budget SECONDS)" >&2; exit 2 ;;
   esac
   shift
@@ -97,13 +98,13 @@ step() {
 
 if [ $quick = 1 ]; then
   # One small grid: llvmpipe spends ~40 s per grid timing the 256 MiB copy kernel.
-  grids=17x13x9; repeats=1; batch=4
+  grids=17x13x9; pack_grids=$grids; repeats=1; batch=4
   render_args=(--shapes bunny --resolutions 3,4 --frames 2 --image 64 --skip-coherent)
   wax=(--grid 12x10x5 --max-iterations 3 --max-seconds 60)
   marble=(--grid 16x16x4 --max-iterations 3 --max-seconds 60)
   peer=(--grid 12x10x5 --max-iterations 3 --max-seconds 30)
 else
-  grids=130x53x37,256x256x20,129x129x129; repeats=7; batch=16
+  grids=130x53x37,256x256x20,129x129x129; pack_grids=130x53x37,256x256x20; repeats=7; batch=16
   render_args=(--shapes bunny --resolutions 16,17 --frames 20 --skip-coherent)
   # A full recovery: the bench's default 300 L-BFGS iterations (or convergence), with a time
   # cap for the session (docs/gpu.md, "Next GPU session": the estimate).
@@ -146,6 +147,11 @@ step "bench forward (gl, batch ${batch})" 90 \
   "$run" bench forward --backend gl --grids "$grids" --repeats "$repeats" --batch "$batch"
 step "recovery Wax I (wax, cpu peer, time-capped)" 60 \
   "$run" bench recovery --presets wax "${one_case[@]}" --backend cpu "${peer[@]}"
+# Last, as it only informs a tuning choice: four fields per value (llvmpipe's layout for
+# batches, docs/gpu.md) on the GPU, against the batch figures of the bench forward step above.
+step "bench forward (gl, batch ${batch}, four fields per value)" 60 \
+  env TRANSLUME_GL_PACK_FIELDS=4 "$run" bench forward --backend gl --grids "$pack_grids" --repeats "$repeats" \
+  --batch "$batch" --no-peers
 
 total=$(( $(date +%s) - start ))
 printf '\nsession: %d s of the %d s budget%s\n' "$total" "$budget" \
