@@ -238,15 +238,16 @@ struct GlMultigridSolver::Impl {
   void Reserve(int fields);
   // Sets pack_fields (1 or 4) and regrows the buffers for it.
   void SetPackFields(int k);
-  // Whether the V-cycles of nb fields run packed, four fields per vec4 (FIELDS4): pack_fields
+  // Whether a solve of nb fields runs packed, four fields per vec4 (FIELDS4): pack_fields
   // is 4 and nb >= 3 (fewer fields would leave llvmpipe's threads too few work groups).
   // The rounding up to whole groups must stay within max_batch (the buffers' limits).
   bool Packed(int nb) const { return pack_fields == 4 && nb >= 3 && (nb + 3) / 4 * 4 <= max_batch; }
   // The fields' slots of a packed batch of `fields` (whole groups of four, within max_batch;
   // else `fields`).
   int Slots4(int fields) const { return (fields + 3) / 4 * 4 <= max_batch ? (fields + 3) / 4 * 4 : fields; }
-  // True while a packed V-cycle runs on the levels' b4, x4, r4 (Precondition, FullMultigrid):
-  // the multigrid dispatches then take FIELDS4 and one work group per four fields.
+  // True while a packed solve or V-cycle runs (SolveDevice; Precondition and FullMultigrid
+  // on per-field values): the dispatches then take FIELDS4 and one work group per four fields,
+  // and the levels' b4, x4, r4.
   bool packed = false;
   int Groups(int nb) const { return packed ? (nb + 3) / 4 : nb; }
   std::string Fields4() const { return packed ? "#define FIELDS4\n" : ""; }
@@ -275,7 +276,7 @@ struct GlMultigridSolver::Impl {
              {int(L.s.nx), int(L.s.ny), int(L.s.nz), color}, int64_t(half) * L.s.ny, Groups(nb), Fields4().c_str());
   }
 
-  // x_double (the CG iterate, never packed): x in double, the sums too (residual.comp).
+  // x_double (the CG iterate): x in double, the sums too (residual.comp).
   void Stencil(GLevel& L, const Buffer& x, const Buffer& b, Buffer& out, int mode, int nb,
                bool x_double = false) {
     RunBatch("residual", {&L.cx, &L.cy, &L.cz, &L.sigma, &x, &b, &out},
@@ -287,12 +288,13 @@ struct GlMultigridSolver::Impl {
   // (full multigrid). sweeps > 0: V(sweeps, sweeps) on this level and below, down to the
   // coarse tail, instead of the options' cycle. b and x in the current layout (`packed`).
   void VCycle(size_t l, const Buffer& b, Buffer& x, int nb, bool from_zero = true, int sweeps = 0);
-  // z = B r on the finest level's nb per-field values (one V-cycle), packed where Packed(nb)
-  // and the tail does not start on the finest level (whose tail packs its own fields).
+  // z = B r on the finest level (one V-cycle): in a packed solve on its packed values, else on
+  // per-field values, which it packs where Packed(nb) and the tail does not start on the
+  // finest level (that tail packs its own fields).
   void Precondition(const Buffer& r, Buffer& z, int nb);
   // The cpu solver's full-multigrid pass (MultigridOptions::full_multigrid_start) for the
-  // finest-level right-hand sides r (per field): z = its approximate solution (per field),
-  // packed where Packed(nb). Uses every level's b and x.
+  // finest-level right-hand sides r: z = its approximate solution, in the same layout as
+  // Precondition's r and z. Uses every level's b and x.
   // With a coarse tail, one V-cycle over the tail's levels stands in for the exact coarse solve
   // (the tail runs as one dispatch), so the pass differs from the per-level one there.
   void FullMultigrid(const Buffer& r, Buffer& z, int nb);
