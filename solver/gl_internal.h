@@ -249,8 +249,13 @@ struct GlMultigridSolver::Impl {
   // on per-field values): the dispatches then take FIELDS4 and one work group per four fields,
   // and the levels' b4, x4, r4.
   bool packed = false;
-  int Groups(int nb) const { return packed ? (nb + 3) / 4 : nb; }
-  std::string Fields4() const { return packed ? "#define FIELDS4\n" : ""; }
+  // RunBatch for nb fields in the current layout: one work group z per field, or per four
+  // fields with FIELDS4 defined while `packed`.
+  int64_t RunFields(const char* name, std::initializer_list<const Buffer*> buffers,
+                    std::initializer_list<int> ints, int64_t threads, int nb, const char* defines = "") {
+    return RunBatch(name, buffers, ints, threads, packed ? (nb + 3) / 4 : nb,
+                    ((packed ? "#define FIELDS4\n" : "") + std::string(defines)).c_str());
+  }
   Buffer& LevelB(GLevel& L) { return packed ? L.b4 : L.b; }
   Buffer& LevelX(GLevel& L) { return packed ? L.x4 : L.x; }
   Buffer& LevelR(GLevel& L) { return packed ? L.r4 : L.r; }
@@ -262,26 +267,25 @@ struct GlMultigridSolver::Impl {
   // c = R f (level l to l + 1) and f += P c (level l + 1 to l) on nb fields: one dispatch
   // each (transfer.comp).
   void Restrict(size_t l, const Buffer& f, Buffer& c, int nb) {
-    RunBatch("transfer", {&f, &c, &xfer_idx, &xfer_w}, {int(l), 0}, FlatThreads(levels[l + 1]->n), Groups(nb),
-             Fields4().c_str());
+    RunFields("transfer", {&f, &c, &xfer_idx, &xfer_w}, {int(l), 0}, FlatThreads(levels[l + 1]->n), nb);
   }
   void ProlongAdd(size_t l, const Buffer& c, Buffer& f, int nb) {
-    RunBatch("transfer", {&c, &f, &xfer_idx, &xfer_w}, {int(l), 1}, FlatThreads(levels[l]->n), Groups(nb),
-             (Fields4() + "#define PROLONG\n").c_str());
+    RunFields("transfer", {&c, &f, &xfer_idx, &xfer_w}, {int(l), 1}, FlatThreads(levels[l]->n), nb,
+              "#define PROLONG\n");
   }
 
   void Smooth(GLevel& L, const Buffer& b, Buffer& x, int color, int nb) {
     const int half = int((L.s.nx + 1) / 2);
-    RunBatch("smooth", {&L.cx, &L.cy, &L.cz, &L.inv, &L.luc, &b, &x},
-             {int(L.s.nx), int(L.s.ny), int(L.s.nz), color}, int64_t(half) * L.s.ny, Groups(nb), Fields4().c_str());
+    RunFields("smooth", {&L.cx, &L.cy, &L.cz, &L.inv, &L.luc, &b, &x},
+              {int(L.s.nx), int(L.s.ny), int(L.s.nz), color}, int64_t(half) * L.s.ny, nb);
   }
 
   // x_double (the CG iterate): x in double, the sums too (residual.comp).
   void Stencil(GLevel& L, const Buffer& x, const Buffer& b, Buffer& out, int mode, int nb,
                bool x_double = false) {
-    RunBatch("residual", {&L.cx, &L.cy, &L.cz, &L.sigma, &x, &b, &out},
-             {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode, ColumnLength(L.s)}, ColumnThreads(L.s), Groups(nb),
-             (Fields4() + (x_double ? "#define X_DOUBLE\n" : "")).c_str());
+    RunFields("residual", {&L.cx, &L.cy, &L.cz, &L.sigma, &x, &b, &out},
+              {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode, ColumnLength(L.s)}, ColumnThreads(L.s), nb,
+              x_double ? "#define X_DOUBLE\n" : "");
   }
 
   // One V-cycle x = B b on `nb` fields of level l. from_zero false: x holds an initial guess
@@ -299,6 +303,21 @@ struct GlMultigridSolver::Impl {
   // (the tail runs as one dispatch), so the pass differs from the per-level one there.
   void FullMultigrid(const Buffer& r, Buffer& z, int nb);
   void FullMultigridLevels(const Buffer& r, Buffer& z, int nb);  // in the current layout
+  // run(b, x) on the finest level's r and z (Precondition's and FullMultigrid's layouts): as
+  // they are, or packed into the finest level's b4 and x4 around it.
+  template <typename F>
+  void OnFinest(const Buffer& r, Buffer& z, int nb, F&& run) {
+    if (packed || !Packed(nb) || tail_level == 0) {
+      run(r, z);
+      return;
+    }
+    GLevel& L = *levels[0];
+    Pack(r, L.b4, nb);
+    packed = true;
+    run(L.b4, L.x4);
+    packed = false;
+    Unpack(L.x4, z, nb);
+  }
   // The level the pass solves on before going up: the coarse tail's first or the coarsest.
   size_t FullMultigridTop() const { return std::min(tail_level, levels.size() - 1); }
 
@@ -309,7 +328,8 @@ struct GlMultigridSolver::Impl {
   // The coarse tail (tail.comp, docs/gpu.md): levels tail_level.. (the levels with at most
   // tail_nodes nodes, at least two of them) run their V-cycle in one dispatch; tail_level ==
   // levels.size(): no tail. tail_coef: their coefficients, packed; tail_work: tail_stride
-  // values per field; tail_work4: tail_stride vec4 per four fields (Packed batches).
+  // values per field (for whole groups of four where packing is on); tail_work4: its view as
+  // tail_stride vec4 per four fields (Packed batches).
   // pack_fields: Tuning::pack_fields unless SetPackFields changed it.
   int64_t tail_nodes = 0;
   int pack_fields = 1;
@@ -334,19 +354,18 @@ struct GlMultigridSolver::Impl {
   // a . b of every field (double) into scal[f kCgStride + slot]; Dot2 also a . c into slot + 1.
   // (In the current layout: `packed`.)
   void Dot(const Buffer& a, const Buffer& b, int slot, int nb) {
-    RunBatch("dot", {&a, &b, &partial}, {int(n0), nb}, DotThreads(n0), Groups(nb), Fields4().c_str());
+    RunFields("dot", {&a, &b, &partial}, {int(n0), nb}, DotThreads(n0), nb);
     const int64_t m = DotPartials(DotThreads(n0));
     RunBatch("reduce", {&partial, &scal}, {int(m), slot, 1, kCgStride}, GetTuning().group, nb);
   }
   void Dot2(const Buffer& a, const Buffer& b, const Buffer& c, int slot, int nb) {
-    RunBatch("dot", {&a, &b, &partial, &c}, {int(n0), nb}, DotThreads(n0), Groups(nb),
-             (Fields4() + "#define PAIR\n").c_str());
+    RunFields("dot", {&a, &b, &partial, &c}, {int(n0), nb}, DotThreads(n0), nb, "#define PAIR\n");
     const int64_t m = DotPartials(DotThreads(n0));
     RunBatch("reduce", {&partial, &scal}, {int(m), slot, 2, kCgStride}, GetTuning().group, nb);
   }
   // cg_update.comp in `mode` ("" or "#define DIRECTION\n" or "#define ADD\n"), current layout.
   void CgUpdate(std::initializer_list<const Buffer*> buffers, const char* mode, int nb) {
-    RunBatch("cg_update", buffers, {int(n0), nb}, FlatThreads(n0), Groups(nb), (Fields4() + mode).c_str());
+    RunFields("cg_update", buffers, {int(n0), nb}, FlatThreads(n0), nb, mode);
   }
 
   // Multigrid-PCG on `nb` fields at once, in lockstep (every dispatch serves all of them): b

@@ -439,8 +439,8 @@ bool GlMultigridSolver::Impl::CgIterationInTail(int nb) const {
 }
 
 void GlMultigridSolver::Impl::AllocTailWork(int fields) {
-  tail_work.Alloc(tail_stride * 4 * fields);
-  tail_work4.Alloc(tail_stride * 16 * ((fields + 3) / 4), nullptr, Elem::kVec4);
+  tail_work.Alloc(tail_stride * 4 * (pack_fields == 4 ? Slots4(fields) : fields));
+  tail_work4.ViewOf(tail_work, Elem::kVec4);
 }
 
 void GlMultigridSolver::SetCoarseTail(int64_t max_nodes) {
@@ -579,7 +579,7 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
   if (from_zero || l + 1 == levels.size()) x.Zero();
   if (l + 1 == levels.size()) {
     if (dense_coarse) {
-      RunBatch("dense_solve", {&coarse_inverse, &b, &x}, {int(L.n)}, L.n, Groups(nb), Fields4().c_str());
+      RunFields("dense_solve", {&coarse_inverse, &b, &x}, {int(L.n)}, L.n, nb);
       return;
     }
     for (int s = 0; s < coarse_sweeps; ++s) {
@@ -607,29 +607,11 @@ void GlMultigridSolver::Impl::VCycle(size_t l, const Buffer& b, Buffer& x, int n
 }
 
 void GlMultigridSolver::Impl::Precondition(const Buffer& r, Buffer& z, int nb) {
-  if (packed || !Packed(nb) || tail_level == 0) {
-    VCycle(0, r, z, nb);
-    return;
-  }
-  GLevel& L = *levels[0];
-  Pack(r, L.b4, nb);
-  packed = true;
-  VCycle(0, L.b4, L.x4, nb);
-  packed = false;
-  Unpack(L.x4, z, nb);
+  OnFinest(r, z, nb, [&](const Buffer& b, Buffer& x) { VCycle(0, b, x, nb); });
 }
 
 void GlMultigridSolver::Impl::FullMultigrid(const Buffer& r, Buffer& z, int nb) {
-  if (packed || !Packed(nb) || tail_level == 0) {
-    FullMultigridLevels(r, z, nb);
-    return;
-  }
-  GLevel& L = *levels[0];
-  Pack(r, L.b4, nb);
-  packed = true;
-  FullMultigridLevels(L.b4, L.x4, nb);
-  packed = false;
-  Unpack(L.x4, z, nb);
+  OnFinest(r, z, nb, [&](const Buffer& b, Buffer& x) { FullMultigridLevels(b, x, nb); });
 }
 
 void GlMultigridSolver::Impl::FullMultigridLevels(const Buffer& r, Buffer& z, int nb) {
@@ -683,7 +665,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
   Buffer& x = packed ? x_packed : x_fields;
   Buffer &r = packed ? r4 : this->r, &z = packed ? z4 : this->z;
   Buffer &p = packed ? p4 : this->p, &q = packed ? q4 : this->q;
-  const int64_t slots = packed ? (nb + 3) / 4 * 4 : nb;
+  const int64_t slots = packed ? Slots4(nb) : nb;
   const int64_t n = n0;
   const int max_it = options.max_iterations;
   const double tol = options.tolerance;

@@ -168,7 +168,7 @@ struct MultigridSolver<T>::Level {
     Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt;
     Eigen::SparseMatrix<T> L;  // unit lower triangular (diagonal not used)
     Eigen::Matrix<T, Eigen::Dynamic, 1> inv_d;
-    Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> P, P_inv;
+    Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> P;
     mutable Eigen::Matrix<T, Eigen::Dynamic, 1> work;
     void Solve(const T* b, T* x) const {
       const int64_t n = inv_d.size();
@@ -176,7 +176,7 @@ struct MultigridSolver<T>::Level {
       L.template triangularView<Eigen::UnitLower>().solveInPlace(work);
       work.array() *= inv_d.array();
       L.transpose().template triangularView<Eigen::UnitUpper>().solveInPlace(work);
-      Eigen::Map<Eigen::Matrix<T, Eigen::Dynamic, 1>>(x, n) = P_inv * work;
+      Eigen::Map<Eigen::Matrix<T, Eigen::Dynamic, 1>>(x, n) = P.transpose() * work;
     }
   };
   std::unique_ptr<Direct> direct;
@@ -362,7 +362,6 @@ void MultigridSolver<T>::SetCoefficients(const T* kappa, const T* mu, double C) 
       d.L = Eigen::SparseMatrix<double>(d.ldlt.matrixL()).template cast<T>();
       d.inv_d = d.ldlt.vectorD().cwiseInverse().template cast<T>();
       d.P = d.ldlt.permutationP();
-      d.P_inv = d.ldlt.permutationPinv();
     }
   }
   if (float_preconditioner_) {

@@ -5,8 +5,8 @@
 
 namespace translume {
 
-// Loops over fewer values (grid nodes) than this run on one thread (OpenMP `if` and
-// `num_threads` clauses in the solver): opening a parallel region costs a few microseconds
+// Loops over fewer values (grid nodes) than this run on one thread (the OpenMP `if` clause of
+// every parallel loop in the solver): opening a parallel region costs a few microseconds
 // with spinning threads and tens with sleeping ones (OMP_WAIT_POLICY=passive, our default:
 // ~75 us on the 2-core VM), more than one pass over that many nodes takes on one core.
 // docs/solver.md, "Threads", has the measurements.
