@@ -76,6 +76,9 @@ RecoveryBenchRow RunCase(const Case& c, const RecoveryBenchOptions& o, const Rec
   r.simulate_seconds = c.simulate_seconds;
   r.iterations = s.iterations;
   r.solves = s.solves;
+  r.homogeneous_solves = s.homogeneous_solves;
+  r.cg_iterations = s.cg_iterations;
+  r.homogeneous_cg_iterations = s.homogeneous_cg_iterations;
   r.objective = s.final_objective;
   r.fit_error = ev.fit_error;
   r.holdout_error = ev.holdout_error;
@@ -96,6 +99,15 @@ std::string Layers(const std::vector<double>& v) {
 
 double RecoveryBenchRow::SecondsPerIteration() const {
   return iterations > 0 ? (seconds - homogeneous_seconds) / iterations : 0.0;
+}
+
+double RecoveryBenchRow::HomogeneousIterationsPerSolve() const {
+  return homogeneous_solves > 0 ? double(homogeneous_cg_iterations) / homogeneous_solves : 0.0;
+}
+
+double RecoveryBenchRow::IterationsPerSolve() const {
+  const int64_t n = solves - homogeneous_solves;
+  return n > 0 ? double(cg_iterations - homogeneous_cg_iterations) / n : 0.0;
 }
 
 RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
@@ -121,11 +133,13 @@ RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
           if (progress)
             progress(fmt::format("{} {}-lit noise {:g} [{}]: held-out E {:.2e} (truth {:.2e}), "
                                  "fit E {:.2e}, {} iterations ({}: {}), {} solves, {:.1f} s "
-                                 "(homogeneous {:.1f} s, {:.3f} s/iteration; evaluation {:.1f} s)",
+                                 "(homogeneous {:.1f} s, {:.3f} s/iteration; evaluation {:.1f} s); "
+                                 "CG iterations per solve {:.2f} in the homogeneous fit, {:.2f} after",
                                  preset, SetupName(setup), noise, BackendName(backend),
                                  r.holdout_error, r.truth_holdout_error, r.fit_error, r.iterations,
                                  r.termination, r.message, r.solves, r.seconds, r.homogeneous_seconds,
-                                 r.SecondsPerIteration(), r.evaluate_seconds));
+                                 r.SecondsPerIteration(), r.evaluate_seconds,
+                                 r.HomogeneousIterationsPerSolve(), r.IterationsPerSolve()));
           out.rows.push_back(std::move(r));
         }
       }
@@ -209,6 +223,9 @@ std::string RecoveryBenchJson(const RecoveryBenchResult& res) {
                           {"simulate_seconds", r.simulate_seconds},
                           {"evaluate_seconds", r.evaluate_seconds},
                           {"iterations", r.iterations}, {"solves", r.solves},
+                          {"homogeneous_solves", r.homogeneous_solves},
+                          {"cg_iterations", r.cg_iterations},
+                          {"homogeneous_cg_iterations", r.homogeneous_cg_iterations},
                           {"objective", r.objective}, {"fit_error", r.fit_error},
                           {"holdout_error", r.holdout_error},
                           {"truth_holdout_error", r.truth_holdout_error},

@@ -56,11 +56,16 @@ struct RecoveryBenchRow {
   // the evaluation, outside the recovery.
   double seconds = 0, homogeneous_seconds = 0, simulate_seconds = 0, evaluate_seconds = 0;
   int iterations = 0;
-  int64_t solves = 0;
+  int64_t solves = 0, homogeneous_solves = 0;
+  // Conjugate-gradient iterations of all solves and of the homogeneous fit's.
+  int64_t cg_iterations = 0, homogeneous_cg_iterations = 0;
   double objective = 0, fit_error = 0, holdout_error = 0, truth_holdout_error = 0;
   std::vector<double> kappa_layer_error, mu_layer_error;
   // Seconds per iteration of the heterogeneous phase (what scales with the iteration count).
   double SecondsPerIteration() const;
+  // Mean conjugate-gradient iterations per solve of the homogeneous fit and of the phase after.
+  double HomogeneousIterationsPerSolve() const;
+  double IterationsPerSolve() const;
 };
 
 struct OptimizerComparison {

@@ -174,12 +174,21 @@ int64_t dispatch_count = 0;
 
 // TRANSLUME_GL_PROFILE=1: every dispatch is followed by glFinish and timed; at exit, stderr
 // gets the dispatches and seconds per shader (a diagnostic: the finishes serialise the queue).
+// TRANSLUME_GL_PROFILE=2: per shader, defines, threads and fields.
 struct Profile {
-  bool on = [] {
-    const char* v = std::getenv("TRANSLUME_GL_PROFILE");
-    return v && *v && std::string(v) != "0";
-  }();
+  const char* env = std::getenv("TRANSLUME_GL_PROFILE");
+  bool on = env && *env && std::string(env) != "0";
+  bool detailed = on && std::string(env) == "2";
   std::map<std::string, std::pair<int64_t, double>> by_shader;  // dispatches, seconds
+  static std::string Key(const char* name, const char* defines, int64_t threads, int fields) {
+    std::string d;
+    for (std::istringstream in(defines ? defines : ""); in >> std::ws && !in.eof();) {
+      std::string word;
+      in >> word;
+      if (word != "#define") d += (d.empty() ? "" : " ") + word;
+    }
+    return fmt::format("{} [{}] {} x {}", name, d, threads, fields);
+  }
   ~Profile() {
     if (!on) return;
     std::vector<std::pair<std::string, std::pair<int64_t, double>>> rows(by_shader.begin(), by_shader.end());
@@ -226,7 +235,8 @@ int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
   ++dispatch_count;
   if (profile.on) {
     api.Finish();
-    auto& [count, seconds] = profile.by_shader[name];
+    auto& [count, seconds] = profile.by_shader[profile.detailed ? profile.Key(name, defines, threads, fields)
+                                                                : std::string(name)];
     ++count;
     seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }

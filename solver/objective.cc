@@ -132,6 +132,7 @@ void FrontFaceObjective::Residuals(std::vector<double>* out) const {
 
 void FrontFaceObjective::Track(const SolveSummary& s) {
   ++solves_;
+  cg_iterations_ += s.iterations;
   worst_ = std::max(worst_, s.converged ? s.final_residual : std::max(s.final_residual, 1.0));
 }
 

@@ -30,8 +30,9 @@ class ChannelObjective {
   // dJ/dmu (2M solves); with null ones only the M forward solves run.
   virtual double Evaluate(const double* kappa, const double* mu, double* grad_kappa,
                           double* grad_mu) = 0;
-  // Linear solves so far (forward and adjoint).
+  // Linear solves so far (forward and adjoint), and their conjugate-gradient iterations.
   virtual int64_t solves() const = 0;
+  virtual int64_t cg_iterations() const = 0;
   // From the last Evaluate: per condition sum_p w (L^R - L)^2 and sum_p w L^2.
   virtual const std::vector<double>& condition_misfit() const = 0;
   virtual const std::vector<double>& condition_norm() const = 0;
@@ -47,6 +48,7 @@ class ChannelObjective {
 class FrontFaceObjective : public ChannelObjective {
  public:
   int64_t solves() const override { return solves_; }
+  int64_t cg_iterations() const override { return cg_iterations_; }
   const std::vector<double>& condition_misfit() const override { return misfit_; }
   const std::vector<double>& condition_norm() const override { return norm_; }
   double worst_residual() const override { return worst_; }
@@ -72,7 +74,7 @@ class FrontFaceObjective : public ChannelObjective {
   std::vector<std::vector<double>> L_, w_, q_front_;
   std::vector<double> misfit_, norm_;
   double denom_ = 0, worst_ = 0;
-  int64_t solves_ = 0;
+  int64_t solves_ = 0, cg_iterations_ = 0;
 };
 
 // The CPU backend: one MultigridSolver<double> per channel. The solver's OpenMP loops use the

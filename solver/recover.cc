@@ -50,6 +50,11 @@ class RecoveryProblem {
     mu_scale_ = m;
   }
   int64_t num_parameters() const { return 6 * n_; }
+  int64_t cg_iterations() const {
+    int64_t s = 0;
+    for (const auto& c : channels_) s += c->cg_iterations();
+    return s;
+  }
   int64_t solves() const {
     int64_t s = 0;
     for (const auto& c : channels_) s += c->solves();
@@ -519,6 +524,7 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
     }
     sum.homogeneous_seconds = Since(t0);
     sum.homogeneous_solves = problem.solves();
+    sum.homogeneous_cg_iterations = problem.cg_iterations();
   }
   TL_CHECK(int64_t(state->x.size()) == 6 * n);
   problem.set_scales(state->kappa_scale, state->mu_scale);
@@ -558,6 +564,7 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
   sum.initial_objective = r.initial;
   sum.iterations = state->iteration;
   sum.solves = state->solves = solves();
+  sum.cg_iterations = problem.cg_iterations();
   sum.seconds = state->seconds = seconds();
   sum.history = state->history;
   return sum;

@@ -80,6 +80,9 @@ struct RecoverySummary {
   int64_t solves = 0;
   double seconds = 0, homogeneous_seconds = 0;
   int64_t homogeneous_solves = 0;  // of `solves`, spent in the homogeneous fit
+  // Conjugate-gradient iterations of this run's solves (not of a resumed run's earlier ones),
+  // and of them the homogeneous fit's.
+  int64_t cg_iterations = 0, homogeneous_cg_iterations = 0;
   double initial_objective = 0, final_objective = 0;
   std::array<double, 3> homogeneous_kappa{}, homogeneous_mu{};
   std::vector<IterationReport> history;

@@ -34,6 +34,13 @@ TEST_P(RecoverOnBackend, HomogeneousVolumeToOnePerMille) {
     EXPECT_NEAR(s.homogeneous_mu[c] / truth.mu[c][0], 1.0, 1e-3) << c;
   }
   EXPECT_LT(s.fit_error, 1e-8);
+  // Every solve counted: the fit's, then two evaluations of 4 solves per channel at its result
+  // (the objective with no iteration left, the final fit error), warm-started at the fit's
+  // solutions: no CG iteration left to do.
+  EXPECT_EQ(s.homogeneous_solves, s.solves - 2 * 3 * 4);
+  EXPECT_GT(s.homogeneous_cg_iterations, 0);
+  EXPECT_EQ(s.homogeneous_cg_iterations, s.cg_iterations);
+  EXPECT_LT(s.cg_iterations, 10 * s.solves);
 }
 
 // A small heterogeneous recovery from oversampled noise-free data, checked on held-out spots.
