@@ -5,11 +5,13 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <exception>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
+#include <opencv2/core/utility.hpp>
 
 #include "acquire/capture.h"
 #include "calib/board.h"
@@ -158,11 +160,18 @@ double DualBoxMean(const std::vector<float>& fine, const GridShape& fs, int K, i
 int WriteStack(const std::string& dir, const std::vector<cv::Mat>& photos, const std::vector<double>& times) {
   fs::create_directories(dir);
   nlohmann::json j;
-  for (size_t k = 0; k < photos.size(); ++k) {
-    const std::string name = fmt::format("t{:02d}.png", k);
-    calib::WritePhoto((fs::path(dir) / name).string(), photos[k]);
-    j[name] = times[k];
-  }
+  for (size_t k = 0; k < photos.size(); ++k) j[fmt::format("t{:02d}.png", k)] = times[k];
+  // The PNG encoder is serial: photos in parallel (the first failure is rethrown).
+  std::vector<std::exception_ptr> errors(photos.size());
+  cv::parallel_for_(cv::Range(0, int(photos.size())), [&](const cv::Range& r) {
+    for (int k = r.start; k < r.end; ++k) try {
+        calib::WritePhoto((fs::path(dir) / fmt::format("t{:02d}.png", k)).string(), photos[size_t(k)]);
+      } catch (...) {
+        errors[size_t(k)] = std::current_exception();
+      }
+  });
+  for (const auto& e : errors)
+    if (e) std::rethrow_exception(e);
   std::ofstream((fs::path(dir) / "exposures.json").string()) << j.dump(2) << "\n";
   return int(photos.size());
 }
