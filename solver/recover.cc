@@ -161,9 +161,9 @@ class RecoveryProblem {
         g1 += j1 * r0[i];
         g2 += j2 * r0[i];
       }
-      bool accepted = false;
+      bool accepted = false, converged = false;
       double step = 0;
-      for (int tries = 0; tries < 12 && !accepted; ++tries) {
+      for (int tries = 0; tries < 12 && !accepted && !converged; ++tries) {
         const double b11 = a11 * (1 + damping), b22 = a22 * (1 + damping);
         const double det = b11 * b22 - a12 * a12;
         if (!(det > 0)) {
@@ -174,6 +174,14 @@ class RecoveryProblem {
         double dk = (-g1 * b22 + g2 * a12) / det, dm = (-g2 * b11 + g1 * a12) / det;
         const double len = std::max(std::abs(dk), std::abs(dm));
         if (len > 1) { dk /= len; dm /= len; }
+        // The Gauss-Newton model |r + J d|^2 = J + 2 g.d + d^T A d: where even it promises less
+        // than the tolerance, the fit has converged (on the gl backend's float model the
+        // objective's last digits are noise, and steps there only wander).
+        const double predicted = -(2 * (g1 * dk + g2 * dm) + a11 * dk * dk + 2 * a12 * dk * dm + a22 * dm * dm);
+        if (predicted <= o_.tolerance * f0) {
+          converged = true;
+          break;
+        }
         const double ft = EvaluateConstant(c, *lk + dk, *lm + dm, &rt);
         if (ft < f0) {
           *lk += dk;
@@ -184,12 +192,12 @@ class RecoveryProblem {
           r0.swap(rt);
           damping = std::max(damping / 3, 1e-9);
           accepted = true;
-          if (decrease <= 1e-12 * ft) step = 0;
+          if (decrease <= o_.tolerance * ft) step = 0;  // as the optimisers stop
         } else {
           damping *= 4;
         }
       }
-      if (!accepted || step < 1e-7) break;
+      if (converged || !accepted || step < 1e-7) break;
     }
   }
 

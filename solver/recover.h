@@ -39,7 +39,8 @@ struct RecoveryOptions {
   // Stop when an iteration lowers the objective by less than tolerance * objective.
   double tolerance = 1e-7;
   // First fit one (kappa, mu) per channel (Levenberg-Marquardt on 2 unknowns per channel, at
-  // most this many iterations; 0 skips it), then the heterogeneous problem.
+  // most this many iterations, stopping as above, or where its model promises less; 0 skips
+  // it), then the heterogeneous problem.
   int homogeneous_iterations = 40;
   double homogeneous_kappa = 0.1, homogeneous_mu = 0.01;  // its starting point (mm, 1/mm)
   // Relative residual of every forward and adjoint solve.
