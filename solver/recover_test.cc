@@ -36,10 +36,11 @@ TEST_P(RecoverOnBackend, HomogeneousVolumeToOnePerMille) {
   EXPECT_LT(s.fit_error, 1e-8);
   // Every solve counted: the fit's, then two evaluations of 4 solves per channel at its result
   // (the objective with no iteration left, the final fit error), warm-started at the fit's
-  // solutions: no CG iteration left to do.
+  // solutions: at most one CG iteration each left to do.
   EXPECT_EQ(s.homogeneous_solves, s.solves - 2 * 3 * 4);
   EXPECT_GT(s.homogeneous_cg_iterations, 0);
-  EXPECT_EQ(s.homogeneous_cg_iterations, s.cg_iterations);
+  EXPECT_GE(s.cg_iterations, s.homogeneous_cg_iterations);
+  EXPECT_LE(s.cg_iterations - s.homogeneous_cg_iterations, 2 * 3 * 4);
   EXPECT_LT(s.cg_iterations, 10 * s.solves);
 }
 
