@@ -284,13 +284,16 @@ ForwardBenchRow BenchGl(const GridShape& shape, const ForwardBenchOptions& o,
   std::vector<double> solves;
   for (int r = 0; r < std::max(1, o.repeats); ++r) {
     std::fill(x.begin(), x.end(), 0.0f);
+    const int64_t before = GlMultigridSolver::Dispatches();
     const SolveSummary s = solver.Solve(b.data(), x.data());
+    row.dispatches = GlMultigridSolver::Dispatches() - before;
     solves.push_back(s.seconds);
     row.iterations = s.iterations;
     row.residual = s.final_residual;
   }
   row.seconds = Median(solves);
   GlAgreement(problem, x, &row);
+  row.dispatch_seconds = solver.TimeEmptyDispatch(11);
   row.apply_seconds = solver.TimeApply(11);
   row.work_units = row.seconds / row.apply_seconds;
   row.nodes_per_second = double(n) / row.seconds;
@@ -364,6 +367,12 @@ std::string ForwardBenchTable(const std::vector<ForwardBenchRow>& rows) {
       out += fmt::format("{:>14} {:>16.2e} {:>18.2e}\n", r.shape.ToString(), r.gl_error_l2,
                          r.gl_error_front);
     out += "(the gl solution against the cpu solver's in double to 1e-12, relative)\n";
+    out += fmt::format("\n{:>14} {:>12} {:>16} {:>18}\n", "grid", "dispatches", "empty dispatch",
+                       "their floor / solve");
+    for (const auto& r : rows)
+      out += fmt::format("{:>14} {:>12} {:>13.1f} us {:>17.0f}%\n", r.shape.ToString(), r.dispatches,
+                         1e6 * r.dispatch_seconds, 100 * double(r.dispatches) * r.dispatch_seconds / r.seconds);
+    out += "(one solve's dispatches; an empty dispatch's median time, measured in the same run)\n";
   }
   if (!rows.empty() && rows[0].batch_fields > 0) {
     // Per right-hand side against one gl solve and the cpu peer's one solve.
@@ -405,6 +414,8 @@ std::string ForwardBenchJson(const std::vector<ForwardBenchRow>& rows) {
       row["stencil_fraction_of_copy"] = r.apply_bandwidth / r.copy_bandwidth;
       row["gl_error_l2"] = r.gl_error_l2;
       row["gl_error_front"] = r.gl_error_front;
+      row["dispatches"] = r.dispatches;
+      row["empty_dispatch_seconds"] = r.dispatch_seconds;
     }
     if (r.batch_fields > 0) {
       row["batch_fields"] = r.batch_fields;

@@ -65,6 +65,10 @@ struct ForwardBenchRow {
   // problem: relative L2 error over every node, and the largest error on the front face (the
   // radiance there) relative to the face's largest value.
   double gl_error_l2 = 0, gl_error_front = 0;
+  // gl only: dispatches of one solve, and the median seconds of an empty dispatch (their
+  // fixed cost) measured in the same run.
+  int64_t dispatches = 0;
+  double dispatch_seconds = 0;
   // gl only: the batched solve of batch_fields right-hand sides (median seconds for all of
   // them, the most iterations of any field).
   int batch_fields = 0, batch_iterations = 0;

@@ -48,6 +48,9 @@ struct Tuning {
   // Fields per value in the V-cycles of a batch of three or more fields: 1, or 4 with four
   // fields' values interleaved as one vec4 per node (common.glsl's FIELDS4).
   int pack_fields = 1;
+  // Single-field solves run the finest level in quarter rows (common.glsl's QUARTERS: four
+  // nodes of a row per vec4). TRANSLUME_GL_QUARTERS=0|1 overrides it.
+  bool quarters = false;
 };
 const Tuning& GetTuning();
 
@@ -258,23 +261,67 @@ struct GlMultigridSolver::Impl {
   }
   Buffer& LevelB(GLevel& L) { return packed ? L.b4 : L.b; }
   Buffer& LevelX(GLevel& L) { return packed ? L.x4 : L.x; }
-  Buffer& LevelR(GLevel& L) { return packed ? L.r4 : L.r; }
+  Buffer& LevelR(GLevel& L) { return packed || Quarter(L) ? L.r4 : L.r; }
+
+  // Single-field solves in quarter rows (Tuning::quarters, common.glsl's QUARTERS): the finest
+  // level's values and coefficients four nodes of a row per vec4, qw packed nodes per row, nq
+  // packed nodes in all (cx_q .. sigma_q: its coefficients, packed by SetCoefficients). A
+  // solve of one field runs quartered where the finest level is not in the coarse tail: its
+  // CG vectors (r4 .. q4, b_packed, x_packed) and the finest level's V-cycle work (smooth,
+  // residual, the transfers to and from level 1, which stays plain) on the packed values.
+  bool quarters = false;   // enabled: the tuning's, or SetQuarters
+  bool quartered = false;  // true while a quartered solve runs
+  int qw = 0;
+  int64_t nq = 0;
+  Buffer cx_q, cy_q, cz_q, inv_q, luc_q, sigma_q;
+  bool Quartered(int nb) const { return quarters && nb == 1 && tail_level > 0; }
+  bool Quarter(const GLevel& L) const { return quartered && &L == levels[0].get(); }
+  void SetQuarters(bool on);
+  void QuarterCoefficients();
+  // One field's n0 values <-> its quarter rows (pack.comp's QUARTERS).
+  void QuarterPack(const Buffer& plain, Buffer& rows, bool doubles = false);
+  void QuarterUnpack(const Buffer& rows, Buffer& plain, bool doubles = false);
+  // A dispatch on the finest level's values: RunFields, or quartered on the one field.
+  int64_t RunFinest(const char* name, std::initializer_list<const Buffer*> buffers,
+                    std::initializer_list<int> ints, int64_t threads, int nb, const char* defines = "") {
+    if (quartered)
+      return RunBatch(name, buffers, ints, threads, 1,
+                      ("#define FIELDS4\n#define QUARTERS\n" + std::string(defines)).c_str());
+    return RunFields(name, buffers, ints, threads, nb, defines);
+  }
+  // Values per field on the finest level in the current layout (the CG vectors' length).
+  int64_t FinestCount() const { return quartered ? nq : n0; }
   // packed = the nb per-field values of `per_field` (n0 each) four to a vec4, or the reverse;
   // with `doubles` both hold doubles (four consecutive ones per node when packed).
   void Pack(const Buffer& per_field, Buffer& packed4, int nb, bool doubles = false);
   void Unpack(const Buffer& packed4, Buffer& per_field, int nb, bool doubles = false);
 
   // c = R f (level l to l + 1) and f += P c (level l + 1 to l) on nb fields: one dispatch
-  // each (transfer.comp).
+  // each (transfer.comp; level 0 quartered: from and to its quarter rows).
   void Restrict(size_t l, const Buffer& f, Buffer& c, int nb) {
+    if (Quarter(*levels[l])) {
+      RunBatch("transfer", {&f, &c, &xfer_idx, &xfer_w}, {int(l), 0, qw}, FlatThreads(levels[l + 1]->n), 1,
+               "#define QUARTERS\n");
+      return;
+    }
     RunFields("transfer", {&f, &c, &xfer_idx, &xfer_w}, {int(l), 0}, FlatThreads(levels[l + 1]->n), nb);
   }
   void ProlongAdd(size_t l, const Buffer& c, Buffer& f, int nb) {
+    if (Quarter(*levels[l])) {
+      RunBatch("transfer", {&c, &f, &xfer_idx, &xfer_w}, {int(l), 1, qw}, FlatThreads(nq), 1,
+               "#define QUARTERS\n#define PROLONG\n");
+      return;
+    }
     RunFields("transfer", {&c, &f, &xfer_idx, &xfer_w}, {int(l), 1}, FlatThreads(levels[l]->n), nb,
               "#define PROLONG\n");
   }
 
   void Smooth(GLevel& L, const Buffer& b, Buffer& x, int color, int nb) {
+    if (Quarter(L)) {
+      RunFinest("smooth", {&cx_q, &cy_q, &cz_q, &inv_q, &luc_q, &b, &x}, {qw, int(L.s.ny), int(L.s.nz), color},
+                int64_t(qw / 2) * L.s.ny, 1);
+      return;
+    }
     const int half = int((L.s.nx + 1) / 2);
     RunFields("smooth", {&L.cx, &L.cy, &L.cz, &L.inv, &L.luc, &b, &x},
               {int(L.s.nx), int(L.s.ny), int(L.s.nz), color}, int64_t(half) * L.s.ny, nb);
@@ -283,9 +330,16 @@ struct GlMultigridSolver::Impl {
   // x_double (the CG iterate): x in double, the sums too (residual.comp).
   void Stencil(GLevel& L, const Buffer& x, const Buffer& b, Buffer& out, int mode, int nb,
                bool x_double = false) {
+    const char* defines = x_double ? "#define X_DOUBLE\n" : "";
+    if (Quarter(L)) {
+      const GridShape rows{qw, L.s.ny, L.s.nz};
+      RunFinest("residual", {&cx_q, &cy_q, &cz_q, &sigma_q, &x, &b, &out},
+                {qw, int(L.s.ny), int(L.s.nz), mode, ColumnLength(rows)}, ColumnThreads(rows), 1, defines);
+      return;
+    }
     RunFields("residual", {&L.cx, &L.cy, &L.cz, &L.sigma, &x, &b, &out},
               {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode, ColumnLength(L.s)}, ColumnThreads(L.s), nb,
-              x_double ? "#define X_DOUBLE\n" : "");
+              defines);
   }
 
   // One V-cycle x = B b on `nb` fields of level l. from_zero false: x holds an initial guess
@@ -354,18 +408,21 @@ struct GlMultigridSolver::Impl {
   // a . b of every field (double) into scal[f kCgStride + slot]; Dot2 also a . c into slot + 1.
   // (In the current layout: `packed`.)
   void Dot(const Buffer& a, const Buffer& b, int slot, int nb) {
-    RunFields("dot", {&a, &b, &partial}, {int(n0), nb}, DotThreads(n0), nb);
-    const int64_t m = DotPartials(DotThreads(n0));
+    const int64_t n = FinestCount();
+    RunFinest("dot", {&a, &b, &partial}, {int(n), nb}, DotThreads(n), nb);
+    const int64_t m = DotPartials(DotThreads(n));
     RunBatch("reduce", {&partial, &scal}, {int(m), slot, 1, kCgStride}, GetTuning().group, nb);
   }
   void Dot2(const Buffer& a, const Buffer& b, const Buffer& c, int slot, int nb) {
-    RunFields("dot", {&a, &b, &partial, &c}, {int(n0), nb}, DotThreads(n0), nb, "#define PAIR\n");
-    const int64_t m = DotPartials(DotThreads(n0));
+    const int64_t n = FinestCount();
+    RunFinest("dot", {&a, &b, &partial, &c}, {int(n), nb}, DotThreads(n), nb, "#define PAIR\n");
+    const int64_t m = DotPartials(DotThreads(n));
     RunBatch("reduce", {&partial, &scal}, {int(m), slot, 2, kCgStride}, GetTuning().group, nb);
   }
   // cg_update.comp in `mode` ("" or "#define DIRECTION\n" or "#define ADD\n"), current layout.
   void CgUpdate(std::initializer_list<const Buffer*> buffers, const char* mode, int nb) {
-    RunFields("cg_update", buffers, {int(n0), nb}, FlatThreads(n0), nb, mode);
+    const int64_t n = FinestCount();
+    RunFinest("cg_update", buffers, {int(n), nb}, FlatThreads(n), nb, mode);
   }
 
   // Multigrid-PCG on `nb` fields at once, in lockstep (every dispatch serves all of them): b

@@ -137,9 +137,11 @@ const Tuning& GetTuning() {
     t.tail_nodes = 4096;
     t.tail_group = cpu ? 8 : 256;
     t.pack_fields = cpu ? 4 : 1;
+    t.quarters = cpu;
     if (const char* tail = std::getenv("TRANSLUME_GL_TAIL_NODES")) t.tail_nodes = std::atoll(tail);
     if (const char* g = std::getenv("TRANSLUME_GL_TAIL_GROUP")) t.tail_group = std::atoi(g);
     if (const char* f = std::getenv("TRANSLUME_GL_PACK_FIELDS")) t.pack_fields = std::atoi(f) == 4 ? 4 : 1;
+    if (const char* q = std::getenv("TRANSLUME_GL_QUARTERS")) t.quarters = std::atoi(q) != 0;
     return t;
   }();
   return tuning;
@@ -149,10 +151,11 @@ const Tuning& GetTuning() {
 
 std::string GlShaderTuning() {
   const gl_internal::Tuning& t = gl_internal::GetTuning();
-  return t.images ? fmt::format("llvmpipe (image buffers, z-column invocations, {}-invocation "
-                                "groups; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)", t.group)
-                  : fmt::format("gpu (storage buffers, one node per invocation, {}-invocation "
-                                "groups; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)", t.group);
+  return fmt::format("{} ({}, {}-invocation groups, {} field(s) per value in batches, single "
+                     "fields {}; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)",
+                     t.images ? "llvmpipe" : "gpu",
+                     t.images ? "image buffers, z-column invocations" : "storage buffers, one node per invocation",
+                     t.group, t.pack_fields, t.quarters ? "in quarter rows" : "plain");
 }
 
 namespace gl_internal {
@@ -357,6 +360,14 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
   I.max_batch = int(std::max<int64_t>(1, most));
   I.tail_nodes = gl_internal::GetTuning().tail_nodes;
   I.pack_fields = gl_internal::GetTuning().pack_fields;
+  // Quarter rows: an even width, so that the zebra sweeps' colours agree across quarters.
+  const GridShape& s0 = I.levels[0]->s;
+  I.qw = int(2 * ((s0.nx + 7) / 8));
+  I.nq = int64_t(I.qw) * s0.ny * s0.nz;
+  I.quarters = gl_internal::GetTuning().quarters;
+  if (I.quarters)
+    for (Buffer* b : {&I.cx_q, &I.cy_q, &I.cz_q, &I.inv_q, &I.luc_q, &I.sigma_q})
+      b->Alloc(I.nq * 16, nullptr, Elem::kVec4);
   I.PackLevels();
   I.Reserve(1);
 }
@@ -470,18 +481,20 @@ void GlMultigridSolver::Impl::Reserve(int fields) {
   TL_CHECK(fields >= 1 && fields <= max_batch);
   if (fields <= capacity) return;
   const int64_t slots = pack_fields == 4 ? Slots4(fields) : fields;
+  // Quarter rows (one field) may need more room than one field's values: the padding.
+  const int64_t rows = quarters ? nq * 16 : 0;
   for (size_t l = 0; l < levels.size(); ++l) {
     GLevel& L = *levels[l];
-    for (Buffer* b : {&L.b, &L.x, &L.r}) b->Alloc(L.n * 4 * slots);
+    for (Buffer* b : {&L.b, &L.x, &L.r}) b->Alloc(std::max(L.n * 4 * slots, l == 0 ? rows : 0));
   }
-  for (Buffer* b : {&r, &z, &p, &q}) b->Alloc(n0 * 4 * slots);
+  for (Buffer* b : {&r, &z, &p, &q}) b->Alloc(std::max(n0 * 4 * slots, rows));
   r4.ViewOf(r, Elem::kVec4);
   z4.ViewOf(z, Elem::kVec4);
   p4.ViewOf(p, Elem::kVec4);
   q4.ViewOf(q, Elem::kVec4);
-  if (pack_fields == 4) {
-    b_packed.Alloc(n0 * 4 * slots, nullptr, Elem::kVec4);
-    x_packed.Alloc(n0 * 8 * slots, nullptr, Elem::kDouble);
+  if (pack_fields == 4 || quarters) {
+    b_packed.Alloc(std::max(n0 * 4 * slots, rows), nullptr, Elem::kVec4);
+    x_packed.Alloc(std::max(n0 * 8 * slots, 2 * rows), nullptr, Elem::kDouble);
   }
   for (size_t l = 0; l < levels.size(); ++l) {
     GLevel& L = *levels[l];
@@ -503,6 +516,38 @@ void GlMultigridSolver::Impl::SetPackFields(int k) {
   const int fields = capacity;
   capacity = 0;
   Reserve(fields);
+}
+
+void GlMultigridSolver::Impl::SetQuarters(bool on) {
+  quarters = on;
+  if (on && cx_q.id() == 0)
+    for (Buffer* b : {&cx_q, &cy_q, &cz_q, &inv_q, &luc_q, &sigma_q}) b->Alloc(nq * 16, nullptr, Elem::kVec4);
+  if (on && coefficients_set) QuarterCoefficients();
+  const int fields = capacity;
+  capacity = 0;
+  Reserve(fields);
+}
+
+void GlMultigridSolver::Impl::QuarterCoefficients() {
+  GLevel& L = *levels[0];
+  QuarterPack(L.cx, cx_q);
+  QuarterPack(L.cy, cy_q);
+  QuarterPack(L.cz, cz_q);
+  QuarterPack(L.inv, inv_q);
+  QuarterPack(L.luc, luc_q);
+  QuarterPack(L.sigma, sigma_q);
+}
+
+void GlMultigridSolver::Impl::QuarterPack(const Buffer& plain, Buffer& rows, bool doubles) {
+  const GridShape& s = levels[0]->s;
+  RunBatch("pack", {&plain, &rows}, {int(nq), 1, int(s.nx), qw}, FlatThreads(nq), 1,
+           doubles ? "#define QUARTERS\n#define DOUBLE\n" : "#define QUARTERS\n");
+}
+
+void GlMultigridSolver::Impl::QuarterUnpack(const Buffer& rows, Buffer& plain, bool doubles) {
+  const GridShape& s = levels[0]->s;
+  RunBatch("pack", {&plain, &rows}, {int(nq), 1, int(s.nx), qw}, FlatThreads(nq), 1,
+           doubles ? "#define QUARTERS\n#define UNPACK\n#define DOUBLE\n" : "#define QUARTERS\n#define UNPACK\n");
 }
 
 void GlMultigridSolver::Impl::Pack(const Buffer& per_field, Buffer& packed4, int nb, bool doubles) {
@@ -569,6 +614,7 @@ void GlMultigridSolver::SetCoefficients(const float* kappa, const float* mu, dou
   }
   I.coefficients_set = true;
   if (I.tail_level < I.levels.size()) I.CopyTailCoefficients();
+  if (I.quarters) I.QuarterCoefficients();
 }
 
 void GlMultigridSolver::Apply(const float* x, float* y) {
@@ -666,16 +712,22 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
     bool& flag;
     Layout(bool& f, bool on) : flag(f) { flag = on; }
     ~Layout() { flag = false; }
-  } layout(packed, Packed(nb));
+  } layout(packed, Packed(nb)), quarter_rows(quartered, Quartered(nb));
   if (packed) {
     Pack(b_fields, b_packed, nb);
     Pack(x_fields, x_packed, nb, true);
   }
-  const Buffer& b = packed ? b_packed : b_fields;
-  Buffer& x = packed ? x_packed : x_fields;
-  Buffer &r = packed ? r4 : this->r, &z = packed ? z4 : this->z;
-  Buffer &p = packed ? p4 : this->p, &q = packed ? q4 : this->q;
-  const int64_t slots = packed ? Slots4(nb) : nb;
+  if (quartered) {
+    QuarterPack(b_fields, b_packed);
+    QuarterPack(x_fields, x_packed, true);
+  }
+  const bool vec4s = packed || quartered;
+  const Buffer& b = vec4s ? b_packed : b_fields;
+  Buffer& x = vec4s ? x_packed : x_fields;
+  Buffer &r = vec4s ? r4 : this->r, &z = vec4s ? z4 : this->z;
+  Buffer &p = vec4s ? p4 : this->p, &q = vec4s ? q4 : this->q;
+  // Bytes of the CG vectors r .. q in the current layout.
+  const int64_t vector_bytes = quartered ? nq * 16 : n0 * 4 * (packed ? Slots4(nb) : nb);
   const int64_t n = n0;
   const int max_it = options.max_iterations;
   const double tol = options.tolerance;
@@ -700,7 +752,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
   };
   auto restart = [&] {
     Precondition(r, z, nb);
-    p.CopyFrom(z, n * 4 * slots);
+    p.CopyFrom(z, vector_bytes);
     Dot(r, z, kCgRz, nb);
   };
 
@@ -714,6 +766,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
       const std::vector<double> zeros(n, 0.0);
       x_fields.Upload(zeros.data(), n * 8, int64_t(f) * n * 8);
       if (packed) Pack(x_fields, x_packed, nb, true);
+      if (quartered) QuarterPack(x_fields, x_packed, true);
       at(f, kCgRr) = 0;
       finish(f, true, "zero right-hand side");
       continue;
@@ -802,6 +855,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
       if (!done[f]) finish(f, false, fmt::format("reached max_iterations = {}", max_it));
   }
   if (packed) Unpack(x_packed, x_fields, nb, true);
+  if (quartered) QuarterUnpack(x_packed, x_fields, true);
   std::vector<double> h(int64_t(nb) * max_it);
   if (it > 0) hist.Download(h.data(), int64_t(h.size()) * 8);
   const double seconds =
@@ -872,6 +926,15 @@ double GlMultigridSolver::TimeApply(int repetitions) {
     for (int k = 0; k < 10; ++k) I.Stencil(L, L.x, L.x, I.q, 1, 1);
   });
 }
+
+double GlMultigridSolver::TimeEmptyDispatch(int repetitions) {
+  Impl& I = *impl_;
+  return MedianSeconds(repetitions, 100, [&] {
+    for (int k = 0; k < 100; ++k) Run("copy", {&I.q, &I.q}, {0}, 1);
+  });
+}
+
+int64_t GlMultigridSolver::Dispatches() { return gl_internal::DispatchCount(); }
 
 double GlMultigridSolver::TimeCopy(int64_t bytes, int repetitions) {
   if (GetTuning().images) {

@@ -55,6 +55,11 @@ class GlMultigridSolver {
   std::string CopyReference() const;
   // Bytes one stencil application must move at least: x, cx, cy, cz, sigma read, y written.
   int64_t ApplyBytes() const;
+  // Median seconds of a dispatch that does nothing (one work group of an empty loop, and its
+  // barrier): the fixed cost every dispatch pays (on llvmpipe its thread pool's hand-off).
+  double TimeEmptyDispatch(int repetitions);
+  // Compute dispatches issued by every gl solver of the process so far.
+  static int64_t Dispatches();
 
   // The device state, for the other gl sources (gl_internal.h).
   struct Impl;

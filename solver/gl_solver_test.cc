@@ -337,5 +337,43 @@ TEST(GlSolver, OneDispatchCgIterationMatchesTheDispatchedOne) {
   EXPECT_LE(nf + 7 * iterations, nd);
 }
 
+// A single field's solve in quarter rows (common.glsl's QUARTERS: the finest level four nodes
+// of a row per vec4) gives the plain layout's results: the same iterations, solutions within
+// float rounding. Widths with padding (13 -> 4 x 4, 26 -> 4 x 8) and without (40), with the
+// coarse tail off and on; a back light, a spot beside a quarter's edge, a warm start.
+TEST(GlSolver, QuarterRowsMatchThePlainLayout) {
+  for (const GridShape shape : {GridShape{13, 9, 6}, GridShape{26, 11, 7}, GridShape{40, 30, 8}}) {
+    for (bool tail : {false, true}) {
+      SCOPED_TRACE(::testing::Message() << shape.ToString() << (tail ? " with" : " without") << " the tail");
+      VariedProblem P(shape, 5);
+      GlMultigridSolver& gl = *P.gl;
+      GlMultigridSolver::Impl& I = gl.impl();
+      if (!tail) gl.SetCoarseTail(0);
+      if (I.tail_level == 0) continue;  // the whole hierarchy in the tail: never quartered
+      const int64_t n = P.n;
+      P.b[n + shape.index(I.qw, 3, 0)] = 1.0f;  // a spot on the second quarter's first column
+      for (int f : {0, 1, 2}) {
+        SCOPED_TRACE(f);
+        std::vector<float> x_plain(P.x0.begin() + f * n, P.x0.begin() + (f + 1) * n), x_rows = x_plain;
+        I.SetQuarters(false);
+        const SolveSummary plain = gl.SolveBatch(1, P.b.data() + f * n, x_plain.data())[0];
+        I.SetQuarters(true);
+        ASSERT_TRUE(I.Quartered(1));
+        const SolveSummary rows = gl.SolveBatch(1, P.b.data() + f * n, x_rows.data())[0];
+        EXPECT_TRUE(rows.converged) << rows.BriefReport();
+        EXPECT_EQ(rows.iterations, plain.iterations);
+        EXPECT_NEAR(rows.final_residual, plain.final_residual, 0.1 * plain.final_residual);
+        double dd = 0, xx = 0;
+        for (int64_t p = 0; p < n; ++p) {
+          dd += (double(x_rows[p]) - x_plain[p]) * (double(x_rows[p]) - x_plain[p]);
+          xx += double(x_plain[p]) * x_plain[p];
+        }
+        EXPECT_GT(xx, 0.0);
+        EXPECT_LE(std::sqrt(dd / xx), 1e-5);
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace translume

@@ -7,7 +7,8 @@
 //   ADD:       x += p on active fields (the full-multigrid start; buffers x, -, p, -, scalars)
 // x, r, p, q, z hold one field of n values per work-group z, or under FIELDS4 four fields per
 // vec4 (x: four consecutive doubles per node) with one coefficient per field of the group;
-// fields past `fields` take 0. A grid-stride loop (common.glsl).
+// fields past `fields` take 0; under QUARTERS (common.glsl) the four components are one field's
+// nodes and take its coefficient. A grid-stride loop (common.glsl).
 DOUBLES(4, Scal, scal, readonly);
 layout(location = 0) uniform int n;
 layout(location = 1) uniform int fields;
@@ -31,7 +32,11 @@ VALUES(3, Q, q, readonly);
 
 // Slot `slot` of component c's field, or false past the last field.
 bool Slot(int c, int slot, out double v) {
+#ifdef QUARTERS
+  int f = int(Field());
+#else
   int f = int(Field()) * K + c;
+#endif
   v = f < fields ? LDD(scal, f * kCgStride + slot) : 0.0LF;
   return f < fields;
 }

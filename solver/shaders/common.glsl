@@ -96,6 +96,29 @@ bool Column(int nx, int ny, int nz, int kz, out int i, out int j, out int k0, ou
 #define MG_LDV LD
 #endif
 
+// QUARTERS (with FIELDS4; the host's define for the finest level of a single field's solve,
+// Tuning::quarters): the level's x-rows are cut into four quarters of qw nodes (qw even, the
+// last quarter padded), and node (q qw + i, j, k) is component q of packed node i + qw (j + ny k).
+// One load then brings four nodes of a row, as FIELDS4 brings four fields. The coefficients
+// come packed the same way (COEFS, MG_COEF, LDC; padding nodes have all coefficients 0), and a
+// node's x-neighbour across a quarter's edge is the next component of the packed node at the
+// row's other end: FromLeft / FromRight shift the components (component 0 of the first quarter
+// and 3 of the last get 0, where the coupling is 0 too). The colours of the zebra sweeps agree
+// because qw is even.
+#ifdef QUARTERS
+#define COEFS VEC4S
+#define MG_COEF vec4
+#define LDC LD4
+vec4 FromLeft(vec4 v) { return vec4(0.0, v.xyz); }
+vec4 FromRight(vec4 v) { return vec4(v.yzw, 0.0); }
+dvec4 FromLeft(dvec4 v) { return dvec4(0.0LF, v.xyz); }
+dvec4 FromRight(dvec4 v) { return dvec4(v.yzw, 0.0LF); }
+#else
+#define COEFS FLOATS
+#define MG_COEF float
+#define LDC LD
+#endif
+
 // Per-field conjugate-gradient scalars (double), kCgStride per field, field f at f * kCgStride
 // (gl_internal.h mirrors these slots): rz = r.z, pq = p.A p, rr = r.r, rz_new = the next r.z,
 // bb = b.b, active = 1 while the field iterates (0: frozen, alpha = 0), iterations done, and

@@ -5,7 +5,8 @@
 // coroutine switches) one sum per invocation instead. Batched: a, b, c hold one field of n
 // values per work-group z, or four fields per vec4 under FIELDS4 (common.glsl: the sums are
 // then dvec4, one component per field); partial sum g of field f (G per field) is at
-// partial[(f G + g) W + k], W = 1 or 2 sums, for fields f < `fields` only.
+// partial[(f G + g) W + k], W = 1 or 2 sums, for fields f < `fields` only. Under QUARTERS the
+// four components are one field's nodes (common.glsl): their sums add up to its partial sum.
 VALUES(0, A, a, readonly);
 VALUES(1, B, b, readonly);
 DOUBLES(2, Partial, partial, writeonly);
@@ -29,6 +30,14 @@ shared DSUM sdata[TL_GROUP];
 
 // Stores this group's (or invocation's) sums s0, s1 as partial sum g of G of each field.
 void Store(uint g, uint G, DSUM s0, DSUM s1) {
+#ifdef QUARTERS
+  uint at = (Field() * G + g) * W;
+  STD(partial, at, (s0.x + s0.y) + (s0.z + s0.w));
+#ifdef PAIR
+  STD(partial, at + 1u, (s1.x + s1.y) + (s1.z + s1.w));
+#endif
+  return;
+#endif
   for (int c = 0; c < K; ++c) {
     uint f = Field() * uint(K) + uint(c);
     if (f >= uint(fields)) return;

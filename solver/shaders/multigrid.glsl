@@ -41,23 +41,29 @@ bool SmoothColumn(int t, int nx, int ny, int color, out int i, out int j) {
 void SmoothLine(MgLevel L, int i, int j, int b0, int x0) {
   int nx = L.nx, ny = L.ny, nz = L.nz, nxy = nx * ny;
   MG_VALUE below = MG_VALUE(0.0);
-  float cz_below = 0.0;
+  MG_COEF cz_below = MG_COEF(0.0);
   int p = i + nx * j;
   for (int k = 0; k < nz; ++k, p += nxy) {
     int q = x0 + p;
     MG_VALUE d = MG_LDV(mg_b, b0 + p) + cz_below * below;
-    if (i > 0) d += LD(mg_cx, L.cx + p - 1) * MG_LDV(mg_x, q - 1);
-    if (i + 1 < nx) d += LD(mg_cx, L.cx + p) * MG_LDV(mg_x, q + 1);
-    if (j > 0) d += LD(mg_cy, L.cy + p - nx) * MG_LDV(mg_x, q - nx);
-    if (j + 1 < ny) d += LD(mg_cy, L.cy + p) * MG_LDV(mg_x, q + nx);
-    below = d * LD(mg_inv, L.inv + p);
+    if (i > 0) d += LDC(mg_cx, L.cx + p - 1) * MG_LDV(mg_x, q - 1);
+#ifdef QUARTERS
+    else d += FromLeft(LDC(mg_cx, L.cx + p + nx - 1)) * FromLeft(MG_LDV(mg_x, q + nx - 1));
+#endif
+    if (i + 1 < nx) d += LDC(mg_cx, L.cx + p) * MG_LDV(mg_x, q + 1);
+#ifdef QUARTERS
+    else d += LDC(mg_cx, L.cx + p) * FromRight(MG_LDV(mg_x, q - (nx - 1)));
+#endif
+    if (j > 0) d += LDC(mg_cy, L.cy + p - nx) * MG_LDV(mg_x, q - nx);
+    if (j + 1 < ny) d += LDC(mg_cy, L.cy + p) * MG_LDV(mg_x, q + nx);
+    below = d * LDC(mg_inv, L.inv + p);
     ST(mg_x, q, below);
-    cz_below = LD(mg_cz, L.cz + p);
+    cz_below = LDC(mg_cz, L.cz + p);
   }
   MG_VALUE above = below;
   p -= 2 * nxy;
   for (int k = nz - 2; k >= 0; --k, p -= nxy) {
-    above = MG_LDV(mg_x, x0 + p) + LD(mg_luc, L.luc + p) * above;
+    above = MG_LDV(mg_x, x0 + p) + LDC(mg_luc, L.luc + p) * above;
     ST(mg_x, x0 + p, above);
   }
 }
@@ -66,14 +72,14 @@ void SmoothLine(MgLevel L, int i, int j, int b0, int x0) {
 #ifdef MG_RESIDUAL
 #ifndef ACC
 #define ACC MG_VALUE
-#define ACC_C float
+#define ACC_C MG_COEF
 #define LDX MG_LDV
 #endif
 // Nodes k0 .. k1 - 1 of column (i, j) (common.glsl's Column): mode 0: y = b - A x (residual),
 // mode 1: y = A x, A in the difference form A x_p = sigma_p x_p + sum_q c_pq (x_p - x_q)
 // (assemble.comp). x0, b0, y0: this field's level offsets in x, b and y. x and cz of the node
 // below are carried in registers. ACC is the accumulator type, ACC_C the coefficients' type
-// in its sums and LDX loads x (MG_VALUE, float and MG_LDV unless the shader defines them:
+// in its sums and LDX loads x (MG_VALUE, MG_COEF and MG_LDV unless the shader defines them:
 // residual.comp's X_DOUBLE).
 void ResidualColumn(MgLevel L, int i, int j, int k0, int k1, int mode, int x0, int b0, int y0) {
   int nx = L.nx, ny = L.ny, nz = L.nz, nxy = nx * ny;
@@ -82,18 +88,24 @@ void ResidualColumn(MgLevel L, int i, int j, int k0, int k1, int mode, int x0, i
   ACC_C czm = ACC_C(0.0);
   if (k0 > 0) {
     xm = LDX(mg_x, x0 + p - nxy);
-    czm = ACC_C(LD(mg_cz, L.cz + p - nxy));
+    czm = ACC_C(LDC(mg_cz, L.cz + p - nxy));
   }
   ACC xc = LDX(mg_x, x0 + p);
   for (int k = k0; k < k1; ++k, p += nxy) {
     int o = x0 + p;  // this node in this field
     ACC xp = k + 1 < nz ? LDX(mg_x, o + nxy) : ACC(0.0);
-    ACC_C czp = ACC_C(LD(mg_cz, L.cz + p));
-    ACC v = ACC_C(LD(mg_sigma, L.sigma + p)) * xc + czm * (xc - xm) + czp * (xc - xp);
-    if (i > 0) v += ACC_C(LD(mg_cx, L.cx + p - 1)) * (xc - LDX(mg_x, o - 1));
-    if (i + 1 < nx) v += ACC_C(LD(mg_cx, L.cx + p)) * (xc - LDX(mg_x, o + 1));
-    if (j > 0) v += ACC_C(LD(mg_cy, L.cy + p - nx)) * (xc - LDX(mg_x, o - nx));
-    if (j + 1 < ny) v += ACC_C(LD(mg_cy, L.cy + p)) * (xc - LDX(mg_x, o + nx));
+    ACC_C czp = ACC_C(LDC(mg_cz, L.cz + p));
+    ACC v = ACC_C(LDC(mg_sigma, L.sigma + p)) * xc + czm * (xc - xm) + czp * (xc - xp);
+    if (i > 0) v += ACC_C(LDC(mg_cx, L.cx + p - 1)) * (xc - LDX(mg_x, o - 1));
+#ifdef QUARTERS
+    else v += ACC_C(FromLeft(LDC(mg_cx, L.cx + p + nx - 1))) * (xc - FromLeft(LDX(mg_x, o + nx - 1)));
+#endif
+    if (i + 1 < nx) v += ACC_C(LDC(mg_cx, L.cx + p)) * (xc - LDX(mg_x, o + 1));
+#ifdef QUARTERS
+    else v += ACC_C(LDC(mg_cx, L.cx + p)) * (xc - FromRight(LDX(mg_x, o - (nx - 1))));
+#endif
+    if (j > 0) v += ACC_C(LDC(mg_cy, L.cy + p - nx)) * (xc - LDX(mg_x, o - nx));
+    if (j + 1 < ny) v += ACC_C(LDC(mg_cy, L.cy + p)) * (xc - LDX(mg_x, o + nx));
     ST(mg_y, y0 + p, MG_VALUE(mode == 0 ? ACC(MG_LDV(mg_b, b0 + p)) - v : v));
     xm = xc;
     xc = xp;
@@ -143,12 +155,34 @@ MgTaps MgGather(MgAxis A, int c) {
   return t;
 }
 
+// The fine rows' stride, and the fine value of x-tap g of t in the fine row starting at r: the
+// level's own layout, or under MG_FINE_QUARTERS (transfer.comp) its quarter rows of mg_qw
+// (common.glsl's QUARTERS), where MgQuarterTaps has made each tap an offset in the packed row
+// and a component.
+#ifdef MG_FINE_QUARTERS
+#define MG_FINE_NX(X) mg_qw
+#define MG_FINE_VALUE(r, t, q, g) LD4(mg_src, (r) + (t).f[g])[q[g]]
+void MgQuarterTaps(inout MgTaps t, out int q[kMgTaps]) {
+  for (int g = 0; g < t.n; ++g) {
+    q[g] = Div(t.f[g], mg_qw);
+    t.f[g] -= q[g] * mg_qw;
+  }
+}
+#else
+#define MG_FINE_NX(X) X.n_fine
+#define MG_FINE_VALUE(r, t, q, g) MG_LDV(mg_src, (r) + (t).f[g])
+#endif
+
 // Restriction R = P^T: coarse node e (of X.n_coarse Y.n_coarse Z.n_coarse) from the fine
 // values at in0 (X.n_fine Y.n_fine Z.n_fine of them).
 MG_VALUE Restrict3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
   int mxy = X.n_coarse * Y.n_coarse, ck = Div(e, mxy), r = e - ck * mxy, cj = Div(r, X.n_coarse);
-  int ci = r - cj * X.n_coarse, nx = X.n_fine, nxy = nx * Y.n_fine;
+  int ci = r - cj * X.n_coarse, nx = MG_FINE_NX(X), nxy = nx * Y.n_fine;
   MgTaps tx = MgGather(X, ci), ty = MgGather(Y, cj), tz = MgGather(Z, ck);
+  int tq[kMgTaps];
+#ifdef MG_FINE_QUARTERS
+  MgQuarterTaps(tx, tq);
+#endif
   MG_VALUE s = MG_VALUE(0.0);
   for (int gz = 0; gz < tz.n; ++gz) {
     int kz = in0 + nxy * tz.f[gz];
@@ -156,7 +190,7 @@ MG_VALUE Restrict3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
     for (int gy = 0; gy < ty.n; ++gy) {
       int jy = kz + nx * ty.f[gy];
       MG_VALUE sx = MG_VALUE(0.0);
-      for (int gx = 0; gx < tx.n; ++gx) sx += tx.w[gx] * MG_LDV(mg_src, jy + tx.f[gx]);
+      for (int gx = 0; gx < tx.n; ++gx) sx += tx.w[gx] * MG_FINE_VALUE(jy, tx, tq, gx);
       sy += ty.w[gy] * sx;
     }
     s += tz.w[gz] * sy;
@@ -164,27 +198,46 @@ MG_VALUE Restrict3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
   return s;
 }
 
+#ifndef MG_FINE_QUARTERS  // (there mg_src is the fine level, in quarter rows)
 // Prolongation P (trilinear): fine node e (of X.n_fine Y.n_fine Z.n_fine) from the coarse
-// values at in0.
-MG_VALUE Prolong3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
-  int nxy = X.n_fine * Y.n_fine, k = Div(e, nxy), r = e - k * nxy, j = Div(r, X.n_fine);
-  int i = r - j * X.n_fine, mx = X.n_coarse, mxy = mx * Y.n_coarse;
+// values at in0. In two parts, so that the nodes of a row share the y and z part (MgRow: the
+// coarse rows' offsets and weights for fine row j, plane k) and only the x part is per node.
+struct MgRow {
+  int cy[2];
+  int z0, z1;
+  float wy0, wy1, wz0, wz1;
+};
+MgRow ProlongRow(int j, int k, MgAxis X, MgAxis Y, MgAxis Z) {
+  int mxy = X.n_coarse * Y.n_coarse;
+  MgRow row;
+  row.cy = int[2](LD(mg_idx, Y.lohi + 2 * j), LD(mg_idx, Y.lohi + 2 * j + 1));
+  row.z0 = mxy * LD(mg_idx, Z.lohi + 2 * k);
+  row.z1 = mxy * LD(mg_idx, Z.lohi + 2 * k + 1);
+  row.wy0 = LD(mg_wts, Y.w + 2 * j);
+  row.wy1 = LD(mg_wts, Y.w + 2 * j + 1);
+  row.wz0 = LD(mg_wts, Z.w + 2 * k);
+  row.wz1 = LD(mg_wts, Z.w + 2 * k + 1);
+  return row;
+}
+MG_VALUE ProlongAt(int i, MgRow row, MgAxis X, int in0) {
+  int mx = X.n_coarse;
   int cx[2] = int[2](LD(mg_idx, X.lohi + 2 * i), LD(mg_idx, X.lohi + 2 * i + 1));
-  int cy[2] = int[2](LD(mg_idx, Y.lohi + 2 * j), LD(mg_idx, Y.lohi + 2 * j + 1));
-  int z0 = mxy * LD(mg_idx, Z.lohi + 2 * k), z1 = mxy * LD(mg_idx, Z.lohi + 2 * k + 1);
-  float wy0 = LD(mg_wts, Y.w + 2 * j), wy1 = LD(mg_wts, Y.w + 2 * j + 1);
-  float wz0 = LD(mg_wts, Z.w + 2 * k), wz1 = LD(mg_wts, Z.w + 2 * k + 1);
   MG_VALUE sy[2];
   for (int a = 0; a < 2; ++a) {
     MG_VALUE sz[2];
     for (int b = 0; b < 2; ++b) {
-      int cj = in0 + cx[a] + mx * cy[b];
-      sz[b] = wz0 * MG_LDV(mg_src, cj + z0) + wz1 * MG_LDV(mg_src, cj + z1);
+      int cj = in0 + cx[a] + mx * row.cy[b];
+      sz[b] = row.wz0 * MG_LDV(mg_src, cj + row.z0) + row.wz1 * MG_LDV(mg_src, cj + row.z1);
     }
-    sy[a] = wy0 * sz[0] + wy1 * sz[1];
+    sy[a] = row.wy0 * sz[0] + row.wy1 * sz[1];
   }
   return LD(mg_wts, X.w + 2 * i) * sy[0] + LD(mg_wts, X.w + 2 * i + 1) * sy[1];
 }
+MG_VALUE Prolong3Value(int e, MgAxis X, MgAxis Y, MgAxis Z, int in0) {
+  int nxy = X.n_fine * Y.n_fine, k = Div(e, nxy), r = e - k * nxy, j = Div(r, X.n_fine);
+  return ProlongAt(r - j * X.n_fine, ProlongRow(j, k, X, Y, Z), X, in0);
+}
+#endif
 #endif
 
 #ifdef MG_DENSE

@@ -5,7 +5,9 @@
 // per_field into grouped, or with UNPACK the reverse; fields past `fields` are packed as 0 and
 // not unpacked. With DOUBLE both hold doubles, grouped four consecutive ones per node
 // (common.glsl's LDD4). Work-group z: the group of four fields; a grid-stride loop over the n
-// nodes.
+// nodes. With QUARTERS, between one field's values (nx per row) and its quarter rows
+// (common.glsl: n packed nodes of qw; padding packed as 0): the finest level's values and
+// coefficients of a single field's solve.
 #ifdef DOUBLE
 DOUBLES(0, PerField, per_field, restrict);
 DOUBLES(1, Packed, grouped, restrict);
@@ -15,28 +17,50 @@ VEC4S(1, Packed, grouped, restrict);
 #endif
 layout(location = 0) uniform int n;
 layout(location = 1) uniform int fields;
+#ifdef QUARTERS
+layout(location = 2) uniform int nx;
+layout(location = 3) uniform int qw;
+#endif
+
+// Where component c of packed node e comes from in per_field, or -1 (padding): field
+// 4 g + c's node e (FIELDS4), or under QUARTERS the one field's node (c qw + i, row) for packed
+// node i + qw row (common.glsl), n then the packed node count.
+int Source(int g, int e, int c) {
+#ifdef QUARTERS
+  int row = Div(e, qw), x = c * qw + e - row * qw;
+  return x < nx ? x + nx * row : -1;
+#else
+  int f = 4 * g + c;
+  return f < fields ? f * n + e : -1;
+#endif
+}
 
 void main() {
   int g = int(Field());
   for (uint e = ThreadIndex(); e < uint(n); e += Stride()) {
+    int at = g * n + int(e);
 #ifdef DOUBLE
     for (int c = 0; c < 4; ++c) {
-      int f = 4 * g + c, at = 4 * (g * n + int(e)) + c;
+      int from = Source(g, int(e), c);
 #ifdef UNPACK
-      if (f < fields) STD(per_field, f * n + int(e), LDD(grouped, at));
+      if (from >= 0) STD(per_field, from, LDD(grouped, 4 * at + c));
 #else
-      STD(grouped, at, f < fields ? LDD(per_field, f * n + int(e)) : 0.0LF);
+      STD(grouped, 4 * at + c, from >= 0 ? LDD(per_field, from) : 0.0LF);
 #endif
     }
 #elif defined(UNPACK)
-    vec4 v = LD4(grouped, g * n + int(e));
-    for (int c = 0; c < 4; ++c)
-      if (4 * g + c < fields) ST(per_field, (4 * g + c) * n + int(e), v[c]);
+    vec4 v = LD4(grouped, at);
+    for (int c = 0; c < 4; ++c) {
+      int from = Source(g, int(e), c);
+      if (from >= 0) ST(per_field, from, v[c]);
+    }
 #else
     vec4 v = vec4(0.0);
-    for (int c = 0; c < 4; ++c)
-      if (4 * g + c < fields) v[c] = LD(per_field, (4 * g + c) * n + int(e));
-    ST(grouped, g * n + int(e), v);
+    for (int c = 0; c < 4; ++c) {
+      int from = Source(g, int(e), c);
+      if (from >= 0) v[c] = LD(per_field, from);
+    }
+    ST(grouped, at, v);
 #endif
   }
 }

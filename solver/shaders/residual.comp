@@ -8,15 +8,20 @@
 // With X_DOUBLE defined, x is double and the sum accumulates in double: the conjugate-gradient
 // iterate is kept in double so that its residual can reach 1e-6 (a float iterate stalls at a
 // few 1e-6: A amplifies the rounding of x). Under FIELDS4 its four fields' values are four
-// consecutive doubles per node (common.glsl's LDD4).
-FLOATS(0, Cx, mg_cx, readonly);
-FLOATS(1, Cy, mg_cy, readonly);
-FLOATS(2, Cz, mg_cz, readonly);
-FLOATS(3, Sigma, mg_sigma, readonly);
+// consecutive doubles per node (common.glsl's LDD4). Under QUARTERS (common.glsl) x, b, out and
+// the coefficients hold one field's quarter rows, nx the packed width.
+COEFS(0, Cx, mg_cx, readonly);
+COEFS(1, Cy, mg_cy, readonly);
+COEFS(2, Cz, mg_cz, readonly);
+COEFS(3, Sigma, mg_sigma, readonly);
 #if defined(X_DOUBLE) && defined(FIELDS4)
 DOUBLES(4, X, mg_x, readonly);
 #define ACC dvec4
+#ifdef QUARTERS
+#define ACC_C dvec4
+#else
 #define ACC_C double
+#endif
 #define LDX LDD4
 #elif defined(X_DOUBLE)
 DOUBLES(4, X, mg_x, readonly);

@@ -2,12 +2,13 @@
 // One half-sweep of red-black (zebra) z-line Gauss-Seidel on one level: every column (i, j)
 // with (i + j) % 2 == color solves its tridiagonal z-system exactly, the neighbouring columns
 // (the other colour) held fixed (multigrid.glsl's SmoothLine). One column per invocation.
-// Batched: b and x hold one field per work-group z, or four under FIELDS4 (common.glsl).
-FLOATS(0, Cx, mg_cx, readonly);
-FLOATS(1, Cy, mg_cy, readonly);
-FLOATS(2, Cz, mg_cz, readonly);
-FLOATS(3, Inv, mg_inv, readonly);
-FLOATS(4, Luc, mg_luc, readonly);
+// Batched: b and x hold one field per work-group z, or four under FIELDS4 (common.glsl); under
+// QUARTERS one field's quarter rows (common.glsl), nx the packed width.
+COEFS(0, Cx, mg_cx, readonly);
+COEFS(1, Cy, mg_cy, readonly);
+COEFS(2, Cz, mg_cz, readonly);
+COEFS(3, Inv, mg_inv, readonly);
+COEFS(4, Luc, mg_luc, readonly);
 VALUES(5, B, mg_b, readonly);
 VALUES(6, X, mg_x, restrict);
 layout(location = 0) uniform int nx;
