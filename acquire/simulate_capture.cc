@@ -5,17 +5,16 @@
 #include <unistd.h>
 
 #include <chrono>
-#include <exception>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
-#include <opencv2/core/utility.hpp>
 
 #include "acquire/capture.h"
 #include "calib/board.h"
 #include "calib/hdr.h"
+#include "calib/parallel.h"
 #include "calib/projector_pattern.h"
 #include "solver/light.h"
 #include "solver/material_io.h"
@@ -161,17 +160,10 @@ int WriteStack(const std::string& dir, const std::vector<cv::Mat>& photos, const
   fs::create_directories(dir);
   nlohmann::json j;
   for (size_t k = 0; k < photos.size(); ++k) j[fmt::format("t{:02d}.png", k)] = times[k];
-  // The PNG encoder is serial: photos in parallel (the first failure is rethrown).
-  std::vector<std::exception_ptr> errors(photos.size());
-  cv::parallel_for_(cv::Range(0, int(photos.size())), [&](const cv::Range& r) {
-    for (int k = r.start; k < r.end; ++k) try {
-        calib::WritePhoto((fs::path(dir) / fmt::format("t{:02d}.png", k)).string(), photos[size_t(k)]);
-      } catch (...) {
-        errors[size_t(k)] = std::current_exception();
-      }
+  // The PNG encoder is serial: photos in parallel.
+  calib::ParallelFor(int(photos.size()), [&](int k) {
+    calib::WritePhoto((fs::path(dir) / fmt::format("t{:02d}.png", k)).string(), photos[size_t(k)]);
   });
-  for (const auto& e : errors)
-    if (e) std::rethrow_exception(e);
   std::ofstream((fs::path(dir) / "exposures.json").string()) << j.dump(2) << "\n";
   return int(photos.size());
 }

@@ -8,6 +8,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "calib/error.h"
+#include "calib/parallel.h"
 
 namespace translume::calib {
 namespace {
@@ -50,8 +51,11 @@ CameraCalibration CalibrateCamera(const BoardSpec& board, const std::vector<Name
       throw CalibError(fmt::format("{}: image is {}x{} but {} is {}x{}; all photos must have the "
                                    "same size", v.name, v.image.cols, v.image.rows,
                                    views[0].name, c.image_size.width, c.image_size.height));
-  for (const NamedImage& v : views) {
-    const BoardDetection d = DetectBoard(board, v.image);
+  std::vector<BoardDetection> found(views.size());  // detected in parallel, used in order
+  ParallelFor(int(views.size()), [&](int i) { found[size_t(i)] = DetectBoard(board, views[size_t(i)].image); });
+  for (size_t i = 0; i < views.size(); ++i) {
+    const NamedImage& v = views[i];
+    const BoardDetection& d = found[i];
     if (!d.found) {
       c.dropped.push_back(v.name + ": board not found");
       continue;

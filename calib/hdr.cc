@@ -17,6 +17,7 @@
 #include <set>
 
 #include "calib/error.h"
+#include "calib/parallel.h"
 
 namespace translume::calib {
 namespace {
@@ -152,11 +153,18 @@ ExposureStack ReadExposureStack(const std::string& dir) {
   }
   ExposureStack s;
   s.dir = dir;
-  for (const fs::path& p : files) {
+  // Decoded in parallel, then checked in order.
+  std::vector<cv::Mat> pixels(files.size());
+  std::vector<double> exifs(files.size(), 0.0);
+  ParallelFor(int(files.size()), [&](int i) {
+    pixels[size_t(i)] = ReadRgbImage(files[size_t(i)].string(), &exifs[size_t(i)]);
+  });
+  for (size_t i = 0; i < files.size(); ++i) {
+    const fs::path& p = files[i];
     Exposure e;
     e.path = p.string();
-    double exif = 0;
-    e.pixels = ReadRgbImage(e.path, &exif);
+    const double exif = exifs[i];
+    e.pixels = std::move(pixels[i]);
     const std::string name = p.filename().string();
     if (exif > 0) e.seconds = exif;
     else if (times.contains(name) && times[name].is_number()) e.seconds = times[name].get<double>();

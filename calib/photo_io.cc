@@ -12,6 +12,7 @@
 
 #include "calib/error.h"
 #include "calib/hdr.h"
+#include "calib/parallel.h"
 
 namespace translume::calib {
 
@@ -38,8 +39,8 @@ std::vector<NamedImage> ReadPhotoFolder(const std::string& dir) {
   }
   std::sort(files.begin(), files.end());
   if (files.empty()) throw CalibError(dir + ": no photos (.png, .jpg, .tif, .bmp)");
-  std::vector<NamedImage> views;
-  for (const fs::path& p : files) views.push_back({p.string(), ReadGray8(p.string())});
+  std::vector<NamedImage> views(files.size());
+  ParallelFor(int(files.size()), [&](int i) { views[size_t(i)] = {files[size_t(i)].string(), ReadGray8(files[size_t(i)].string())}; });
   return views;
 }
 

@@ -8,6 +8,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "calib/error.h"
+#include "calib/parallel.h"
 
 namespace translume::calib {
 
@@ -61,13 +62,22 @@ ProjectorCalibration CalibrateProjector(const CameraCalibration& camera, const B
         throw CalibError(fmt::format("{}: photo is {}x{} but the camera calibration is {}x{}",
                                      v.name, m->cols, m->rows, camera.image_size.width,
                                      camera.image_size.height));
-  for (const PlaneView& v : planes) {
-    const BoardDetection d = DetectBoard(board, v.board_photo);
+  // Both detections of every plane in parallel, used in order.
+  std::vector<BoardDetection> boards(planes.size());
+  std::vector<std::vector<cv::Point2f>> grids(planes.size());
+  ParallelFor(int(planes.size()), [&](int i) {
+    boards[size_t(i)] = DetectBoard(board, planes[size_t(i)].board_photo);
+    if (boards[size_t(i)].found)
+      grids[size_t(i)] = FindChessboardGrid(planes[size_t(i)].pattern_photo, pattern.cols, pattern.rows);
+  });
+  for (size_t i = 0; i < planes.size(); ++i) {
+    const PlaneView& v = planes[i];
+    const BoardDetection& d = boards[i];
     if (!d.found) {
       pc.dropped.push_back(v.name + ": printed board not found");
       continue;
     }
-    std::vector<cv::Point2f> c = FindChessboardGrid(v.pattern_photo, pattern.cols, pattern.rows);
+    std::vector<cv::Point2f> c = std::move(grids[i]);
     if (o.rear_projection)
       for (size_t r = 0; r < c.size(); r += size_t(pattern.cols))
         std::reverse(c.begin() + long(r), c.begin() + long(r) + pattern.cols);
