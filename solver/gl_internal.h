@@ -267,7 +267,7 @@ struct GlMultigridSolver::Impl {
 
   // Single-field solves in quarter rows (Tuning::quarters, common.glsl's QUARTERS): the finest
   // level's values and coefficients four nodes of a row per vec4, qw packed nodes per row, nq
-  // packed nodes in all (cx_q .. sigma_q: its coefficients, packed by SetCoefficients). A
+  // packed nodes in all (cx_q .. sigma_q: its coefficients, packed for the solve). A
   // solve of one field runs quartered where the finest level is neither in the coarse tail nor
   // the coarsest: its CG vectors (r4 .. q4, b_packed, x_packed) and the finest level's V-cycle
   // work (smooth, residual, the transfers to and from level 1, which stays plain) on the
@@ -277,6 +277,9 @@ struct GlMultigridSolver::Impl {
   int qw = 0;
   int64_t nq = 0;
   Buffer cx_q, cy_q, cz_q, inv_q, luc_q, sigma_q;
+  // Whether cx_q .. sigma_q predate the last SetCoefficients: packed when a quartered solve
+  // needs them (a recovery's batches never do).
+  bool quarter_coefficients_stale = true;
   // (Not where the finest level is also the coarsest, solved by dense_solve on plain values.)
   bool Quartered(int nb) const { return quarters && nb == 1 && tail_level > 0 && levels.size() > 1; }
   bool Quarter(const GLevel& L) const { return quartered && &L == levels[0].get(); }

@@ -522,7 +522,7 @@ void GlMultigridSolver::Impl::SetQuarters(bool on) {
   quarters = on;
   if (on && cx_q.id() == 0)
     for (Buffer* b : {&cx_q, &cy_q, &cz_q, &inv_q, &luc_q, &sigma_q}) b->Alloc(nq * 16, nullptr, Elem::kVec4);
-  if (on && coefficients_set) QuarterCoefficients();
+  quarter_coefficients_stale = true;
   const int fields = capacity;
   capacity = 0;
   Reserve(fields);
@@ -614,7 +614,7 @@ void GlMultigridSolver::SetCoefficients(const float* kappa, const float* mu, dou
   }
   I.coefficients_set = true;
   if (I.tail_level < I.levels.size()) I.CopyTailCoefficients();
-  if (I.quarters) I.QuarterCoefficients();
+  I.quarter_coefficients_stale = true;  // packed by the next quartered solve
 }
 
 void GlMultigridSolver::Apply(const float* x, float* y) {
@@ -718,6 +718,8 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
     Pack(x_fields, x_packed, nb, true);
   }
   if (quartered) {
+    if (quarter_coefficients_stale) QuarterCoefficients();
+    quarter_coefficients_stale = false;
     QuarterPack(b_fields, b_packed);
     QuarterPack(x_fields, x_packed, true);
   }
