@@ -55,8 +55,7 @@ struct Tuning {
 const Tuning& GetTuning();
 
 // A buffer's element type: its image format when the shaders read it as an image buffer.
-// kDouble4: four doubles per node (a packed CG iterate, common.glsl's DVEC4S), two per texel.
-enum class Elem { kFloat, kInt, kDouble, kVec4, kDouble4 };
+enum class Elem { kFloat, kInt, kDouble, kVec4 };
 
 // A shader storage buffer (and, under Tuning::images, the buffer texture that shaders bind as
 // an image buffer).
@@ -123,7 +122,6 @@ class Buffer {
     switch (elem_) {
       case Elem::kInt: return GL_R32I;
       case Elem::kDouble: return GL_RG32UI;  // unpacked with packDouble2x32 (common.glsl)
-      case Elem::kDouble4: return GL_RGBA32UI;
       case Elem::kVec4: return GL_RGBA32F;
       default: return GL_R32F;
     }

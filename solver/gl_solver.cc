@@ -494,7 +494,7 @@ void GlMultigridSolver::Impl::Reserve(int fields) {
   q4.ViewOf(q, Elem::kVec4);
   if (pack_fields == 4 || quarters) {
     b_packed.Alloc(std::max(n0 * 4 * slots, rows), nullptr, Elem::kVec4);
-    x_packed.Alloc(std::max(n0 * 8 * slots, 2 * rows), nullptr, Elem::kDouble4);
+    x_packed.Alloc(std::max(n0 * 8 * slots, 2 * rows), nullptr, Elem::kDouble);
   }
   for (size_t l = 0; l < levels.size(); ++l) {
     GLevel& L = *levels[l];

@@ -15,11 +15,6 @@ layout(location = 1) uniform int fields;
 #ifdef DIRECTION
 VALUES(0, P, p, restrict);
 VALUES(1, Z, z, readonly);
-#elif defined(FIELDS4)
-DVEC4S(0, X, x, restrict);
-VALUES(1, R, r, restrict);
-VALUES(2, P, p, readonly);
-VALUES(3, Q, q, readonly);
 #else
 DOUBLES(0, X, x, restrict);
 VALUES(1, R, r, restrict);
@@ -75,9 +70,9 @@ void main() {
     ST(p, e, MG_LDV(z, e) + MG_VALUE(coef) * MG_LDV(p, e));
 #else
 #ifdef FIELDS4
-    // (A field with coefficient 0 keeps its x bit for bit.)
-    dvec4 xe = LDD4(x, e);
-    STD4(x, e, mix(xe, xe + coef * dvec4(LD4(p, e)), notEqual(coef, dvec4(0.0LF))));
+    dvec4 pe = dvec4(LD4(p, e));
+    for (int c = 0; c < 4; ++c)
+      if (coef[c] != 0.0LF) STD(x, 4u * e + uint(c), LDD(x, 4u * e + uint(c)) + coef[c] * pe[c]);
 #else
     STD(x, e, LDD(x, e) + coef * double(LD(p, e)));
 #endif

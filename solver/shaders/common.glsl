@@ -52,11 +52,9 @@ bool Column(int nx, int ny, int nz, int kz, out int i, out int j, out int k0, ou
 
 // Arrays: FLOATS(binding, Block, name, qualifier) declares name[] (qualifier readonly, writeonly
 // or restrict), read with LD(name, e) / written with ST(name, e, v); DOUBLES with LDD / STD,
-// INTS with LD, VEC4S (four floats per element) with LD4 / ST, DVEC4S (four doubles per
-// element) with LDD4 / STD4. Under TL_IMAGES (the host's choice on llvmpipe, gl_internal.h)
-// they are image buffers (r32f, rg32ui holding a double's two halves, r32i, rgba32f, rgba32ui
-// holding two doubles: an element in two texels) at image unit `binding`, else shader storage
-// blocks at binding `binding`.
+// INTS with LD, VEC4S (four floats per element) with LD4 / ST. Under TL_IMAGES (the host's
+// choice on llvmpipe, gl_internal.h) they are image buffers (r32f, rg32ui holding a double's two
+// halves, r32i, rgba32f) at image unit `binding`, else shader storage blocks at binding `binding`.
 #ifdef TL_IMAGES
 #define FLOATS(b, B, a, q) layout(binding = b, r32f) q uniform imageBuffer a
 #define INTS(b, B, a, q) layout(binding = b, r32i) q uniform iimageBuffer a
@@ -67,17 +65,6 @@ bool Column(int nx, int ny, int nz, int kz, out int i, out int j, out int k0, ou
 #define LDD(a, e) packDouble2x32(imageLoad(a, int(e)).xy)
 #define ST(a, e, v) imageStore(a, int(e), vec4(v))
 #define STD(a, e, v) imageStore(a, int(e), uvec4(unpackDouble2x32(v), 0u, 0u))
-#define DVEC4S(b, B, a, q) layout(binding = b, rgba32ui) q uniform uimageBuffer a
-dvec4 Doubles4(uvec4 lo, uvec4 hi) {
-  return dvec4(packDouble2x32(lo.xy), packDouble2x32(lo.zw), packDouble2x32(hi.xy), packDouble2x32(hi.zw));
-}
-#define LDD4(a, e) Doubles4(imageLoad(a, 2 * int(e)), imageLoad(a, 2 * int(e) + 1))
-#define STD4(a, e, v)                                                                       \
-  {                                                                                         \
-    dvec4 v_ = (v);                                                                         \
-    imageStore(a, 2 * int(e), uvec4(unpackDouble2x32(v_.x), unpackDouble2x32(v_.y)));       \
-    imageStore(a, 2 * int(e) + 1, uvec4(unpackDouble2x32(v_.z), unpackDouble2x32(v_.w)));   \
-  }
 #else
 #define FLOATS(b, B, a, q) layout(std430, binding = b) q buffer B { float a[]; }
 #define INTS(b, B, a, q) layout(std430, binding = b) q buffer B { int a[]; }
@@ -88,9 +75,6 @@ dvec4 Doubles4(uvec4 lo, uvec4 hi) {
 #define LDD(a, e) a[e]
 #define ST(a, e, v) a[e] = (v)
 #define STD(a, e, v) a[e] = (v)
-#define DVEC4S(b, B, a, q) layout(std430, binding = b) q buffer B { dvec4 a[]; }
-#define LDD4(a, e) a[e]
-#define STD4(a, e, v) a[e] = (v)
 #endif
 
 // FIELDS4 (the host's define for a batch, Tuning::pack_fields): the field values come four
@@ -98,12 +82,13 @@ dvec4 Doubles4(uvec4 lo, uvec4 hi) {
 // component c of group g; a buffer's group holds n vec4). The coefficients stay one float per
 // node, read once for four fields. VALUES declares a value array (VEC4S or FLOATS); MG_VALUE,
 // MG_DVALUE and MG_LDV are its type, double type and load (multigrid.glsl). Double values
-// (the CG iterate) come four fields to a DVEC4S element per node.
+// (the CG iterate) come four fields to four consecutive doubles: LDD4 reads node e's four.
 #ifdef FIELDS4
 #define VALUES VEC4S
 #define MG_VALUE vec4
 #define MG_DVALUE dvec4
 #define MG_LDV LD4
+#define LDD4(a, e) dvec4(LDD(a, 4 * (e)), LDD(a, 4 * (e) + 1), LDD(a, 4 * (e) + 2), LDD(a, 4 * (e) + 3))
 #else
 #define VALUES FLOATS
 #define MG_VALUE float

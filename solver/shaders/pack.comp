@@ -10,7 +10,7 @@
 // coefficients of a single field's solve.
 #ifdef DOUBLE
 DOUBLES(0, PerField, per_field, restrict);
-DVEC4S(1, Packed, grouped, restrict);
+DOUBLES(1, Packed, grouped, restrict);
 #else
 FLOATS(0, PerField, per_field, restrict);
 VEC4S(1, Packed, grouped, restrict);
@@ -39,19 +39,15 @@ void main() {
   int g = int(Field());
   for (uint e = ThreadIndex(); e < uint(n); e += Stride()) {
     int at = g * n + int(e);
-#if defined(DOUBLE) && defined(UNPACK)
-    dvec4 v = LDD4(grouped, at);
+#ifdef DOUBLE
     for (int c = 0; c < 4; ++c) {
       int from = Source(g, int(e), c);
-      if (from >= 0) STD(per_field, from, v[c]);
+#ifdef UNPACK
+      if (from >= 0) STD(per_field, from, LDD(grouped, 4 * at + c));
+#else
+      STD(grouped, 4 * at + c, from >= 0 ? LDD(per_field, from) : 0.0LF);
+#endif
     }
-#elif defined(DOUBLE)
-    dvec4 v = dvec4(0.0LF);
-    for (int c = 0; c < 4; ++c) {
-      int from = Source(g, int(e), c);
-      if (from >= 0) v[c] = LDD(per_field, from);
-    }
-    STD4(grouped, at, v);
 #elif defined(UNPACK)
     vec4 v = LD4(grouped, at);
     for (int c = 0; c < 4; ++c) {

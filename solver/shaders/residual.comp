@@ -8,14 +8,14 @@
 // With X_DOUBLE defined, x is double and the sum accumulates in double: the conjugate-gradient
 // iterate is kept in double so that its residual can reach 1e-6 (a float iterate stalls at a
 // few 1e-6: A amplifies the rounding of x). Under FIELDS4 its four fields' values are four
-// doubles per node (common.glsl's DVEC4S). Under QUARTERS (common.glsl) x, b, out and
+// consecutive doubles per node (common.glsl's LDD4). Under QUARTERS (common.glsl) x, b, out and
 // the coefficients hold one field's quarter rows, nx the packed width.
 COEFS(0, Cx, mg_cx, readonly);
 COEFS(1, Cy, mg_cy, readonly);
 COEFS(2, Cz, mg_cz, readonly);
 COEFS(3, Sigma, mg_sigma, readonly);
 #if defined(X_DOUBLE) && defined(FIELDS4)
-DVEC4S(4, X, mg_x, readonly);
+DOUBLES(4, X, mg_x, readonly);
 #define ACC dvec4
 #ifdef QUARTERS
 #define ACC_C dvec4

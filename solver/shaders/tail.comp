@@ -44,7 +44,7 @@ FLOATS(3, Minv, mg_minv, readonly);
 #ifdef CG_ITERATION
 VALUES(4, R, r_f, restrict);
 VALUES(5, P, p_f, restrict);
-DVEC4S(7, X, xd, restrict);
+DOUBLES(7, X, xd, restrict);
 DOUBLES(8, Scal, scal, restrict);
 DOUBLES(9, Hist, hist, writeonly);
 layout(location = 9) uniform int max_iterations;
@@ -221,10 +221,10 @@ void CgIteration() {
       alpha[c] = LDD(scal, ScalAt(c, kCgRz)) / pq[c];
   for (int e = lid; e < n0; e += group) {
     vec4 p = LD4(work, wp + e), r = LD4(r_f, o + e) - vec4(alpha) * LD4(work, wq + e);
-    dvec4 x = LDD4(xd, o + e);
-    for (int c = 0; c < 4; ++c)
-      if (Live(c)) x[c] += alpha[c] * double(p[c]);
-    STD4(xd, o + e, x);
+    for (int c = 0; c < 4; ++c) {
+      int at = 4 * (o + e) + c;
+      if (Live(c)) STD(xd, at, LDD(xd, at) + alpha[c] * double(p[c]));
+    }
     ST(r_f, o + e, r);
     ST(work, wb + e, r);
   }
