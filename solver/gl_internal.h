@@ -282,24 +282,36 @@ struct GlMultigridSolver::Impl {
   bool Quartered(int nb) const { return quarters && nb == 1 && tail_level > 0 && levels.size() > 1; }
   bool Quarter(const GLevel& L) const { return quartered && &L == levels[0].get(); }
   void SetQuarters(bool on);
+  // Packs the finest level's coefficients into cx_q .. sigma_q (allocated on first use);
+  // while `quartered`.
   void QuarterCoefficients();
-  // One field's n0 values <-> its quarter rows (pack.comp's QUARTERS).
-  void QuarterPack(const Buffer& plain, Buffer& rows, bool doubles = false);
-  void QuarterUnpack(const Buffer& rows, Buffer& plain, bool doubles = false);
-  // A dispatch on the finest level's values: RunFields, or quartered on the one field.
-  int64_t RunFinest(const char* name, std::initializer_list<const Buffer*> buffers,
-                    std::initializer_list<int> ints, int64_t threads, int nb, const char* defines = "") {
-    if (quartered)
+  // RunFields on level L's values: quartered on the one field where L is the finest level of
+  // a quartered solve.
+  int64_t RunOn(const GLevel& L, const char* name, std::initializer_list<const Buffer*> buffers,
+                std::initializer_list<int> ints, int64_t threads, int nb, const char* defines = "") {
+    if (Quarter(L))
       return RunBatch(name, buffers, ints, threads, 1,
                       ("#define FIELDS4\n#define QUARTERS\n" + std::string(defines)).c_str());
     return RunFields(name, buffers, ints, threads, nb, defines);
   }
+  // Level L's shape and its smoother's and stencil's coefficients in the current layout.
+  GridShape ShapeOf(const GLevel& L) const { return Quarter(L) ? GridShape{qw, L.s.ny, L.s.nz} : L.s; }
+  struct Coefficients {
+    const Buffer *cx, *cy, *cz, *inv, *luc, *sigma;
+  };
+  Coefficients CoefficientsOf(const GLevel& L) const {
+    if (Quarter(L)) return {&cx_q, &cy_q, &cz_q, &inv_q, &luc_q, &sigma_q};
+    return {&L.cx, &L.cy, &L.cz, &L.inv, &L.luc, &L.sigma};
+  }
   // Values per field on the finest level in the current layout (the CG vectors' length).
   int64_t FinestCount() const { return quartered ? nq : n0; }
-  // packed = the nb per-field values of `per_field` (n0 each) four to a vec4, or the reverse;
-  // with `doubles` both hold doubles (four consecutive ones per node when packed).
+  // pack.comp, from the nb per-field values of `per_field` (n0 each) into the current layout's
+  // vec4s (`packed4`), or the reverse: four fields to a vec4, or while `quartered` the one
+  // field's quarter rows. With `doubles` both hold doubles (four consecutive ones per node
+  // when packed).
   void Pack(const Buffer& per_field, Buffer& packed4, int nb, bool doubles = false);
   void Unpack(const Buffer& packed4, Buffer& per_field, int nb, bool doubles = false);
+  void RunPack(const Buffer& per_field, const Buffer& packed4, int nb, bool doubles, bool unpack);
 
   // c = R f (level l to l + 1) and f += P c (level l + 1 to l) on nb fields: one dispatch
   // each (transfer.comp; level 0 quartered: from and to its quarter rows).
@@ -322,29 +334,20 @@ struct GlMultigridSolver::Impl {
   }
 
   void Smooth(GLevel& L, const Buffer& b, Buffer& x, int color, int nb) {
-    if (Quarter(L)) {
-      RunFinest("smooth", {&cx_q, &cy_q, &cz_q, &inv_q, &luc_q, &b, &x}, {qw, int(L.s.ny), int(L.s.nz), color},
-                int64_t(qw / 2) * L.s.ny, 1);
-      return;
-    }
-    const int half = int((L.s.nx + 1) / 2);
-    RunFields("smooth", {&L.cx, &L.cy, &L.cz, &L.inv, &L.luc, &b, &x},
-              {int(L.s.nx), int(L.s.ny), int(L.s.nz), color}, int64_t(half) * L.s.ny, nb);
+    const GridShape s = ShapeOf(L);
+    const Coefficients c = CoefficientsOf(L);
+    RunOn(L, "smooth", {c.cx, c.cy, c.cz, c.inv, c.luc, &b, &x}, {int(s.nx), int(s.ny), int(s.nz), color},
+          (s.nx + 1) / 2 * s.ny, nb);
   }
 
   // x_double (the CG iterate): x in double, the sums too (residual.comp).
   void Stencil(GLevel& L, const Buffer& x, const Buffer& b, Buffer& out, int mode, int nb,
                bool x_double = false) {
-    const char* defines = x_double ? "#define X_DOUBLE\n" : "";
-    if (Quarter(L)) {
-      const GridShape rows{qw, L.s.ny, L.s.nz};
-      RunFinest("residual", {&cx_q, &cy_q, &cz_q, &sigma_q, &x, &b, &out},
-                {qw, int(L.s.ny), int(L.s.nz), mode, ColumnLength(rows)}, ColumnThreads(rows), 1, defines);
-      return;
-    }
-    RunFields("residual", {&L.cx, &L.cy, &L.cz, &L.sigma, &x, &b, &out},
-              {int(L.s.nx), int(L.s.ny), int(L.s.nz), mode, ColumnLength(L.s)}, ColumnThreads(L.s), nb,
-              defines);
+    const GridShape s = ShapeOf(L);
+    const Coefficients c = CoefficientsOf(L);
+    RunOn(L, "residual", {c.cx, c.cy, c.cz, c.sigma, &x, &b, &out},
+          {int(s.nx), int(s.ny), int(s.nz), mode, ColumnLength(s)}, ColumnThreads(s), nb,
+          x_double ? "#define X_DOUBLE\n" : "");
   }
 
   // One V-cycle x = B b on `nb` fields of level l. from_zero false: x holds an initial guess
@@ -414,20 +417,20 @@ struct GlMultigridSolver::Impl {
   // (In the current layout: `packed`.)
   void Dot(const Buffer& a, const Buffer& b, int slot, int nb) {
     const int64_t n = FinestCount();
-    RunFinest("dot", {&a, &b, &partial}, {int(n), nb}, DotThreads(n), nb);
+    RunOn(*levels[0], "dot", {&a, &b, &partial}, {int(n), nb}, DotThreads(n), nb);
     const int64_t m = DotPartials(DotThreads(n));
     RunBatch("reduce", {&partial, &scal}, {int(m), slot, 1, kCgStride}, GetTuning().group, nb);
   }
   void Dot2(const Buffer& a, const Buffer& b, const Buffer& c, int slot, int nb) {
     const int64_t n = FinestCount();
-    RunFinest("dot", {&a, &b, &partial, &c}, {int(n), nb}, DotThreads(n), nb, "#define PAIR\n");
+    RunOn(*levels[0], "dot", {&a, &b, &partial, &c}, {int(n), nb}, DotThreads(n), nb, "#define PAIR\n");
     const int64_t m = DotPartials(DotThreads(n));
     RunBatch("reduce", {&partial, &scal}, {int(m), slot, 2, kCgStride}, GetTuning().group, nb);
   }
   // cg_update.comp in `mode` ("" or "#define DIRECTION\n" or "#define ADD\n"), current layout.
   void CgUpdate(std::initializer_list<const Buffer*> buffers, const char* mode, int nb) {
     const int64_t n = FinestCount();
-    RunFinest("cg_update", buffers, {int(n), nb}, FlatThreads(n), nb, mode);
+    RunOn(*levels[0], "cg_update", buffers, {int(n), nb}, FlatThreads(n), nb, mode);
   }
 
   // Multigrid-PCG on `nb` fields at once, in lockstep (every dispatch serves all of them): b

@@ -365,9 +365,6 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
   I.qw = int(2 * ((s0.nx + 7) / 8));
   I.nq = int64_t(I.qw) * s0.ny * s0.nz;
   I.quarters = gl_internal::GetTuning().quarters;
-  if (I.quarters)
-    for (Buffer* b : {&I.cx_q, &I.cy_q, &I.cz_q, &I.inv_q, &I.luc_q, &I.sigma_q})
-      b->Alloc(I.nq * 16, nullptr, Elem::kVec4);
   I.PackLevels();
   I.Reserve(1);
 }
@@ -520,8 +517,6 @@ void GlMultigridSolver::Impl::SetPackFields(int k) {
 
 void GlMultigridSolver::Impl::SetQuarters(bool on) {
   quarters = on;
-  if (on && cx_q.id() == 0)
-    for (Buffer* b : {&cx_q, &cy_q, &cz_q, &inv_q, &luc_q, &sigma_q}) b->Alloc(nq * 16, nullptr, Elem::kVec4);
   quarter_coefficients_stale = true;
   const int fields = capacity;
   capacity = 0;
@@ -529,35 +524,33 @@ void GlMultigridSolver::Impl::SetQuarters(bool on) {
 }
 
 void GlMultigridSolver::Impl::QuarterCoefficients() {
+  TL_CHECK(quartered);
   GLevel& L = *levels[0];
-  QuarterPack(L.cx, cx_q);
-  QuarterPack(L.cy, cy_q);
-  QuarterPack(L.cz, cz_q);
-  QuarterPack(L.inv, inv_q);
-  QuarterPack(L.luc, luc_q);
-  QuarterPack(L.sigma, sigma_q);
-}
-
-void GlMultigridSolver::Impl::QuarterPack(const Buffer& plain, Buffer& rows, bool doubles) {
-  const GridShape& s = levels[0]->s;
-  RunBatch("pack", {&plain, &rows}, {int(nq), 1, int(s.nx), qw}, FlatThreads(nq), 1,
-           doubles ? "#define QUARTERS\n#define DOUBLE\n" : "#define QUARTERS\n");
-}
-
-void GlMultigridSolver::Impl::QuarterUnpack(const Buffer& rows, Buffer& plain, bool doubles) {
-  const GridShape& s = levels[0]->s;
-  RunBatch("pack", {&plain, &rows}, {int(nq), 1, int(s.nx), qw}, FlatThreads(nq), 1,
-           doubles ? "#define QUARTERS\n#define UNPACK\n#define DOUBLE\n" : "#define QUARTERS\n#define UNPACK\n");
+  const std::pair<const Buffer*, Buffer*> pairs[] = {{&L.cx, &cx_q},   {&L.cy, &cy_q},   {&L.cz, &cz_q},
+                                                     {&L.inv, &inv_q}, {&L.luc, &luc_q}, {&L.sigma, &sigma_q}};
+  for (const auto& [plain, rows] : pairs) {
+    if (rows->id() == 0) rows->Alloc(nq * 16, nullptr, Elem::kVec4);
+    Pack(*plain, *rows, 1);
+  }
 }
 
 void GlMultigridSolver::Impl::Pack(const Buffer& per_field, Buffer& packed4, int nb, bool doubles) {
-  RunBatch("pack", {&per_field, &packed4}, {int(n0), nb}, FlatThreads(n0), (nb + 3) / 4,
-           doubles ? "#define DOUBLE\n" : "");
+  RunPack(per_field, packed4, nb, doubles, false);
 }
 
 void GlMultigridSolver::Impl::Unpack(const Buffer& packed4, Buffer& per_field, int nb, bool doubles) {
-  RunBatch("pack", {&per_field, &packed4}, {int(n0), nb}, FlatThreads(n0), (nb + 3) / 4,
-           doubles ? "#define UNPACK\n#define DOUBLE\n" : "#define UNPACK\n");
+  RunPack(per_field, packed4, nb, doubles, true);
+}
+
+void GlMultigridSolver::Impl::RunPack(const Buffer& per_field, const Buffer& packed4, int nb, bool doubles,
+                                      bool unpack) {
+  const std::string defines = std::string(quartered ? "#define QUARTERS\n" : "") +
+                              (doubles ? "#define DOUBLE\n" : "") + (unpack ? "#define UNPACK\n" : "");
+  if (quartered)
+    RunBatch("pack", {&per_field, &packed4}, {int(nq), 1, int(levels[0]->s.nx), qw}, FlatThreads(nq), 1,
+             defines.c_str());
+  else
+    RunBatch("pack", {&per_field, &packed4}, {int(n0), nb}, FlatThreads(n0), (nb + 3) / 4, defines.c_str());
 }
 
 GlMultigridSolver::~GlMultigridSolver() = default;
@@ -713,17 +706,15 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
     Layout(bool& f, bool on) : flag(f) { flag = on; }
     ~Layout() { flag = false; }
   } layout(packed, Packed(nb)), quarter_rows(quartered, Quartered(nb));
-  if (packed) {
+  if (quartered && quarter_coefficients_stale) {
+    QuarterCoefficients();
+    quarter_coefficients_stale = false;
+  }
+  const bool vec4s = packed || quartered;
+  if (vec4s) {
     Pack(b_fields, b_packed, nb);
     Pack(x_fields, x_packed, nb, true);
   }
-  if (quartered) {
-    if (quarter_coefficients_stale) QuarterCoefficients();
-    quarter_coefficients_stale = false;
-    QuarterPack(b_fields, b_packed);
-    QuarterPack(x_fields, x_packed, true);
-  }
-  const bool vec4s = packed || quartered;
   const Buffer& b = vec4s ? b_packed : b_fields;
   Buffer& x = vec4s ? x_packed : x_fields;
   Buffer &r = vec4s ? r4 : this->r, &z = vec4s ? z4 : this->z;
@@ -767,8 +758,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
     if (bb == 0) {
       const std::vector<double> zeros(n, 0.0);
       x_fields.Upload(zeros.data(), n * 8, int64_t(f) * n * 8);
-      if (packed) Pack(x_fields, x_packed, nb, true);
-      if (quartered) QuarterPack(x_fields, x_packed, true);
+      if (vec4s) Pack(x_fields, x_packed, nb, true);
       at(f, kCgRr) = 0;
       finish(f, true, "zero right-hand side");
       continue;
@@ -856,8 +846,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
     for (int f = 0; f < nb; ++f)
       if (!done[f]) finish(f, false, fmt::format("reached max_iterations = {}", max_it));
   }
-  if (packed) Unpack(x_packed, x_fields, nb, true);
-  if (quartered) QuarterUnpack(x_packed, x_fields, true);
+  if (vec4s) Unpack(x_packed, x_fields, nb, true);
   std::vector<double> h(int64_t(nb) * max_it);
   if (it > 0) hist.Download(h.data(), int64_t(h.size()) * 8);
   const double seconds =
