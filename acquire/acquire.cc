@@ -34,13 +34,17 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-// A stage's input signature: every file under the given paths with its size and time.
+// A stage's input signature: every file under the given paths with its size and time. Paths
+// count in their canonical form, so that the same capture named relatively or absolutely (or
+// through a link) is the same input.
 std::string Signature(const std::vector<std::string>& paths, const std::string& extra = "") {
   std::string s = extra;
   auto add = [&](const fs::path& p) {
     std::error_code ec;
     const auto t = fs::last_write_time(p, ec).time_since_epoch().count();
-    s += fmt::format("{}:{}:{};", p.string(), fs::is_regular_file(p) ? fs::file_size(p) : 0, t);
+    fs::path canonical = fs::weakly_canonical(p, ec);
+    if (ec) canonical = p;
+    s += fmt::format("{}:{}:{};", canonical.string(), fs::is_regular_file(p) ? fs::file_size(p) : 0, t);
   };
   for (const std::string& p : paths) {
     if (p.empty()) continue;

@@ -176,6 +176,13 @@ TEST_F(AcquireTest, EndToEndHeldOutError) {
   const AcquireReport r2 = Acquire(ReadCapture(c), Out(), again);
   EXPECT_NE(std::find(r2.reused.begin(), r2.reused.end(), "calibration"), r2.reused.end());
   EXPECT_NE(std::find(r2.reused.begin(), r2.reused.end(), "hdr"), r2.reused.end());
+  // So does one that names the capture folder relatively (the same files).
+  const fs::path cwd = fs::current_path();
+  fs::current_path(fs::path(c).parent_path());
+  const AcquireReport relative = Acquire(ReadCapture(fs::path(c).filename().string()), Out(), again);
+  fs::current_path(cwd);
+  EXPECT_NE(std::find(relative.reused.begin(), relative.reused.end(), "calibration"), relative.reused.end());
+  EXPECT_NE(std::find(relative.reused.begin(), relative.reused.end(), "hdr"), relative.reused.end());
   again.force = true;
   const AcquireReport r3 = Acquire(ReadCapture(c), Out(), again);
   EXPECT_TRUE(r3.reused.empty());

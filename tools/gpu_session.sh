@@ -20,7 +20,7 @@
 # step's full output, in order), summary.md (the figures for docs/benchmarks.md, also printed
 # at the end): two files, well within what the device tool brings back (8).
 #
-# --quick runs the same steps on tiny sizes (a dry run here, on Mesa llvmpipe: about 1 min).
+# --quick runs the same steps on tiny sizes (a dry run here, on Mesa llvmpipe: 10-20 s).
 set -uo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 bundle=$root/gpu-bundle
