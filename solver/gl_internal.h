@@ -436,8 +436,11 @@ struct GlMultigridSolver::Impl {
   // Multigrid-PCG on `nb` fields at once, in lockstep (every dispatch serves all of them): b
   // (float) and the iterates x (double) hold nb fields of n0 values back to back; x holds the
   // initial guesses on entry. Coefficients must be set; nb <= max_batch. One summary per field;
-  // `seconds` is the time of the whole batch.
-  std::vector<SolveSummary> SolveDevice(const Buffer& b, Buffer& x, int nb);
+  // `seconds` is the time of the whole batch. grouped: b and x are already in the packed
+  // layout (Packed(nb) must hold; b a vec4 buffer of Slots4(nb) / 4 groups of n0, x four
+  // consecutive doubles per node and group, padding fields 0), so that a caller who keeps its
+  // fields packed (the gl objective) saves the pack and unpack passes around every solve.
+  std::vector<SolveSummary> SolveDevice(const Buffer& b, Buffer& x, int nb, bool grouped = false);
 };
 
 }  // namespace translume

@@ -1,9 +1,10 @@
 // SPDX-License-Identifier: MIT
 // The gl backend of ChannelObjective: forward and adjoint solves and the gradient on the GPU.
 // Per condition the right-hand side b, the forward field phi and the adjoint field psi stay on
-// the GPU across evaluations (warm starts); what crosses the bus per evaluation is kappa and mu
-// (in), the front face of each phi (out) with the adjoint source on the front face (in), and the
-// gradient (out). The conditions solve as batches (GlMultigridSolver::SolveBatch): all forward
+// the GPU across evaluations (warm starts), in the layout the solver runs them in (four fields
+// per node on llvmpipe); what crosses the bus per evaluation is kappa and mu (in), the front
+// face of each phi (out) with the adjoint source on the front face (in), and the gradient
+// (out). The conditions solve as batches (GlMultigridSolver::SolveBatch): all forward
 // solves of a batch in one lockstep multigrid-PCG, then all adjoint solves, then one gradient
 // dispatch per batch.
 #include <algorithm>
@@ -27,20 +28,27 @@ class GlChannelObjective : public FrontFaceObjective {
     const int M = int(d.conditions.size());
     const TensorGrid grid = TensorGrid::Uniform(shape_, d.spacing_mm);
     const int64_t k_lit = LitFaceK(d.setup, shape_);
+    GlMultigridSolver::Impl& I = solver_.impl();
     for (int first = 0; first < M; first += solver_.max_batch()) {
       auto batch = std::make_unique<Batch>();
       batch->first = first;
       batch->count = std::min(solver_.max_batch(), M - first);
-      const int64_t values = batch->count * n;
-      std::vector<float> b(values);
-      for (int f = 0; f < batch->count; ++f)
-        LitFaceSource(grid, k_lit, C_, d.conditions[first + f].q[channel].data(), b.data() + f * n);
-      batch->b.Alloc(values * 4, b.data());
-      batch->rhs.Alloc(values * 4);
+      batch->grouped = I.Packed(batch->count);
+      // Field slots: whole groups of four when grouped (the padding fields stay 0).
+      const int slots = batch->grouped ? I.Slots4(batch->count) : batch->count;
+      std::vector<float> b(slots * n, 0.0f);
+      std::vector<float> field(n);
+      for (int f = 0; f < batch->count; ++f) {
+        LitFaceSource(grid, k_lit, C_, d.conditions[first + f].q[channel].data(), field.data());
+        for (int64_t e = 0; e < n; ++e) b[batch->At(f, e, n)] = field[e];
+      }
+      const Elem values = batch->grouped ? Elem::kVec4 : Elem::kFloat;
+      batch->b.Alloc(slots * n * 4, b.data(), values);
+      batch->rhs.Alloc(slots * n * 4, nullptr, values);
       batch->rhs.Zero();
-      for (Buffer* field : {&batch->phi, &batch->psi}) {
-        field->Alloc(values * 8, nullptr, Elem::kDouble);
-        field->Zero();  // all-zero bits are 0.0 in double too
+      for (Buffer* x : {&batch->phi, &batch->psi}) {
+        x->Alloc(slots * n * 8, nullptr, Elem::kDouble);
+        x->Zero();  // all-zero bits are 0.0 in double too
       }
       batches_.push_back(std::move(batch));
     }
@@ -60,23 +68,35 @@ class GlChannelObjective : public FrontFaceObjective {
     }
     BeginEvaluation();
     double J = 0;
-    std::vector<double> source(nf);
-    std::vector<float> source_f(nf);
+    std::vector<double> source(nf), front;
+    std::vector<float> sources;
     for (auto& batch : batches_) {
-      for (const SolveSummary& s : I.SolveDevice(batch->b, batch->phi, batch->count)) Track(s);
-      for (int f = 0; f < batch->count; ++f) {
-        const size_t m = size_t(batch->first + f);
-        // The front face is k = 0: the first nf nodes of the field.
-        batch->phi.Download(front_[m].data(), nf * 8, f * n * 8);
+      const Batch& B = *batch;
+      for (const SolveSummary& s : I.SolveDevice(B.b, batch->phi, B.count, B.grouped)) Track(s);
+      // The front face is k = 0: the first nf nodes of each field (of each group of four when
+      // grouped), read back in one piece per field or group.
+      const int64_t face_values = B.grouped ? 4 * nf : nf;
+      const int64_t stride = B.grouped ? 4 * n : n;  // values per field or group
+      const int pieces = B.grouped ? (B.count + 3) / 4 : B.count;
+      front.resize(pieces * face_values);
+      for (int g = 0; g < pieces; ++g)
+        batch->phi.Download(front.data() + g * face_values, face_values * 8, g * stride * 8);
+      if (gk) sources.assign(pieces * face_values, 0.0f);
+      for (int f = 0; f < B.count; ++f) {
+        const size_t m = size_t(B.first + f);
+        for (int64_t e = 0; e < nf; ++e) front_[m][e] = front[B.At(f, e, nf)];
         J += ConditionMisfit(m, source.data());
         if (!gk) continue;
-        std::copy(source.begin(), source.end(), source_f.begin());
-        batch->rhs.Upload(source_f.data(), nf * 4, f * n * 4);
+        for (int64_t e = 0; e < nf; ++e) sources[B.At(f, e, nf)] = float(source[e]);
       }
       if (!gk) continue;
-      for (const SolveSummary& s : I.SolveDevice(batch->rhs, batch->psi, batch->count)) Track(s);
-      Run("gradient", {&I.levels[0]->geometry, &batch->phi, &batch->psi, &grad_kappa_, &grad_mu_},
-          {int(shape_.nx), int(shape_.ny), int(shape_.nz), batch->count}, gl_internal::FlatThreads(n));
+      // The adjoint sources live on the front face; the rest of rhs stays 0.
+      for (int g = 0; g < pieces; ++g)
+        batch->rhs.Upload(sources.data() + g * face_values, face_values * 4, g * stride * 4);
+      for (const SolveSummary& s : I.SolveDevice(B.rhs, batch->psi, B.count, B.grouped)) Track(s);
+      Run("gradient", {&I.levels[0]->geometry, &B.phi, &B.psi, &grad_kappa_, &grad_mu_},
+          {int(shape_.nx), int(shape_.ny), int(shape_.nz), B.count}, gl_internal::FlatThreads(n), -1, 0,
+          B.grouped ? "#define FIELDS4\n" : "");
     }
     if (gk) {
       grad_kappa_.Download(gk, n * 8);
@@ -88,11 +108,18 @@ class GlChannelObjective : public FrontFaceObjective {
  private:
   const double* FrontField(size_t m) const override { return front_[m].data(); }
 
-  // Conditions first .. first + count - 1, each buffer holding their fields back to back:
-  // b (float), the adjoint sources rhs (float, zero off the front face), phi and psi (double).
+  // Conditions first .. first + count - 1: b (float), the adjoint sources rhs (float, zero
+  // off the front face), phi and psi (double). Each buffer holds the fields back to back, or
+  // where the solver runs the batch packed (Impl::Packed) in its packed layout (`grouped`:
+  // four fields per node, common.glsl's FIELDS4), so that the solves need no packing.
   struct Batch {
     int first = 0, count = 0;
+    bool grouped = false;
     Buffer b, rhs, phi, psi;
+    // Where value e of field f is in an array of m values per field (per group of four).
+    int64_t At(int f, int64_t e, int64_t m) const {
+      return grouped ? 4 * (f / 4 * m + e) + f % 4 : f * m + e;
+    }
   };
 
   GridShape shape_;

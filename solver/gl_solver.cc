@@ -696,7 +696,7 @@ void GlMultigridSolver::Impl::FullMultigridLevels(const Buffer& r, Buffer& z, in
 // residual b - A x (double x) and restarts those that miss the tolerance (at most 3 times,
 // then "stagnated"), as the cpu solver does.
 std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_fields, Buffer& x_fields,
-                                                               int nb) {
+                                                               int nb, bool grouped) {
   const auto t0 = std::chrono::steady_clock::now();
   Reserve(nb);
   GLevel& L = *levels[0];
@@ -710,13 +710,16 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
     QuarterCoefficients();
     quarter_coefficients_stale = false;
   }
+  TL_CHECK(!grouped || packed);
   const bool vec4s = packed || quartered;
-  if (vec4s) {
+  // Whether b and x are packed here, around the solve.
+  const bool pack_here = vec4s && !grouped;
+  if (pack_here) {
     Pack(b_fields, b_packed, nb);
     Pack(x_fields, x_packed, nb, true);
   }
-  const Buffer& b = vec4s ? b_packed : b_fields;
-  Buffer& x = vec4s ? x_packed : x_fields;
+  const Buffer& b = pack_here ? b_packed : b_fields;
+  Buffer& x = pack_here ? x_packed : x_fields;
   Buffer &r = vec4s ? r4 : this->r, &z = vec4s ? z4 : this->z;
   Buffer &p = vec4s ? p4 : this->p, &q = vec4s ? q4 : this->q;
   // Bytes of the CG vectors r .. q in the current layout.
@@ -756,9 +759,17 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
   for (int f = 0; f < nb; ++f) {
     const double bb = at(f, kCgBb);
     if (bb == 0) {
-      const std::vector<double> zeros(n, 0.0);
-      x_fields.Upload(zeros.data(), n * 8, int64_t(f) * n * 8);
-      if (vec4s) Pack(x_fields, x_packed, nb, true);
+      if (grouped) {
+        // Component f % 4 of group f / 4's n nodes.
+        std::vector<double> group(4 * n);
+        x.Download(group.data(), 4 * n * 8, int64_t(f / 4) * 4 * n * 8);
+        for (int64_t e = 0; e < n; ++e) group[4 * e + f % 4] = 0.0;
+        x.Upload(group.data(), 4 * n * 8, int64_t(f / 4) * 4 * n * 8);
+      } else {
+        const std::vector<double> zeros(n, 0.0);
+        x_fields.Upload(zeros.data(), n * 8, int64_t(f) * n * 8);
+        if (pack_here) Pack(x_fields, x_packed, nb, true);
+      }
       at(f, kCgRr) = 0;
       finish(f, true, "zero right-hand side");
       continue;
@@ -846,7 +857,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
     for (int f = 0; f < nb; ++f)
       if (!done[f]) finish(f, false, fmt::format("reached max_iterations = {}", max_it));
   }
-  if (vec4s) Unpack(x_packed, x_fields, nb, true);
+  if (pack_here) Unpack(x_packed, x_fields, nb, true);
   std::vector<double> h(int64_t(nb) * max_it);
   if (it > 0) hist.Download(h.data(), int64_t(h.size()) * 8);
   const double seconds =

@@ -4,7 +4,9 @@
 //   gk_p -= sum_m sum_{faces (p,q)} A_pq / (2 gap) (psi_p - psi_q)(phi_p - phi_q)
 //   gm_p -= sum_m V_p psi_p phi_p
 // phi: forward fields, psi: adjoint fields (both double, the solver's iterates), condition m at
-// [m n, (m + 1) n). geo as in assemble.comp.
+// [m n, (m + 1) n), or under FIELDS4 in the solver's packed layout (common.glsl: condition
+// 4 g + c is component c of group g's four consecutive doubles per node; padding fields are 0
+// and add nothing). geo as in assemble.comp.
 FLOATS(0, Geo, geo, readonly);
 DOUBLES(1, Phi, phi, readonly);
 DOUBLES(2, Psi, psi, readonly);
@@ -29,6 +31,15 @@ void Node(uint p) {
   if (k > 0) a[4] = wx * wy / double(LD(geo, g0 + nx + ny + k - 1));
   if (k + 1 < nz) a[5] = wx * wy / double(LD(geo, g0 + nx + ny + k));
   double g = 0.0LF, v = 0.0LF;
+#ifdef FIELDS4
+  for (int m = 0; m < (fields + 3) / 4; ++m) {
+    int o = m * n + int(p);
+    dvec4 sp = LDD4(psi, o), fp = LDD4(phi, o);
+    for (int f = 0; f < 6; ++f)
+      if (a[f] != 0.0LF) g += a[f] * dot(sp - LDD4(psi, o + d[f]), fp - LDD4(phi, o + d[f]));
+    v += dot(sp, fp);
+  }
+#else
   for (int m = 0; m < fields; ++m) {
     int o = m * n + int(p);
     double sp = LDD(psi, o), fp = LDD(phi, o);
@@ -36,6 +47,7 @@ void Node(uint p) {
       if (a[f] != 0.0LF) g += a[f] * (sp - LDD(psi, o + d[f])) * (fp - LDD(phi, o + d[f]));
     v += sp * fp;
   }
+#endif
   STD(gk, p, LDD(gk, p) - 0.5LF * g);
   STD(gm, p, LDD(gm, p) - wx * wy * wz * v);
 }
