@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
@@ -51,7 +52,8 @@ double RelightingError(const std::vector<FacePattern>& a, const std::vector<Face
         den += w * std::pow(double(b[m][c][p]), 2);
       }
     }
-  return den > 0 ? num / den : 0.0;
+  if (den > 0) return num / den;
+  return num > 0 ? std::numeric_limits<double>::infinity() : 0.0;
 }
 
 void LayerErrors(const Material& rec, const Material& truth, std::vector<double>* kappa,

@@ -14,6 +14,7 @@ namespace translume {
 // Relighting error of SPEC section 5 over conditions m, channels and front-face nodes p:
 //   E = sum w_mp (a_mp - b_mp)^2 / sum w_mp b_mp^2
 // (b: the reference; w: masks, one per condition, nx*ny values; empty masks mean all 1).
+// A reference without light (sum w b^2 = 0) gives 0 if a is dark there too, else infinity.
 double RelightingError(const std::vector<FacePattern>& a, const std::vector<FacePattern>& b,
                        const std::vector<std::vector<float>>& masks = {});
 

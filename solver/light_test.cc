@@ -57,21 +57,29 @@ TEST(Light, SpotCoversItsDiscArea) {
   EXPECT_EQ(q[0], 0.0f);
 }
 
-TEST(Light, ImagePatternUsesLuminance) {
+// An image pattern is stretched over the face, pixel (x, y) over node (i, j) as in the EXRs
+// `forward` writes, and weighted by the Rec. 709 luminance: pure red, green, blue and white
+// pixels in the top row (y = 0), black below; 9x5 nodes at 1 mm, so each pixel covers 2x2 mm
+// and the dual boxes of nodes i = 1, 3, 5, 7 (j = 1: top row; j = 3: bottom) lie in one pixel.
+TEST(Light, ImagePatternUsesLuminanceAndTheImageAxes) {
   const std::string path = (std::filesystem::temp_directory_path() / "translume_light.exr").string();
   Image img;
   img.width = 4;
   img.height = 2;
   img.channels = 3;
   img.data.assign(4 * 2 * 3, 0.0f);
-  for (int x = 2; x < 4; ++x)
-    for (int y = 0; y < 2; ++y)
-      for (int c = 0; c < 3; ++c) img.at(x, y, c) = 0.5f;
+  for (int c = 0; c < 3; ++c) {
+    img.at(c, 0, c) = 1.0f;  // red, green, blue
+    img.at(3, 0, c) = 1.0f;  // white
+  }
   WriteImage(path, img);
   const GridShape s{9, 5, 3};
   const auto q = RasterizeLightFile(LightSpec::Parse("image:" + path), s, 1.0);
-  EXPECT_NEAR(q[0], 0.0, 1e-6);
-  EXPECT_NEAR(q[8 + 9 * 4], 0.5, 1e-6);
+  const double expected[4] = {0.2126, 0.7152, 0.0722, 1.0};
+  for (int x = 0; x < 4; ++x) {
+    EXPECT_NEAR(q[(2 * x + 1) + 9 * 1], expected[x], 1e-6) << x;
+    EXPECT_NEAR(q[(2 * x + 1) + 9 * 3], 0.0, 1e-6) << x;
+  }
   std::filesystem::remove(path);
 }
 

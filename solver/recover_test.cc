@@ -62,14 +62,24 @@ TEST_P(RecoverOnBackend, HeterogeneousVolumeRelightsHeldOutSpots) {
   const RecoverySummary s = Recover(data.training, ro, &st);
   std::printf("%s\n", s.BriefReport().c_str());
   const Material rec = MaterialFromState(data.training, st);
+  ASSERT_EQ(data.holdout.conditions.size(), 8u);
   std::vector<FacePattern> q;
   for (const auto& c : data.holdout.conditions) q.push_back(c.q);
   MultigridOptions mg;
   mg.tolerance = 1e-10;
-  const double E = RelightingError(RenderFrontFace(rec, Setup::kBack, q, mg),
-                                   RenderFrontFace(truth, Setup::kBack, q, mg));
-  std::printf("held-out E %.3e, fit E %.3e\n", E, s.fit_error);
+  const std::vector<FacePattern> reference = RenderFrontFace(truth, Setup::kBack, q, mg);
+  const double E = RelightingError(RenderFrontFace(rec, Setup::kBack, q, mg), reference);
+  // The control: the homogeneous fit the recovery started from. The held-out spots must see
+  // the heterogeneity (else any homogeneous material would pass: measured 28x the recovery's
+  // E). The per-node parameters are not asserted: appearance is identifiable, they are not
+  // (the paper's Fig. 14); here the front layer's kappa error goes 0.08 -> 0.10 while E falls.
+  const Material start = Material::Constant(truth.shape, truth.spacing_mm,
+                                            {float(s.homogeneous_kappa[0]), float(s.homogeneous_kappa[1]), float(s.homogeneous_kappa[2])},
+                                            {float(s.homogeneous_mu[0]), float(s.homogeneous_mu[1]), float(s.homogeneous_mu[2])});
+  const double E_start = RelightingError(RenderFrontFace(start, Setup::kBack, q, mg), reference);
+  std::printf("held-out E %.3e (homogeneous start %.3e), fit E %.3e\n", E, E_start, s.fit_error);
   EXPECT_LT(E, 1e-3);
+  EXPECT_GT(E_start, 10 * E);
   EXPECT_LT(s.final_objective, s.initial_objective);
 }
 

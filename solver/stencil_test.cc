@@ -109,6 +109,17 @@ TEST(Stencil, LitFaceSourceIntegratesLightOverTheFace) {
   // Face area (nx-1)h x (ny-1)h, times q / (2C).
   EXPECT_NEAR(sum, (8 * h) * (6 * h) / (2 * C), 1e-12);
   for (int64_t p = 0; p < s.size() - s.face_size(); ++p) EXPECT_EQ(b[p], 0.0);
+  // Node by node, with q varying along both axes and on the front face: b_p = A_p^z q_p / (2C),
+  // A_p^z = h^2 inside the face, h^2 / 2 on its edges and h^2 / 4 at its corners.
+  for (int64_t f = 0; f < s.face_size(); ++f) q[f] = float(1 + f % s.nx + 10 * (f / s.nx));
+  std::fill(b.begin(), b.end(), 0.0);
+  LitFaceSource(TensorGrid::Uniform(s, h), 0, C, q.data(), b.data());
+  for (int64_t j = 0; j < s.ny; ++j)
+    for (int64_t i = 0; i < s.nx; ++i) {
+      const double area = h * h * (i == 0 || i == s.nx - 1 ? 0.5 : 1.0) * (j == 0 || j == s.ny - 1 ? 0.5 : 1.0);
+      EXPECT_NEAR(b[s.index(i, j, 0)], area * (1 + i + 10 * j) / (2 * C), 1e-12) << i << "," << j;
+    }
+  for (int64_t p = s.face_size(); p < s.size(); ++p) EXPECT_EQ(b[p], 0.0);
 }
 
 }  // namespace

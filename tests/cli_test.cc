@@ -195,7 +195,10 @@ TEST_F(Cli, BenchForwardSmoke) {
   EXPECT_TRUE(jacobi["converged"].get<bool>()) << jacobi.dump();
   EXPECT_FALSE(jacobi["ratio_is_lower_bound"].get<bool>());
   EXPECT_LE(jacobi["residual"].get<double>(), 1e-6);
-  EXPECT_GT(jacobi["ratio"].get<double>(), 1.0);
+  // (Its time ratio is a measurement, not asserted: the work is. The paper's relaxation needs
+  // hundreds of sweeps where the multigrid needs a few iterations.)
+  EXPECT_GT(jacobi["ratio"].get<double>(), 0.0);
+  EXPECT_GT(jacobi["iterations"].get<int>(), 20 * j[0]["iterations"].get<int>());
   ExpectOneLineError(Translume("bench forward --jacobi-factor 0"), "jacobi-factor");
   ExpectOneLineError(Translume("bench forward --backend gl --cpu-time"), "--cpu-time");
 }
