@@ -71,6 +71,39 @@ TEST(FaceMapping, RegionPatternRoundTrip) {
   }
 }
 
+// An anchor independent of face_mapping.cc's own lit-face geometry (which the round trip above
+// shares on both sides): a point of the lit face (z = Z back-lit, z = 0 front-lit: SPEC's
+// sample frame), taken through camera_from_sample, projector_from_camera and the projector's
+// model by hand, lands on a lit pixel of the pattern for a rectangle when it lies just inside
+// the rectangle (half a node) and on a dark one just outside, at each of the four edges. A
+// mirrored face parametrisation, swapped axes or the wrong face's depth would move it.
+TEST(FaceMapping, PatternLightsTheRectangleWhereTheRigModelSays) {
+  for (translume::Setup setup : {Setup::kBack, Setup::kFront}) {
+    SCOPED_TRACE(SetupName(setup));
+    const CaptureRig rig = DefaultCaptureRig(kGrid, kH, setup);
+    const double X = double(kGrid.nx - 1) * kH, Y = double(kGrid.ny - 1) * kH;
+    const double z = setup == Setup::kBack ? double(kGrid.nz - 1) * kH : 0.0;
+    const std::array<double, 4> rect{0.25 * X, 0.6 * X, 0.3 * Y, 0.7 * Y};  // x0, x1, y0, y1
+    const cv::Mat pattern = PatternForFaceRect(rig.projector, rig.projector_from_camera, rig.camera_from_sample,
+                                               kGrid, kH, setup, rect);
+    auto pixel = [&](double x, double y) {
+      const cv::Vec3d p = rig.projector_from_camera.Apply(rig.camera_from_sample.Apply({x, y, z}));
+      const cv::Point2d uv = rig.projector.Project({cv::Point3d(p[0], p[1], p[2])})[0];
+      return int(pattern.at<uint8_t>(int(std::lround(uv.y)), int(std::lround(uv.x))));
+    };
+    const double d = kH / 2, xm = (rect[0] + rect[1]) / 2, ym = (rect[2] + rect[3]) / 2;
+    EXPECT_EQ(pixel(xm, ym), 255);
+    EXPECT_EQ(pixel(rect[0] + d, ym), 255);
+    EXPECT_EQ(pixel(rect[0] - d, ym), 0);
+    EXPECT_EQ(pixel(rect[1] - d, ym), 255);
+    EXPECT_EQ(pixel(rect[1] + d, ym), 0);
+    EXPECT_EQ(pixel(xm, rect[2] + d), 255);
+    EXPECT_EQ(pixel(xm, rect[2] - d), 0);
+    EXPECT_EQ(pixel(xm, rect[3] - d), 255);
+    EXPECT_EQ(pixel(xm, rect[3] + d), 0);
+  }
+}
+
 TEST(FaceMapping, ResamplingAveragesAndFlagsSaturation) {
   const CaptureRig rig = DefaultCaptureRig(kGrid, kH, Setup::kBack);
   cv::Mat img(rig.camera.size, CV_32FC3, cv::Scalar(0.25, 0.5, 0.75));
