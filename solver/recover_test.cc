@@ -44,6 +44,43 @@ TEST_P(RecoverOnBackend, HomogeneousVolumeToOnePerMille) {
   EXPECT_LT(s.cg_iterations, 10 * s.solves);
 }
 
+// The same fit from data simulated on the 2x finer grid (no inverse crime, SPEC section 5).
+// The best homogeneous pair on the recovery grid is then not the truth: it fits the data at
+// least as well as the truth does there (the truth is one of the pairs), and kappa stays within
+// a few per cent. mu moves further (measured +28 % in the red channel, whose diffusion length
+// sqrt(kappa / mu) = 5 mm is twice the slab's thickness: there mu barely changes L, so the
+// recovery grid's ~1 % error in L maps into it), so only its direction of influence, the fit,
+// is asserted.
+TEST_P(RecoverOnBackend, HomogeneousVolumeFromOversampledData) {
+  const Material truth = Material::Constant({12, 10, 5}, 0.5, {0.25f, 0.15f, 0.08f}, {0.01f, 0.03f, 0.06f});
+  SimulateOptions so;
+  so.lights = RegionLights("2x2");
+  const Dataset d = SimulateDataset(truth, so).training;
+  RecoveryOptions ro;
+  ro.backend = GetParam();
+  ro.max_iterations = 0;
+  RecoveryState st;
+  const RecoverySummary s = Recover(d, ro, &st);
+  MultigridOptions mg;
+  mg.tolerance = 1e-10;
+  std::vector<FacePattern> q, L;
+  std::vector<std::vector<float>> w;
+  for (const auto& c : d.conditions) {
+    q.push_back(c.q);
+    L.push_back(c.L);
+    w.push_back(c.mask);
+  }
+  const double floor = RelightingError(RenderFrontFace(truth, d.setup, q, mg), L, w);
+  std::printf("fit E %.3e, the truth's on the recovery grid %.3e\n", s.fit_error, floor);
+  EXPECT_GT(floor, 1e-6);  // the data are not the recovery grid's own
+  EXPECT_LE(s.fit_error, floor * (1 + 1e-3));
+  for (int c = 0; c < 3; ++c) {
+    std::printf("channel %d: kappa %.4f (truth %.4f), mu %.4f (truth %.4f)\n", c, s.homogeneous_kappa[c],
+                truth.kappa[c][0], s.homogeneous_mu[c], truth.mu[c][0]);
+    EXPECT_NEAR(s.homogeneous_kappa[c] / truth.kappa[c][0], 1.0, 0.03) << c;
+  }
+}
+
 // A small heterogeneous recovery from oversampled noise-free data, checked on held-out spots.
 TEST_P(RecoverOnBackend, HeterogeneousVolumeRelightsHeldOutSpots) {
   SynthOptions syn;
