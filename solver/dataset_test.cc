@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "solver/dataset.h"
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -116,8 +117,22 @@ TEST_F(DatasetFiles, RejectsBrokenFilesWithOneLineNamingFileAndField) {
   WriteDataset(dir_.string(), d_);
   Rewrite("\"grid\": [", "\"grid\": [1,");
   ExpectError({"grid"});
+  // Condition names become parts of file names (q_NAME.exr): nothing that leaves the folder.
+  for (const char* bad : {"../x", "a/b", "..", ""}) {
+    WriteDataset(dir_.string(), d_);
+    Rewrite("\"name\": \"c1\"", fmt::format("\"name\": \"{}\"", bad));
+    ExpectError({"conditions[1]", "name", "[A-Za-z0-9_.-]"});
+  }
   std::ofstream(Json()) << "{ not json";
   ExpectError({"dataset.json", "JSON"});
+}
+
+TEST(Dataset, SafeConditionNames) {
+  for (const char* good : {"c0", "region_1.2-3", "A"}) EXPECT_TRUE(IsSafeConditionName(good)) << good;
+  for (const char* bad : {"", ".", "..", "../x", "a/b", "a\\b", "sp ace", "x\n"})
+    EXPECT_FALSE(IsSafeConditionName(bad)) << bad;
+  EXPECT_TRUE(IsSafeConditionName(std::string(100, 'a')));
+  EXPECT_FALSE(IsSafeConditionName(std::string(101, 'a')));
 }
 
 TEST(Simulate, RefineKeepsCoarseNodesAndInterpolates) {

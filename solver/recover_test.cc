@@ -206,6 +206,29 @@ TEST(Recover, CheckpointResumeMatchesUninterruptedRun) {
   EXPECT_THROW(ReadCheckpoint("/nonexistent/ck.bin", d), InputError);
 }
 
+// --init: a material's state gives the material back (float values), with the dataset's grid,
+// and a material on another grid is named as the problem.
+TEST(Recover, StateFromMaterialRoundTrips) {
+  SynthOptions syn;
+  syn.preset = "inclusions";
+  syn.shape = {9, 7, 4};
+  const Material m = SynthesizeMaterial(syn);
+  Dataset d;
+  d.shape = m.shape;
+  d.spacing_mm = m.spacing_mm;
+  d.C = m.C;
+  const Material back = MaterialFromState(d, StateFromMaterial(d, m));
+  EXPECT_EQ(back.shape, m.shape);
+  EXPECT_DOUBLE_EQ(back.spacing_mm, m.spacing_mm);
+  for (int c = 0; c < 3; ++c)
+    for (int64_t p = 0; p < m.shape.size(); ++p) {
+      EXPECT_NEAR(back.kappa[c][p], m.kappa[c][p], 1e-6 * m.kappa[c][p]);
+      EXPECT_NEAR(back.mu[c][p], m.mu[c][p], 1e-6 * m.mu[c][p]);
+    }
+  d.shape.nz += 1;
+  EXPECT_THROW(StateFromMaterial(d, m), InputError);
+}
+
 TEST(Recover, PaperOptimizerAndNcgLowerTheObjective) {
   const Material truth = Material::Constant({8, 6, 4}, 0.5, {0.2f, 0.15f, 0.1f}, {0.02f, 0.03f, 0.05f});
   SimulateOptions so;
