@@ -129,6 +129,10 @@ CameraCalibration ReadCameraCalibration(const std::string& path) {
   fs["image_width"] >> c.image_size.width;
   fs["image_height"] >> c.image_size.height;
   fs["rms"] >> c.rms;
+  fs["per_view_errors"] >> c.per_view_errors;
+  fs["std_intrinsics"] >> c.std_intrinsics;
+  fs["views"] >> c.used_views;
+  fs["dropped_views"] >> c.dropped;
   if (K.size() != cv::Size(3, 3) || c.dist.empty() || c.image_size.area() <= 0)
     throw CalibError(path + ": lacks camera_matrix, distortion_coefficients or image size");
   c.K = cv::Matx33d(K);

@@ -48,7 +48,8 @@ CameraCalibration CalibrateCamera(const BoardSpec& board, const std::vector<Name
 // rms, per_view_errors, std_intrinsics, views, dropped_views, board.
 void WriteCameraCalibration(const std::string& path, const CameraCalibration& c,
                             const std::string& board);
-// Reads camera_matrix, distortion_coefficients, image_width/height (and rms) back. Throws
+// Reads camera_matrix, distortion_coefficients, image_width/height (and rms, per_view_errors,
+// std_intrinsics, views, dropped_views where present) back; rvecs/tvecs are not stored. Throws
 // CalibError naming the file when it cannot be read or lacks a field.
 CameraCalibration ReadCameraCalibration(const std::string& path);
 

@@ -11,6 +11,7 @@
 
 #include "calib/error.h"
 #include "calib/synthetic_rig.h"
+#include "calib/test_util.h"
 
 namespace translume::calib {
 namespace {
@@ -118,26 +119,45 @@ TEST(CameraCalib, BadInputsThrowNamingTheFile) {
   EXPECT_THROW(BoardSpec::Parse("charuco:9x7:20:15:7X7_1"), CalibError);
 }
 
+// The file keeps every stored number exactly: OpenCV 4 writes doubles as "%.16e" (17
+// significant digits), enough to read back the same IEEE double. So the comparisons are exact,
+// with values chosen to have no short binary form (a float or "%.6g" writer would fail them).
 TEST(CameraCalib, YamlRoundTripLoadsInOpenCV) {
   CameraCalibration c;
   c.image_size = {1024, 768};
-  c.K = {1200.5, 0, 515.25, 0, 1201.75, 380.5, 0, 0, 1};
-  c.dist = (cv::Mat_<double>(1, 5) << -0.12, 0.09, 0.0004, -0.0003, 0);
-  c.rms = 0.06;
-  c.per_view_errors = {0.05, 0.07};
+  c.K = {1200.123456789012, 0, 515.2718281828459, 0, 1201.7531415926535, 380.5772156649015, 0, 0, 1};
+  c.dist = (cv::Mat_<double>(1, 5) << -0.1234567890123, 0.0987654321987, 0.00041421356237,
+            -0.00031415926535, 0.0000271828182846);
+  c.std_intrinsics = (cv::Mat_<double>(1, 4) << 0.9012345678901, 0.8765432109876,
+                      1.0601234567891, 0.7101234567890);
+  c.rms = 0.0612345678901234;
+  c.per_view_errors = {0.0512345678901234, 0.0712345678901234};
   c.used_views = {"a.png", "b.png"};
   c.dropped = {"c.png: board not found"};
   const BoardSpec board = BoardSpec::Parse("charuco:10x7:25:18");
-  const std::string path =
-      (std::filesystem::temp_directory_path() / "translume_camera_roundtrip.yml").string();
+  const std::string path = TempPath("translume_camera_roundtrip.yml");
   WriteCameraCalibration(path, c, board.ToString());
-  cv::FileStorage fs(path, cv::FileStorage::READ);
-  cv::Mat K;
-  fs["camera_matrix"] >> K;
-  EXPECT_NEAR(K.at<double>(0, 0), c.K(0, 0), 1e-9);
+  {
+    // Other tools read the file with plain OpenCV: the names and the board are as documented.
+    cv::FileStorage fs(path, cv::FileStorage::READ);
+    cv::Mat K;
+    std::string b;
+    fs["camera_matrix"] >> K;
+    fs["board"] >> b;
+    EXPECT_EQ(cv::norm(K, cv::Mat(c.K), cv::NORM_INF), 0.0) << K;
+    EXPECT_EQ(b, board.ToString());
+  }
   const CameraCalibration r = ReadCameraCalibration(path);
   EXPECT_EQ(r.image_size, c.image_size);
-  EXPECT_NEAR(r.dist.at<double>(1), c.dist.at<double>(1), 1e-12);
+  ExpectSameMat(cv::Mat(r.K), cv::Mat(c.K), "K");
+  ExpectSameMat(r.dist, c.dist, "dist");  // all 5 coefficients, 1x5 CV_64F
+  ExpectSameMat(r.std_intrinsics, c.std_intrinsics, "std_intrinsics");
+  EXPECT_EQ(r.rms, c.rms);
+  EXPECT_EQ(r.per_view_errors, c.per_view_errors);
+  EXPECT_EQ(r.used_views, c.used_views);
+  EXPECT_EQ(r.dropped, c.dropped);
+  // The per-view extrinsics (rvecs, tvecs) are not part of the file format.
+  EXPECT_TRUE(r.rvecs.empty());
   std::filesystem::remove(path);
   EXPECT_THROW(ReadCameraCalibration(path), CalibError);
 }

@@ -200,6 +200,42 @@ TEST(Hdr, SixteenBitLinearMergeWithBlackFrames) {
   EXPECT_GT(biased.p95, e.p95 + 0.01);
 }
 
+// A float (linear, full scale 1) stack built by hand, 1x2 pixels, times 0.5, 2 and 8 s, default
+// MergeOptions (valid: 0.0005 < x < 0.97). Where some exposure is valid and the samples agree
+// (x = E t), the merge is E to float rounding (1e-6 relative) whatever the weights. Where no
+// exposure is valid, MergeHdr documents: saturated in the shortest one, +inf; else the longest
+// exposure's x / t (>= 0). The under-exposed samples here disagree (as read noise makes them),
+// so taking another exposure gives another number.
+TEST(Hdr, FloatStackExactWhereValidAndFlaggedElsewhere) {
+  const std::vector<double> t{0.5, 2.0, 8.0};
+  // Pixel 0: E = 0.001 (valid at 2 and 8 s only), 0.05 (valid in all), 1.5 (valid at 0.5 s
+  //          only; 3 and 12 clip to 1).
+  // Pixel 1: R under-exposed everywhere (0.0001, 0.0004, 0.0002: the longest gives 0.000025),
+  //          G clipped everywhere, B E = 0.2 valid at 0.5 and 2 s.
+  const cv::Vec3f px0[3] = {{0.0005f, 0.025f, 0.75f}, {0.002f, 0.1f, 1.f}, {0.008f, 0.4f, 1.f}};
+  const cv::Vec3f px1[3] = {{0.0001f, 1.f, 0.1f}, {0.0004f, 1.f, 0.4f}, {0.0002f, 1.f, 1.f}};
+  std::vector<cv::Mat> images;
+  for (int j = 0; j < 3; ++j) {
+    cv::Mat m(1, 2, CV_32FC3);
+    m.at<cv::Vec3f>(0, 0) = px0[j];
+    m.at<cv::Vec3f>(0, 1) = px1[j];
+    images.push_back(m);
+  }
+  const HdrImage h = MergeHdr(MakeStack(images, t), nullptr);
+  const cv::Vec3f e0 = h.radiance.at<cv::Vec3f>(0, 0), e1 = h.radiance.at<cv::Vec3f>(0, 1);
+  std::printf("float stack: (%g %g %g) (%g %g %g)\n", e0[0], e0[1], e0[2], e1[0], e1[1], e1[2]);
+  EXPECT_NEAR(e0[0] / 0.001, 1.0, 1e-6);
+  EXPECT_NEAR(e0[1] / 0.05, 1.0, 1e-6);
+  EXPECT_NEAR(e0[2] / 1.5, 1.0, 1e-6);
+  EXPECT_NEAR(e1[0] / 0.000025, 1.0, 1e-6);
+  EXPECT_TRUE(std::isinf(e1[1]) && e1[1] > 0);
+  EXPECT_NEAR(e1[2] / 0.2, 1.0, 1e-6);
+  EXPECT_EQ(h.flags.at<cv::Vec3b>(0, 0), cv::Vec3b(kHdrOk, kHdrOk, kHdrOk));
+  EXPECT_EQ(h.flags.at<cv::Vec3b>(0, 1), cv::Vec3b(kHdrUnderexposed, kHdrSaturated, kHdrOk));
+  EXPECT_EQ(h.saturated, 1u);
+  EXPECT_EQ(h.underexposed, 1u);
+}
+
 class HdrFiles : public ::testing::Test {
  protected:
   void SetUp() override {

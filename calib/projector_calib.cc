@@ -196,6 +196,13 @@ ProjectorCalibration ReadProjectorCalibration(const std::string& path) {
   fs["projector_rms"] >> p.projector_rms;
   fs["stereo_camera_rms"] >> p.stereo_camera_rms;
   fs["stereo_projector_rms"] >> p.stereo_projector_rms;
+  fs["projector_std_intrinsics"] >> p.std_intrinsics;
+  cv::Mat e;
+  fs["per_plane_errors"] >> e;
+  for (int i = 0; i < e.rows && e.cols == 2; ++i)
+    p.per_plane_errors.emplace_back(e.at<double>(i, 0), e.at<double>(i, 1));
+  fs["planes"] >> p.used_planes;
+  fs["dropped_planes"] >> p.dropped;
   return p;
 }
 

@@ -77,6 +77,8 @@ ProjectorCalibration CalibrateProjector(const CameraCalibration& camera, const B
 // camera_matrix, distortion_coefficients, image_width, image_height.
 void WriteProjectorCalibration(const std::string& path, const ProjectorCalibration& p,
                                const CameraCalibration& camera, const std::string& pattern);
+// Reads the projector's fields back (not the camera's or the pattern); throws CalibError naming
+// the file when it cannot be read or lacks projector_matrix, projector_distortion, R or T.
 ProjectorCalibration ReadProjectorCalibration(const std::string& path);
 
 }  // namespace translume::calib

@@ -185,6 +185,12 @@ WhiteBalance ReadWhiteBalance(const std::string& path) {
   WhiteBalance w;
   g.convertTo(g, CV_64F);
   w.gains = cv::Vec3d(g.at<double>(0), g.at<double>(1), g.at<double>(2));
+  cv::Mat r;
+  fs["residual"] >> r;
+  if (r.total() == 3) {
+    r.convertTo(r, CV_64F);
+    w.residual = cv::Vec3d(r.at<double>(0), r.at<double>(1), r.at<double>(2));
+  }
   fs["patches"] >> w.patches;
   fs["method"] >> w.method;
   return w;

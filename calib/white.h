@@ -46,6 +46,8 @@ WhiteBalance WhiteFromColorChecker(const cv::Mat& white, const cv::Mat& black,
 // (the black HDR's path, to subtract per pixel).
 void WriteWhiteBalance(const std::string& path, const WhiteBalance& w,
                        const cv::Vec3d& black_mean, const std::string& black_image);
+// Reads white_gains, residual, patches and method back (not the black level); throws CalibError
+// naming the file when it cannot be read or lacks white_gains.
 WhiteBalance ReadWhiteBalance(const std::string& path);
 
 }  // namespace translume::calib

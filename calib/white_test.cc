@@ -4,12 +4,14 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <opencv2/calib3d.hpp>
 
 #include "calib/colorchecker.h"
 #include "calib/error.h"
 #include "calib/hdr.h"
 #include "calib/synthetic_rig.h"
+#include "calib/test_util.h"
 
 namespace translume::calib {
 namespace {
@@ -113,6 +115,49 @@ TEST(White, BadInputs) {
                               {0.9, 0.9, 0.9}), CalibError);
   EXPECT_THROW(WhiteFromColorChecker(cv::Mat(s.white.size(), CV_32FC3, cv::Scalar::all(0.1)), cv::Mat()),
                CalibError);
+}
+
+// MeanInPolygon of an image whose channels are x, y and x * y over the pixels with centres in the
+// axis-aligned square (10..20, 5..15): a product set, so the means are exactly 15, 10 and 150
+// (whether or not the boundary pixels count, as long as both sides are treated alike); one pixel
+// too many or too few on one side moves them by >= 0.04.
+TEST(White, MeanInPolygonOfKnownImage) {
+  cv::Mat img(30, 40, CV_32FC3);
+  for (int y = 0; y < img.rows; ++y)
+    for (int x = 0; x < img.cols; ++x) img.at<cv::Vec3f>(y, x) = cv::Vec3f(float(x), float(y), float(x * y));
+  const cv::Vec3d m = MeanInPolygon(img, {{10, 5}, {20, 5}, {20, 15}, {10, 15}});
+  EXPECT_NEAR(m[0], 15.0, 1e-9);
+  EXPECT_NEAR(m[1], 10.0, 1e-9);
+  EXPECT_NEAR(m[2], 150.0, 1e-9);
+}
+
+// The white balance file gives back the gains, misfit, patch count and method exactly (17
+// significant digits), and the black level under its documented names.
+TEST(White, YamlRoundTrip) {
+  WhiteBalance w;
+  w.gains = {1.4029812345678901, 0.9181423456789012, 1.2031234567890123};
+  w.residual = {0.0036123456789012, 0.0013123456789012, 0.0016123456789012};
+  w.patches = 6;
+  w.method = "colorchecker";
+  const std::string path = TempPath("translume_white_roundtrip.yml");
+  const cv::Vec3d black(0.0081234567890123, 0.0101234567890123, 0.0121234567890123);
+  WriteWhiteBalance(path, w, black, "black.exr");
+  const WhiteBalance r = ReadWhiteBalance(path);
+  EXPECT_EQ(r.gains, w.gains);
+  EXPECT_EQ(r.residual, w.residual);
+  EXPECT_EQ(r.patches, 6);
+  EXPECT_EQ(r.method, "colorchecker");
+  {
+    cv::FileStorage fs(path, cv::FileStorage::READ);
+    cv::Mat b;
+    std::string image;
+    fs["black_level_mean"] >> b;
+    fs["black_image"] >> image;
+    ExpectSameMat(b, cv::Mat(cv::Matx13d(black[0], black[1], black[2])), "black_level_mean");
+    EXPECT_EQ(image, "black.exr");
+  }
+  std::filesystem::remove(path);
+  EXPECT_THROW(ReadWhiteBalance(path), CalibError);
 }
 
 }  // namespace
