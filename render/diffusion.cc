@@ -117,12 +117,15 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
     for (int c = 0; c < 3; ++c) {
       const double kn = m.kappa[c][n];
       if (!pg.is_boundary(n)) {
+        // SPEC section 3's flux w_ji (kappa_i + kappa_j) / 2 (phi_j - phi_i), in phi' = kappa phi.
         double sum = 0;
         for (int k = 0; k < 6; ++k) {
-          S.w[(n * 3 + c) * 6 + k] = pg.weights[n][k];
-          sum += pg.weights[n][k];
+          const int32_t j = pg.neighbours[n][k];
+          const double kj = m.kappa[c][j], kbar = 0.5 * (kn + kj);
+          S.w[(n * 3 + c) * 6 + k] = float(pg.weights[n][k] * kbar * kn / kj);
+          sum += pg.weights[n][k] * kbar;
         }
-        S.inv_diag[n * 3 + c] = float(1 / (m.mu[c][n] / kn + sum));
+        S.inv_diag[n * 3 + c] = float(1 / (m.mu[c][n] + sum));
       } else {
         // The Robin balance over the slab of depth d/2 that the boundary node owns (see the
         // header): the link's flux, the slab's absorption, and its lateral diffusion taken from

@@ -19,7 +19,12 @@ struct NodeMaterial {
 // The polygrid diffusion equations (Wang et al. 2008, Equation (9)) in the relaxation form of
 // Section 5.2 with phi' = kappa phi, written for every node n and channel c as
 //   phi'_n <- (s_n + sum_k w_nk phi'_{nb_nk}) * inv_diag_n
-// Interior node i:   w_k = w_ji (Appendix B), s = 0,  1/inv_diag = mu_i / kappa_i + sum_j w_ji
+// Interior node i: the conservative balance of SPEC section 3 on the Laplacian weights w_ji
+// (Appendix B), sum_j w_ji kbar_ij (phi_j - phi_i) = mu_i phi_i with the face average
+// kbar_ij = (kappa_i + kappa_j) / 2 (the paper's Equation (9) discretises Laplacian(kappa phi)
+// instead, a different equation wherever kappa varies), so in phi':
+//   w_k = w_ji kbar_ij kappa_i / kappa_j, s = 0,  1/inv_diag = mu_i + sum_j w_ji kbar_ij
+// (homogeneous: w_k = kappa w_ji, 1/inv_diag = mu + kappa sum_j w_ji, the paper's row times kappa).
 // Boundary node b linked to interior j at distance d: the Robin condition phi + 2 C kappa
 // dphi/dn = q (Equation (9)) as a balance over the slab of depth d/2 that b owns along its link
 // (vertex-centred finite volumes, the boundary half cells of SPEC section 3):

@@ -90,8 +90,9 @@ NodeMaterial ConstantNodeMaterial(const Polygrid& pg, const std::array<float, 3>
 NodeMaterial ProceduralNodeMaterial(const Polygrid& pg, const std::string& name) {
   // Marble-like and skin-like coefficients (Jensen et al. 2001, converted to kappa, mu).
   const std::array<float, 3> marble_k = {0.14f, 0.15f, 0.17f}, marble_mu = {0.0021f, 0.0041f, 0.0071f};
-  // Veins keep the host kappa: the paper's form Laplacian(kappa phi) makes phi jump up where kappa
-  // drops, which would light the veins up.
+  // Veins keep the host kappa (chosen when the interior equation was the paper's form
+  // Laplacian(kappa phi), under which phi jumps up where kappa drops; the stored reference
+  // image depends on it).
   const std::array<float, 3> vein_k = marble_k, vein_mu = {0.08f, 0.10f, 0.12f};
   const std::array<float, 3> skin_k = {0.45f, 0.30f, 0.25f}, skin_mu = {0.032f, 0.17f, 0.48f};
   if (name != "marble" && name != "layers")

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <map>
 
 #include "render/diffusion.h"
@@ -156,9 +157,14 @@ TEST(Polygrid, HierarchyProlongsConstants) {
 }
 
 // The polygrid of a box (one cube, undistorted) against the regular-grid forward solver of
-// SPEC section 3 on the same box, same homogeneous material, back face lit uniformly: the
-// front-face radiance agrees (relative L2 over the face nodes away from the rim).
-double BoxEquivalenceError(int n, double h, float kappa, float mu, double fraction = 0.1) {
+// SPEC section 3 on the same box, same material, back face lit uniformly: the front-face
+// radiance agrees (relative L2 over the face nodes away from the rim). The material may vary
+// with depth z below the front face (mm; SPEC: z = 0 is the front face, the polygrid's -z
+// face, lattice k = 0): kappa(z) and mu(z), evaluated at every node's own depth on both grids.
+using DepthProfile = std::function<float(double)>;
+
+double BoxEquivalenceError(int n, double h, const DepthProfile& kappa, const DepthProfile& mu,
+                           double fraction = 0.1) {
   const double L = (n - 1) * h;
   const auto box = MakeBoxShape(Vec3(L, L, L));
   PolygridOptions o;
@@ -166,10 +172,12 @@ double BoxEquivalenceError(int n, double h, float kappa, float mu, double fracti
   o.first_layer_fraction = fraction;
   const Polygrid pg = BuildPolygrid(BuiltinPolycube("box"), *box, o);
   NodeMaterial m;
-  for (int c = 0; c < 3; ++c) {
-    m.kappa[c].assign(pg.size(), kappa);
-    m.mu[c].assign(pg.size(), mu);
-  }
+  for (int c = 0; c < 3; ++c)
+    for (int64_t i = 0; i < pg.size(); ++i) {
+      const double z = pg.position[i].z() + L / 2;
+      m.kappa[c].push_back(kappa(z));
+      m.mu[c].push_back(mu(z));
+    }
   const double C = ReflectionParameterC(1.3);
   BoundaryLight q;
   for (int c = 0; c < 3; ++c) {
@@ -180,7 +188,14 @@ double BoxEquivalenceError(int n, double h, float kappa, float mu, double fracti
   const JacobiSystem S = BuildJacobiSystem(pg, m, C, q);
   const BoundaryLight Lpg = BoundaryRadiance(pg, m, q, SolveReference(S, 1));
 
-  const Material mat = Material::Constant({n, n, n}, h, {kappa, kappa, kappa}, {mu, mu, mu});
+  Material mat = Material::Constant({n, n, n}, h, {1, 1, 1}, {1, 1, 1});
+  for (int c = 0; c < 3; ++c)
+    for (int k = 0; k < n; ++k)
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+          mat.kappa[c][mat.shape.index(i, j, k)] = kappa(k * h);
+          mat.mu[c][mat.shape.index(i, j, k)] = mu(k * h);
+        }
   ForwardOptions fo;
   fo.multigrid.tolerance = 1e-10;
   fo.multigrid.max_iterations = 400;
@@ -204,6 +219,11 @@ double BoxEquivalenceError(int n, double h, float kappa, float mu, double fracti
   return std::sqrt(num / den);
 }
 
+double BoxEquivalenceError(int n, double h, float kappa, float mu, double fraction = 0.1) {
+  return BoxEquivalenceError(n, h, [=](double) { return kappa; }, [=](double) { return mu; },
+                             fraction);
+}
+
 TEST(Polygrid, SingleCubeBoxMatchesRegularGridSolver) {
   const double e9 = BoxEquivalenceError(9, 0.5, 0.4f, 0.05f);
   const double e17 = BoxEquivalenceError(17, 0.25, 0.4f, 0.05f);
@@ -214,6 +234,25 @@ TEST(Polygrid, SingleCubeBoxMatchesRegularGridSolver) {
   EXPECT_LT(e17, e9);
   // Issue 7's target. Measured (docs/benchmarks.md): second-order convergence, 6.2e-4 at 33^3
   // (with the paper's first-order boundary link and bent grid lines it was 2.6e-3).
+  EXPECT_LT(e33, 1e-3);
+}
+
+// The same box with a material layered in depth: kappa 0.2 -> 0.6 mm and mu 0.02 -> 0.1/mm
+// linearly from the front face (z = 0) to the back (z = 4 mm), so that the flux between nodes
+// at different depths depends on how kappa is averaged. SPEC section 3 takes the face average
+// (kappa_p + kappa_q) / 2; the paper's interior form Laplacian(kappa phi) (kappa_p phi_q - ...)
+// solves a different equation here, 0.61 off at every resolution (measured: 6.2e-1, 6.1e-1,
+// 6.1e-1 at 9^3, 17^3, 33^3), and reading a neighbour's kappa or mu from the wrong node shows
+// likewise. Measured with the face average: 2.2e-2 (9^3), 3.9e-3 (17^3), 8.4e-4 (33^3), second
+// order as in the homogeneous case (6.2e-4 at 33^3); the same 1e-3 target holds.
+TEST(Polygrid, SingleCubeBoxMatchesRegularGridSolverLayered) {
+  const auto kappa = [](double z) { return float(0.2 + 0.4 * z / 4); };
+  const auto mu = [](double z) { return float(0.02 + 0.08 * z / 4); };
+  const double e9 = BoxEquivalenceError(9, 0.5, kappa, mu);
+  const double e33 = BoxEquivalenceError(33, 0.125, kappa, mu);
+  std::printf("[box equivalence] 4 mm cube, kappa 0.2 -> 0.6 mm, mu 0.02 -> 0.1/mm with depth: "
+              "relative L2 difference %.3e (9^3), %.3e (33^3)\n", e9, e33);
+  EXPECT_LT(e33, e9 / 8);  // converging (second order: about 1/16 per two halvings of h)
   EXPECT_LT(e33, 1e-3);
 }
 
