@@ -2,11 +2,14 @@
 // The only translation unit that includes OpenVDB (its headers are slow to compile).
 #include "solver/material_io.h"
 
+#include <algorithm>
+#include <cctype>
 #include <openvdb/openvdb.h>
 
 #include <cmath>
 #include <filesystem>
 #include <fmt/format.h>
+#include <fstream>
 #include <mutex>
 #include <set>
 
@@ -17,6 +20,68 @@ namespace translume {
 namespace {
 
 constexpr const char* kFormat = "material/1";
+
+// Integrity trailer (docs/formats.md): WriteMaterial appends 24 bytes after OpenVDB's file,
+// which OpenVDB never reads (it seeks to its grids by offset): "TLSUM001", the length of the
+// file before the trailer and its 64-bit FNV-1a hash, both little-endian. The file metadata
+// `translume_checksum` says that the file had one, so a file cut short is caught too.
+constexpr char kTrailerMagic[8] = {'T', 'L', 'S', 'U', 'M', '0', '0', '1'};
+constexpr int kTrailerBytes = 24;
+constexpr const char* kChecksumKind = "fnv1a64-trailer";
+
+// FNV-1a over the first `bytes` bytes of `in` from its current position (bytes 0..).
+uint64_t Fnv1a64(std::istream& in, uint64_t bytes) {
+  uint64_t h = 14695981039346656037ull;
+  std::vector<char> buf(1 << 20);
+  while (bytes > 0) {
+    const std::streamsize n = std::streamsize(std::min<uint64_t>(bytes, buf.size()));
+    if (!in.read(buf.data(), n)) return ~h;  // short: cannot match
+    for (std::streamsize i = 0; i < n; ++i) h = (h ^ uint64_t(uint8_t(buf[size_t(i)]))) * 1099511628211ull;
+    bytes -= uint64_t(n);
+  }
+  return h;
+}
+
+void PutU64(char* out, uint64_t v) {
+  for (int b = 0; b < 8; ++b) out[b] = char((v >> (8 * b)) & 0xff);
+}
+
+uint64_t GetU64(const char* in) {
+  uint64_t v = 0;
+  for (int b = 0; b < 8; ++b) v |= uint64_t(uint8_t(in[b])) << (8 * b);
+  return v;
+}
+
+void AppendTrailer(const std::string& path) {
+  const uint64_t size = std::filesystem::file_size(path);
+  std::ifstream in(path, std::ios::binary);
+  const uint64_t hash = Fnv1a64(in, size);
+  char trailer[kTrailerBytes];
+  std::copy(kTrailerMagic, kTrailerMagic + 8, trailer);
+  PutU64(trailer + 8, size);
+  PutU64(trailer + 16, hash);
+  std::ofstream out(path, std::ios::binary | std::ios::app);
+  out.write(trailer, kTrailerBytes);
+  if (!out) throw InputError(fmt::format("{}: cannot write", path));
+}
+
+// Whether `path` ends in an integrity trailer; throws InputError where it does but the file
+// does not match it.
+bool CheckTrailer(const std::string& path, uint64_t size) {
+  std::ifstream in(path, std::ios::binary);
+  char trailer[kTrailerBytes];
+  in.seekg(std::streamoff(size - kTrailerBytes));
+  if (!in.read(trailer, kTrailerBytes) || !std::equal(kTrailerMagic, kTrailerMagic + 8, trailer)) return false;
+  const uint64_t length = GetU64(trailer + 8);
+  if (length != size - kTrailerBytes)
+    throw InputError(fmt::format("{}: corrupt material file: {} bytes where its checksum trailer says {}",
+                                 path, size - kTrailerBytes, length));
+  in.seekg(0);
+  if (Fnv1a64(in, length) != GetU64(trailer + 16))
+    throw InputError(fmt::format("{}: corrupt material file: its contents do not match their checksum "
+                                 "(damaged after it was written)", path));
+  return true;
+}
 
 void InitVdb() {
   static std::once_flag once;
@@ -74,6 +139,7 @@ void WriteVdb(const std::string& path, const Material& m, const MaterialCorrupti
   meta.insertMeta("eta", openvdb::FloatMetadata(float(m.eta)));
   meta.insertMeta("translume_format",
                   openvdb::StringMetadata(bad == MC::kWrongFormat ? "material/99" : kFormat));
+  if (bad != MC::kNoChecksum) meta.insertMeta("translume_checksum", openvdb::StringMetadata(kChecksumKind));
   if (bad == MC::kUnknownMetadata) meta.insertMeta("albedo_scale", openvdb::FloatMetadata(2.0f));
   if (bad == MC::kMissingMu) grids = {kappa, density, albedo};
   if (bad == MC::kShapeMismatch) {
@@ -99,6 +165,7 @@ void WriteVdb(const std::string& path, const Material& m, const MaterialCorrupti
     } catch (const openvdb::Exception& e) {
       throw InputError(fmt::format("{}: cannot write material file: {}", path, e.what()));
     }
+    if (bad != MC::kNoChecksum) AppendTrailer(tmp);
   });
 }
 
@@ -116,30 +183,75 @@ void WriteCorruptMaterialForTest(const std::string& path, const Material& m,
   WriteVdb(path, m, &corruption);
 }
 
+namespace {
+
+// At most 80 characters of `text` for an error line, non-printable ones as '?', runs of blanks
+// as one (a corrupt file's "names" can be megabytes of garbage).
+std::string Short(const std::string& text) {
+  std::string out;
+  for (char c : text) {
+    if (out.size() >= 80) return out + "...";
+    const char p = std::isprint(static_cast<unsigned char>(c)) ? c : '?';
+    if (p == ' ' && !out.empty() && out.back() == ' ') continue;
+    out += p;
+  }
+  return out;
+}
+
+Material ReadMaterialFile(const std::string& path, bool trailer);
+
+}  // namespace
+
 Material ReadMaterial(const std::string& path) {
   InitVdb();
-  if (!std::filesystem::exists(path)) throw InputError(fmt::format("{}: no such file", path));
-  openvdb::io::File file(path);
+  namespace fs = std::filesystem;
+  if (!fs::exists(path)) throw InputError(fmt::format("{}: no such file", path));
+  if (fs::is_directory(path)) throw InputError(fmt::format("{}: is a folder, not a material file", path));
+  // OpenVDB trusts the lengths in a file's header: cut inside it, a file can make it allocate
+  // gigabytes. Every material file is tens of kilobytes at least (two grids and their trees).
+  std::error_code ec;
+  const auto bytes = fs::file_size(path, ec);
+  if (!ec && bytes < 4096)
+    throw InputError(fmt::format("{}: not a material file: {} bytes is too short for an OpenVDB file "
+                                 "with two grids (truncated?)", path, bytes));
+  const bool trailer = !ec && CheckTrailer(path, bytes);
   try {
-    file.open();
-  } catch (const openvdb::Exception& e) {
-    throw InputError(fmt::format("{}: not a readable OpenVDB file ({})", path, e.what()));
+    return ReadMaterialFile(path, trailer);
+  } catch (const InputError&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw InputError(fmt::format("{}: not a readable OpenVDB material (truncated or corrupt: {})", path,
+                                 Short(e.what())));
   }
+}
+
+namespace {
+
+Material ReadMaterialFile(const std::string& path, bool trailer) {
+  openvdb::io::File file(path);
+  file.open();
   Material m;
   auto meta = file.getMetadata();
   bool have_c = false, have_eta = false;
-  const std::set<std::string> known = {"C", "eta", "translume_format"};
+  const std::set<std::string> known = {"C", "eta", "translume_format", "translume_checksum"};
   for (auto it = meta->beginMeta(); it != meta->endMeta(); ++it) {
     const std::string& key = it->first;
     if (!known.count(key)) {
       throw InputError(fmt::format("{}: unknown file metadata '{}' (expected C, eta, "
-                                   "translume_format)", path, key));
+                                   "translume_format, translume_checksum)", path, Short(key)));
+    }
+    if (key == "translume_checksum") {
+      // Written with an integrity trailer (checked before OpenVDB read the file): without it
+      // the file was cut short.
+      if (!trailer)
+        throw InputError(fmt::format("{}: corrupt material file: its checksum trailer is missing (cut short?)", path));
+      continue;
     }
     if (key == "translume_format") {
       const std::string v = it->second->str();
       if (v != kFormat)
         throw InputError(fmt::format("{}: translume_format is '{}', this build reads '{}'", path,
-                                     v, kFormat));
+                                     Short(v), kFormat));
       continue;
     }
     double value = 0;
@@ -222,5 +334,7 @@ Material ReadMaterial(const std::string& path) {
     throw InputError(fmt::format("{}: {}", path, err));
   return m;
 }
+
+}  // namespace
 
 }  // namespace translume

@@ -41,6 +41,7 @@ class MaterialIo : public ::testing::Test {
       EXPECT_NE(msg.find(path), std::string::npos) << msg;
       EXPECT_NE(msg.find(what), std::string::npos) << msg;
       EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+      EXPECT_LT(msg.size(), path.size() + 200) << msg;  // one short line, whatever the file holds
     }
   }
 
@@ -70,8 +71,51 @@ TEST_F(MaterialIo, RejectsEveryBrokenFile) {
   ExpectRejected(Path("absent.vdb"), "no such file");
   {
     std::ofstream(Path("text.vdb")) << "not a vdb";
-    ExpectRejected(Path("text.vdb"), "not a readable OpenVDB file");
+    ExpectRejected(Path("text.vdb"), "too short");
+    std::ofstream(Path("long.vdb")) << std::string(10000, 'x');
+    ExpectRejected(Path("long.vdb"), "not a readable OpenVDB material");
+    fs::create_directories(Path("folder.vdb"));
+    ExpectRejected(Path("folder.vdb"), "is a folder");
   }
+  // A good file cut short or with flipped bytes: one short line naming it, at any cut (inside
+  // the header OpenVDB would otherwise trust garbage lengths and allocate gigabytes).
+  WriteMaterial(Path("good.vdb"), material_);
+  std::string bytes;
+  {
+    std::ifstream in(Path("good.vdb"), std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  ASSERT_GT(bytes.size(), 8192u);
+  for (size_t cut : {size_t(60), size_t(100), size_t(120), bytes.size() / 3, bytes.size() - 10}) {
+    std::ofstream(Path("cut.vdb"), std::ios::binary) << bytes.substr(0, cut);
+    try {
+      ReadMaterial(Path("cut.vdb"));
+      ADD_FAILURE() << "no error for a file cut at " << cut;
+    } catch (const InputError& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(Path("cut.vdb")), std::string::npos) << msg;
+      EXPECT_LT(msg.size(), 300u) << cut;
+      if (cut >= 4096)
+        EXPECT_TRUE(msg.find("cut short") != std::string::npos || msg.find("truncated") != std::string::npos) << msg;
+    }
+  }
+  // Flipped bytes anywhere (in the header, a grid's topology or its values: OpenVDB would read
+  // some silently as other values and crash on others) fail the checksum; so does a byte
+  // appended.
+  for (size_t at : {size_t(80), bytes.size() / 4, bytes.size() / 2, bytes.size() - 40, bytes.size() - 5}) {
+    std::string flipped = bytes;
+    flipped[at] = char(~flipped[at]);
+    std::ofstream(Path("flip.vdb"), std::ios::binary) << flipped;
+    ExpectRejected(Path("flip.vdb"), "corrupt material file");
+  }
+  std::ofstream(Path("longer.vdb"), std::ios::binary) << bytes << 'x';
+  // (The trailer is then not at the end: OpenVDB reads the file, which says it had one.)
+  ExpectRejected(Path("longer.vdb"), "checksum trailer is missing");
+  std::ofstream(Path("cut_trailer.vdb"), std::ios::binary) << bytes.substr(0, bytes.size() - 24);
+  ExpectRejected(Path("cut_trailer.vdb"), "checksum trailer is missing");
+  // A file from before the trailer still reads.
+  WriteCorruptMaterialForTest(Path("old.vdb"), material_, MaterialCorruption::kNoChecksum);
+  EXPECT_EQ(ReadMaterial(Path("old.vdb")).kappa, material_.kappa);
   const std::pair<MaterialCorruption, std::string> cases[] = {
       {MaterialCorruption::kMissingMu, "missing grid 'mu'"},
       {MaterialCorruption::kMissingC, "missing file metadata 'C'"},
