@@ -128,7 +128,10 @@ CaptureSpec ReadCapture(const std::string& path) {
   }
   s.grid = {n[0], n[1], n[2]};
   if (j.contains("eta") && j.contains("C")) r.Fail("C", "give eta or C, not both");
-  if (j.contains("eta")) s.eta = r.Positive(j["eta"], "eta");
+  if (j.contains("eta")) {
+    s.eta = r.Positive(j["eta"], "eta");
+    if (!(s.eta > 1 && s.eta <= 3.5)) r.Fail("eta", "must be a refractive index in (1, 3.5]");
+  }
   s.C = j.contains("C") ? r.Positive(j["C"], "C") : ReflectionParameterC(s.eta);
   if (s.C < 1) r.Fail("C", "must be >= 1");
   if (j.contains("face_corners_px") && !(j["face_corners_px"].is_string() && j["face_corners_px"] == "auto"))

@@ -49,6 +49,9 @@ Material EditMaterial(const Material& material, const EditOptions& o, const Imag
   if (std::string err = o.Validate(); !err.empty()) throw InputError("edit: " + err);
   Material m = material;
   const GridShape& s = m.shape;
+  if (o.depth_begin >= s.nz || o.depth_end >= s.nz)
+    throw InputError(fmt::format("--depth {}:{}: the material has node layers 0..{}", o.depth_begin,
+                                 o.depth_end < 0 ? std::string("") : std::to_string(o.depth_end), s.nz - 1));
   const int64_t k_end = o.depth_end < 0 ? s.nz - 1 : std::min<int64_t>(o.depth_end, s.nz - 1);
   for (int64_t k = o.depth_begin; k <= k_end; ++k)
     for (int64_t j = 0; j < s.ny; ++j)

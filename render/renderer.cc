@@ -120,6 +120,7 @@ std::string RenderOptions::Validate() const {
     return "the image size must be 1..16384 pixels per side";
   if (supersample < 1 || supersample > 8) return "supersample must be 1..8";
   if (!(fov_deg > 1 && fov_deg < 170)) return "the field of view must be in (1, 170) degrees";
+  if (!std::isfinite(azimuth_deg) || !std::isfinite(elevation_deg)) return "the camera angles must be finite";
   if (!(eta >= 1)) return "eta must be >= 1";
   if (specular < 0 || !(roughness > 0) || surface_reflectance < 0)
     return "specular and surface reflectance must be >= 0, roughness > 0";

@@ -26,13 +26,16 @@ void WriteAtomically(const std::string& path,
   try {
     write(tmp);
   } catch (...) {
-    fs::remove(tmp, ec);
+    std::error_code ignored;
+    fs::remove_all(tmp, ignored);
     throw;
   }
   fs::rename(tmp, target, ec);
   if (ec) {
-    fs::remove(tmp, ec);
-    throw InputError(fmt::format("{}: cannot write: {}", path, ec.message()));
+    const std::string why = fs::is_directory(target) ? "it is a folder" : ec.message();
+    std::error_code ignored;
+    fs::remove_all(tmp, ignored);
+    throw InputError(fmt::format("{}: cannot write: {}", path, why));
   }
 }
 

@@ -132,6 +132,8 @@ std::string EvaluationJson(const EvaluationReport& r) {
 DatasetMismatch CompareDatasets(const Dataset& a, const Dataset& b) {
   if (a.shape.nx != b.shape.nx || a.shape.ny != b.shape.ny)
     throw InputError(fmt::format("datasets differ in grid: {} vs {}", a.shape.ToString(), b.shape.ToString()));
+  if (a.setup != b.setup)
+    throw InputError(fmt::format("datasets differ in setup: {}-lit vs {}-lit", SetupName(a.setup), SetupName(b.setup)));
   DatasetMismatch r;
   std::vector<FacePattern> La, Lb, qa, qb;
   std::vector<std::vector<float>> w;

@@ -53,6 +53,13 @@ std::vector<float> RasterizeLightFile(const LightSpec& spec, const GridShape& sh
   const Image pattern = ReadImage(spec.image_path);
   if (pattern.width < 1 || pattern.height < 1)
     throw InputError(fmt::format("{}: empty light pattern image", spec.image_path));
+  for (size_t v = 0; v < pattern.data.size(); ++v)
+    if (!std::isfinite(pattern.data[v]) || pattern.data[v] < 0) {
+      const size_t pixel = v / size_t(pattern.channels);
+      throw InputError(fmt::format("{}: light pattern pixel ({}, {}) is {}; light must be finite and >= 0",
+                                   spec.image_path, pixel % size_t(pattern.width), pixel / size_t(pattern.width),
+                                   pattern.data[v]));
+    }
   return RasterizeLight(spec, shape, h, &pattern);
 }
 

@@ -311,7 +311,7 @@ OptimizerResult RunCeres(RecoveryProblem* problem, OptimizerKind kind, int max_i
   r.iterations = int(sum.iterations.size()) - 1;
   r.initial = sum.initial_cost;
   r.final = sum.final_cost;
-  r.message = sum.message;
+  r.message = cb.stopped ? "stopped by the caller (e.g. Ctrl-C) after this iteration" : sum.message;
   if (cb.stopped) r.termination = RecoveryTermination::kStopped;
   else if (sum.termination_type == ceres::CONVERGENCE) r.termination = RecoveryTermination::kConverged;
   else if (sum.termination_type == ceres::NO_CONVERGENCE) r.termination = RecoveryTermination::kMaxIterations;

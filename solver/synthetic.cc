@@ -125,6 +125,9 @@ Material SynthesizeMaterial(const SynthOptions& o) {
     throw InputError("--grid: every dimension must be at least 2 nodes");
   if (!(o.spacing_mm > 0) || !std::isfinite(o.spacing_mm))
     throw InputError(fmt::format("--spacing: {} is not a positive length in mm", o.spacing_mm));
+  // (Jensen's Fdr fit, which gives C, passes 1 near eta = 3.9.)
+  if (!(o.eta > 1 && o.eta <= 3.5))
+    throw InputError(fmt::format("--eta: {} is not a refractive index in (1, 3.5]", o.eta));
   Material m = Material::Constant(shape, o.spacing_mm, {1, 1, 1}, {1, 1, 1}, o.eta);
   const Noise noise(o.seed);
   std::mt19937_64 rng(o.seed);

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <cstdlib>
+#include <string>
 
 namespace translume {
 
@@ -15,8 +16,15 @@ void SetNumThreads(int n) {
 
 int NumThreads() { return omp_get_max_threads(); }
 
-void InitThreadsFromEnvironment() {
-  if (const char* env = std::getenv("TRANSLUME_THREADS")) SetNumThreads(std::atoi(env));
+std::string InitThreadsFromEnvironment() {
+  const char* env = std::getenv("TRANSLUME_THREADS");
+  if (!env || !*env) return "";
+  char* end = nullptr;
+  const long n = std::strtol(env, &end, 10);
+  if (*end != '\0' || n < 1 || n > 4096)
+    return std::string("TRANSLUME_THREADS=") + env + ": expected a whole number of threads, 1..4096";
+  SetNumThreads(int(n));
+  return "";
 }
 
 void UsePassiveOpenMpByDefault(char** argv) {

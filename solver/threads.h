@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 
 namespace translume {
 
@@ -16,8 +17,8 @@ inline constexpr int64_t kParallelNodes = 100000;
 // OMP_NUM_THREADS if set, else the number of hardware threads. `translume --threads N` sets it.
 void SetNumThreads(int n);
 int NumThreads();
-// Called once at start-up: applies TRANSLUME_THREADS.
-void InitThreadsFromEnvironment();
+// Called once at start-up: applies TRANSLUME_THREADS; returns "" or what is wrong with it.
+std::string InitThreadsFromEnvironment();
 
 // Called first in an executable's main(): unless OMP_WAIT_POLICY or GOMP_SPINCOUNT is set,
 // sets OMP_WAIT_POLICY=passive (idle OpenMP threads sleep at once instead of spinning) and

@@ -106,7 +106,7 @@ TEST_F(CalibCli, CameraBadInputs) {
   ExpectOneLineError(Translume("calibrate camera " + P("nothere") + " --board chessboard:9x6:25 -o " +
                                P("out.yml")), P("nothere") + ": not a folder");
   ExpectOneLineError(Translume("calibrate camera " + P("blank") + " --board chessboard:9x6:25 -o " +
-                               P("blank/cam.yml")), "would overwrite or add to the input");
+                               P("blank/cam.yml")), "would write into the input folder");
   ExpectOneLineError(Translume("calibrate wobble"), "unknown subcommand 'wobble'");
 }
 
@@ -144,7 +144,7 @@ TEST_F(CalibCli, CalibrateProjectorFromPlanes) {
                      "--pattern 11x7:200");
   ExpectOneLineError(Translume("calibrate projector " + P("planes") + " --camera " + P("out.yml") +
                                " --board chessboard:9x6:25 -o " + P("out.yml")),
-                     "would overwrite or add to the input");
+                     "would overwrite the input");
   ExpectOneLineError(Translume("calibrate projector " + P("planes") + " --camera " + P("pattern.png") +
                                " --board chessboard:9x6:25 -o " + P("out.yml")), P("pattern.png"));
   fs::remove(P("planes/p2_pattern.png"));
@@ -237,7 +237,7 @@ TEST_F(CalibCli, HdrBadInputs) {
   fs::remove(P("s/e1.png"));
   fs::remove(P("s/e2.png"));
   ExpectOneLineError(Translume("hdr " + P("s") + " -o " + P("out.exr")), "at least 2 images, found 1");
-  ExpectOneLineError(Translume("hdr " + P("s") + " -o " + P("s/x.exr")), "would overwrite or add to the input");
+  ExpectOneLineError(Translume("hdr " + P("s") + " -o " + P("s/x.exr")), "would write into the input folder");
   ExpectOneLineError(Translume("hdr " + P("s") + " -o " + P("x.png")), "must end in .exr");
   ExpectOneLineError(Translume("calibrate response " + P("s") + " -o " + P("out.yml")),
                      "at least 2 images, found 1");

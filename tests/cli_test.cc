@@ -180,6 +180,48 @@ TEST_F(Cli, InverseCommandsRejectBadArguments) {
   EXPECT_EQ(Translume("bench recovery --help").status, 0);
 }
 
+// No command replaces or writes into its inputs, and an output path that names a folder is
+// found before the work; each case one line, the input unchanged.
+TEST_F(Cli, OutputsNeverReplaceInputs) {
+  ASSERT_EQ(Translume("synth --preset wax --grid 8x6x4 -o " + P("m.vdb")).status, 0);
+  const auto bytes = fs::file_size(P("m.vdb"));
+  ExpectOneLineError(Translume("edit " + P("m.vdb") + " --scale kappa=2 -o " + P("m.vdb")), "would overwrite the input");
+  ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 2x2 --holdout 2 -o " + P("ds")).status, 0);
+  // solve's report OUT.json would replace the dataset's own json; a checkpoint the material.
+  ExpectOneLineError(Translume("solve " + P("ds/dataset.json") + " -o " + P("ds/dataset.vdb")), "would");
+  ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("c.vdb") + " --checkpoint " + P("c.vdb")),
+                     "would overwrite the input");
+  ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("r.vdb") + " --init " + P("r.vdb")), "would overwrite");
+  fs::create_directories(P("r.json"));
+  ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("r.vdb")), "is a folder");
+  EXPECT_FALSE(fs::exists(P("r.vdb")));
+  fs::create_directories(P("dir.vdb"));
+  ExpectOneLineError(Translume("synth --preset wax --grid 8x6x4 -o " + P("dir.vdb")), "is a folder");
+  // A light image, or a folder below an input folder.
+  ASSERT_EQ(Translume("forward " + P("m.vdb") + " -o " + P("L.exr")).status, 0);
+  ExpectOneLineError(Translume("forward " + P("m.vdb") + " --light image:" + P("L.exr") + " -o " + P("L.exr")),
+                     "would overwrite the input");
+  ExpectOneLineError(Translume("hdr " + P("ds") + " -o " + P("ds/sub/x.exr")), "would write into the input folder");
+  EXPECT_EQ(fs::file_size(P("m.vdb")), bytes);
+  // simulate replaces an earlier dataset whole (no stale holdout/), refuses other folders and
+  // the folder holding its material.
+  ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + P("ds")).status, 0);
+  EXPECT_FALSE(fs::exists(P("ds/holdout")));
+  EXPECT_EQ(ReadDataset(P("ds")).conditions.size(), 4u);
+  fs::create_directories(P("photos"));
+  std::ofstream(P("photos/a.png")) << "x";
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + P("photos")), "not empty");
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + dir_.string()), "holds the input");
+  // Flags checked as flags.
+  ExpectOneLineError(Translume("synth --preset wax --eta 0.5 -o " + P("e.vdb")), "--eta");
+  ExpectOneLineError(Translume("synth --preset wax --threads 0 -o " + P("e.vdb")), "--threads");
+  ExpectOneLineError(Translume("info", "TRANSLUME_THREADS=abc"), "TRANSLUME_THREADS");
+  ExpectOneLineError(Translume("demo -o " + P("m.vdb")), "is a file");
+  ExpectOneLineError(Translume("forward " + P("m.vdb") + " --backend gl --precision double -o " + P("G.exr")),
+                     "--precision double");
+  EXPECT_FALSE(fs::exists(P("e.vdb")));
+}
+
 TEST_F(Cli, BenchForwardSmoke) {
   // A large --jacobi-factor lets the paper's relaxation run to 1e-6, so its ratio is measured
   // rather than a lower bound.

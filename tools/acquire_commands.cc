@@ -16,6 +16,7 @@
 #include "solver/light.h"
 #include "solver/synthetic.h"
 #include "solver/material_io.h"
+#include "solver/memory.h"
 #include "solver/status.h"
 #include "solver/threads.h"
 #include "tools/commands.h"
@@ -39,9 +40,9 @@ int RunSimulateCapture(int argc, char** argv) {
   app.add_option("--rig", rig_path, "default, or a rig file (.json, docs/capture.md)")->capture_default_str();
   app.add_option("--setup", setup, "back (projector behind the sample) or front")->capture_default_str();
   app.add_option("--lights", lights, "NxN regions of the lit face, one condition each")->capture_default_str();
-  app.add_option("--oversample", o.oversample, "Forward solves on a grid this many times finer")->capture_default_str();
+  app.add_option("--oversample", o.oversample, "Forward solves on a grid this many times finer: 2, 4, 6 or 8")->capture_default_str();
   app.add_option("--holdout", o.holdout, "Held-out spot conditions in truth/dataset/holdout")->capture_default_str();
-  app.add_option("--exposures", o.exposures, "Photos per exposure stack, one stop apart")->capture_default_str();
+  app.add_option("--exposures", o.exposures, "Photos per exposure stack, one stop apart: 2..16")->capture_default_str();
   app.add_flag("--auto-corners", o.auto_corners, "Leave the face corners to acquire's detection");
   app.add_option("--seed", o.seed, "Noise and pose seed")->capture_default_str();
   app.add_option("-o,--output", out, "New capture folder")->required();
@@ -112,9 +113,9 @@ int RunAcquire(int argc, char** argv) {
   if (tty) std::printf("\n");
   if (o.solve) std::printf("%s\n", rep.solve.BriefReport().c_str());
   std::printf("%s", rep.Table().c_str());
-  std::printf("wrote %s%s, %s, %s/dataset.json and %zu previews in %s/previews\n",
-              o.solve ? out.c_str() : "", o.solve ? "" : "(no solve)", rep.report_json.c_str(),
-              rep.dataset_dir.c_str(), rep.previews.size(), rep.work_dir.c_str());
+  std::printf("wrote %s%s, %s/dataset.json and %zu previews in %s/previews%s\n",
+              o.solve ? (out + ", ").c_str() : "", rep.report_json.c_str(), rep.dataset_dir.c_str(),
+              rep.previews.size(), rep.work_dir.c_str(), o.solve ? "" : " (--no-solve: no material)");
   return 0;
 }
 
@@ -140,13 +141,22 @@ int RunDemo(int argc, char** argv) {
     std::printf("    %s\n", line.c_str());
     std::fflush(stdout);
   };
+  // Every flag and the output folder checked before the minutes of work.
+  if (iterations < 0) throw InputError("--max-iterations: must be >= 0");
+  if (fs::exists(out) && !fs::is_directory(out))
+    throw InputError(fmt::format("-o {}: is a file; the demo writes a folder", out));
   SynthOptions so;
   so.preset = "marble";
   so.shape = ParseGridShape(grid, "--grid");
-  const Material truth = SynthesizeMaterial(so);
   acquire::SimulateCaptureOptions sc;
   sc.setup = ParseSetup(setup);
   sc.lights = RegionLights(lights).front().region_n;
+  const int64_t K = sc.oversample;
+  const GridShape fine{(so.shape.nx - 1) * K + 1, (so.shape.ny - 1) * K + 1, (so.shape.nz - 1) * K + 1};
+  CheckFitsInMemory(EstimateMemory(fine, 1, Precision::kDouble).forward_bytes +
+                        EstimateMemory(so.shape, sc.lights * sc.lights, Precision::kDouble).recovery_bytes,
+                    fmt::format("the demo on the {} grid", so.shape.ToString()));
+  const Material truth = SynthesizeMaterial(so);
   const fs::path capture = fs::path(out) / "capture";
   // A capture folder from an earlier demo run is replaced; anything else is left alone.
   if (fs::exists(capture)) {

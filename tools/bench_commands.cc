@@ -3,8 +3,10 @@
 // problem in memory (no file IO), so they also build into the self-contained GPU benchmark
 // binary (tools/gpubench.cc).
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <memory>
 #include <string>
 #include <vector>
@@ -14,6 +16,7 @@
 #include "solver/forward.h"
 #include "solver/gl_context.h"
 #include "solver/status.h"
+#include "solver/synthetic.h"
 #include "solver/threads.h"
 #include "tools/commands.h"
 
@@ -44,24 +47,26 @@ void AddBenchForward(CLI::App& bench) {
   fwd->fallthrough();  // --threads after the subcommand too
   fwd->add_option("--grids", f->grids, "Grids NXxNYxNZ (default: 33^3, 65^3, 129^3, 130x53x37, 256x256x20)")
       ->delimiter(',');
-  fwd->add_option("--repeats", f->o.repeats, "Solves per grid (median)")->capture_default_str();
+  fwd->add_option("--repeats", f->o.repeats, "Solves per grid (median)")->capture_default_str()->check(CLI::Range(1, 10000));
   fwd->add_option("--precision", f->precision, "float or double")->capture_default_str();
   fwd->add_option("--backend", f->backend, "cpu or gl (gl: float, the cpu solver is the peer, "
                                            "and the stencil's bandwidth is compared to a copy)")
       ->capture_default_str();
   fwd->add_option("--jacobi-cap", f->o.jacobi_cap_seconds, "Longest Jacobi run per grid, seconds")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(PositiveFinite());
   fwd->add_option("--jacobi-factor", f->o.jacobi_factor,
                   "Jacobi also stops after this many times our solve time (its ratio is then a "
                   "lower bound; raise it to measure the ratio itself)")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveFinite());
   fwd->add_flag("--cpu-time", f->o.cpu_time,
                 "Time with the process's CPU clock, not the wall clock (cpu backend, with "
                 "--threads 1: unaffected by other jobs on a shared machine)");
   fwd->add_option("--batch", f->o.batch, "gl: also solve this many right-hand sides (4x4 region "
                                          "lights) as one batch; 0 skips")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(CLI::Range(0, 4096));
   fwd->add_option("--smoothing", f->o.smoothing, "Our solver's V(N, N) cycle on the finest level: "
                   "smoothing sweeps before and after the coarse correction (default: 1 with x-y "
                   "coarsening, else 2)")
@@ -145,12 +150,24 @@ void AddBenchRecovery(CLI::App& bench) {
       throw InputError("bench recovery: --comparison-only and --no-comparison exclude each other");
     o.run_cases = !f->comparison_only;
     o.compare_optimizers = !f->no_comparison;
+    // Errors name this command's flags (--setups, not the library's --setup).
+    const std::vector<std::string> known = SynthPresetNames();
+    for (const auto& p : o.presets)
+      if (std::find(known.begin(), known.end(), p) == known.end())
+        throw InputError(fmt::format("--presets: unknown preset '{}' (available: {})", p, fmt::join(known, ", ")));
     o.setups.clear();
-    for (const auto& s : f->setups) o.setups.push_back(ParseSetup(s));
+    for (const auto& s : f->setups) {
+      if (s != "back" && s != "front") throw InputError(fmt::format("--setups: '{}' is not 'back' or 'front'", s));
+      o.setups.push_back(ParseSetup(s));
+    }
     o.backends.clear();
     for (const auto& b : f->backends) o.backends.push_back(ParseBackend(b));
     if (o.backends.empty()) throw InputError("bench recovery: --backend needs a backend");
+    if (f->data_backend != "cpu" && f->data_backend != "gl")
+      throw InputError(fmt::format("--data-backend: unknown backend '{}' (available: cpu, gl)", f->data_backend));
     o.data_backend = ParseBackend(f->data_backend);
+    if (o.paper_iterations < 0) throw InputError("--paper-iterations: must be >= 0");
+    if (!(o.noisy_lambda >= 0) || !std::isfinite(o.noisy_lambda)) throw InputError("--noisy-lambda: must be >= 0");
     if (!(o.max_seconds >= 0)) throw InputError("bench recovery: --max-seconds must be >= 0");
     for (double n : o.noises)
       if (!(n >= 0)) throw InputError(fmt::format("bench recovery: noise {} must be >= 0", n));

@@ -27,16 +27,6 @@ namespace {
 namespace fs = std::filesystem;
 
 
-// Refuses an output that would replace one of the inputs or land inside an input folder.
-void RequireNotInput(const std::string& out, const std::vector<std::string>& inputs) {
-  std::error_code ec;
-  const fs::path o = fs::weakly_canonical(out, ec);
-  for (const std::string& in : inputs) {
-    const fs::path i = fs::weakly_canonical(in, ec);
-    if (o == i || (fs::is_directory(i) && o.parent_path() == i))
-      throw calib::CalibError(fmt::format("-o {}: would overwrite or add to the input {}", out, in));
-  }
-}
 
 // OpenCV's own thread pool follows --threads / TRANSLUME_THREADS too.
 void ApplyThreads() { cv::setNumThreads(NumThreads()); }
@@ -71,7 +61,7 @@ int RunCalibrateCamera(int argc, char** argv) {
   if (ParseOrHelp(app, argc, argv)) return 0;
   ApplyThreads();
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
-  RequireNotInput(out, {dir});
+  RequireNotInput("-o", out, {dir});
   const calib::BoardSpec board = calib::BoardSpec::Parse(board_text);
   const calib::CameraCalibration c = calib::CalibrateCamera(board, calib::ReadPhotoFolder(dir), o);
   WriteAtomically(out, [&](const std::string& tmp) {
@@ -108,6 +98,7 @@ int RunCalibrateProjector(int argc, char** argv) {
   const calib::ProjectorChessboard pattern = calib::ParseProjectorChessboard(pattern_text, size);
   if (!write_pattern.empty()) {
     RequireExtension(write_pattern, {".png"}, "--write-pattern");
+    RequireNotInput("--write-pattern", write_pattern, {dir, camera_path});
     WriteAtomically(write_pattern, [&](const std::string& tmp) {
       calib::WriteImage8(tmp, pattern.MakeImage());
     });
@@ -119,7 +110,7 @@ int RunCalibrateProjector(int argc, char** argv) {
   if (dir.empty() || camera_path.empty() || board_text.empty() || out.empty())
     throw CLI::RequiredError("PLANES_DIR, --camera, --board and -o");
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
-  RequireNotInput(out, {dir, camera_path});
+  RequireNotInput("-o", out, {dir, camera_path});
   const calib::BoardSpec board = calib::BoardSpec::Parse(board_text);
   const calib::CameraCalibration camera = calib::ReadCameraCalibration(camera_path);
   const calib::ProjectorCalibration p =
@@ -147,7 +138,7 @@ int RunCalibrateResponse(int argc, char** argv) {
   if (ParseOrHelp(app, argc, argv)) return 0;
   ApplyThreads();
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
-  RequireNotInput(out, dirs);
+  RequireNotInput("-o", out, dirs);
   std::vector<calib::ExposureStack> stacks;
   for (const std::string& d : dirs) stacks.push_back(calib::ReadExposureStack(d));
   const calib::ResponseCurve curve = calib::CalibrateResponse(stacks, o);
@@ -199,9 +190,8 @@ int RunCalibrateWhite(int argc, char** argv) {
   if (ParseOrHelp(app, argc, argv)) return 0;
   ApplyThreads();
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
-  std::vector<std::string> inputs{white_path};
-  if (!black_path.empty()) inputs.push_back(black_path);
-  RequireNotInput(out, inputs);
+  const std::vector<std::string> inputs{white_path, black_path, response_path};
+  RequireNotInput("-o", out, inputs);
   if (chart.empty() == patch.empty())
     throw calib::CalibError("give either --chart colorchecker or --patch (with --albedo)");
   if (!chart.empty() && chart != "colorchecker")
@@ -281,9 +271,8 @@ int RunHdr(int argc, char** argv) {
   ApplyThreads();
   return OneLineErrors([&] {
     RequireExtension(out, {".exr"}, "-o");
-    std::vector<std::string> inputs{dir};
-    if (!black_dir.empty()) inputs.push_back(black_dir);
-    RequireNotInput(out, inputs);
+    const std::vector<std::string> inputs{dir, black_dir, response_path};
+    RequireNotInput("-o", out, inputs);
     calib::ResponseCurve curve;
     if (!response_path.empty()) curve = calib::ReadResponse(response_path);
     const calib::ExposureStack stack = calib::ReadExposureStack(dir);

@@ -1,7 +1,10 @@
 // SPDX-License-Identifier: MIT
 #include <algorithm>
 #include <cctype>
+#include <cmath>
+#include <cstdlib>
 #include <cstdio>
+#include <filesystem>
 #include <fmt/format.h>
 
 #include "solver/status.h"
@@ -10,11 +13,23 @@
 
 namespace translume {
 
+CLI::Validator PositiveFinite() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        if (end == text.c_str() || *end != '\0' || !std::isfinite(v) || !(v > 0))
+          return text + " is not a finite number > 0";
+        return "";
+      },
+      "> 0");
+}
+
 void AddCommonOptions(CLI::App& app) {
   app.add_option_function<int>("--threads", [](int n) { SetNumThreads(n); },
                                "Threads to use (default: TRANSLUME_THREADS, OMP_NUM_THREADS "
                                "or all hardware threads)")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(1, 4096).description("").name("1..4096"));
 }
 
 std::string Extension(const std::string& path) {
@@ -35,6 +50,25 @@ void RequireExtension(const std::string& path, std::initializer_list<const char*
     names += (names.empty() ? "" : " or ") + std::string(x);
   }
   throw InputError(fmt::format("{} {}: the output must end in {}", flag, path, names));
+}
+
+void RequireNotInput(const char* flag, const std::string& out, const std::vector<std::string>& inputs) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::path o = fs::weakly_canonical(out, ec);
+  for (const std::string& in : inputs) {
+    if (in.empty()) continue;
+    const fs::path i = fs::weakly_canonical(in, ec);
+    if (o == i) throw InputError(fmt::format("{} {}: would overwrite the input {}", flag, out, in));
+    if (!fs::is_directory(i)) continue;
+    for (fs::path p = o.parent_path(); !p.empty() && p != p.root_path(); p = p.parent_path())
+      if (p == i) throw InputError(fmt::format("{} {}: would write into the input folder {}", flag, out, in));
+  }
+}
+
+void RequireFilePath(const char* flag, const std::string& path) {
+  if (std::filesystem::is_directory(path))
+    throw InputError(fmt::format("{} {}: is a folder, not a file", flag, path));
 }
 
 bool ParseOrHelp(CLI::App& app, int argc, char** argv) {

@@ -3,6 +3,7 @@
 
 #include <CLI/CLI.hpp>
 #include <string>
+#include <vector>
 
 namespace translume {
 
@@ -29,6 +30,10 @@ void PrintBenchProgress(const std::string& line);
 int RunRender(int argc, char** argv);
 int RunEdit(int argc, char** argv);
 
+// A CLI11 check that a number is finite and > 0 (CLI::PositiveNumber's message prints the
+// largest double).
+CLI::Validator PositiveFinite();
+
 // Options every subcommand takes (--threads).
 void AddCommonOptions(CLI::App& app);
 // The lower-case extension of `path` (".png"), or "" if it has none.
@@ -37,6 +42,14 @@ std::string Extension(const std::string& path);
 // (case-insensitive).
 void RequireExtension(const std::string& path, std::initializer_list<const char*> exts,
                       const char* flag);
+
+// Throws InputError "FLAG OUT: would overwrite the input IN" when the output `out` is one of
+// `inputs` (files or folders; empty ones are skipped), or "... would write into the input
+// folder IN" when it lies anywhere below an input folder. Paths compare in canonical form.
+void RequireNotInput(const char* flag, const std::string& out, const std::vector<std::string>& inputs);
+// Throws InputError "FLAG PATH: is a folder, not a file" when an output file's path names an
+// existing folder (checked before the work, so that it is not lost at the end).
+void RequireFilePath(const char* flag, const std::string& path);
 
 // Parses argv into app; on --help prints and returns true (caller exits 0).
 bool ParseOrHelp(CLI::App& app, int argc, char** argv);

@@ -13,7 +13,10 @@
 
 int main(int argc, char** argv) {
   translume::UsePassiveOpenMpByDefault(argv);
-  translume::InitThreadsFromEnvironment();
+  if (const std::string err = translume::InitThreadsFromEnvironment(); !err.empty()) {
+    std::fprintf(stderr, "translume: error: %s\n", err.c_str());
+    return 1;
+  }
   if (argc >= 2 && !std::strcmp(argv[1], "gl-info")) {
     try {
       std::printf("%s\n", translume::GlContext::Get().info().ToString().c_str());

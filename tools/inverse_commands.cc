@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fmt/format.h>
 #include <fstream>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
 
@@ -77,6 +78,54 @@ std::string FormatSeconds(double s) {
 }
 
 
+// simulate's -o: a new or empty folder, or an earlier dataset (which the new one replaces
+// whole, holdout/ included); never the folder that holds the input material.
+void RequireDatasetFolder(const std::string& out, const std::string& material_path) {
+  RequireNotInput("-o", out, {material_path});
+  std::error_code ec;
+  if (fs::weakly_canonical(material_path, ec).string().rfind(fs::weakly_canonical(out, ec).string() + "/", 0) == 0)
+    throw InputError(fmt::format("-o {}: holds the input {}; choose another folder", out, material_path));
+  if (!fs::exists(out)) return;
+  if (!fs::is_directory(out)) throw InputError(fmt::format("-o {}: is a file, not a folder", out));
+  if (!fs::is_empty(out) && !fs::exists(fs::path(out) / "dataset.json"))
+    throw InputError(fmt::format("-o {}: the folder is not empty and holds no dataset.json; choose a new or empty "
+                                 "folder (an earlier dataset there is replaced)", out));
+}
+
+// Writes a folder as a whole: `write` fills a temporary sibling, which then takes the place
+// of `out` (and of what was there); on failure `out` is left as it was.
+void ReplaceFolder(const std::string& out, const std::function<void(const std::string&)>& write) {
+  const fs::path target = fs::absolute(out).lexically_normal();
+  const fs::path name = target.filename().empty() ? target.parent_path().filename() : target.filename();
+  const fs::path dir = target.filename().empty() ? target.parent_path() : target;
+  const fs::path tmp = dir.parent_path() / fmt::format(".{}.tmp{}", name.string(), getpid());
+  const fs::path old = dir.parent_path() / fmt::format(".{}.old{}", name.string(), getpid());
+  std::error_code ec;
+  fs::remove_all(tmp, ec);
+  try {
+    fs::create_directories(tmp);
+    write(tmp.string());
+  } catch (...) {
+    fs::remove_all(tmp, ec);
+    throw;
+  }
+  if (fs::exists(dir)) {
+    fs::rename(dir, old, ec);
+    if (ec) {
+      fs::remove_all(tmp, ec);
+      throw InputError(fmt::format("-o {}: cannot replace the folder: {}", out, ec.message()));
+    }
+  }
+  fs::rename(tmp, dir, ec);
+  if (ec) {
+    const std::string why = ec.message();
+    if (fs::exists(old)) fs::rename(old, dir, ec);
+    fs::remove_all(tmp, ec);
+    throw InputError(fmt::format("-o {}: cannot write the folder: {}", out, why));
+  }
+  fs::remove_all(old, ec);
+}
+
 int RunSimulate(int argc, char** argv) {
   CLI::App app{"Simulate a capture of a material into a node-space dataset (docs/formats.md):\n"
                "region lights on the lit face, forward solves on a grid K times finer per axis\n"
@@ -102,11 +151,14 @@ int RunSimulate(int argc, char** argv) {
   o.backend = ParseBackend(backend);
   if (o.backend == Backend::kGl) GlContext::Get();  // fail before any output
   if (std::string err = o.Validate(); !err.empty()) throw InputError("simulate: " + err);
+  RequireDatasetFolder(out, material_path);
   const Material m = ReadMaterial(material_path);
   const auto t0 = std::chrono::steady_clock::now();
   const SimulatedData data = SimulateDataset(m, o);
-  WriteDataset(out, data.training);
-  if (!data.holdout.conditions.empty()) WriteDataset((fs::path(out) / "holdout").string(), data.holdout);
+  ReplaceFolder(out, [&](const std::string& tmp) {
+    WriteDataset(tmp, data.training);
+    if (!data.holdout.conditions.empty()) WriteDataset((fs::path(tmp) / "holdout").string(), data.holdout);
+  });
   std::printf("wrote %s: %zu conditions (%s, %s-lit), grid %s, oversampled %dx, noise %g, "
               "%zu held-out, %.1f s\n", (fs::path(out) / "dataset.json").c_str(),
               data.training.conditions.size(), lights.c_str(), SetupName(o.setup),
@@ -136,14 +188,30 @@ int RunSolve(int argc, char** argv) {
   const std::string& optimizer = flags.optimizer;
   const std::string& regularizer = flags.regularizer;
   const Dataset d = ReadDataset(dataset_path);
+  // Outputs: OUT.vdb, OUT.json and the slices next to them, the checkpoint; none may replace or
+  // land in an input, and none may be a folder (found before the solve, not after it).
+  const fs::path base = fs::path(out).replace_extension("");
+  const std::string report = base.string() + ".json";
+  const fs::path json_dir = fs::path(dataset_path).parent_path();
+  const std::string dataset_dir =
+      fs::is_directory(dataset_path) ? dataset_path : (json_dir.empty() ? fs::path(".") : json_dir).string();
+  for (const std::string& path : {out, report}) {
+    RequireNotInput("-o", path, {dataset_path, dataset_dir, init, checkpoint});
+    RequireFilePath("-o", path);
+  }
+  if (!checkpoint.empty()) {
+    RequireNotInput("--checkpoint", checkpoint, {dataset_path, dataset_dir, init});
+    RequireFilePath("--checkpoint", checkpoint);
+  }
   CheckFitsInMemory(EstimateMemory(d.shape, int(d.conditions.size()), Precision::kDouble).recovery_bytes,
                     fmt::format("a recovery on the {} grid with {} conditions", d.shape.ToString(),
                                 d.conditions.size()));
   RecoveryState state;
   if (!checkpoint.empty() && fs::exists(checkpoint)) {
     state = ReadCheckpoint(checkpoint, d);
-    std::printf("resuming from %s at iteration %d (%lld solves, %s)\n", checkpoint.c_str(),
-                state.iteration, (long long)state.solves, FormatSeconds(state.seconds).c_str());
+    std::printf("resuming from %s at iteration %d (%lld solves, %s)%s\n", checkpoint.c_str(),
+                state.iteration, (long long)state.solves, FormatSeconds(state.seconds).c_str(),
+                init.empty() ? "" : "; --init is not used when resuming");
   } else if (!init.empty()) {
     state = StateFromMaterial(d, ReadMaterial(init));
   }
@@ -203,7 +271,6 @@ int RunSolve(int argc, char** argv) {
   const Material m = MaterialFromState(d, state);
   WriteMaterial(out, m);
   std::printf("%s\n", sum.BriefReport().c_str());
-  const fs::path base = fs::path(out).replace_extension("");
   const auto slices = WriteMaterialSlices(base.string(), m);
   nlohmann::json j;
   j["dataset"] = dataset_path;
@@ -234,7 +301,6 @@ int RunSolve(int argc, char** argv) {
                     {"gradient_norm", r.gradient_norm}, {"solves", r.solves}, {"seconds", r.seconds}});
   j["history"] = hist;
   j["slices"] = slices;
-  const std::string report = base.string() + ".json";
   WriteAtomically(report, [&](const std::string& tmp) {
     std::ofstream f(tmp);
     f << j.dump(2) << "\n";
@@ -252,21 +318,31 @@ int RunEvaluate(int argc, char** argv) {
   std::string rec_path, truth_path, dataset_path, measured_path;
   bool json = false;
   app.add_option("recovered", rec_path, "Recovered material (.vdb)")->required();
-  app.add_option("--truth", truth_path, "True material (.vdb) on the recovery grid");
-  app.add_option("--dataset", dataset_path, "The dataset folder (with holdout/ for held-out errors)")->required();
+  app.add_option("--truth", truth_path, "True material (.vdb) on the recovery grid: needed for the held-out, "
+                 "training and per-layer errors (without it only the fit error)");
+  app.add_option("--dataset", dataset_path, "The dataset folder (with holdout/ for held-out errors, with --truth)")
+      ->required();
   app.add_option("--measured", measured_path, "A dataset built from photos (acquire's OUT_work/dataset): "
                  "also print its relative RMS error in L and q against --dataset");
   app.add_flag("--json", json, "Print JSON instead of a table");
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   const Dataset training = ReadDataset(dataset_path);
+  std::optional<DatasetMismatch> mapping;
   if (!measured_path.empty()) {
-    const DatasetMismatch mm = CompareDatasets(ReadDataset(measured_path), training);
-    std::printf("mapping: %s vs %s: L relative RMS %.2f %%, q relative RMS %.2f %%\n",
-                measured_path.c_str(), dataset_path.c_str(), 100 * mm.L_rms, 100 * mm.q_rms);
-    std::printf("mapping: L scale per channel %.4f %.4f %.4f; relative RMS after it %.2f %% %.2f %% %.2f %%\n",
-                mm.L_scale[0], mm.L_scale[1], mm.L_scale[2], 100 * mm.L_rms_after_scale[0],
-                100 * mm.L_rms_after_scale[1], 100 * mm.L_rms_after_scale[2]);
+    try {
+      mapping = CompareDatasets(ReadDataset(measured_path), training);
+    } catch (const InputError& e) {
+      throw InputError(fmt::format("--measured {} against --dataset {}: {}", measured_path, dataset_path, e.what()));
+    }
+    if (!json) {
+      const DatasetMismatch& mm = *mapping;
+      std::printf("mapping: %s vs %s: L relative RMS %.2f %%, q relative RMS %.2f %%\n",
+                  measured_path.c_str(), dataset_path.c_str(), 100 * mm.L_rms, 100 * mm.q_rms);
+      std::printf("mapping: L scale per channel %.4f %.4f %.4f; relative RMS after it %.2f %% %.2f %% %.2f %%\n",
+                  mm.L_scale[0], mm.L_scale[1], mm.L_scale[2], 100 * mm.L_rms_after_scale[0],
+                  100 * mm.L_rms_after_scale[1], 100 * mm.L_rms_after_scale[2]);
+    }
   }
   fs::path hdir = fs::is_directory(dataset_path) ? fs::path(dataset_path) : fs::path(dataset_path).parent_path();
   hdir /= "holdout";
@@ -277,8 +353,24 @@ int RunEvaluate(int argc, char** argv) {
   MultigridOptions mg;
   mg.tolerance = 1e-9;
   mg.max_iterations = 300;
-  const EvaluationReport r = EvaluateRecovery(rec, truth ? &*truth : nullptr, training, holdout, mg);
-  std::printf("%s\n", (json ? EvaluationJson(r) : EvaluationTable(r)).c_str());
+  EvaluationReport r;
+  try {
+    r = EvaluateRecovery(rec, truth ? &*truth : nullptr, training, holdout, mg);
+  } catch (const InputError& e) {
+    throw InputError(fmt::format("{} against --dataset {}: {}", rec_path, dataset_path, e.what()));
+  }
+  if (!json) {
+    std::printf("%s\n", EvaluationTable(r).c_str());
+    return 0;
+  }
+  nlohmann::json j = nlohmann::json::parse(EvaluationJson(r));
+  if (mapping)
+    j["mapping"] = {{"measured", measured_path},
+                    {"L_rms", mapping->L_rms},
+                    {"q_rms", mapping->q_rms},
+                    {"L_scale", mapping->L_scale},
+                    {"L_rms_after_scale", mapping->L_rms_after_scale}};
+  std::printf("%s\n", j.dump(2).c_str());
   return 0;
 }
 

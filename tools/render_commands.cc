@@ -3,6 +3,7 @@
 // (Wang et al. 2008, Section 5; docs/render.md).
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <fmt/format.h>
 #include <memory>
@@ -113,14 +114,20 @@ int RunRender(int argc, char** argv) {
   if (ParseOrHelp(app, argc, argv)) return 0;
   const std::string ext = Extension(out);
   RequireExtension(out, {".png", ".exr"}, "-o");
-  if (std::sscanf(image.c_str(), "%dx%d", &ro.width, &ro.height) != 2)
+  char rest = 0;
+  if (std::sscanf(image.c_str(), "%dx%d%c", &ro.width, &ro.height, &rest) != 2)
     throw InputError("--image " + image + ": expected WxH");
-  if (!camera.empty() && std::sscanf(camera.c_str(), "%lf,%lf", &ro.azimuth_deg, &ro.elevation_deg) != 2)
+  if (!camera.empty() && std::sscanf(camera.c_str(), "%lf,%lf%c", &ro.azimuth_deg, &ro.elevation_deg, &rest) != 2)
     throw InputError("--camera " + camera + ": expected AZIMUTH,ELEVATION");
+  if (!std::isfinite(exposure)) throw InputError("--exposure: must be a finite number of stops");
   if (turntable < 1) throw InputError("--turntable: must be >= 1");
   if (levels < 1) throw InputError("--levels: must be >= 1");
   if (std::string err = ro.Validate(); !err.empty()) throw InputError("render: " + err);
   RenderLight L = RenderLight::Parse(light);
+  const bool mesh = Extension(shape_name) == ".obj" || Extension(shape_name) == ".ply";
+  RequireNotInput("-o", out, {material, L.kind == RenderLight::Kind::kEnvironment ? L.path : "",
+                              mesh ? shape_name : "", polycube_path});
+  RequireFilePath("-o", out);
   if (L.kind == RenderLight::Kind::kEnvironment) L.environment = std::make_shared<Image>(ReadImage(L.path));
 
   std::unique_ptr<Shape> shape;
@@ -202,6 +209,8 @@ int RunEdit(int argc, char** argv) {
   for (const auto& s : scales) eo.ParseTerm(s, false);
   for (const auto& a : adds) eo.ParseTerm(a, true);
   if (!depth.empty()) eo.ParseDepth(depth);
+  RequireNotInput("-o", out, {material, mask});
+  RequireFilePath("-o", out);
   const Material m = ReadMaterial(material);
   Image mask_image;
   if (!mask.empty()) mask_image = ReadImage(mask);

@@ -70,16 +70,16 @@ int RunSynth(int argc, char** argv) {
 int RunForward(int argc, char** argv) {
   CLI::App app{"Solve the diffusion forward model (SPEC section 3) and write the front-face\n"
                "radiance L = (phi - q) / (2 pi) as an RGB float EXR, pixel (i, j) = node (i, j, 0).\n"
-               "Lights: uniform | region:I,J/N | spot:X,Y,R (mm) | image:FILE",
+               "Lights: uniform | region:I,J/N | spot:X,Y,R (mm) | image:FILE\n"
+               "Exit status 3: a channel's solve did not reach --tolerance (the image is written).",
                "translume forward"};
-  std::string material_path, light = "uniform", setup = "back", backend = "cpu",
-              precision = "double", out;
+  std::string material_path, light = "uniform", setup = "back", backend = "cpu", precision, out;
   double tolerance = 1e-6;
   app.add_option("material", material_path, "Material file (.vdb)")->required();
   app.add_option("--light", light, "Light specification")->capture_default_str();
   app.add_option("--setup", setup, "back (lit back face) or front")->capture_default_str();
   app.add_option("--backend", backend, "cpu or gl (OpenGL compute shaders, float; docs/gpu.md)")->capture_default_str();
-  app.add_option("--precision", precision, "float or double")->capture_default_str();
+  app.add_option("--precision", precision, "float or double (default: double on cpu; gl computes in float)");
   app.add_option("--tolerance", tolerance, "Relative residual to reach")->capture_default_str();
   app.add_option("-o,--output", out, "Output radiance image (.exr)")->required();
   AddCommonOptions(app);
@@ -88,11 +88,15 @@ int RunForward(int argc, char** argv) {
   ForwardOptions fo;
   fo.setup = ParseSetup(setup);
   fo.backend = ParseBackend(backend);
-  fo.precision = ParsePrecision(precision);
+  if (fo.backend == Backend::kGl && precision == "double")
+    throw InputError("--precision double: the gl backend computes in float (use --backend cpu for double)");
+  fo.precision = ParsePrecision(precision.empty() ? (fo.backend == Backend::kGl ? "float" : "double") : precision);
   fo.multigrid.tolerance = tolerance;
   if (std::string err = fo.multigrid.Validate(); !err.empty())
     throw InputError("--tolerance: " + err);
   const LightSpec spec = LightSpec::Parse(light);
+  RequireNotInput("-o", out, {material_path, spec.image_path});
+  RequireFilePath("-o", out);
   if (fo.backend == Backend::kGl) GlContext::Get();  // fail before any output
   const Material m = ReadMaterial(material_path);
   CheckFitsInMemory(EstimateMemory(m.shape, 1, fo.precision).forward_bytes,
@@ -123,7 +127,7 @@ int RunInfo(int argc, char** argv) {
   app.add_option("material", material_path, "Material file (.vdb) to size");
   app.add_option("--grid", grid, "Grid NXxNYxNZ to size");
   app.add_option("--conditions", conditions, "Illumination conditions of a recovery")
-      ->capture_default_str()->check(CLI::PositiveNumber);
+      ->capture_default_str()->check(PositiveFinite());
   app.add_option("--precision", precision, "float or double")->capture_default_str();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;

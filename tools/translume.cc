@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <cstring>
+#include <new>
 #include <exception>
 #include <string>
 
@@ -49,7 +50,10 @@ void PrintUsage(FILE* out) {
 
 int main(int argc, char** argv) {
   translume::UsePassiveOpenMpByDefault(argv);
-  translume::InitThreadsFromEnvironment();
+  if (const std::string err = translume::InitThreadsFromEnvironment(); !err.empty()) {
+    std::fprintf(stderr, "translume: error: %s\n", err.c_str());
+    return 1;
+  }
   if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h") ||
       !std::strcmp(argv[1], "help")) {
     PrintUsage(stdout);
@@ -73,6 +77,10 @@ int main(int argc, char** argv) {
     } catch (const translume::Interrupted& e) {
       std::fprintf(stderr, "translume %s: interrupted: %s\n", c.name, e.what());
       return 130;
+    } catch (const std::bad_alloc&) {
+      std::fprintf(stderr, "translume %s: error: out of memory: the grid or the images are too large "
+                   "for this machine (translume info --grid NXxNYxNZ estimates what a grid needs)\n", c.name);
+      return 1;
     } catch (const std::exception& e) {
       std::fprintf(stderr, "translume %s: error: %s\n", c.name, e.what());
       return 1;
