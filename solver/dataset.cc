@@ -79,8 +79,10 @@ Dataset ReadDataset(const std::string& path) {
     throw InputError(fmt::format("{}: field \"format\" is '{}', expected '{}'", f, format, kFormat));
   Dataset d;
   const auto grid = Field<std::vector<int64_t>>(j, "grid", f);
-  if (grid.size() != 3 || grid[0] < 2 || grid[1] < 2 || grid[2] < 2)
-    throw InputError(fmt::format("{}: field \"grid\" must be [nx, ny, nz] with every entry >= 2", f));
+  bool whole = j["grid"].is_array();
+  for (const json& v : j["grid"]) whole &= v.is_number_integer();
+  if (grid.size() != 3 || !whole || grid[0] < 2 || grid[1] < 2 || grid[2] < 2)
+    throw InputError(fmt::format("{}: field \"grid\" must be [nx, ny, nz], whole numbers >= 2", f));
   d.shape = {grid[0], grid[1], grid[2]};
   d.spacing_mm = Field<double>(j, "spacing_mm", f);
   if (!(d.spacing_mm > 0) || !std::isfinite(d.spacing_mm))

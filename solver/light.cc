@@ -47,8 +47,8 @@ LightSpec LightSpec::Parse(const std::string& text) {
     s.kind = Kind::kSpot;
     if (std::sscanf(args.c_str(), "%lf,%lf,%lf%c", &s.spot_x, &s.spot_y, &s.spot_r, &tail) != 3)
       Bad(text, "spot needs X,Y,R in mm");
-    if (!(s.spot_r > 0) || !std::isfinite(s.spot_x) || !std::isfinite(s.spot_y))
-      Bad(text, "spot radius must be > 0");
+    if (!std::isfinite(s.spot_x) || !std::isfinite(s.spot_y)) Bad(text, "the spot centre must be finite (mm)");
+    if (!(s.spot_r > 0) || !std::isfinite(s.spot_r)) Bad(text, "spot radius must be finite and > 0");
   } else if (kind == "image") {
     s.kind = Kind::kImage;
     s.image_path = args;

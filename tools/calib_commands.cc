@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -161,7 +162,7 @@ std::vector<double> ParseNumbers(const std::string& text, const char* flag, size
     try {
       size_t used = 0;
       v.push_back(std::stod(item, &used));
-      if (used != item.size()) throw std::invalid_argument(item);
+      if (used != item.size() || !std::isfinite(v.back())) throw std::invalid_argument(item);
     } catch (const std::exception&) {
       throw calib::CalibError(fmt::format("{} {}: '{}' is not a number", flag, text, item));
     }
@@ -202,6 +203,8 @@ int RunCalibrateWhite(int argc, char** argv) {
     if (albedo_text.empty()) throw calib::CalibError("--patch needs --albedo");
     const std::vector<double> p = ParseNumbers(patch, "--patch", 8, 8);
     for (int k = 0; k < 4; ++k) corners.emplace_back(float(p[2 * k]), float(p[2 * k + 1]));
+    if (std::abs(cv::contourArea(corners)) < 1)
+      throw calib::CalibError(fmt::format("--patch {}: the four corners enclose no area", patch));
     const std::vector<double> a = ParseNumbers(albedo_text, "--albedo", 1, 3);
     albedo = a.size() == 1 ? cv::Vec3d::all(a[0]) : cv::Vec3d(a[0], a[1], a[2]);
   }

@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <cstring>
 #include <new>
+#include <opencv2/core/utils/logger.hpp>
 #include <exception>
 #include <string>
 
@@ -50,6 +51,9 @@ void PrintUsage(FILE* out) {
 
 int main(int argc, char** argv) {
   translume::UsePassiveOpenMpByDefault(argv);
+  // OpenCV's own log lines ("[ERROR:0@0.029] ... Can't open file") would come before ours,
+  // which name the file and the problem.
+  cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
   if (const std::string err = translume::InitThreadsFromEnvironment(); !err.empty()) {
     std::fprintf(stderr, "translume: error: %s\n", err.c_str());
     return 1;
