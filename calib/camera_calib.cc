@@ -21,8 +21,8 @@ double Median(std::vector<double> v) {
 }  // namespace
 
 std::string CameraCalibOptions::Validate() const {
-  if (min_views < 3) return "min_views must be at least 3";
-  if (!(outlier_factor > 1)) return "outlier_factor must be > 1";
+  if (min_views < 3) return "min_views (--min-views) must be at least 3";
+  if (!(outlier_factor > 1)) return "outlier_factor (--outlier-factor) must be > 1";
   if (!(outlier_min_px >= 0)) return "outlier_min_px must be >= 0";
   return "";
 }

@@ -14,7 +14,7 @@ namespace translume::calib {
 
 std::string ProjectorCalibOptions::Validate() const {
   if (min_planes < 3) return "min_planes must be at least 3";
-  if (!(outlier_factor > 1)) return "outlier_factor must be > 1";
+  if (!(outlier_factor > 1)) return "outlier_factor (--outlier-factor) must be > 1";
   return "";
 }
 

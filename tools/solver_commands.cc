@@ -131,6 +131,9 @@ int RunInfo(int argc, char** argv) {
   app.add_option("--precision", precision, "float or double")->capture_default_str();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
+  const Precision sized_precision = ParsePrecision(precision);  // checked even without a grid
+  if (!material_path.empty() && !grid.empty())
+    throw InputError("info: give a material or --grid, not both");
   std::printf("translume %s (%s build)\n", TRANSLUME_VERSION, TRANSLUME_BUILD_TYPE);
   std::printf("backends: cpu (multigrid-preconditioned CG, float and double), gl (OpenGL compute, "
               "float)\n");
@@ -157,8 +160,7 @@ int RunInfo(int argc, char** argv) {
   if (!material_path.empty()) shape = ReadMaterial(material_path).shape;
   if (!grid.empty()) shape = ParseGridShape(grid, "--grid");
   if (shape.size() > 0) {
-    const Precision p = ParsePrecision(precision);
-    const MemoryEstimate e = EstimateMemory(shape, conditions, p);
+    const MemoryEstimate e = EstimateMemory(shape, conditions, sized_precision);
     std::printf("grid %s (%lld nodes), %s:\n", shape.ToString().c_str(), (long long)shape.size(),
                 precision.c_str());
     std::printf("  forward solve: %s%s\n", FormatBytes(e.forward_bytes).c_str(),
