@@ -74,6 +74,9 @@ ProjectorChessboard ParseProjectorChessboard(const std::string& text, const std:
     throw CalibError(fmt::format("--pattern {}: expected COLSxROWS:SQUARE_PX", text));
   if (!std::regex_match(size, n, wh))
     throw CalibError(fmt::format("--projector-size {}: expected WIDTHxHEIGHT", size));
+  const int w = std::stoi(n[1]), h = std::stoi(n[2]);
+  if (w < 64 || h < 64 || w > 16384 || h > 16384)
+    throw CalibError(fmt::format("--projector-size {}: each side must be 64..16384 pixels", size));
   const ProjectorChessboard b = ProjectorChessboard::Centered(
       {std::stoi(n[1]), std::stoi(n[2])}, std::stoi(m[1]), std::stoi(m[2]), std::stoi(m[3]));
   if (std::string why = b.Validate(); !why.empty())

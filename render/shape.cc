@@ -380,6 +380,8 @@ TriangleMesh ReadObj(const std::string& path, std::istream& in) {
       for (size_t i = 1; i + 1 < f.size(); ++i) m.triangles.push_back({f[0], f[i], f[i + 1]});
     }
   }
+  if (m.vertices.empty() || m.triangles.empty())
+    MeshError(path, "no vertices ('v' lines) or no faces ('f' lines): not an OBJ mesh");
   return m;
 }
 

@@ -79,6 +79,7 @@ TEST(Shape, BadMeshesGiveClearErrors) {
   expect_error(Write("tl_flipped.obj", kTet + "f 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 3 4\n"), "orientation");
   expect_error(Write("tl_range.obj", kTet + "f 1 3 9\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"), "out of range");
   expect_error(Write("tl_mesh.stl", "solid"), "unknown mesh format");
+  expect_error(Write("tl_garbage.obj", "garbage\nmore\n"), "not an OBJ mesh");
   expect_error((fs::temp_directory_path() / "tl_missing.obj").string(), "cannot open");
 }
 

@@ -91,6 +91,9 @@ int RunAcquire(int argc, char** argv) {
   const fs::path out_abs = fs::weakly_canonical(fs::absolute(out)), cap_abs = fs::weakly_canonical(fs::absolute(cap.dir));
   if (std::mismatch(cap_abs.begin(), cap_abs.end(), out_abs.begin(), out_abs.end()).first == cap_abs.end())
     throw InputError(fmt::format("-o {}: write outside the capture folder (inputs are never touched)", out));
+  CheckFitsInMemory(EstimateMemory(cap.grid, int(cap.conditions.size()), Precision::kDouble).recovery_bytes,
+                    fmt::format("{}: a recovery on the {} grid with {} conditions", cap.file, cap.grid.ToString(),
+                                cap.conditions.size()));
   std::printf("acquire: %s, grid %s (h %g mm), %s-lit, %zu conditions, %d threads\n", cap.file.c_str(),
               cap.grid.ToString().c_str(), cap.spacing_mm, SetupName(cap.setup), cap.conditions.size(),
               NumThreads());

@@ -179,6 +179,8 @@ int RunBench(int argc, char** argv) {
   AddBenchForward(app);
   AddBenchRecovery(app);
   AddCommonOptions(app);
+  if (argc >= 2 && argv[1][0] != '-' && std::string(argv[1]) != "forward" && std::string(argv[1]) != "recovery")
+    throw InputError(fmt::format("unknown benchmark '{}' (forward, recovery)", argv[1]));
   ParseOrHelp(app, argc, argv);
   return 0;
 }
