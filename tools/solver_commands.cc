@@ -102,6 +102,9 @@ int RunForward(int argc, char** argv) {
   CheckFitsInMemory(EstimateMemory(m.shape, 1, fo.precision).forward_bytes,
                     fmt::format("a forward solve on the {} grid", m.shape.ToString()));
   const FacePattern q = GreyPattern(RasterizeLightFile(spec, m.shape, m.spacing_mm));
+  if (std::all_of(q[0].begin(), q[0].end(), [](float v) { return v == 0.0f; }))
+    throw InputError(fmt::format("--light {}: lights no node of the {} x {} mm lit face", light,
+                                 double(m.shape.nx - 1) * m.spacing_mm, double(m.shape.ny - 1) * m.spacing_mm));
   std::printf("forward: %s, grid %s, h %g mm, light %s, setup %s, %d threads\n",
               material_path.c_str(), m.shape.ToString().c_str(), m.spacing_mm, light.c_str(),
               SetupName(fo.setup), NumThreads());
