@@ -52,7 +52,7 @@ double HatWeight(int z) { return z <= 127 ? z + 1.0 : 256.0 - z; }
 
 }  // namespace
 
-cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds) {
+cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds, bool* grey) {
   if (!fs::exists(path)) throw CalibError(path + ": no such file");
   OIIO::ImageSpec config;
   if (IsRaw(path)) {
@@ -82,6 +82,7 @@ cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds) {
   const bool ok = in->read_image(0, 0, 0, std::min(nch, 4), type, raw.data);
   if (!ok) throw CalibError(fmt::format("{}: cannot decode image: {}", path, FirstLine(in->geterror())));
   cv::Mat rgb;
+  if (grey) *grey = raw.channels() <= 2;
   if (raw.channels() == 1) cv::cvtColor(raw, rgb, cv::COLOR_GRAY2RGB);
   else if (raw.channels() == 2) {
     std::vector<cv::Mat> ch;
@@ -156,8 +157,11 @@ ExposureStack ReadExposureStack(const std::string& dir) {
   // Decoded in parallel, then checked in order.
   std::vector<cv::Mat> pixels(files.size());
   std::vector<double> exifs(files.size(), 0.0);
+  std::vector<char> grey(files.size(), 0);
   ParallelFor(int(files.size()), [&](int i) {
-    pixels[size_t(i)] = ReadRgbImage(files[size_t(i)].string(), &exifs[size_t(i)]);
+    bool g = false;
+    pixels[size_t(i)] = ReadRgbImage(files[size_t(i)].string(), &exifs[size_t(i)], &g);
+    grey[size_t(i)] = g;
   });
   for (size_t i = 0; i < files.size(); ++i) {
     const fs::path& p = files[i];
@@ -178,6 +182,9 @@ ExposureStack ReadExposureStack(const std::string& dir) {
                                      e.pixels.rows, f.path, f.pixels.cols, f.pixels.rows));
       if (e.pixels.depth() != f.pixels.depth())
         throw CalibError(fmt::format("{}: bit depth differs from {}", e.path, f.path));
+      if (grey[i] != grey[0])
+        throw CalibError(fmt::format("{}: a {} photo in a stack whose first photo {} is {}", e.path,
+                                     grey[i] ? "greyscale" : "colour", f.path, grey[0] ? "greyscale" : "colour"));
     }
     s.exposures.push_back(std::move(e));
   }

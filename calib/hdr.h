@@ -28,8 +28,9 @@ struct ExposureStack {
 // 8-bit files stay CV_8UC3, 16-bit files become CV_16UC3, float/half files CV_32FC3. Camera RAW
 // files (.cr2 .cr3 .nef .arw .dng .raf .orf .rw2 .pef .srw) are decoded linearly (no white
 // balance, no auto brightness, linear colour space) to CV_16UC3. *exif_seconds receives the EXIF
-// ExposureTime (0 when absent). Throws CalibError "PATH: problem".
-cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds = nullptr);
+// ExposureTime (0 when absent), *grey whether the file itself was grey (one or two channels).
+// Throws CalibError "PATH: problem".
+cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds = nullptr, bool* grey = nullptr);
 
 // Writes a CV_32FC3 RGB image as an OpenEXR file (float). Throws CalibError on failure.
 void WriteExr(const std::string& path, const cv::Mat& rgb);
@@ -43,7 +44,8 @@ cv::Mat ReadLinearRgb(const std::string& path);
 // Reads every image in `dir` (sorted by name) with its exposure time: the EXIF ExposureTime
 // when present, else the entry for the file name in `dir`/exposures.json ({"name": seconds}).
 // Throws CalibError naming the file when a time is missing or not positive, images differ in
-// size or bit depth, a file cannot be decoded, or the folder holds fewer than 2 images.
+// size, bit depth or colour (grey and colour files mixed), a file cannot be decoded, or the
+// folder holds fewer than 2 images.
 ExposureStack ReadExposureStack(const std::string& dir);
 
 // Camera response of an 8-bit camera: lut is 256x1 CV_32FC3 (R, G, B), lut(z) = relative

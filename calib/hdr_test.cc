@@ -322,6 +322,9 @@ TEST_F(HdrFiles, BadStacksNameTheFile) {
   cv::imwrite(P("img3.png"), cv::Mat(10, 10, CV_8UC3));
   std::ofstream(dir_ / "exposures.json") << nlohmann_json_.substr(0, nlohmann_json_.size() - 1) + ", \"img3.png\": 1}";
   EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": image is 10x10"), 0u);
+  // A greyscale photo among colour ones (read as grey RGB, it would skew the colours).
+  cv::imwrite(P("img3.png"), cv::Mat(48, 64, CV_8UC1, cv::Scalar(100)));
+  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": a greyscale photo"), 0u);
   std::ofstream(P("img3.png")) << "not a png at all";
   EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": cannot read image"), 0u);
   for (int j : {1, 2, 3}) fs::remove(P(fmt::format("img{}.png", j)));
