@@ -2,7 +2,6 @@
 #include "acquire/simulate_capture.h"
 
 #include <fmt/format.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
@@ -16,6 +15,7 @@
 #include "calib/hdr.h"
 #include "calib/parallel.h"
 #include "calib/projector_pattern.h"
+#include "solver/atomic_file.h"
 #include "solver/light.h"
 #include "solver/material_io.h"
 #include "solver/simulate.h"
@@ -302,14 +302,11 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     if (progress_fn) progress_fn(fmt::format("{} ({:.1f} s)", s, elapsed()));
   };
   // Everything goes into a temporary sibling folder, renamed at the end.
-  const fs::path final_dir = fs::path(dir).lexically_normal();
-  const fs::path tmp = final_dir.parent_path() /
-                       fmt::format(".{}.tmp{}", final_dir.filename().string(), ::getpid());
-  fs::remove_all(tmp);
-  for (const char* sub : {"calib/camera", "calib/planes", "patterns", "truth"})
-    fs::create_directories(tmp / sub);
   SimulateCaptureSummary sum;
-  try {
+  WriteFolderAtomically(dir, [&](const std::string& tmp_dir) {
+    const fs::path tmp(tmp_dir);
+    for (const char* sub : {"calib/camera", "calib/planes", "patterns", "truth"})
+      fs::create_directories(tmp / sub);
     const Geometry g = Geom(material.shape, material.spacing_mm);
     const calib::SyntheticRig srig = ToSyntheticRig(rig);
     // Photographs a linear radiance image at `times` (the rig's response and noise, `bits` deep)
@@ -529,19 +526,8 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     spec.black = (tmp / "lighting/black").string();
     std::ofstream(tmp / "capture.json") << CaptureJson(spec);
     sum.conditions = M;
-  } catch (...) {
-    std::error_code ec;
-    fs::remove_all(tmp, ec);
-    throw;
-  }
-  std::error_code ec;
-  if (fs::exists(final_dir)) fs::remove(final_dir, ec);  // empty (checked above)
-  fs::rename(tmp, final_dir, ec);
-  if (ec) {
-    fs::remove_all(tmp, ec);
-    throw InputError(fmt::format("{}: cannot create the capture folder (written meanwhile by another process?)", dir));
-  }
-  sum.capture_json = (final_dir / "capture.json").string();
+  });
+  sum.capture_json = (fs::path(dir).lexically_normal() / "capture.json").string();
   sum.seconds = elapsed();
   return sum;
 }

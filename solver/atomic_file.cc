@@ -39,4 +39,39 @@ void WriteAtomically(const std::string& path,
   }
 }
 
+void WriteFolderAtomically(const std::string& path,
+                           const std::function<void(const std::string&)>& write) {
+  namespace fs = std::filesystem;
+  fs::path dir = fs::absolute(path).lexically_normal();
+  if (dir.filename().empty()) dir = dir.parent_path();  // "out/" names "out"
+  const std::string name = dir.filename().string();
+  const fs::path tmp = dir.parent_path() / fmt::format(".{}.tmp{}", name, getpid());
+  const fs::path old = dir.parent_path() / fmt::format(".{}.old{}", name, getpid());
+  std::error_code ec;
+  fs::remove_all(tmp, ec);
+  try {
+    fs::create_directories(tmp);
+    write(tmp.string());
+  } catch (...) {
+    fs::remove_all(tmp, ec);
+    throw;
+  }
+  if (fs::exists(dir)) {
+    fs::rename(dir, old, ec);
+    if (ec) {
+      const std::string why = ec.message();
+      fs::remove_all(tmp, ec);
+      throw InputError(fmt::format("{}: cannot replace the folder: {}", path, why));
+    }
+  }
+  fs::rename(tmp, dir, ec);
+  if (ec) {
+    const std::string why = ec.message();
+    if (fs::exists(old)) fs::rename(old, dir, ec);
+    fs::remove_all(tmp, ec);
+    throw InputError(fmt::format("{}: cannot write the folder: {}", path, why));
+  }
+  fs::remove_all(old, ec);
+}
+
 }  // namespace translume

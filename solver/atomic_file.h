@@ -11,4 +11,10 @@ namespace translume {
 // destination is either the complete new file or untouched. Creates missing parent folders.
 void WriteAtomically(const std::string& path, const std::function<void(const std::string&)>& write);
 
+// The same for a folder: write(tmp) fills a new temporary sibling folder, which then takes the
+// place of `path` (whatever was there, which the caller has decided may go, is removed after
+// the swap). If write throws, or the swap fails, `path` is left as it was and the temporary
+// folder is removed. Throws InputError naming `path` when the swap fails.
+void WriteFolderAtomically(const std::string& path, const std::function<void(const std::string&)>& write);
+
 }  // namespace translume

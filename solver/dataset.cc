@@ -59,6 +59,12 @@ T Field(const json& j, const char* key, const std::string& file) {
 
 }  // namespace
 
+std::string DatasetFolder(const std::string& path) {
+  if (fs::is_directory(path)) return path;
+  const fs::path parent = fs::path(path).parent_path();
+  return parent.empty() ? "." : parent.string();
+}
+
 Dataset ReadDataset(const std::string& path) {
   fs::path file = path;
   if (fs::is_directory(file)) file /= "dataset.json";

@@ -43,6 +43,9 @@ bool IsSafeConditionName(const std::string& name);
 // unknown setup, duplicate condition names, missing images, wrong image size or channel count
 // (q, L: 3 channels; mask: 1), non-finite values, negative q, mask outside [0, 1].
 Dataset ReadDataset(const std::string& path);
+// The folder of a dataset named as ReadDataset takes it: `path` itself, or the json file's
+// folder ("." for a bare file name).
+std::string DatasetFolder(const std::string& path);
 
 // Writes `dir`/dataset.json and the EXR images q_NAME.exr, L_NAME.exr, mask_NAME.exr (the mask
 // only where it is not all 1). Every file is written atomically. Throws InputError on I/O

@@ -10,10 +10,10 @@
 
 namespace translume {
 
-Backend ParseBackend(const std::string& text) {
+Backend ParseBackend(const std::string& text, const char* flag) {
   if (text == "cpu") return Backend::kCpu;
   if (text == "gl") return Backend::kGl;
-  throw InputError(fmt::format("--backend: unknown backend '{}' (available: cpu, gl)", text));
+  throw InputError(fmt::format("{}: unknown backend '{}' (available: cpu, gl)", flag, text));
 }
 
 const char* BackendName(Backend backend) { return backend == Backend::kGl ? "gl" : "cpu"; }

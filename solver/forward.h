@@ -14,7 +14,8 @@ namespace translume {
 // Where a diffusion solve runs: `cpu` (OpenMP, float or double) or `gl` (OpenGL compute
 // shaders in a headless context, float; see gl_solver.h).
 enum class Backend { kCpu, kGl };
-Backend ParseBackend(const std::string& text);
+// Throws InputError naming `flag` on anything but cpu | gl.
+Backend ParseBackend(const std::string& text, const char* flag = "--backend");
 const char* BackendName(Backend backend);  // "cpu", "gl"
 
 enum class Precision { kFloat, kDouble };

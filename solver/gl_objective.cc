@@ -70,9 +70,9 @@ class GlChannelObjective : public FrontFaceObjective {
     double J = 0;
     std::vector<double> source(nf), front;
     std::vector<float> sources;
-    for (auto& batch : batches_) {
-      const Batch& B = *batch;
-      for (const SolveSummary& s : I.SolveDevice(B.b, batch->phi, B.count, B.grouped)) Track(s);
+    for (auto& batch_ptr : batches_) {
+      Batch& B = *batch_ptr;
+      for (const SolveSummary& s : I.SolveDevice(B.b, B.phi, B.count, B.grouped)) Track(s);
       // The front face is k = 0: the first nf nodes of each field (of each group of four when
       // grouped), read back in one piece per field or group.
       const int64_t face_values = B.grouped ? 4 * nf : nf;
@@ -80,7 +80,7 @@ class GlChannelObjective : public FrontFaceObjective {
       const int pieces = B.grouped ? (B.count + 3) / 4 : B.count;
       front.resize(pieces * face_values);
       for (int g = 0; g < pieces; ++g)
-        batch->phi.Download(front.data() + g * face_values, face_values * 8, g * stride * 8);
+        B.phi.Download(front.data() + g * face_values, face_values * 8, g * stride * 8);
       if (gk) sources.assign(pieces * face_values, 0.0f);
       for (int f = 0; f < B.count; ++f) {
         const size_t m = size_t(B.first + f);
@@ -92,8 +92,8 @@ class GlChannelObjective : public FrontFaceObjective {
       if (!gk) continue;
       // The adjoint sources live on the front face; the rest of rhs stays 0.
       for (int g = 0; g < pieces; ++g)
-        batch->rhs.Upload(sources.data() + g * face_values, face_values * 4, g * stride * 4);
-      for (const SolveSummary& s : I.SolveDevice(B.rhs, batch->psi, B.count, B.grouped)) Track(s);
+        B.rhs.Upload(sources.data() + g * face_values, face_values * 4, g * stride * 4);
+      for (const SolveSummary& s : I.SolveDevice(B.rhs, B.psi, B.count, B.grouped)) Track(s);
       Run("gradient", {&I.levels[0]->geometry, &B.phi, &B.psi, &grad_kappa_, &grad_mu_},
           {int(shape_.nx), int(shape_.ny), int(shape_.nz), B.count}, gl_internal::FlatThreads(n), -1, 0,
           B.grouped ? "#define FIELDS4\n" : "");

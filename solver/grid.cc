@@ -31,10 +31,10 @@ GridShape ParseGridShape(const std::string& text, const std::string& what) {
   return {values[0], values[1], values[2]};
 }
 
-Setup ParseSetup(const std::string& text) {
+Setup ParseSetup(const std::string& text, const char* flag) {
   if (text == "back") return Setup::kBack;
   if (text == "front") return Setup::kFront;
-  throw InputError("--setup: '" + text + "' is not 'back' or 'front'");
+  throw InputError(std::string(flag) + ": '" + text + "' is not 'back' or 'front'");
 }
 
 const char* SetupName(Setup setup) { return setup == Setup::kBack ? "back" : "front"; }

@@ -27,7 +27,8 @@ GridShape ParseGridShape(const std::string& text, const std::string& what);
 
 // Which face the projector lights (SPEC section 2).
 enum class Setup { kBack, kFront };
-Setup ParseSetup(const std::string& text);
+// Throws InputError naming `flag` (the command line's option) on anything but back | front.
+Setup ParseSetup(const std::string& text, const char* flag = "--setup");
 const char* SetupName(Setup setup);
 // Depth index k of the lit face: nz - 1 in the back-lit setup, 0 in the front-lit one.
 inline int64_t LitFaceK(Setup setup, const GridShape& shape) {

@@ -198,35 +198,6 @@ std::string Short(const std::string& text) {
   return out;
 }
 
-Material ReadMaterialFile(const std::string& path, bool trailer);
-
-}  // namespace
-
-Material ReadMaterial(const std::string& path) {
-  InitVdb();
-  namespace fs = std::filesystem;
-  if (!fs::exists(path)) throw InputError(fmt::format("{}: no such file", path));
-  if (fs::is_directory(path)) throw InputError(fmt::format("{}: is a folder, not a material file", path));
-  // OpenVDB trusts the lengths in a file's header: cut inside it, a file can make it allocate
-  // gigabytes. Every material file is tens of kilobytes at least (two grids and their trees).
-  std::error_code ec;
-  const auto bytes = fs::file_size(path, ec);
-  if (!ec && bytes < 4096)
-    throw InputError(fmt::format("{}: not a material file: {} bytes is too short for an OpenVDB file "
-                                 "with two grids (truncated?)", path, bytes));
-  const bool trailer = !ec && CheckTrailer(path, bytes);
-  try {
-    return ReadMaterialFile(path, trailer);
-  } catch (const InputError&) {
-    throw;
-  } catch (const std::exception& e) {
-    throw InputError(fmt::format("{}: not a readable OpenVDB material (truncated or corrupt: {})", path,
-                                 Short(e.what())));
-  }
-}
-
-namespace {
-
 Material ReadMaterialFile(const std::string& path, bool trailer) {
   openvdb::io::File file(path);
   file.open();
@@ -336,5 +307,28 @@ Material ReadMaterialFile(const std::string& path, bool trailer) {
 }
 
 }  // namespace
+
+Material ReadMaterial(const std::string& path) {
+  InitVdb();
+  namespace fs = std::filesystem;
+  if (!fs::exists(path)) throw InputError(fmt::format("{}: no such file", path));
+  if (fs::is_directory(path)) throw InputError(fmt::format("{}: is a folder, not a material file", path));
+  // OpenVDB trusts the lengths in a file's header: cut inside it, a file can make it allocate
+  // gigabytes. Every material file is tens of kilobytes at least (two grids and their trees).
+  std::error_code ec;
+  const auto bytes = fs::file_size(path, ec);
+  if (!ec && bytes < 4096)
+    throw InputError(fmt::format("{}: not a material file: {} bytes is too short for an OpenVDB file "
+                                 "with two grids (truncated?)", path, bytes));
+  const bool trailer = !ec && CheckTrailer(path, bytes);
+  try {
+    return ReadMaterialFile(path, trailer);
+  } catch (const InputError&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw InputError(fmt::format("{}: not a readable OpenVDB material (truncated or corrupt: {})", path,
+                                 Short(e.what())));
+  }
+}
 
 }  // namespace translume

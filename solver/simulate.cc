@@ -15,12 +15,16 @@
 
 namespace translume {
 
+GridShape RefineShape(const GridShape& s, int K) {
+  return {(s.nx - 1) * K + 1, (s.ny - 1) * K + 1, (s.nz - 1) * K + 1};
+}
+
 Material RefineMaterial(const Material& m, int K) {
   TL_CHECK(K >= 1);
   if (K == 1) return m;
   const GridShape& s = m.shape;
   Material f = m;
-  f.shape = {(s.nx - 1) * K + 1, (s.ny - 1) * K + 1, (s.nz - 1) * K + 1};
+  f.shape = RefineShape(s, K);
   f.spacing_mm = m.spacing_mm / K;
   // Per fine index along an axis: the lower coarse node and the weight of the upper one.
   auto axis = [K](int64_t n_fine, int64_t n_coarse, std::vector<int64_t>* lo, std::vector<double>* w) {

@@ -12,9 +12,11 @@
 
 namespace translume {
 
-// The material on a grid K times finer per axis: (n - 1) K + 1 nodes per axis, spacing h / K,
-// kappa and mu trilinearly interpolated between the original nodes (which it keeps exactly).
+// The material on a grid K times finer per axis: (n - 1) K + 1 nodes per axis (RefineShape),
+// spacing h / K, kappa and mu trilinearly interpolated between the original nodes (which it
+// keeps exactly).
 Material RefineMaterial(const Material& material, int K);
+GridShape RefineShape(const GridShape& shape, int K);
 
 // Front-face radiance of `material` under each light pattern (L = (phi - q_front) / (2 pi),
 // SPEC section 3), solved on the material's own grid. cpu: conditions in parallel threads; gl:

@@ -17,6 +17,7 @@
 #include "solver/synthetic.h"
 #include "solver/material_io.h"
 #include "solver/memory.h"
+#include "solver/simulate.h"
 #include "solver/status.h"
 #include "solver/threads.h"
 #include "tools/commands.h"
@@ -154,9 +155,7 @@ int RunDemo(int argc, char** argv) {
   acquire::SimulateCaptureOptions sc;
   sc.setup = ParseSetup(setup);
   sc.lights = RegionLights(lights).front().region_n;
-  const int64_t K = sc.oversample;
-  const GridShape fine{(so.shape.nx - 1) * K + 1, (so.shape.ny - 1) * K + 1, (so.shape.nz - 1) * K + 1};
-  CheckFitsInMemory(EstimateMemory(fine, 1, Precision::kDouble).forward_bytes +
+  CheckFitsInMemory(EstimateMemory(RefineShape(so.shape, sc.oversample), 1, Precision::kDouble).forward_bytes +
                         EstimateMemory(so.shape, sc.lights * sc.lights, Precision::kDouble).recovery_bytes,
                     fmt::format("the demo on the {} grid", so.shape.ToString()));
   const Material truth = SynthesizeMaterial(so);

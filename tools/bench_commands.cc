@@ -156,16 +156,11 @@ void AddBenchRecovery(CLI::App& bench) {
       if (std::find(known.begin(), known.end(), p) == known.end())
         throw InputError(fmt::format("--presets: unknown preset '{}' (available: {})", p, fmt::join(known, ", ")));
     o.setups.clear();
-    for (const auto& s : f->setups) {
-      if (s != "back" && s != "front") throw InputError(fmt::format("--setups: '{}' is not 'back' or 'front'", s));
-      o.setups.push_back(ParseSetup(s));
-    }
+    for (const auto& s : f->setups) o.setups.push_back(ParseSetup(s, "--setups"));
     o.backends.clear();
     for (const auto& b : f->backends) o.backends.push_back(ParseBackend(b));
     if (o.backends.empty()) throw InputError("bench recovery: --backend needs a backend");
-    if (f->data_backend != "cpu" && f->data_backend != "gl")
-      throw InputError(fmt::format("--data-backend: unknown backend '{}' (available: cpu, gl)", f->data_backend));
-    o.data_backend = ParseBackend(f->data_backend);
+    o.data_backend = ParseBackend(f->data_backend, "--data-backend");
     if (o.paper_iterations < 0) throw InputError("--paper-iterations: must be >= 0");
     if (!(o.noisy_lambda >= 0) || !std::isfinite(o.noisy_lambda)) throw InputError("--noisy-lambda: must be >= 0");
     if (!(o.max_seconds >= 0)) throw InputError("bench recovery: --max-seconds must be >= 0");

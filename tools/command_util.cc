@@ -60,9 +60,14 @@ void RequireNotInput(const char* flag, const std::string& out, const std::vector
     if (in.empty()) continue;
     const fs::path i = fs::weakly_canonical(in, ec);
     if (o == i) throw InputError(fmt::format("{} {}: would overwrite the input {}", flag, out, in));
-    if (!fs::is_directory(i)) continue;
-    for (fs::path p = o.parent_path(); !p.empty() && p != p.root_path(); p = p.parent_path())
-      if (p == i) throw InputError(fmt::format("{} {}: would write into the input folder {}", flag, out, in));
+    auto below = [](const fs::path& a, const fs::path& folder) {
+      for (fs::path p = a.parent_path(); !p.empty() && p != p.root_path(); p = p.parent_path())
+        if (p == folder) return true;
+      return false;
+    };
+    if (fs::is_directory(i) && below(o, i))
+      throw InputError(fmt::format("{} {}: would write into the input folder {}", flag, out, in));
+    if (below(i, o)) throw InputError(fmt::format("{} {}: holds the input {}; choose another folder", flag, out, in));
   }
 }
 

@@ -44,8 +44,10 @@ void RequireExtension(const std::string& path, std::initializer_list<const char*
                       const char* flag);
 
 // Throws InputError "FLAG OUT: would overwrite the input IN" when the output `out` is one of
-// `inputs` (files or folders; empty ones are skipped), or "... would write into the input
-// folder IN" when it lies anywhere below an input folder. Paths compare in canonical form.
+// `inputs` (files or folders; empty ones are skipped), "... would write into the input
+// folder IN" when it lies anywhere below an input folder, or "... holds the input IN" when an
+// input lies below `out` (an output folder replaced whole would take it along). Paths compare
+// in canonical form.
 void RequireNotInput(const char* flag, const std::string& out, const std::vector<std::string>& inputs);
 // Throws InputError "FLAG PATH: is a folder, not a file" when an output file's path names an
 // existing folder (checked before the work, so that it is not lost at the end).

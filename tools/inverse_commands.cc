@@ -10,7 +10,6 @@
 #include <filesystem>
 #include <fmt/format.h>
 #include <fstream>
-#include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
 
@@ -82,48 +81,11 @@ std::string FormatSeconds(double s) {
 // whole, holdout/ included); never the folder that holds the input material.
 void RequireDatasetFolder(const std::string& out, const std::string& material_path) {
   RequireNotInput("-o", out, {material_path});
-  std::error_code ec;
-  if (fs::weakly_canonical(material_path, ec).string().rfind(fs::weakly_canonical(out, ec).string() + "/", 0) == 0)
-    throw InputError(fmt::format("-o {}: holds the input {}; choose another folder", out, material_path));
   if (!fs::exists(out)) return;
   if (!fs::is_directory(out)) throw InputError(fmt::format("-o {}: is a file, not a folder", out));
   if (!fs::is_empty(out) && !fs::exists(fs::path(out) / "dataset.json"))
     throw InputError(fmt::format("-o {}: the folder is not empty and holds no dataset.json; choose a new or empty "
                                  "folder (an earlier dataset there is replaced)", out));
-}
-
-// Writes a folder as a whole: `write` fills a temporary sibling, which then takes the place
-// of `out` (and of what was there); on failure `out` is left as it was.
-void ReplaceFolder(const std::string& out, const std::function<void(const std::string&)>& write) {
-  const fs::path target = fs::absolute(out).lexically_normal();
-  const fs::path name = target.filename().empty() ? target.parent_path().filename() : target.filename();
-  const fs::path dir = target.filename().empty() ? target.parent_path() : target;
-  const fs::path tmp = dir.parent_path() / fmt::format(".{}.tmp{}", name.string(), getpid());
-  const fs::path old = dir.parent_path() / fmt::format(".{}.old{}", name.string(), getpid());
-  std::error_code ec;
-  fs::remove_all(tmp, ec);
-  try {
-    fs::create_directories(tmp);
-    write(tmp.string());
-  } catch (...) {
-    fs::remove_all(tmp, ec);
-    throw;
-  }
-  if (fs::exists(dir)) {
-    fs::rename(dir, old, ec);
-    if (ec) {
-      fs::remove_all(tmp, ec);
-      throw InputError(fmt::format("-o {}: cannot replace the folder: {}", out, ec.message()));
-    }
-  }
-  fs::rename(tmp, dir, ec);
-  if (ec) {
-    const std::string why = ec.message();
-    if (fs::exists(old)) fs::rename(old, dir, ec);
-    fs::remove_all(tmp, ec);
-    throw InputError(fmt::format("-o {}: cannot write the folder: {}", out, why));
-  }
-  fs::remove_all(old, ec);
 }
 
 int RunSimulate(int argc, char** argv) {
@@ -155,7 +117,7 @@ int RunSimulate(int argc, char** argv) {
   const Material m = ReadMaterial(material_path);
   const auto t0 = std::chrono::steady_clock::now();
   const SimulatedData data = SimulateDataset(m, o);
-  ReplaceFolder(out, [&](const std::string& tmp) {
+  WriteFolderAtomically(out, [&](const std::string& tmp) {
     WriteDataset(tmp, data.training);
     if (!data.holdout.conditions.empty()) WriteDataset((fs::path(tmp) / "holdout").string(), data.holdout);
   });
@@ -192,9 +154,7 @@ int RunSolve(int argc, char** argv) {
   // land in an input, and none may be a folder (found before the solve, not after it).
   const fs::path base = fs::path(out).replace_extension("");
   const std::string report = base.string() + ".json";
-  const fs::path json_dir = fs::path(dataset_path).parent_path();
-  const std::string dataset_dir =
-      fs::is_directory(dataset_path) ? dataset_path : (json_dir.empty() ? fs::path(".") : json_dir).string();
+  const std::string dataset_dir = DatasetFolder(dataset_path);
   for (const std::string& path : {out, report}) {
     RequireNotInput("-o", path, {dataset_path, dataset_dir, init, checkpoint});
     RequireFilePath("-o", path);
@@ -344,8 +304,7 @@ int RunEvaluate(int argc, char** argv) {
                   100 * mm.L_rms_after_scale[1], 100 * mm.L_rms_after_scale[2]);
     }
   }
-  fs::path hdir = fs::is_directory(dataset_path) ? fs::path(dataset_path) : fs::path(dataset_path).parent_path();
-  hdir /= "holdout";
+  const fs::path hdir = fs::path(DatasetFolder(dataset_path)) / "holdout";
   const Dataset holdout = fs::exists(hdir / "dataset.json") ? ReadDataset(hdir.string()) : Dataset{};
   const Material rec = ReadMaterial(rec_path);
   std::optional<Material> truth;
