@@ -8,17 +8,54 @@
 #include <cmath>
 #include <filesystem>
 #include <fmt/format.h>
+#include <fstream>
+#include <iterator>
+#include <string_view>
 
 #include "solver/atomic_file.h"
 #include "solver/status.h"
 
 namespace translume {
+namespace {
+
+// OpenImageIO's error text can span lines (a decoder's message, then its library's); ours
+// are one line.
+std::string FirstLine(const std::string& s) {
+  const std::string line = s.substr(0, s.find('\n'));
+  return line.empty() ? "unknown error" : line;
+}
+
+// The end marker of a PNG (an IEND chunk) or JPEG (an EOI marker after the last start-of-scan)
+// file, whose absence means the file was cut short: libjpeg then fills the missing rows with
+// grey and OpenImageIO reports success, and libpng prints its own line before failing. Empty
+// when the file is complete or of another format.
+std::string Truncation(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string bytes(8, '\0');
+  in.read(bytes.data(), 8);
+  auto starts = [&](std::string_view magic) { return bytes.compare(0, magic.size(), magic) == 0; };
+  if (!starts("\x89PNG\r\n\x1a\n") && !starts("\xff\xd8\xff")) return "";
+  bytes.append(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  if (starts("\x89PNG\r\n\x1a\n")) {
+    if (bytes.rfind(std::string_view("\0\0\0\0IEND", 8)) == std::string::npos)
+      return "PNG file is cut short (no IEND chunk)";
+  } else if (starts("\xff\xd8\xff")) {
+    const size_t scan = bytes.rfind("\xff\xda");
+    const size_t end = bytes.rfind("\xff\xd9");
+    if (scan == std::string::npos || end == std::string::npos || end < scan)
+      return "JPEG file is cut short (no end-of-image marker after its last scan)";
+  }
+  return "";
+}
+
+}  // namespace
 
 Image ReadImage(const std::string& path) {
   if (!std::filesystem::exists(path)) throw InputError(fmt::format("{}: no such file", path));
+  if (const std::string cut = Truncation(path); !cut.empty()) throw InputError(fmt::format("{}: {}", path, cut));
   auto in = OIIO::ImageInput::open(path);
   if (!in) {
-    throw InputError(fmt::format("{}: cannot read image: {}", path, OIIO::geterror()));
+    throw InputError(fmt::format("{}: cannot read image: {}", path, FirstLine(OIIO::geterror())));
   }
   const OIIO::ImageSpec& spec = in->spec();
   Image img;
@@ -27,7 +64,7 @@ Image ReadImage(const std::string& path) {
   img.channels = spec.nchannels;
   img.data.resize(size_t(img.width) * img.height * img.channels);
   if (!in->read_image(0, 0, 0, img.channels, OIIO::TypeDesc::FLOAT, img.data.data())) {
-    throw InputError(fmt::format("{}: cannot read image: {}", path, in->geterror()));
+    throw InputError(fmt::format("{}: cannot read image: {}", path, FirstLine(in->geterror())));
   }
   in->close();
   return img;
@@ -43,7 +80,7 @@ void WriteImage(const std::string& path, const Image& image) {
     if (tmp.ends_with(".exr")) spec.attribute("compression", "zip");
     if (!out->open(tmp, spec) ||
         !out->write_image(OIIO::TypeDesc::FLOAT, image.data.data()) || !out->close()) {
-      throw InputError(fmt::format("{}: cannot write image: {}", path, out->geterror()));
+      throw InputError(fmt::format("{}: cannot write image: {}", path, FirstLine(out->geterror())));
     }
   });
 }

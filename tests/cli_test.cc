@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -39,6 +40,27 @@ TEST_F(Cli, SynthThenForwardWritesRadiance) {
   EXPECT_GT(L.at(17, 13, 1), L.at(2, 2, 1));
   r = Translume("forward " + P("m.vdb") + " --setup front --precision float --light spot:3,3,1 -o " + P("F.exr"));
   EXPECT_EQ(r.status, 0) << r.output;
+}
+
+// A light pattern cut short (an interrupted copy) is named, not read as grey rows (JPEG) or
+// with the decoder's own lines (PNG); the whole files are fine.
+TEST_F(Cli, CutShortImagesAreNamed) {
+  ASSERT_EQ(Translume("synth --preset wax --grid 8x8x4 -o " + P("m.vdb")).status, 0);
+  Image pattern;
+  pattern.width = pattern.height = 64;
+  pattern.channels = 3;
+  for (int v = 0; v < 64 * 64 * 3; ++v) pattern.data.push_back(float((v * 7919) % 256) / 255);
+  for (const std::string ext : {"png", "jpg"}) {
+    WriteImage(P("p." + ext), pattern);
+    const CommandRun r = Translume("forward " + P("m.vdb") + " --light image:" + P("p." + ext) + " -o " + P("L.exr"));
+    EXPECT_EQ(r.status, 0) << r.output;
+    std::ifstream in(P("p." + ext), std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::ofstream(P("cut." + ext), std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+    ExpectOneLineError(Translume("forward " + P("m.vdb") + " --light image:" + P("cut." + ext) + " -o " + P("C.exr")),
+                       P("cut." + ext) + ": " + (ext == "png" ? "PNG" : "JPEG") + " file is cut short");
+  }
+  EXPECT_FALSE(fs::exists(P("C.exr")));
 }
 
 TEST_F(Cli, BadArgumentsGiveOneLineAndNoOutput) {
