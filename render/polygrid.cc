@@ -179,9 +179,31 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       }
     }
   }
+  // The lattice position of the centre of the cubes that hold boundary node b: the first
+  // projection goes along the line from there (Shape::ProjectAlong).
+  std::vector<std::array<double, 3>> cube_centre(N - pg.num_interior);
+  for (int64_t b = pg.num_interior; b < N; ++b) {
+    const auto& g = pg.lattice[b];
+    std::array<double, 3> sum = {0, 0, 0};
+    int count = 0;
+    for (int x = (g[0] - 1) / m; x <= g[0] / m; ++x)
+      for (int y = (g[1] - 1) / m; y <= g[1] / m; ++y)
+        for (int z = (g[2] - 1) / m; z <= g[2] / m; ++z)
+          if (g[0] >= x * m && g[0] <= (x + 1) * m && g[1] >= y * m && g[1] <= (y + 1) * m &&
+              g[2] >= z * m && g[2] <= (z + 1) * m && cube_at(x, y, z)) {
+            sum = {sum[0] + (x + 0.5) * m, sum[1] + (y + 0.5) * m, sum[2] + (z + 0.5) * m};
+            ++count;
+          }
+    TL_CHECK(count > 0);
+    for (int a = 0; a < 3; ++a) cube_centre[b - pg.num_interior][a] = sum[a] / count;
+  }
   auto project_boundary = [&] {
-    for (int64_t b = pg.num_interior; b < N; ++b)
-      shape.Project(pg.position[b], &pg.position[b], &pg.normal[b - pg.num_interior]);
+    for (int64_t b = pg.num_interior; b < N; ++b) {
+      Vec3 centre;
+      for (int a = 0; a < 3; ++a)
+        centre[a] = shape.lo[a] + (shape.hi[a] - shape.lo[a]) * cube_centre[b - pg.num_interior][a] / (lat.n[a] - 1);
+      shape.ProjectAlong(pg.position[b], centre, &pg.position[b], &pg.normal[b - pg.num_interior]);
+    }
     for (int it = 0; it < options.boundary_relax_iterations; ++it) {
       std::vector<Vec3> next = pg.position;
       for (int64_t b = pg.num_interior; b < N; ++b) {

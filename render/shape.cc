@@ -236,7 +236,7 @@ class PolycubeSolidShape : public Shape {
     for (int a = 0; a < 3; ++a) g[a] = std::clamp(int(std::floor(u[a])), 0, ext_[a] - 1);
     double best = 1e300;
     int best_face = -1;
-    Vec3 best_point;
+    Vec3 best_point = Vec3::Zero();
     auto try_face = [&](int f) {
       const auto& [c, dir] = faces_[f];
       Vec3 q;
@@ -330,6 +330,70 @@ class MeshShape : public Shape {
       const double bound = r * cell_.minCoeff() - outside;
       if (best < 1e300 && bound > 0 && std::sqrt(best) <= bound) break;
     }
+  }
+  // Walks the grid cells that the line crosses inside the bounding box (Amanatides and Woo),
+  // intersecting their triangles (Moller and Trumbore), and keeps the hit nearest to p.
+  void ProjectAlong(const Vec3& p, const Vec3& centre, Vec3* s, Vec3* n) const override {
+    const double len = (p - centre).norm();
+    if (!(len > 1e-12 * (hi - lo).norm())) return Project(p, s, n);
+    const Vec3 u = (p - centre) / len;
+    // The line's parameter range inside the (slightly grown) box, from p.
+    const Vec3 pad = 1e-6 * (hi - lo) + Vec3::Constant(1e-9);
+    double t0 = -1e300, t1 = 1e300;
+    for (int a = 0; a < 3; ++a) {
+      if (std::abs(u[a]) < 1e-300) {
+        if (p[a] < lo[a] - pad[a] || p[a] > hi[a] + pad[a]) return Project(p, s, n);
+        continue;
+      }
+      double ta = (lo[a] - pad[a] - p[a]) / u[a], tb = (hi[a] + pad[a] - p[a]) / u[a];
+      if (ta > tb) std::swap(ta, tb);
+      t0 = std::max(t0, ta);
+      t1 = std::min(t1, tb);
+    }
+    if (t0 > t1) return Project(p, s, n);
+    const Vec3 start = p + t0 * u;
+    std::array<int, 3> c = CellOf(start), step;
+    Vec3 t_max, t_delta;
+    for (int a = 0; a < 3; ++a) {
+      step[a] = u[a] > 0 ? 1 : -1;
+      const double boundary = lo[a] + (c[a] + (u[a] > 0 ? 1 : 0)) * cell_[a];
+      t_max[a] = std::abs(u[a]) < 1e-300 ? 1e300 : t0 + (boundary - start[a]) / u[a];
+      t_delta[a] = std::abs(u[a]) < 1e-300 ? 1e300 : cell_[a] / std::abs(u[a]);
+    }
+    double best_t = 1e300, bu = 0, bv = 0;
+    int32_t best_tri = -1;
+    for (;;) {
+      for (int32_t t : cells_[Index(c[0], c[1], c[2])]) {
+        const auto& tri = mesh_.triangles[t];
+        const Vec3 &a = mesh_.vertices[tri[0]], e1 = mesh_.vertices[tri[1]] - a, e2 = mesh_.vertices[tri[2]] - a;
+        const Vec3 h = u.cross(e2);
+        const double det = e1.dot(h);
+        if (std::abs(det) < 1e-14 * e1.squaredNorm() * e2.norm()) continue;  // parallel
+        const Vec3 w = p - a;
+        const double b1 = w.dot(h) / det;
+        if (b1 < -1e-12 || b1 > 1 + 1e-12) continue;
+        const Vec3 qv = w.cross(e1);
+        const double b2 = u.dot(qv) / det;
+        if (b2 < -1e-12 || b1 + b2 > 1 + 1e-12) continue;
+        const double t_hit = e2.dot(qv) / det;  // p + t_hit u
+        if (std::abs(t_hit) < std::abs(best_t)) {
+          best_t = t_hit;
+          best_tri = t;
+          bu = b1;
+          bv = b2;
+        }
+      }
+      // Cells further than the best hit (on both sides of p) cannot hold a nearer one.
+      const int a = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
+      if (t_max[a] > t1 || (best_tri >= 0 && t_max[a] > std::abs(best_t))) break;
+      c[a] += step[a];
+      if (c[a] < 0 || c[a] >= dims_[a]) break;
+      t_max[a] += t_delta[a];
+    }
+    if (best_tri < 0) return Project(p, s, n);
+    const auto& tri = mesh_.triangles[best_tri];
+    *s = p + best_t * u;
+    *n = ((1 - bu - bv) * normals_[tri[0]] + bu * normals_[tri[1]] + bv * normals_[tri[2]]).normalized();
   }
 
  private:

@@ -42,6 +42,17 @@ class Shape {
   // use an analytic projection (radial for star-shaped ones, closest point otherwise), meshes
   // the closest point with interpolated vertex normals.
   virtual void Project(const Vec3& p, Vec3* surface, Vec3* normal) const = 0;
+  // The first projection of a boundary node from the stretched polycube (Section 5.1): the
+  // surface point on the line through `centre` (inside the polycube: the centre of the node's
+  // cubes) and p that is nearest to p. Two nodes apart on the polycube then stay apart, where a
+  // closest point on a faceted mesh would take every node in a convex vertex's or edge's
+  // region to that vertex or edge (coincident nodes, infinite Laplacian weights). Meshes cast
+  // the line; where it misses the surface, and for the built-in shapes (whose Project is one to
+  // one), Project(p).
+  virtual void ProjectAlong(const Vec3& p, const Vec3& centre, Vec3* surface, Vec3* normal) const {
+    (void)centre;
+    Project(p, surface, normal);
+  }
   const TriangleMesh& mesh() const { return mesh_; }
   const std::string& name() const { return name_; }
   // Axis-aligned box that the polycube is stretched onto (mm).
