@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include "solver/dataset.h"
 #include "solver/material.h"
 #include "solver/status.h"
 
@@ -217,8 +218,10 @@ CaptureSpec ReadCapture(const std::string& path) {
     r.CheckKeys(c, where, {"name", "stack", "pattern", "light"});
     CaptureSpec::Condition cond;
     cond.name = r.String(r.Get(c, "name", where + "."), where + ".name");
-    if (cond.name.empty() || cond.name.find_first_of("/\\ ") != std::string::npos)
-      r.Fail(where + ".name", "must be non-empty, without spaces or slashes");
+    // The name becomes file names in the work folder and the node-space dataset: the
+    // dataset's rule, checked here before minutes of calibration and HDR.
+    if (!IsSafeConditionName(cond.name))
+      r.Fail(where + ".name", fmt::format("'{}' must be 1-100 characters of [A-Za-z0-9_.-]", cond.name));
     if (!names.insert(cond.name).second) r.Fail(where + ".name", "duplicate name " + cond.name);
     cond.stack = r.Path(r.Get(c, "stack", where + "."), where + ".stack", true);
     if (c.contains("pattern") == c.contains("light"))

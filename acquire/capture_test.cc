@@ -94,6 +94,9 @@ TEST_F(CaptureTest, EveryBrokenFieldIsNamed) {
   ExpectError([](auto& j) { j["white"]["albedo"] = 1.5; }, "white.albedo: must be in (0, 1]");
   ExpectError([](auto& j) { j["colour"] = 1; }, "colour: unknown field");
   ExpectError([](auto& j) { j["conditions"][1]["name"] = "a"; }, "conditions[1].name: duplicate");
+  // Names the node-space dataset would refuse after the HDR stage (it aborted there).
+  for (const char* bad : {"lit(0,1)", "r\u00e9gion", "a:b", "..", "x y"})
+    ExpectError([&](auto& j) { j["conditions"][1]["name"] = bad; }, "conditions[1].name: '");
   ExpectError([](auto& j) { j["conditions"][0]["stack"] = "lighting/07"; }, "conditions[0].stack: folder");
   ExpectError([](auto& j) { j["conditions"][0].erase("light"); }, "conditions[0]: give exactly one");
   ExpectError([](auto& j) { j["conditions"][0]["pattern"] = "calib/response.yml"; j["conditions"][0].erase("light"); },
