@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -81,6 +82,11 @@ cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds, bool* grey) 
   cv::Mat raw(spec.height, spec.width, CV_MAKETYPE(depth, std::min(nch, 4)));
   const bool ok = in->read_image(0, 0, 0, std::min(nch, 4), type, raw.data);
   if (!ok) throw CalibError(fmt::format("{}: cannot decode image: {}", path, FirstLine(in->geterror())));
+  // OpenImageIO's JPEG reader reports libjpeg's warnings (a file cut short, corrupt data) only
+  // as error text and fills the missing pixels with grey: such a photo would enter the merge.
+  if (std::strcmp(in->format_name(), "jpeg") == 0)
+    if (const std::string warning = in->geterror(); !warning.empty())
+      throw CalibError(fmt::format("{}: damaged image (cut short or corrupt): {}", path, FirstLine(warning)));
   cv::Mat rgb;
   if (grey) *grey = raw.channels() <= 2;
   if (raw.channels() == 1) cv::cvtColor(raw, rgb, cv::COLOR_GRAY2RGB);

@@ -29,7 +29,7 @@ struct ExposureStack {
 // files (.cr2 .cr3 .nef .arw .dng .raf .orf .rw2 .pef .srw) are decoded linearly (no white
 // balance, no auto brightness, linear colour space) to CV_16UC3. *exif_seconds receives the EXIF
 // ExposureTime (0 when absent), *grey whether the file itself was grey (one or two channels).
-// Throws CalibError "PATH: problem".
+// Throws CalibError "PATH: problem", also for a damaged JPEG (cut short or corrupt data).
 cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds = nullptr, bool* grey = nullptr);
 
 // Writes a CV_32FC3 RGB image as an OpenEXR file (float). Throws CalibError on failure.

@@ -337,6 +337,20 @@ TEST_F(HdrFiles, BadStacksNameTheFile) {
   EXPECT_NE(Error([&] { ReadResponse(P("bad.yml")); }).find(P("bad.yml") + ": "), std::string::npos);
 }
 
+// A JPEG cut short (a copy interrupted, a failing card) decodes "successfully" in OpenImageIO,
+// grey where data is missing; it must be refused, naming the file.
+TEST_F(HdrFiles, CutShortJpegIsRefused) {
+  cv::Mat img(96, 128, CV_8UC3);
+  cv::randu(img, cv::Scalar::all(0), cv::Scalar::all(255));
+  const std::string whole = P("whole.jpg"), cut = P("cut.jpg");
+  ASSERT_TRUE(cv::imwrite(whole, img));
+  EXPECT_EQ(ReadRgbImage(whole).size(), img.size());
+  std::ifstream in(whole, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  EXPECT_EQ(Error([&] { ReadRgbImage(cut); }).find(cut + ": damaged image"), 0u);
+}
+
 TEST_F(HdrFiles, ResponseAndExrRoundTrip) {
   ResponseCurve c;
   c.lut.create(256, 1, CV_32FC3);
