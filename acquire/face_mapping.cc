@@ -14,6 +14,11 @@
 namespace translume::acquire {
 namespace {
 
+// EstimateSamplePose refuses corners that the best pose misses by more than this many pixels
+// RMS or this fraction of the face's mean side in the image, whichever is larger.
+constexpr double kMaxCornerMissPx = 3.0;
+constexpr double kMaxCornerMissFraction = 0.02;
+
 // `samples` coordinates (mm) spread evenly over node n's dual interval along one axis.
 std::vector<double> DualBoxSamples(int64_t n, int64_t count, double h, int samples) {
   const double lo = std::max(0.0, (double(n) - 0.5) * h);
@@ -105,12 +110,23 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
     throw InputError(fmt::format("{}: the corners are in the wrong order (expected node (0,0), "
                                  "(nx-1,0), (nx-1,ny-1), (0,ny-1): the sample seen upright, "
                                  "clockwise from its top-left corner)", what));
-  if (rms_px) {
-    const auto px = camera.Project(Transform(pose, obj));
-    double s = 0;
-    for (size_t k = 0; k < 4; ++k) s += std::pow(cv::norm(px[k] - corners[k]), 2);
-    *rms_px = std::sqrt(s / 4);
+  const auto px = camera.Project(Transform(pose, obj));
+  double sq = 0, side = 0;
+  for (size_t k = 0; k < 4; ++k) {
+    sq += std::pow(cv::norm(px[k] - corners[k]), 2);
+    side += cv::norm(corners[(k + 1) % 4] - corners[k]) / 4;
   }
+  const double rms = std::sqrt(sq / 4);
+  if (rms_px) *rms_px = rms;
+  // Corners listed from the wrong corner (rotated order) fit a face of the transposed shape:
+  // the best pose misses them by a fair part of the face. Clicking errors and a slightly
+  // mismeasured sample stay well under the bound.
+  const double bound = std::max(kMaxCornerMissPx, kMaxCornerMissFraction * side);
+  if (rms > bound)
+    throw InputError(fmt::format(
+        "{}: the corners do not fit the {:g} x {:g} mm front face (the best pose misses them by "
+        "{:.1f} px RMS, more than {:.1f} px): check their order (node (0,0), (nx-1,0), "
+        "(nx-1,ny-1), (0,ny-1)) and sample_mm", what, obj[2].x, obj[2].y, rms, bound));
   return pose;
 }
 

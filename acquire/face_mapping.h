@@ -31,8 +31,10 @@ std::vector<cv::Point3d> FrontFaceCorners(const GridShape& grid, double h);
 
 // camera_from_sample from the front face's four image corners (planar PnP, IPPE, refined by
 // Levenberg-Marquardt). *rms_px receives the corners' reprojection RMS. Throws InputError
-// naming `what` when a corner lies outside the image or the pose puts the sample behind the
-// camera.
+// naming `what` when a corner lies outside the image, the pose puts the sample behind the
+// camera or shows the face from behind (corners counter-clockwise), or the pose misses the
+// corners by more than max(3 px, 2 % of the face's side in the image) RMS (corners listed from
+// another corner of a non-square face, or a wrong sample size).
 calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
                                const GridShape& grid, double h, const std::string& what,
                                double* rms_px = nullptr);
