@@ -36,11 +36,6 @@ bool IsRaw(const std::string& path) {
   return raw.count(Lower(fs::path(path).extension().string())) > 0;
 }
 
-bool IsImageFile(const fs::path& p) {
-  static const std::set<std::string> ext = {".png", ".tif", ".tiff", ".jpg", ".jpeg", ".exr"};
-  return ext.count(Lower(p.extension().string())) > 0 || IsRaw(p.string());
-}
-
 // OpenImageIO's error text, first line only (our messages are one line).
 std::string FirstLine(std::string s) {
   const size_t n = s.find('\n');
@@ -52,6 +47,13 @@ std::string FirstLine(std::string s) {
 double HatWeight(int z) { return z <= 127 ? z + 1.0 : 256.0 - z; }
 
 }  // namespace
+
+bool IsPhotoFile(const std::string& path) {
+  static const std::set<std::string> ext = {".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".exr"};
+  const fs::path p(path);
+  const std::string name = p.filename().string();
+  return !name.empty() && name[0] != '.' && (ext.count(Lower(p.extension().string())) > 0 || IsRaw(path));
+}
 
 cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds, bool* grey) {
   if (!fs::exists(path)) throw CalibError(path + ": no such file");
@@ -140,7 +142,7 @@ ExposureStack ReadExposureStack(const std::string& dir) {
   if (!fs::is_directory(dir)) throw CalibError(dir + ": not a folder");
   std::vector<fs::path> files;
   for (const auto& e : fs::directory_iterator(dir))
-    if (e.is_regular_file() && IsImageFile(e.path()) && e.path().filename().string()[0] != '.')
+    if (e.is_regular_file() && IsPhotoFile(e.path().string()))
       files.push_back(e.path());
   std::sort(files.begin(), files.end());
   if (files.size() < 2)

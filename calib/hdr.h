@@ -24,6 +24,11 @@ struct ExposureStack {
   cv::Size Size() const { return exposures.empty() ? cv::Size() : exposures[0].pixels.size(); }
 };
 
+// Whether a file in a photo folder or exposure stack is read as a photo: .png .jpg .jpeg .tif
+// .tiff .bmp .exr or a camera RAW file (below), in any case, and not a hidden file (a name
+// starting with '.', e.g. the ._IMG_0001.JPG that macOS leaves on FAT and exFAT cards).
+bool IsPhotoFile(const std::string& path);
+
 // Reads one image file through OpenImageIO as RGB (grey images are replicated, alpha dropped):
 // 8-bit files stay CV_8UC3, 16-bit files become CV_16UC3, float/half files CV_32FC3. Camera RAW
 // files (.cr2 .cr3 .nef .arw .dng .raf .orf .rw2 .pef .srw) are decoded linearly (no white

@@ -4,7 +4,6 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <cctype>
 #include <filesystem>
 #include <map>
 #include <opencv2/imgproc.hpp>
@@ -30,15 +29,10 @@ cv::Mat ReadGray8(const std::string& path) {
 std::vector<NamedImage> ReadPhotoFolder(const std::string& dir) {
   if (!fs::is_directory(dir)) throw CalibError(dir + ": not a folder");
   std::vector<fs::path> files;
-  for (const auto& e : fs::directory_iterator(dir)) {
-    std::string ext = e.path().extension().string();
-    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-    if (e.is_regular_file() && (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" ||
-                                ext == ".tiff" || ext == ".bmp"))
-      files.push_back(e.path());
-  }
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.is_regular_file() && IsPhotoFile(e.path().string())) files.push_back(e.path());
   std::sort(files.begin(), files.end());
-  if (files.empty()) throw CalibError(dir + ": no photos (.png, .jpg, .tif, .bmp)");
+  if (files.empty()) throw CalibError(dir + ": no photos (.png, .jpg, .tif, .bmp, .exr, camera RAW)");
   std::vector<NamedImage> views(files.size());
   ParallelFor(int(files.size()), [&](int i) { views[size_t(i)] = {files[size_t(i)].string(), ReadGray8(files[size_t(i)].string())}; });
   return views;

@@ -14,8 +14,8 @@ namespace translume::calib {
 // An 8-bit grey version of any photo (8-bit, 16-bit, float, RAW; see ReadRgbImage).
 cv::Mat ReadGray8(const std::string& path);
 
-// Every photo (.png .jpg .jpeg .tif .tiff .bmp) in `dir`, sorted by name, as 8-bit grey; names
-// are the paths. Throws CalibError when `dir` is not a folder or holds no photo.
+// Every photo in `dir` (IsPhotoFile: hidden files skipped), sorted by name, as 8-bit grey;
+// names are the paths. Throws CalibError when `dir` is not a folder or holds no photo.
 std::vector<NamedImage> ReadPhotoFolder(const std::string& dir);
 
 // Plane photos for CalibrateProjector: NAME_board.EXT and NAME_pattern.EXT pairs in one folder.
