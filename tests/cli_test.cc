@@ -106,6 +106,9 @@ TEST_F(Cli, CapturePipelineErrorsAreOneLine) {
   ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " --lights 3 -o " + P("c")), "3");
   ExpectOneLineError(Translume("acquire " + P("nowhere") + " -o " + P("out.vdb")), "capture.json");
   ExpectOneLineError(Translume("acquire " + P("full") + " -o " + P("out.exr")), "-o");
+  // An output that names a folder stops before the work, not after the solve.
+  fs::create_directories(P("folder.vdb"));
+  ExpectOneLineError(Translume("acquire " + P("nowhere") + " -o " + P("folder.vdb")), "-o " + P("folder.vdb") + ": is a folder");
 }
 
 TEST_F(Cli, GlPlatformsCanBeForcedAndBadOnesAreNamed) {
