@@ -168,7 +168,10 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   const fs::path work(rep.work_dir);
   fs::create_directories(work);
   StageLog log((work / "stages.json").string(), o.force);
+  bool solving = false;
   auto progress = [&](const std::string& s) {
+    if (!solving && o.stop && o.stop())
+      throw AcquireStopped(fmt::format("stopped before: {}; the finished stages are in {}", s, rep.work_dir));
     if (progress_fn) progress_fn(s);
   };
   auto t0 = Clock::now();
@@ -425,6 +428,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   nlohmann::json j;
   if (o.solve) {
     progress("solving for kappa and mu ...");
+    solving = true;
     RecoveryState state;
     rep.solve = Recover(d, o.recovery, &state, iteration);
     const Material m = MaterialFromState(d, state, cap.eta);

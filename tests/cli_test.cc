@@ -361,6 +361,32 @@ TEST_F(Cli, SamplesReadmeCommandsRun) {
   EXPECT_EQ(ReadMaterial(P("acquired.vdb")).shape, (GridShape{32, 24, 8}));
 }
 
+// Ctrl-C in acquire: before the solve it stops at the next stage (the finished ones stay in
+// OUT_work/, nothing else is written); during the solve it writes the best material so far,
+// the report and the previews, as `solve` does. Exit status 130 both times.
+TEST_F(Cli, AcquireStopsCleanlyOnSigint) {
+  ASSERT_EQ(Translume("synth --preset wax --grid 16x12x4 --spacing 0.5 -o " + P("m.vdb")).status, 0);
+  ASSERT_EQ(Translume("simulate-capture " + P("m.vdb") + " --lights 1x1 -o " + P("cap")).status, 0);
+  // Sends SIGINT once `acquire` has printed `line` (polling its log), then waits for it.
+  auto interrupt_at = [&](const std::string& out, const std::string& line) {
+    return testing_cli::Run(std::string(TRANSLUME_BINARY) + " acquire " + P("cap") + " -o " + P(out) +
+                            " --max-iterations 1000000 --tolerance 1e-15 > " + P("log") + " 2>&1 & pid=$!; "
+                            "for i in $(seq 1200); do grep -q '" + line + "' " + P("log") + " && break; sleep 0.1; done; "
+                            "kill -INT $pid; wait $pid; echo exit=$?; cat " + P("log"));
+  };
+  CommandRun r = interrupt_at("a.vdb", "calibrating the camera");
+  EXPECT_NE(r.output.find("exit=130"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("acquire: interrupted, stopped before"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(P("a.vdb")));
+  r = interrupt_at("b.vdb", "solving for kappa and mu");
+  EXPECT_NE(r.output.find("exit=130"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("is the best material so far"), std::string::npos) << r.output;
+  EXPECT_EQ(ReadMaterial(P("b.vdb")).shape, (GridShape{16, 12, 4}));
+  std::ifstream report(P("b_work/report.json"));
+  ASSERT_TRUE(report);
+  EXPECT_EQ(nlohmann::json::parse(report)["solve"]["termination"], "stopped");
+}
+
 // translume render / edit (issue 7, docs/render.md).
 TEST_F(Cli, RenderAndEdit) {
   ASSERT_EQ(Translume("synth --preset marble --grid 24x24x6 --spacing 0.5 -o " + P("m.vdb")).status, 0);

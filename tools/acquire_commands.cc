@@ -5,6 +5,7 @@
 #include <chrono>
 #include <algorithm>
 #include <cstdio>
+#include <optional>
 #include <filesystem>
 #include <fmt/format.h>
 
@@ -72,7 +73,9 @@ int RunAcquire(int argc, char** argv) {
   CLI::App app{"From a capture folder (docs/capture.md) to a material: calibration, HDR, sample\n"
                "pose, mapping of the photos onto the grid nodes, the node-space dataset, the\n"
                "solve, a report and previews. Intermediate results go to OUT_work/ and are\n"
-               "reused on a re-run unless their inputs changed (--force recomputes).",
+               "reused on a re-run unless their inputs changed (--force recomputes).\n"
+               "Ctrl-C stops at the next stage, or during the solve writes the best material so\n"
+               "far (exit status 130); a second Ctrl-C ends at once.",
                "translume acquire"};
   std::string capture_path, out;
   RecoveryFlags flags;
@@ -102,26 +105,39 @@ int RunAcquire(int argc, char** argv) {
   std::fflush(stdout);
   const bool tty = isatty(fileno(stdout));
   const int every = std::max(1, o.recovery.max_iterations / 10);
-  const auto rep = acquire::Acquire(
-      cap, out, o,
-      [](const std::string& line) {
-        std::printf("  %s\n", line.c_str());
-        std::fflush(stdout);
-      },
-      [&](const IterationReport& r, const RecoveryState&) {
-        if (tty || r.iteration % every == 0)
-          std::printf("%s  iteration %4d  objective %.4e  solves %lld  %s%s", tty ? "\r" : "", r.iteration,
-                      r.objective, (long long)r.solves, FormatSeconds(r.seconds).c_str(), tty ? "   " : "\n");
-        std::fflush(stdout);
-        return true;
-      });
+  // First Ctrl-C: stop at the next stage before the solve, or after the current iteration of
+  // the solve and write the best material so far (as `solve` does).
+  std::optional<SigintGuard> sigint(std::in_place);
+  o.stop = [&] { return sigint->interrupted(); };
+  acquire::AcquireReport rep;
+  try {
+    rep = acquire::Acquire(
+        cap, out, o,
+        [](const std::string& line) {
+          std::printf("  %s\n", line.c_str());
+          std::fflush(stdout);
+        },
+        [&](const IterationReport& r, const RecoveryState&) {
+          if (tty || r.iteration % every == 0)
+            std::printf("%s  iteration %4d  objective %.4e  solves %lld  %s%s", tty ? "\r" : "", r.iteration,
+                        r.objective, (long long)r.solves, FormatSeconds(r.seconds).c_str(), tty ? "   " : "\n");
+          std::fflush(stdout);
+          return !sigint->interrupted();
+        });
+  } catch (const acquire::AcquireStopped& e) {
+    std::printf("acquire: interrupted, %s (a re-run reuses them)\n", e.what());
+    return kInterruptedExit;
+  }
+  const bool interrupted = sigint->interrupted();
+  sigint.reset();
   if (tty) std::printf("\n");
   if (o.solve) std::printf("%s\n", rep.solve.BriefReport().c_str());
   std::printf("%s", rep.Table().c_str());
   std::printf("wrote %s%s, %s/dataset.json and %zu previews in %s/previews%s\n",
               o.solve ? (out + ", ").c_str() : "", rep.report_json.c_str(), rep.dataset_dir.c_str(),
               rep.previews.size(), rep.work_dir.c_str(), o.solve ? "" : " (--no-solve: no material)");
-  return 0;
+  if (interrupted) std::printf("interrupted: %s is the best material so far\n", out.c_str());
+  return interrupted ? kInterruptedExit : 0;
 }
 
 int RunDemo(int argc, char** argv) {

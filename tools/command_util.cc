@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <csignal>
 #include <cstdlib>
 #include <cstdio>
 #include <filesystem>
@@ -12,6 +13,28 @@
 #include "tools/commands.h"
 
 namespace translume {
+namespace {
+
+volatile std::sig_atomic_t g_interrupted = 0;
+
+void OnSigint(int) {
+  if (g_interrupted) {
+    std::signal(SIGINT, SIG_DFL);
+    std::raise(SIGINT);
+  }
+  g_interrupted = 1;
+}
+
+}  // namespace
+
+SigintGuard::SigintGuard() {
+  g_interrupted = 0;
+  previous_ = std::signal(SIGINT, OnSigint);
+}
+
+SigintGuard::~SigintGuard() { std::signal(SIGINT, previous_); }
+
+bool SigintGuard::interrupted() const { return g_interrupted != 0; }
 
 CLI::Validator PositiveFinite() {
   return CLI::Validator(

@@ -53,6 +53,23 @@ void RequireNotInput(const char* flag, const std::string& out, const std::vector
 // existing folder (checked before the work, so that it is not lost at the end).
 void RequireFilePath(const char* flag, const std::string& path);
 
+// Ctrl-C as a request to stop early: while a SigintGuard lives, the first SIGINT only sets a
+// flag that long-running work polls (between iterations, stages); a second one ends the
+// process at once (the default action). The previous handler comes back with the guard's end.
+// Exit status 130 is the shell's for a SIGINT.
+class SigintGuard {
+ public:
+  SigintGuard();
+  ~SigintGuard();
+  SigintGuard(const SigintGuard&) = delete;
+  SigintGuard& operator=(const SigintGuard&) = delete;
+  bool interrupted() const;
+
+ private:
+  void (*previous_)(int);
+};
+constexpr int kInterruptedExit = 130;
+
 // Parses argv into app; on --help prints and returns true (caller exits 0).
 bool ParseOrHelp(CLI::App& app, int argc, char** argv);
 

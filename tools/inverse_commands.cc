@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fmt/format.h>
@@ -32,17 +31,6 @@ namespace translume {
 namespace {
 
 namespace fs = std::filesystem;
-
-volatile std::sig_atomic_t g_interrupted = 0;
-// First Ctrl-C: finish the current iteration, then write the best material so far. A second
-// one ends the process at once (the default action).
-void OnSigint(int) {
-  if (g_interrupted) {
-    std::signal(SIGINT, SIG_DFL);
-    std::raise(SIGINT);
-  }
-  g_interrupted = 1;
-}
 
 }  // namespace
 
@@ -183,8 +171,8 @@ int RunSolve(int argc, char** argv) {
   if (state.x.empty()) std::printf("homogeneous fit first (6 unknowns)...\n");
   std::fflush(stdout);
   const bool tty = isatty(fileno(stdout));
-  g_interrupted = 0;
-  auto previous = std::signal(SIGINT, OnSigint);
+  // First Ctrl-C: finish the current iteration, then write the best material so far.
+  std::optional<SigintGuard> sigint(std::in_place);
   auto last_checkpoint = std::chrono::steady_clock::now();
   bool printed_homogeneous = !state.x.empty();
   double first_report = -1;
@@ -215,18 +203,12 @@ int RunSolve(int argc, char** argv) {
       WriteCheckpoint(checkpoint, d, s);
       last_checkpoint = std::chrono::steady_clock::now();
     }
-    return g_interrupted == 0;
+    return !sigint->interrupted();
   };
-  RecoverySummary sum;
-  try {
-    sum = Recover(d, o, &state, callback);
-  } catch (...) {
-    std::signal(SIGINT, previous);
-    throw;
-  }
-  std::signal(SIGINT, previous);
+  const RecoverySummary sum = Recover(d, o, &state, callback);
+  const bool interrupted = sigint->interrupted();
+  sigint.reset();  // writing the outputs: Ctrl-C ends at once again
   if (tty) std::printf("\n");
-  const bool interrupted = g_interrupted != 0;
   if (!checkpoint.empty()) WriteCheckpoint(checkpoint, d, state);
   const Material m = MaterialFromState(d, state);
   WriteMaterial(out, m);
@@ -268,7 +250,7 @@ int RunSolve(int argc, char** argv) {
   });
   std::printf("wrote %s, %s and %zu slices (%s_*.png)%s\n", out.c_str(), report.c_str(),
               slices.size(), base.c_str(), interrupted ? "; interrupted: this is the best material so far" : "");
-  return interrupted ? 130 : 0;
+  return interrupted ? kInterruptedExit : 0;
 }
 
 int RunEvaluate(int argc, char** argv) {
