@@ -201,13 +201,12 @@ std::vector<std::pair<Vec3, std::array<double, 3>>> EnvironmentSamples(const Ima
   return out;
 }
 
-double ToneMap(Image* image, double exposure) {
-  double scale = std::pow(2.0, exposure);
-  if (exposure <= 0) {
+double ToneMap(Image* image, std::optional<double> stops) {
+  double scale = stops ? std::pow(2.0, *stops) : 1.0;
+  if (!stops) {
     std::vector<float> v;
     for (float x : image->data)
       if (x > 0) v.push_back(x);
-    scale = 1;
     if (!v.empty()) {
       const size_t k = std::min(v.size() - 1, size_t(0.99 * v.size()));
       std::nth_element(v.begin(), v.begin() + k, v.end());

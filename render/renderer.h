@@ -2,6 +2,7 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -82,9 +83,10 @@ class Renderer {
 BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kappa,
                              const std::array<float, 3>& mu, double C, const BoundaryLight& q);
 
-// Tone map for 8-bit output: scale so that the 99th percentile of the non-zero pixels is 0.8
-// (exposure <= 0) or by 2^exposure, then the sRGB curve. Returns the scale used.
-double ToneMap(Image* image, double exposure);
+// Tone map for 8-bit output: scale by 2^stops (any finite stops, negative darkens), or, without
+// stops (auto exposure), so that the 99th percentile of the non-zero pixel values is 0.8; then
+// the sRGB curve. Returns the scale used.
+double ToneMap(Image* image, std::optional<double> stops);
 
 // Fresnel transmittance 1 - F_r for unpolarised light entering a dielectric of relative index
 // eta at incidence cosine cos_i.

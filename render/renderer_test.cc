@@ -206,6 +206,28 @@ TEST(Render, MeshShapeRendersAndBadLightsAreRefused) {
   EXPECT_THROW(RenderLight::Parse("dir:0,0,0"), InputError);
 }
 
+// Tone mapping: explicit stops scale by 2^stops, negative ones included (they used to fall
+// back to auto exposure); auto exposure puts the 99th percentile of the non-zero values at 0.8
+// and leaves an all-black image black.
+TEST(Render, ToneMapHonoursNegativeStops) {
+  Image img;
+  img.width = 100;
+  img.height = 1;
+  img.channels = 1;
+  for (int i = 0; i < 100; ++i) img.data.push_back(0.01f * (i + 1));  // 0.01 .. 1
+  Image a = img;
+  EXPECT_DOUBLE_EQ(ToneMap(&a, -2.0), 0.25);
+  EXPECT_NEAR(a.data[39], 1.055 * std::pow(0.1, 1 / 2.4) - 0.055, 1e-6);  // 0.4 x 0.25, sRGB
+  Image b = img;
+  EXPECT_DOUBLE_EQ(ToneMap(&b, 0.0), 1.0);
+  Image c = img;
+  EXPECT_DOUBLE_EQ(ToneMap(&c, std::nullopt), 0.8);  // the 99th value of 100 is 1.0
+  Image black = img;
+  std::fill(black.data.begin(), black.data.end(), 0.f);
+  EXPECT_DOUBLE_EQ(ToneMap(&black, std::nullopt), 1.0);
+  EXPECT_EQ(black.data[0], 0.f);
+}
+
 const char* Name(DiffusionBackend b) { return b == DiffusionBackend::kGl ? "gl" : "cpu"; }
 
 // The hemispherical integral of cos F_t(cos, 1.3) over directions, 2 pi int_0^{pi/2} F_t cos

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <fmt/format.h>
 #include <memory>
+#include <optional>
 
 #include "render/edit.h"
 #include "render/material_map.h"
@@ -81,9 +82,10 @@ int RunRender(int argc, char** argv) {
                "translume render"};
   std::string material, shape_name = "sphere", polycube_path, light = "dir:1,0.3,0.6", out,
               camera, image = "256x256", iterations = "200,100,100", depth, backend = "cpu";
-  double size_mm = 20, exposure = 0, map_scale = 1, first_layer = 0.1;
+  double size_mm = 20, map_scale = 1, first_layer = 0.1;
   int resolution = 17, levels = 3, turntable = 1;
   bool coherence = false, clamp = false;
+  std::optional<double> exposure;  // stops; none: auto exposure
   RenderOptions ro;
   app.add_option("material", material, "Material")->required();
   app.add_option("--shape", shape_name, "slab|sphere|torus|blob|bunny|MESH.obj|MESH.ply")->capture_default_str();
@@ -108,7 +110,7 @@ int RunRender(int argc, char** argv) {
   app.add_option("--reflectance", ro.surface_reflectance, "Lambertian surface reflectance")->capture_default_str();
   app.add_flag("--clamp", clamp, "Clamp the material in u, v instead of tiling");
   app.add_option("--map-scale", map_scale, "Surface mm per material mm")->capture_default_str();
-  app.add_option("--exposure", exposure, "PNG exposure in stops (0: auto)")->capture_default_str();
+  app.add_option("--exposure", exposure, "PNG exposure in stops (default: auto)");
   app.add_option("-o,--output", out, "Output image (.png or .exr)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
@@ -119,7 +121,7 @@ int RunRender(int argc, char** argv) {
     throw InputError("--image " + image + ": expected WxH");
   if (!camera.empty() && std::sscanf(camera.c_str(), "%lf,%lf%c", &ro.azimuth_deg, &ro.elevation_deg, &rest) != 2)
     throw InputError("--camera " + camera + ": expected AZIMUTH,ELEVATION");
-  if (!std::isfinite(exposure)) throw InputError("--exposure: must be a finite number of stops");
+  if (exposure && !std::isfinite(*exposure)) throw InputError("--exposure: must be a finite number of stops");
   if (turntable < 1) throw InputError("--turntable: must be >= 1");
   if (levels < 1) throw InputError("--levels: must be >= 1");
   if (std::string err = ro.Validate(); !err.empty()) throw InputError("render: " + err);
