@@ -454,17 +454,20 @@ TriangleMesh ReadPly(const std::string& path, std::istream& in) {
   std::string line, word;
   std::getline(in, line);
   if (line.rfind("ply", 0) != 0) MeshError(path, "not a PLY file (no 'ply' magic)");
-  bool binary = false;
+  bool binary = false, big_endian = false;
   struct Prop { std::string type, name, count_type; bool list = false; };
   struct Element { std::string name; int64_t count = 0; std::vector<Prop> props; };
   std::vector<Element> elements;
   while (std::getline(in, line)) {
     std::istringstream ls(line);
+    word.clear();  // a blank line must not repeat the previous keyword
     ls >> word;
     if (word == "format") {
       ls >> word;
-      if (word == "binary_little_endian") binary = true;
-      else if (word != "ascii") MeshError(path, "unsupported PLY format '" + word + "'");
+      if (word == "binary_little_endian" || word == "binary_big_endian") {
+        binary = true;
+        big_endian = word == "binary_big_endian";
+      } else if (word != "ascii") MeshError(path, "unsupported PLY format '" + word + "'");
     } else if (word == "element") {
       Element e;
       ls >> e.name >> e.count;
@@ -483,6 +486,8 @@ TriangleMesh ReadPly(const std::string& path, std::istream& in) {
       break;
     }
   }
+  const uint16_t one = 1;
+  const bool host_big_endian = *reinterpret_cast<const uint8_t*>(&one) == 0;
   auto read_value = [&](const std::string& type) -> double {
     if (!binary) {
       double v;
@@ -490,8 +495,11 @@ TriangleMesh ReadPly(const std::string& path, std::istream& in) {
       return v;
     }
     auto get = [&](auto x) {
-      in.read(reinterpret_cast<char*>(&x), sizeof(x));
+      char bytes[sizeof(x)];
+      in.read(bytes, sizeof(x));
       if (!in) MeshError(path, "PLY data ends early");
+      if (big_endian != host_big_endian) std::reverse(bytes, bytes + sizeof(x));
+      std::memcpy(&x, bytes, sizeof(x));
       return double(x);
     };
     if (type == "char" || type == "int8") return get(int8_t());

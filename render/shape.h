@@ -27,9 +27,9 @@ struct TriangleMesh {
 };
 
 // Reads a Wavefront OBJ ("v" and "f" records; polygons are fan-triangulated; "f a/b/c" and
-// negative indices accepted) or a PLY (ascii or binary_little_endian; vertex x, y, z and a face
-// vertex_indices list) by extension, and validates it. Throws InputError naming the file and
-// the problem.
+// negative indices accepted) or a PLY (ascii, binary_little_endian or binary_big_endian; vertex
+// x, y, z and a face vertex_indices list) by extension, and validates it. Throws InputError
+// naming the file and the problem.
 TriangleMesh ReadMesh(const std::string& path);
 void WriteObj(const std::string& path, const TriangleMesh& mesh);
 

@@ -3,7 +3,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -61,6 +63,34 @@ TEST(Shape, ObjAndPlyMeshes) {
   const auto binary = ReadMesh(Write("tl_tet_bin.ply", bin));
   EXPECT_EQ(binary.vertices[3], Vec3(0, 0, 1));
   EXPECT_EQ(binary.triangles, ascii.triangles);
+}
+
+// Binary big-endian PLY (used to be refused as an unsupported format), with a blank header
+// line: the same tetrahedron as the ascii file, double coordinates and uint16 indices.
+TEST(Shape, BigEndianPly) {
+  std::string ply =
+      "ply\nformat binary_big_endian 1.0\ncomment written big endian\nelement vertex 4\n"
+      "property double x\nproperty double y\nproperty double z\n\nelement face 4\n"
+      "property list uchar ushort vertex_indices\nend_header\n";
+  auto put = [&](auto v) {
+    char b[sizeof(v)];
+    std::memcpy(b, &v, sizeof(v));
+    const uint16_t one = 1;
+    if (*reinterpret_cast<const uint8_t*>(&one) == 1) std::reverse(b, b + sizeof(v));
+    ply.append(b, sizeof(v));
+  };
+  const double xyz[12] = {0, 0, 0, 1.5, 0, 0, 0, 1, 0, 0, 0, -2};
+  for (double v : xyz) put(v);
+  const uint16_t faces[4][3] = {{0, 1, 2}, {0, 3, 1}, {1, 3, 2}, {0, 2, 3}};
+  for (const auto& f : faces) {
+    ply.push_back(char(3));
+    for (uint16_t i : f) put(i);
+  }
+  const auto m = ReadMesh(Write("tl_tet_be.ply", ply));
+  EXPECT_EQ(m.vertices[1], Vec3(1.5, 0, 0));
+  EXPECT_EQ(m.vertices[3], Vec3(0, 0, -2));
+  ASSERT_EQ(m.triangles.size(), 4u);
+  EXPECT_EQ(m.triangles[1], (std::array<int, 3>{0, 3, 1}));
 }
 
 TEST(Shape, BadMeshesGiveClearErrors) {
