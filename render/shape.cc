@@ -296,7 +296,8 @@ class MeshShape : public Shape {
           for (int x = c0[0]; x <= c1[0]; ++x) cells_[Index(x, y, z)].push_back(int32_t(t));
     }
   }
-  void Project(const Vec3& p, Vec3* s, Vec3* n) const override {
+  void Project(const Vec3& p_in, Vec3* s, Vec3* n) const override {
+    const Vec3 p = p_in;  // callers project in place (s == &p_in); *s changes during the search
     double best = 1e300;
     const auto c = CellOf(p);
     // Distance from p to its (clamped) cell: unvisited cells of ring r + 1 are at least

@@ -40,7 +40,7 @@ class Shape {
   virtual ~Shape() = default;
   // Maps p to a point on the surface and returns the outward unit normal there. Built-in shapes
   // use an analytic projection (radial for star-shaped ones, closest point otherwise), meshes
-  // the closest point with interpolated vertex normals.
+  // the closest point with interpolated vertex normals. `surface` may be &p (in place).
   virtual void Project(const Vec3& p, Vec3* surface, Vec3* normal) const = 0;
   // The first projection of a boundary node from the stretched polycube (Section 5.1): the
   // surface point on the line through `centre` (inside the polycube: the centre of the node's

@@ -132,6 +132,32 @@ TEST(Shape, MeshProjectionMatchesBruteForce) {
   }
 }
 
+// The polygrid projects its nodes in place (Project(x, &x, &n)). The mesh projection used to
+// write its current best point into *s during the search and go on measuring from it, so in
+// place it returned a point on the wrong face: on a 12-triangle cube, boundary nodes of one
+// face landed on the next one and the polygrid folded (non-finite Laplacian weights).
+TEST(Shape, MeshProjectionInPlace) {
+  const auto blob = MakeMeshShape(MakeBuiltinShape("blob", 20, 12)->mesh(), "blob.obj", 0);
+  const auto cube = MakeMeshShape(MakeBoxShape(Vec3(4, 4, 4), 1)->mesh(), "cube.obj", 0);
+  uint32_t state = 777;
+  auto uniform = [&] { state = state * 1664525u + 1013904223u; return (state >> 8) / double(1 << 24); };
+  for (const Shape* shape : {blob.get(), cube.get()}) {
+    const double r = (shape->hi - shape->lo).maxCoeff();
+    for (int i = 0; i < 200; ++i) {
+      const Vec3 p = shape->lo + r * Vec3(uniform(), uniform(), uniform()) - 0.1 * r * Vec3::Ones();
+      Vec3 s, n, x = p, nx;
+      shape->Project(p, &s, &n);
+      shape->Project(x, &x, &nx);
+      EXPECT_LT((x - s).norm(), 1e-12) << shape->name() << " " << i;
+      EXPECT_LT((nx - n).norm(), 1e-12) << shape->name() << " " << i;
+    }
+  }
+  // The cube's face point stays where it is.
+  Vec3 x(-1.5, -2, -1.5), n;
+  cube->Project(x, &x, &n);
+  EXPECT_LT((x - Vec3(-1.5, -2, -1.5)).norm(), 1e-12);
+}
+
 TEST(Shape, ClosestPointOnTriangle) {
   double u, v, w;
   const Vec3 a(0, 0, 0), b(1, 0, 0), c(0, 1, 0);
