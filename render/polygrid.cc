@@ -197,12 +197,19 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
     TL_CHECK(count > 0);
     for (int a = 0; a < 3; ++a) cube_centre[b - pg.num_interior][a] = sum[a] / count;
   }
-  auto project_boundary = [&] {
+  // along: from the plain stretch, along the lines from the cubes' centres; else (the crease
+  // restart below, whose nodes sit off flat sides along their normals) the closest point.
+  auto project_boundary = [&](bool along) {
     for (int64_t b = pg.num_interior; b < N; ++b) {
+      Vec3& normal = pg.normal[b - pg.num_interior];
+      if (!along) {
+        shape.Project(pg.position[b], &pg.position[b], &normal);
+        continue;
+      }
       Vec3 centre;
       for (int a = 0; a < 3; ++a)
         centre[a] = shape.lo[a] + (shape.hi[a] - shape.lo[a]) * cube_centre[b - pg.num_interior][a] / (lat.n[a] - 1);
-      shape.ProjectAlong(pg.position[b], centre, &pg.position[b], &pg.normal[b - pg.num_interior]);
+      shape.ProjectAlong(pg.position[b], centre, &pg.position[b], &normal);
     }
     for (int it = 0; it < options.boundary_relax_iterations; ++it) {
       std::vector<Vec3> next = pg.position;
@@ -216,7 +223,7 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       pg.position.swap(next);
     }
   };
-  project_boundary();
+  project_boundary(true);
   double spacing_sum = 0;
   int64_t spacing_count = 0;
   for (int64_t b = pg.num_interior; b < N; ++b)
@@ -261,7 +268,7 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       for (int64_t n = 0; n < N; ++n)
         pg.position[n][a] = shape.lo[a] + e_lo + (extent - e_lo - e_hi) * (pg.lattice[n][a] - 1) / (lat.n[a] - 3);
     }
-    project_boundary();
+    project_boundary(false);
   }
 
   // First interior nodes: at distance d along the inward normal of their boundary node.

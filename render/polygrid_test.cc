@@ -81,6 +81,29 @@ TEST(Polygrid, SingleCubeBoxCountsAndGeometry) {
     }
 }
 
+// A 12-triangle cube read as a mesh is the same box as the built-in one, so its polygrid must
+// be the same: boundary nodes, normals, links along the face normals. The mesh's normals used
+// to be interpolated from the vertex normals (the cube's diagonals at every corner), which
+// tilted the boundary normals by up to 55 degrees, so the incident light's cosine and the
+// first layer's placement were wrong on every flat-faced mesh.
+TEST(Polygrid, CubeMeshMatchesBuiltinBox) {
+  const auto box = MakeBoxShape(Vec3(4, 4, 4));
+  const auto cube = MakeMeshShape(MakeBoxShape(Vec3(4, 4, 4), 1)->mesh(), "cube.obj", 0);
+  ASSERT_EQ(cube->mesh().triangles.size(), 12u);
+  PolygridOptions o;
+  o.resolution = 9;
+  const Polygrid a = BuildPolygrid(BuiltinPolycube("box"), *box, o);
+  const Polygrid b = BuildPolygrid(BuiltinPolycube("box"), *cube, o);
+  ExpectWellFormed(b);
+  ASSERT_EQ(a.size(), b.size());
+  ASSERT_EQ(a.num_interior, b.num_interior);
+  double pos = 0, nrm = 0;
+  for (int64_t n = 0; n < a.size(); ++n) pos = std::max(pos, (a.position[n] - b.position[n]).norm());
+  for (int64_t k = 0; k < a.num_boundary(); ++k) nrm = std::max(nrm, (a.normal[k] - b.normal[k]).norm());
+  EXPECT_LT(pos, 1e-6);
+  EXPECT_LT(nrm, 1e-9);
+}
+
 TEST(Polygrid, BuiltinShapesAreWellFormed) {
   for (const std::string name : {"sphere", "blob", "torus", "slab"}) {
     SCOPED_TRACE(name);

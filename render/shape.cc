@@ -20,6 +20,9 @@ namespace translume {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
+// Faces meeting at more than this angle (degrees) form a crease of a mesh: its normals are not
+// interpolated across it (MeshShape::Project).
+constexpr double kMeshCreaseDeg = 45;
 
 // A parametric grid of (nu + 1) x (nv + 1) points, u periodic (wrapping), v either periodic
 // (torus) or pole-to-pole (sphere: rows 0 and nv collapse to one vertex each).
@@ -277,7 +280,7 @@ class MeshShape : public Shape {
     name_ = name;
     OrientOutward(&mesh_);
     mesh_.Bounds(&lo, &hi);
-    normals_ = mesh_.VertexNormals();
+    normals_ = mesh_.CornerNormals(kMeshCreaseDeg);
     const Vec3 ext = (hi - lo).cwiseMax(Vec3::Constant(1e-9));
     const double per_axis = std::clamp(std::cbrt(double(mesh_.triangles.size()) / 2), 1.0, 128.0);
     const double cell = ext.maxCoeff() / per_axis;
@@ -324,7 +327,7 @@ class MeshShape : public Shape {
               if (d < best) {
                 best = d;
                 *s = q;
-                *n = (u * normals_[tri[0]] + v * normals_[tri[1]] + w * normals_[tri[2]]).normalized();
+                *n = (u * normals_[t][0] + v * normals_[t][1] + w * normals_[t][2]).normalized();
               }
             }
           }
@@ -392,9 +395,9 @@ class MeshShape : public Shape {
       t_max[a] += t_delta[a];
     }
     if (best_tri < 0) return Project(p, s, n);
-    const auto& tri = mesh_.triangles[best_tri];
     *s = p + best_t * u;
-    *n = ((1 - bu - bv) * normals_[tri[0]] + bu * normals_[tri[1]] + bv * normals_[tri[2]]).normalized();
+    const auto& cn = normals_[best_tri];
+    *n = ((1 - bu - bv) * cn[0] + bu * cn[1] + bv * cn[2]).normalized();
   }
 
  private:
@@ -405,7 +408,7 @@ class MeshShape : public Shape {
   }
   size_t Index(int x, int y, int z) const { return x + size_t(dims_[0]) * (y + size_t(dims_[1]) * z); }
 
-  std::vector<Vec3> normals_;
+  std::vector<std::array<Vec3, 3>> normals_;  // per triangle corner, sharp at creases
   std::array<int, 3> dims_ = {1, 1, 1};
   Vec3 cell_ = Vec3::Ones();
   std::vector<std::vector<int32_t>> cells_;
@@ -585,6 +588,28 @@ std::vector<Vec3> TriangleMesh::VertexNormals() const {
   }
   for (Vec3& v : n) v = v.norm() > 0 ? Vec3(v.normalized()) : Vec3(0, 0, 1);
   return n;
+}
+
+std::vector<std::array<Vec3, 3>> TriangleMesh::CornerNormals(double crease_deg) const {
+  std::vector<Vec3> fn(triangles.size());  // area-weighted (twice the area)
+  std::vector<std::vector<int32_t>> around(vertices.size());
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    const auto& tri = triangles[t];
+    fn[t] = (vertices[tri[1]] - vertices[tri[0]]).cross(vertices[tri[2]] - vertices[tri[0]]);
+    for (int c = 0; c < 3; ++c) around[tri[c]].push_back(int32_t(t));
+  }
+  const double min_cos = std::cos(crease_deg * kPi / 180);
+  std::vector<std::array<Vec3, 3>> out(triangles.size());
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    const Vec3 own = fn[t].norm() > 0 ? Vec3(fn[t].normalized()) : Vec3::Zero();
+    for (int c = 0; c < 3; ++c) {
+      Vec3 sum = Vec3::Zero();
+      for (int32_t s : around[triangles[t][c]])
+        if (size_t(s) == t || (fn[s].norm() > 0 && fn[s].normalized().dot(own) >= min_cos)) sum += fn[s];
+      out[t][c] = sum.norm() > 0 ? Vec3(sum.normalized()) : Vec3(0, 0, 1);
+    }
+  }
+  return out;
 }
 
 TriangleMesh ReadMesh(const std::string& path) {

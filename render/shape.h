@@ -24,6 +24,11 @@ struct TriangleMesh {
   void Bounds(Vec3* lo, Vec3* hi) const;
   // Area-weighted vertex normals (unit length).
   std::vector<Vec3> VertexNormals() const;
+  // Per triangle corner: the area-weighted mean of the face normals of the triangles around
+  // the corner's vertex whose normal is within crease_deg of this triangle's own (unit length).
+  // Smooth across shallow edges, sharp at creases: on a 12-triangle cube every corner normal is
+  // its face's, where VertexNormals gives the cube's diagonals.
+  std::vector<std::array<Vec3, 3>> CornerNormals(double crease_deg) const;
 };
 
 // Reads a Wavefront OBJ ("v" and "f" records; polygons are fan-triangulated; "f a/b/c" and
@@ -40,7 +45,8 @@ class Shape {
   virtual ~Shape() = default;
   // Maps p to a point on the surface and returns the outward unit normal there. Built-in shapes
   // use an analytic projection (radial for star-shaped ones, closest point otherwise), meshes
-  // the closest point with interpolated vertex normals. `surface` may be &p (in place).
+  // the closest point with the normal interpolated from its triangle's corner normals
+  // (TriangleMesh::CornerNormals, crease at 45 degrees). `surface` may be &p (in place).
   virtual void Project(const Vec3& p, Vec3* surface, Vec3* normal) const = 0;
   // The first projection of a boundary node from the stretched polycube (Section 5.1): the
   // surface point on the line through `centre` (inside the polycube: the centre of the node's
