@@ -38,9 +38,10 @@ void EditOptions::ParseTerm(const std::string& text, bool add) {
 
 void EditOptions::ParseDepth(const std::string& text) {
   int a = 0, b = 0;
-  char colon = 0;
-  if (std::sscanf(text.c_str(), "%d%c%d", &a, &colon, &b) != 3 || colon != ':')
+  char colon = 0, rest = 0;
+  if (std::sscanf(text.c_str(), "%d%c%d%c", &a, &colon, &b, &rest) != 3 || colon != ':')
     throw InputError("--depth " + text + ": expected A:B (node layers)");
+  if (a < 0 || b < a) throw InputError("--depth " + text + ": the depth range A:B needs 0 <= A <= B");
   depth_begin = a;
   depth_end = b;
 }

@@ -22,7 +22,7 @@ struct EditOptions {
   std::string Validate() const;
   // Parses "kappa=2" / "mu=0.5" into the scale (add = false) or add fields. Throws InputError.
   void ParseTerm(const std::string& text, bool add);
-  // Parses "A:B" (node layers) into the depth range. Throws InputError.
+  // Parses "A:B" (node layers, 0 <= A <= B, inclusive) into the depth range. Throws InputError.
   void ParseDepth(const std::string& text);
 };
 

@@ -35,7 +35,16 @@ TEST(Edit, BadEditsAreRefused) {
   EXPECT_THROW(o.ParseTerm("kappa=two", false), InputError);
   EXPECT_THROW(o.ParseTerm("kappa", true), InputError);
   EXPECT_THROW(o.ParseDepth("3"), InputError);
-  o.ParseDepth("3:1");
+  // Trailing text and a negative end (the internal 'to the deepest layer') used to be accepted:
+  // "2:-1" silently edited every layer from 2 down.
+  EXPECT_THROW(o.ParseDepth("1:2x"), InputError);
+  EXPECT_THROW(o.ParseDepth("2:-1"), InputError);
+  EXPECT_THROW(o.ParseDepth("-1:2"), InputError);
+  EXPECT_THROW(o.ParseDepth("3:1"), InputError);
+  o.ParseDepth("2:2");
+  EXPECT_EQ(o.depth_begin, 2);
+  EXPECT_EQ(o.depth_end, 2);
+  o.depth_begin = 3;
   EXPECT_FALSE(o.Validate().empty());
   const Material m = Material::Constant({2, 2, 2}, 0.5, {0.2f, 0.2f, 0.2f}, {0.01f, 0.01f, 0.01f});
   EditOptions neg;
