@@ -8,6 +8,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "calib/error.h"
+#include "calib/hdr.h"
 #include "calib/parallel.h"
 
 namespace translume::calib {
@@ -46,11 +47,15 @@ CameraCalibration CalibrateCamera(const BoardSpec& board, const std::vector<Name
   std::vector<std::vector<cv::Point3f>> obj;
   std::vector<std::vector<cv::Point2f>> img;
   std::vector<std::string> names;
-  for (const NamedImage& v : views)  // before any (slow) detection
-    if (v.image.size() != c.image_size)
-      throw CalibError(fmt::format("{}: image is {}x{} but {} is {}x{}; all photos must have the "
-                                   "same size", v.name, v.image.cols, v.image.rows,
-                                   views[0].name, c.image_size.width, c.image_size.height));
+  {  // before any (slow) detection
+    std::vector<std::string> names;
+    std::vector<cv::Size> sizes;
+    for (const NamedImage& v : views) {
+      names.push_back(v.name);
+      sizes.push_back(v.image.size());
+    }
+    RequireOneSize(names, sizes, "the calibration's");
+  }
   std::vector<BoardDetection> found(views.size());  // detected in parallel, used in order
   ParallelFor(int(views.size()), [&](int i) { found[size_t(i)] = DetectBoard(board, views[size_t(i)].image); });
   for (size_t i = 0; i < views.size(); ++i) {

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
@@ -138,6 +139,19 @@ void WritePhoto(const std::string& path, const cv::Mat& image) {
   WriteWithOiio(path, image, image.depth() == CV_8U ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16);
 }
 
+void RequireOneSize(const std::vector<std::string>& names, const std::vector<cv::Size>& sizes,
+                    const std::string& whose) {
+  std::map<std::pair<int, int>, int> count;
+  for (const cv::Size& s : sizes) ++count[{s.width, s.height}];
+  const auto common = std::max_element(count.begin(), count.end(),
+                                       [](const auto& a, const auto& b) { return a.second < b.second; });
+  for (size_t i = 0; i < sizes.size(); ++i)
+    if (std::pair(sizes[i].width, sizes[i].height) != common->first)
+      throw CalibError(fmt::format("{}: image is {}x{} but {} of {} {} photos are {}x{}", names[i],
+                                   sizes[i].width, sizes[i].height, common->second, whose, sizes.size(),
+                                   common->first.first, common->first.second));
+}
+
 ExposureStack ReadExposureStack(const std::string& dir) {
   if (!fs::is_directory(dir)) throw CalibError(dir + ": not a folder");
   std::vector<fs::path> files;
@@ -171,6 +185,15 @@ ExposureStack ReadExposureStack(const std::string& dir) {
     pixels[size_t(i)] = ReadRgbImage(files[size_t(i)].string(), &exifs[size_t(i)], &g);
     grey[size_t(i)] = g;
   });
+  {
+    std::vector<std::string> names;
+    std::vector<cv::Size> sizes;
+    for (size_t i = 0; i < files.size(); ++i) {
+      names.push_back(files[i].string());
+      sizes.push_back(pixels[i].size());
+    }
+    RequireOneSize(names, sizes, "the stack's");
+  }
   for (size_t i = 0; i < files.size(); ++i) {
     const fs::path& p = files[i];
     Exposure e;
@@ -178,16 +201,20 @@ ExposureStack ReadExposureStack(const std::string& dir) {
     const double exif = exifs[i];
     e.pixels = std::move(pixels[i]);
     const std::string name = p.filename().string();
-    if (exif > 0) e.seconds = exif;
-    else if (times.contains(name) && times[name].is_number()) e.seconds = times[name].get<double>();
-    if (!(e.seconds > 0) || !std::isfinite(e.seconds))
-      throw CalibError(fmt::format("{}: no exposure time (no EXIF ExposureTime and no positive "
-                                   "entry \"{}\" in {})", e.path, name, json_path.string()));
+    // An entry in exposures.json overrides EXIF (a camera that writes wrong times).
+    const bool listed = times.contains(name);
+    if (listed && times[name].is_number()) e.seconds = times[name].get<double>();
+    else if (!listed && exif > 0 && std::isfinite(exif)) e.seconds = exif;
+    if (!(e.seconds > 0) || !std::isfinite(e.seconds)) {
+      const std::string json = json_path.string();
+      throw CalibError(fmt::format(
+          "{}: no exposure time ({})", e.path,
+          listed ? fmt::format("its entry \"{}\" in {} is not a positive number of seconds", name, json)
+          : exif != 0 ? fmt::format("its EXIF ExposureTime {} is unusable and {} has no entry \"{}\"", exif, json, name)
+                      : fmt::format("no EXIF ExposureTime and no positive entry \"{}\" in {}", name, json)));
+    }
     if (!s.exposures.empty()) {
       const Exposure& f = s.exposures[0];
-      if (e.pixels.size() != f.pixels.size())
-        throw CalibError(fmt::format("{}: image is {}x{} but {} is {}x{}", e.path, e.pixels.cols,
-                                     e.pixels.rows, f.path, f.pixels.cols, f.pixels.rows));
       if (e.pixels.depth() != f.pixels.depth())
         throw CalibError(fmt::format("{}: bit depth differs from {}", e.path, f.path));
       if (grey[i] != grey[0])

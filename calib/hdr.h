@@ -37,6 +37,12 @@ bool IsPhotoFile(const std::string& path);
 // Throws CalibError "PATH: problem", also for a damaged JPEG (cut short or corrupt data).
 cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds = nullptr, bool* grey = nullptr);
 
+// Throws CalibError "NAME: image is WxH but K of WHOSE N photos are W2xH2" for the first photo
+// whose size differs from the size most of them share, so that the odd photo is the one named
+// whichever sorts first (WHOSE: "the stack's", "the folder's").
+void RequireOneSize(const std::vector<std::string>& names, const std::vector<cv::Size>& sizes,
+                    const std::string& whose);
+
 // Writes a CV_32FC3 RGB image as an OpenEXR file (float). Throws CalibError on failure.
 void WriteExr(const std::string& path, const cv::Mat& rgb);
 // Writes an 8-bit grey (CV_8UC1) or RGB (CV_8UC3) image; format from the extension.

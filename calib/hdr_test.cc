@@ -9,6 +9,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/photo.hpp>
@@ -260,6 +261,19 @@ class HdrFiles : public ::testing::Test {
     if (with_json) std::ofstream(dir_ / "exposures.json") << nlohmann_json_;
   }
   std::string P(const std::string& n) const { return (dir_ / n).string(); }
+  // 8x8 JPEGs PREFIX0.jpg, PREFIX1.jpg, ... with these EXIF exposure times.
+  void WriteJpegs(const std::string& prefix, const std::vector<float>& seconds) {
+    const cv::Mat img8(8, 8, CV_8UC3, cv::Scalar(10, 20, 30));
+    for (size_t j = 0; j < seconds.size(); ++j) {
+      const std::string path = P(fmt::format("{}{}.jpg", prefix, j));
+      auto out = OIIO::ImageOutput::create(path);
+      OIIO::ImageSpec spec(8, 8, 3, OIIO::TypeDesc::UINT8);
+      spec.attribute("ExposureTime", seconds[j]);
+      ASSERT_TRUE(out->open(path, spec));
+      ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, img8.data));
+      out->close();
+    }
+  }
   std::string Error(const std::function<void()>& f) {
     try {
       f();
@@ -300,19 +314,31 @@ TEST_F(HdrFiles, ReadsExifExposureTime) {
   // JPEG carries EXIF too; 8-bit stays 8-bit.
   fs::remove_all(dir_);
   fs::create_directories(dir_);
-  const cv::Mat img8(8, 8, CV_8UC3, cv::Scalar(10, 20, 30));
-  for (int j = 0; j < 2; ++j) {
-    const std::string path = P(fmt::format("j{}.jpg", j));
-    auto out = OIIO::ImageOutput::create(path);
-    OIIO::ImageSpec spec(8, 8, 3, OIIO::TypeDesc::UINT8);
-    spec.attribute("ExposureTime", j ? 0.02f : 0.01f);
-    ASSERT_TRUE(out->open(path, spec));
-    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, img8.data));
-    out->close();
-  }
+  WriteJpegs("j", {0.01f, 0.02f});
   const ExposureStack j = ReadExposureStack(dir_.string());
   EXPECT_NEAR(j.exposures[1].seconds, 0.02, 1e-5);  // EXIF rational
   EXPECT_TRUE(j.IsEightBit());
+  // An entry in exposures.json overrides EXIF (a camera writing wrong times).
+  std::ofstream(dir_ / "exposures.json") << "{\"j1.jpg\": 0.04}";
+  const ExposureStack k = ReadExposureStack(dir_.string());
+  EXPECT_NEAR(k.exposures[0].seconds, 0.01, 1e-5);
+  EXPECT_DOUBLE_EQ(k.exposures[1].seconds, 0.04);
+}
+
+// An EXIF time that is no time falls back to exposures.json, and without an entry there the
+// message says what was wrong. (OpenImageIO 2.4 writes a JPEG's ExposureTime of 1/8 or 1/2
+// so that it reads back as inf; such files exist.)
+TEST_F(HdrFiles, UnusableExifTimeFallsBackToJson) {
+  WriteJpegs("x", {0.125f, 0.5f});
+  double exif = 0;
+  ReadRgbImage(P("x0.jpg"), &exif);
+  if (std::isfinite(exif)) GTEST_SKIP() << "this OpenImageIO writes 1/8 s readably: " << exif;
+  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); })
+                .find(P("x0.jpg") + ": no exposure time (its EXIF ExposureTime inf is unusable"), 0u);
+  std::ofstream(dir_ / "exposures.json") << "{\"x0.jpg\": 0.125, \"x1.jpg\": 0.5}";
+  const ExposureStack s = ReadExposureStack(dir_.string());
+  EXPECT_DOUBLE_EQ(s.exposures[0].seconds, 0.125);
+  EXPECT_DOUBLE_EQ(s.exposures[1].seconds, 0.5);
 }
 
 TEST_F(HdrFiles, BadStacksNameTheFile) {
@@ -321,7 +347,13 @@ TEST_F(HdrFiles, BadStacksNameTheFile) {
   std::ofstream(dir_ / "exposures.json") << nlohmann_json_;
   cv::imwrite(P("img3.png"), cv::Mat(10, 10, CV_8UC3));
   std::ofstream(dir_ / "exposures.json") << nlohmann_json_.substr(0, nlohmann_json_.size() - 1) + ", \"img3.png\": 1}";
-  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": image is 10x10"), 0u);
+  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": image is 10x10 but 3 of the stack's 4 photos are 64x48"), 0u);
+  // The odd photo is named also when it sorts first.
+  fs::rename(P("img3.png"), P("a.png"));
+  std::ofstream(dir_ / "exposures.json") << nlohmann_json_.substr(0, nlohmann_json_.size() - 1) + ", \"a.png\": 1}";
+  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("a.png") + ": image is 10x10"), 0u);
+  fs::remove(P("a.png"));
+  std::ofstream(dir_ / "exposures.json") << nlohmann_json_.substr(0, nlohmann_json_.size() - 1) + ", \"img3.png\": 1}";
   // A greyscale photo among colour ones (read as grey RGB, it would skew the colours).
   cv::imwrite(P("img3.png"), cv::Mat(48, 64, CV_8UC1, cv::Scalar(100)));
   EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": a greyscale photo"), 0u);
