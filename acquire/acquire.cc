@@ -294,10 +294,11 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
 
   // 2. HDR.
   const fs::path hdr_dir = work / "hdr";
-  auto merge = [&](const std::string& name, const std::string& stack) {
-    const std::string exr = (hdr_dir / (name + ".exr")).string();
+  // key: the stage log's; exr: where the merged image is kept.
+  auto merge = [&](const std::string& key, const fs::path& exr_path, const std::string& stack) {
+    const std::string exr = exr_path.string();
     const std::string sig = Signature({stack, response_file});
-    if (log.Done("hdr:" + name, sig, {exr})) return calib::ReadLinearRgb(exr);
+    if (log.Done(key, sig, {exr})) return calib::ReadLinearRgb(exr);
     const calib::ExposureStack s = calib::ReadExposureStack(stack);
     if (s.Size() != camera.image_size)
       throw InputError(fmt::format("{}: photos are {}x{} but the camera calibration is {}x{}", stack,
@@ -307,16 +308,18 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       throw InputError(fmt::format("{}: 8-bit photos need a camera response (capture.json: response)", stack));
     const calib::HdrImage hdr = calib::MergeHdr(s, s.IsEightBit() ? curve : nullptr);
     WriteAtomically(exr, [&](const std::string& tmp) { calib::WriteExr(tmp, hdr.radiance); });
-    log.Record("hdr:" + name, sig);
+    log.Record(key, sig);
     computed = true;
     return hdr.radiance;
   };
   std::vector<cv::Mat> hdr;
   for (size_t m = 0; m < cap.conditions.size(); ++m) {
-    hdr.push_back(merge(cap.conditions[m].name, cap.conditions[m].stack));
+    const std::string& name = cap.conditions[m].name;
+    hdr.push_back(merge("hdr:" + name, hdr_dir / (name + ".exr"), cap.conditions[m].stack));
     progress(fmt::format("hdr {}/{}: {}", m + 1, cap.conditions.size(), cap.conditions[m].stack));
   }
-  const cv::Mat black = cap.black.empty() ? cv::Mat() : merge("black", cap.black);
+  // Outside hdr/, whose files are named after the conditions (one may be called "black").
+  const cv::Mat black = cap.black.empty() ? cv::Mat() : merge("black_hdr", work / "black.exr", cap.black);
   if (!computed) rep.reused.push_back("hdr");
   stage_done("hdr");
 

@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -149,6 +150,26 @@ TEST_F(AcquireTest, LightSpecConditionsNeedNoProjector) {
     }
   });
   CheckMapping(Setup::kBack, false, c, Out());
+}
+
+// A condition may be called "black" beside the capture's black stack: their HDR images used
+// to share one file and stage-log entry, each overwriting the other, so every re-run merged
+// both again (and the file held the black stack's image).
+TEST_F(AcquireTest, ConditionNamedBlackKeepsItsOwnHdr) {
+  const std::string c = Copy(Setup::kBack);
+  EditJson(c, [](nlohmann::json& j) {
+    ASSERT_TRUE(j.contains("black"));
+    j["conditions"][0]["name"] = "black";
+  });
+  AcquireOptions o;
+  o.solve = false;
+  const AcquireReport first = Acquire(ReadCapture(c), Out(), o);
+  const fs::path work(first.work_dir);
+  const cv::Mat lit = calib::ReadLinearRgb((work / "hdr" / "black.exr").string());
+  const cv::Mat dark = calib::ReadLinearRgb((work / "black.exr").string());
+  EXPECT_GT(cv::sum(lit)[1], 10 * cv::sum(dark)[1]);  // the lit condition, not the black stack
+  const AcquireReport again = Acquire(ReadCapture(c), Out(), o);
+  EXPECT_NE(std::find(again.reused.begin(), again.reused.end(), "hdr"), again.reused.end());
 }
 
 TEST_F(AcquireTest, EndToEndHeldOutError) {
