@@ -142,9 +142,10 @@ double FresnelTransmittance(double cos_i, double eta) {
 }
 
 BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kappa,
-                             const std::array<float, 3>& mu, double C, const BoundaryLight& q) {
+                             const std::array<float, 3>& mu, double C, const BoundaryLight& q,
+                             double node_area) {
   const int64_t nb = pg.num_boundary();
-  const double area = pg.mean_boundary_spacing * pg.mean_boundary_spacing;
+  const double area = node_area > 0 ? node_area : pg.mean_boundary_spacing * pg.mean_boundary_spacing;
   BoundaryLight L;
   for (int c = 0; c < 3; ++c) {
     const double sa = mu[c], ss = std::max(1e-6, 1 / (3.0 * kappa[c]) - mu[c]);
@@ -477,7 +478,11 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
       k[c] = float(ks / pg.size());
       m[c] = float(ms / pg.size());
     }
-    radiance_ = DipoleRadiance(pg, k, m, I.C, q[0]);
+    double surface = 0;
+    const TriangleMesh& mesh = I.shape->mesh();
+    for (const auto& t : mesh.triangles)
+      surface += 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]).norm();
+    radiance_ = DipoleRadiance(pg, k, m, I.C, q[0], surface / double(pg.num_boundary()));
   }
   q_finest_ = q[0];
   times_.diffusion = Seconds(t0);

@@ -180,6 +180,15 @@ TEST(Render, DipoleAndPolygridAgreeOnTransmittedFalloff) {
               "fitted decay along the surface beyond the terminator (2-10 mm): polygrid %.4f/mm, "
               "dipole %.4f/mm, ratio %.3f\n", rate_pg, rate_dp, rate_pg / rate_dp);
   EXPECT_NEAR(rate_pg / rate_dp, 1.0, 0.10);
+  // The area per node: (mean spacing)^2 falls short of the sphere's 4 pi R^2 over the nodes;
+  // given the true area, the dipole scales with it (and its decay rate stays).
+  const double true_area = 4 * 3.14159265358979 * R * R / pg.num_boundary();
+  const double spacing_area = pg.mean_boundary_spacing * pg.mean_boundary_spacing;
+  std::printf("[falloff] area per node: (mean spacing)^2 is %.3f of 4 pi R^2 / nodes\n", spacing_area / true_area);
+  EXPECT_LT(spacing_area / true_area, 0.97);
+  const BoundaryLight Lda = DipoleRadiance(pg, {kappa, kappa, kappa}, {mu, mu, mu}, C, q, true_area);
+  for (int64_t b = 0; b < pg.num_boundary(); b += 17)
+    EXPECT_NEAR(Lda[0][b], Ldp[0][b] * true_area / spacing_area, 1e-5 * Lda[0][b] + 1e-12);
 }
 
 TEST(Render, MeshShapeRendersAndBadLightsAreRefused) {

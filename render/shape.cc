@@ -437,11 +437,14 @@ TriangleMesh ReadObj(const std::string& path, std::istream& in) {
       std::string tok;
       while (ls >> tok) {
         int idx = 0;
+        const std::string vertex = tok.substr(0, tok.find('/'));
+        size_t used = 0;
         try {
-          idx = std::stoi(tok.substr(0, tok.find('/')));
+          idx = std::stoi(vertex, &used);
         } catch (...) {
-          MeshError(path, "line " + std::to_string(line_no) + ": bad face index '" + tok + "'");
         }
+        if (vertex.empty() || used != vertex.size() || idx == 0)
+          MeshError(path, "line " + std::to_string(line_no) + ": bad face index '" + tok + "'");
         f.push_back(idx < 0 ? int(m.vertices.size()) + idx : idx - 1);
       }
       if (f.size() < 3) MeshError(path, "line " + std::to_string(line_no) + ": face with < 3 vertices");

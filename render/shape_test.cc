@@ -108,6 +108,9 @@ TEST(Shape, BadMeshesGiveClearErrors) {
                      kTet + "v 1 1 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\nf 2 3 5\n"), "non-manifold");
   expect_error(Write("tl_flipped.obj", kTet + "f 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 3 4\n"), "orientation");
   expect_error(Write("tl_range.obj", kTet + "f 1 3 9\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"), "out of range");
+  // Face indices with trailing text, or 0 (OBJ counts from 1), are not read as numbers.
+  expect_error(Write("tl_junk.obj", kTet + "f 1 3 2abc\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"), "line 5: bad face index '2abc'");
+  expect_error(Write("tl_zero.obj", kTet + "f 1 3 0\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"), "bad face index '0'");
   expect_error(Write("tl_mesh.stl", "solid"), "unknown mesh format");
   expect_error(Write("tl_garbage.obj", "garbage\nmore\n"), "not an OBJ mesh");
   expect_error((fs::temp_directory_path() / "tl_missing.obj").string(), "cannot open");
