@@ -171,7 +171,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   bool solving = false;
   auto progress = [&](const std::string& s) {
     if (!solving && o.stop && o.stop())
-      throw AcquireStopped(fmt::format("stopped before: {}; the finished stages are in {}", s, rep.work_dir));
+      throw Interrupted(fmt::format("stopped before \"{}\"; the finished stages are in {} (a re-run reuses them)",
+                                    s, rep.work_dir));
     if (progress_fn) progress_fn(s);
   };
   auto t0 = Clock::now();

@@ -2,7 +2,6 @@
 #pragma once
 
 #include <functional>
-#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -18,15 +17,11 @@ struct AcquireOptions {
   int face_samples = 6;      // per axis, per node dual box, at least (ResampleFrontFace)
   int mask_margin = 2;       // front-lit: masked nodes around the directly lit ones
   // Polled at every progress line before the solve (between stages, per HDR stack): true stops
-  // there with AcquireStopped; the finished stages stay in the work folder for a re-run. The
-  // solve itself stops through the iteration callback (the material so far is written).
+  // there with Interrupted (solver/status.h); the finished stages stay in the work folder for a
+  // re-run. The solve itself stops through the iteration callback (the material so far is
+  // written).
   std::function<bool()> stop;
   std::string Validate() const;
-};
-
-// Thrown by Acquire when options.stop asked to stop before the solve.
-struct AcquireStopped : std::runtime_error {
-  using std::runtime_error::runtime_error;
 };
 
 struct AcquireConditionReport {

@@ -82,8 +82,8 @@ class Reader {
 CaptureSpec ReadCapture(const std::string& path) {
   CaptureSpec s;
   const bool is_dir = fs::is_directory(path);
-  s.dir = is_dir ? path : fs::path(path).parent_path().string();
-  if (s.dir.empty()) s.dir = ".";
+  const fs::path dir = is_dir ? fs::path(path) : fs::path(path).parent_path();
+  s.dir = (dir.empty() ? fs::path(".") : dir).string();
   s.file = is_dir ? (fs::path(path) / "capture.json").string() : path;
   std::ifstream in(s.file);
   if (!in) throw InputError(fmt::format("{}: cannot open (a capture folder holds capture.json)", s.file));

@@ -95,8 +95,9 @@ TEST_F(MaterialIo, RejectsEveryBrokenFile) {
       const std::string msg = e.what();
       EXPECT_NE(msg.find(Path("cut.vdb")), std::string::npos) << msg;
       EXPECT_LT(msg.size(), 300u) << cut;
-      if (cut >= 4096)
+      if (cut >= 4096) {
         EXPECT_TRUE(msg.find("cut short") != std::string::npos || msg.find("truncated") != std::string::npos) << msg;
+      }
     }
   }
   // Flipped bytes anywhere (in the header, a grid's topology or its values: OpenVDB would read

@@ -376,7 +376,7 @@ TEST_F(Cli, AcquireStopsCleanlyOnSigint) {
   };
   CommandRun r = interrupt_at("a.vdb", "calibrating the camera");
   EXPECT_NE(r.output.find("exit=130"), std::string::npos) << r.output;
-  EXPECT_NE(r.output.find("acquire: interrupted, stopped before"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("translume acquire: interrupted: stopped before"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(P("a.vdb")));
   r = interrupt_at("b.vdb", "solving for kappa and mu");
   EXPECT_NE(r.output.find("exit=130"), std::string::npos) << r.output;

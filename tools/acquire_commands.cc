@@ -109,25 +109,19 @@ int RunAcquire(int argc, char** argv) {
   // the solve and write the best material so far (as `solve` does).
   std::optional<SigintGuard> sigint(std::in_place);
   o.stop = [&] { return sigint->interrupted(); };
-  acquire::AcquireReport rep;
-  try {
-    rep = acquire::Acquire(
-        cap, out, o,
-        [](const std::string& line) {
-          std::printf("  %s\n", line.c_str());
-          std::fflush(stdout);
-        },
-        [&](const IterationReport& r, const RecoveryState&) {
-          if (tty || r.iteration % every == 0)
-            std::printf("%s  iteration %4d  objective %.4e  solves %lld  %s%s", tty ? "\r" : "", r.iteration,
-                        r.objective, (long long)r.solves, FormatSeconds(r.seconds).c_str(), tty ? "   " : "\n");
-          std::fflush(stdout);
-          return !sigint->interrupted();
-        });
-  } catch (const acquire::AcquireStopped& e) {
-    std::printf("acquire: interrupted, %s (a re-run reuses them)\n", e.what());
-    return kInterruptedExit;
-  }
+  const acquire::AcquireReport rep = acquire::Acquire(
+      cap, out, o,
+      [](const std::string& line) {
+        std::printf("  %s\n", line.c_str());
+        std::fflush(stdout);
+      },
+      [&](const IterationReport& r, const RecoveryState&) {
+        if (tty || r.iteration % every == 0)
+          std::printf("%s  iteration %4d  objective %.4e  solves %lld  %s%s", tty ? "\r" : "", r.iteration,
+                      r.objective, (long long)r.solves, FormatSeconds(r.seconds).c_str(), tty ? "   " : "\n");
+        std::fflush(stdout);
+        return !sigint->interrupted();
+      });
   const bool interrupted = sigint->interrupted();
   sigint.reset();
   if (tty) std::printf("\n");

@@ -80,7 +80,7 @@ int main(int argc, char** argv) {
       return 1;
     } catch (const translume::Interrupted& e) {
       std::fprintf(stderr, "translume %s: interrupted: %s\n", c.name, e.what());
-      return 130;
+      return translume::kInterruptedExit;
     } catch (const std::bad_alloc&) {
       std::fprintf(stderr, "translume %s: error: out of memory: the grid or the images are too large "
                    "for this machine (translume info --grid NXxNYxNZ estimates what a grid needs)\n", c.name);
