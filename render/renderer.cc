@@ -360,6 +360,7 @@ struct Renderer::Impl {
   std::unique_ptr<RenderPasses> passes;
   // The environment's direction samples, computed once per environment image.
   const Image* env_source = nullptr;
+  TriangleMesh shading_mesh;  // ShadingMesh of the shape's
   std::vector<std::pair<Vec3, std::array<double, 3>>> env;
 };
 
@@ -378,26 +379,66 @@ Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
   PassScene& sc = I.scene;
   sc.options = options;
   sc.levels = levels;
-  sc.mesh = &shape->mesh();
-  const TriangleMesh& mesh = shape->mesh();
-  sc.vertex_normals = mesh.VertexNormals();
+  const Polygrid& pg = (*levels)[0];
+  const int64_t nb = pg.num_boundary();
+  // Vertices about as dense as the boundary nodes (their radiance comes from the 4 nearest).
+  I.shading_mesh = ShadingMesh(shape->mesh(), pg.mean_boundary_spacing,
+                               std::max<int64_t>(int64_t(shape->mesh().vertices.size()), 2 * nb), &sc.vertex_normals);
+  sc.mesh = &I.shading_mesh;
+  const TriangleMesh& mesh = I.shading_mesh;
   sc.centre = (shape->lo + shape->hi) / 2;
   sc.radius = 0;  // bounding sphere about the box centre
   for (const Vec3& v : mesh.vertices) sc.radius = std::max(sc.radius, (v - sc.centre).norm());
   sc.shadow_bias = 0.03 * sc.radius;
-  const Polygrid& pg = (*levels)[0];
-  const int64_t nb = pg.num_boundary();
   sc.near_idx.resize(mesh.vertices.size());
   sc.near_w.resize(mesh.vertices.size());
+  // The 4 nearest boundary nodes of every vertex, through a uniform grid of the nodes (cells of
+  // about two node spacings), searched in rings of growing Chebyshev radius until no unvisited
+  // cell can hold a nearer node than the 4th found.
+  Vec3 glo = Vec3::Constant(1e300), ghi = Vec3::Constant(-1e300);
+  for (int64_t b = 0; b < nb; ++b) {
+    glo = glo.cwiseMin(pg.position[pg.num_interior + b]);
+    ghi = ghi.cwiseMax(pg.position[pg.num_interior + b]);
+  }
+  const double cell = std::max(2 * pg.mean_boundary_spacing, 1e-6 * (ghi - glo).norm() + 1e-12);
+  std::array<int, 3> dims;
+  for (int a = 0; a < 3; ++a) dims[a] = std::clamp(int((ghi[a] - glo[a]) / cell) + 1, 1, 512);
+  auto cell_of = [&](const Vec3& p) {
+    std::array<int, 3> c;
+    for (int a = 0; a < 3; ++a) c[a] = std::clamp(int(std::floor((p[a] - glo[a]) / cell)), 0, dims[a] - 1);
+    return c;
+  };
+  std::vector<std::vector<int32_t>> cells(size_t(dims[0]) * dims[1] * dims[2]);
+  auto index = [&](int x, int y, int z) { return x + size_t(dims[0]) * (y + size_t(dims[1]) * z); };
+  for (int64_t b = 0; b < nb; ++b) {
+    const auto c = cell_of(pg.position[pg.num_interior + b]);
+    cells[index(c[0], c[1], c[2])].push_back(int32_t(b));
+  }
 #pragma omp parallel for schedule(dynamic, 64)
   for (int64_t v = 0; v < int64_t(mesh.vertices.size()); ++v) {
+    const Vec3& x = mesh.vertices[v];
     std::array<std::pair<double, int32_t>, 4> best;
     best.fill({1e300, 0});
-    for (int64_t b = 0; b < nb; ++b) {
-      const double d2 = (mesh.vertices[v] - pg.position[pg.num_interior + b]).squaredNorm();
-      if (d2 >= best[3].first) continue;
-      best[3] = {d2, int32_t(b)};
-      std::sort(best.begin(), best.end());
+    const auto c = cell_of(x);
+    // Distance from x to its (clamped) cell's box: the cells of ring r + 1 are at least
+    // r * cell - outside away.
+    double outside = 0;
+    for (int a = 0; a < 3; ++a) {
+      const double lo = glo[a] + c[a] * cell, hi = lo + cell;
+      outside = std::max({outside, lo - x[a], x[a] - hi});
+    }
+    const int max_r = std::max({dims[0], dims[1], dims[2]});
+    for (int r = 0; r <= max_r; ++r) {
+      ForEachCellInRing(c, r, dims, [&](int cx, int cy, int cz) {
+        for (int32_t b : cells[index(cx, cy, cz)]) {
+          const double d2 = (x - pg.position[pg.num_interior + b]).squaredNorm();
+          if (d2 >= best[3].first) continue;
+          best[3] = {d2, b};
+          std::sort(best.begin(), best.end());
+        }
+      });
+      const double bound = r * cell - outside;
+      if (best[3].first < 1e300 && bound > 0 && best[3].first <= bound * bound) break;
     }
     double wsum = 0;
     for (int k = 0; k < 4; ++k) {

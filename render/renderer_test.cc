@@ -237,6 +237,32 @@ TEST(Render, ToneMapHonoursNegativeStops) {
   EXPECT_EQ(black.data[0], 0.f);
 }
 
+// A 12-triangle cube read as a mesh shades like the built-in box tessellated into 8 x 8 quads
+// per face: the shading mesh is split at the cube's creases (flat faces) and subdivided to the
+// polygrid's spacing (vertex radiance at the nodes' resolution). Before, the cube's vertex
+// normals were its diagonals and its 8 vertices carried all the light: a rounded blur.
+TEST(Render, CoarseMeshShadesLikeTheTessellatedBox) {
+  const auto fine = MakeBoxShape(Vec3(4, 4, 4), 8);
+  const auto cube = MakeMeshShape(MakeBoxShape(Vec3(4, 4, 4), 1)->mesh(), "cube.obj", 0);
+  ASSERT_EQ(cube->mesh().triangles.size(), 12u);
+  PolygridOptions po;
+  po.resolution = 9;
+  RenderOptions ro;
+  ro.width = ro.height = 48;
+  ro.specular = 0;
+  std::vector<Image> img;
+  for (const Shape* shape : {fine.get(), cube.get()}) {
+    const auto levels = BuildPolygridHierarchy(BuiltinPolycube("box"), *shape, po, 2);
+    std::vector<NodeMaterial> mats;
+    for (const Polygrid& pg : levels) mats.push_back(ProceduralNodeMaterial(pg, "marble"));
+    Renderer r(shape, &levels, mats, ReflectionParameterC(1.3), DiffusionOptions{}, ro);
+    img.push_back(r.Render(RenderLight::Parse("dir:1,0.3,0.6")));
+  }
+  const double e = RelativeL2(img[1].data, img[0].data);
+  std::printf("[shading] 12-triangle cube vs tessellated box: relative L2 %.4f\n", e);
+  EXPECT_LT(e, 0.02);
+}
+
 const char* Name(DiffusionBackend b) { return b == DiffusionBackend::kGl ? "gl" : "cpu"; }
 
 // The hemispherical integral of cos F_t(cos, 1.3) over directions, 2 pi int_0^{pi/2} F_t cos

@@ -313,24 +313,20 @@ class MeshShape : public Shape {
     const double outside = (p - p.cwiseMax(cmin).cwiseMin(cmax)).norm();
     const int max_r = std::max({dims_[0], dims_[1], dims_[2]});
     for (int r = 0; r <= max_r; ++r) {
-      for (int z = c[2] - r; z <= c[2] + r; ++z)
-        for (int y = c[1] - r; y <= c[1] + r; ++y)
-          for (int x = c[0] - r; x <= c[0] + r; ++x) {
-            if (std::max({std::abs(x - c[0]), std::abs(y - c[1]), std::abs(z - c[2])}) != r) continue;
-            if (x < 0 || y < 0 || z < 0 || x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) continue;
-            for (int32_t t : cells_[Index(x, y, z)]) {
-              const auto& tri = mesh_.triangles[t];
-              double u, v, w;
-              const Vec3 q = ClosestPointOnTriangle(p, mesh_.vertices[tri[0]], mesh_.vertices[tri[1]],
-                                                    mesh_.vertices[tri[2]], &u, &v, &w);
-              const double d = (q - p).squaredNorm();
-              if (d < best) {
-                best = d;
-                *s = q;
-                *n = (u * normals_[t][0] + v * normals_[t][1] + w * normals_[t][2]).normalized();
-              }
-            }
+      ForEachCellInRing(c, r, dims_, [&](int x, int y, int z) {
+        for (int32_t t : cells_[Index(x, y, z)]) {
+          const auto& tri = mesh_.triangles[t];
+          double u, v, w;
+          const Vec3 q = ClosestPointOnTriangle(p, mesh_.vertices[tri[0]], mesh_.vertices[tri[1]],
+                                                mesh_.vertices[tri[2]], &u, &v, &w);
+          const double d = (q - p).squaredNorm();
+          if (d < best) {
+            best = d;
+            *s = q;
+            *n = (u * normals_[t][0] + v * normals_[t][1] + w * normals_[t][2]).normalized();
           }
+        }
+      });
       const double bound = r * cell_.minCoeff() - outside;
       if (best < 1e300 && bound > 0 && std::sqrt(best) <= bound) break;
     }
@@ -611,6 +607,60 @@ std::vector<std::array<Vec3, 3>> TriangleMesh::CornerNormals(double crease_deg) 
         if (size_t(s) == t || (fn[s].norm() > 0 && fn[s].normalized().dot(own) >= min_cos)) sum += fn[s];
       out[t][c] = sum.norm() > 0 ? Vec3(sum.normalized()) : Vec3(0, 0, 1);
     }
+  }
+  return out;
+}
+
+TriangleMesh ShadingMesh(const TriangleMesh& mesh, double max_edge, int64_t max_vertices,
+                         std::vector<Vec3>* normals) {
+  const std::vector<std::array<Vec3, 3>> corner = mesh.CornerNormals(kMeshCreaseDeg);
+  TriangleMesh out;
+  normals->clear();
+  // (vertex, its corner normal rounded to 1e-9) -> new vertex
+  std::map<std::pair<int, std::array<int64_t, 3>>, int> copies;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    std::array<int, 3> tri;
+    for (int c = 0; c < 3; ++c) {
+      const Vec3& n = corner[t][c];
+      const std::array<int64_t, 3> key = {std::llround(n.x() * 1e9), std::llround(n.y() * 1e9),
+                                          std::llround(n.z() * 1e9)};
+      const auto [it, added] = copies.try_emplace({mesh.triangles[t][c], key}, int(out.vertices.size()));
+      if (added) {
+        out.vertices.push_back(mesh.vertices[mesh.triangles[t][c]]);
+        normals->push_back(n);
+      }
+      tri[c] = it->second;
+    }
+    out.triangles.push_back(tri);
+  }
+  auto longest = [&] {
+    double l = 0;
+    for (const auto& t : out.triangles)
+      for (int c = 0; c < 3; ++c) l = std::max(l, (out.vertices[t[c]] - out.vertices[t[(c + 1) % 3]]).norm());
+    return l;
+  };
+  // A round adds one vertex per edge (~1.5 per triangle).
+  while (longest() > max_edge &&
+         int64_t(out.vertices.size()) + 3 * int64_t(out.triangles.size()) / 2 <= max_vertices) {
+    std::map<std::pair<int, int>, int> mid;
+    auto midpoint = [&](int a, int b) {
+      const auto [it, added] = mid.try_emplace({std::min(a, b), std::max(a, b)}, int(out.vertices.size()));
+      if (added) {
+        out.vertices.push_back(0.5 * (out.vertices[a] + out.vertices[b]));
+        normals->push_back(((*normals)[a] + (*normals)[b]).normalized());
+      }
+      return it->second;
+    };
+    std::vector<std::array<int, 3>> next;
+    next.reserve(out.triangles.size() * 4);
+    for (const auto& t : out.triangles) {
+      const int ab = midpoint(t[0], t[1]), bc = midpoint(t[1], t[2]), ca = midpoint(t[2], t[0]);
+      next.push_back({t[0], ab, ca});
+      next.push_back({ab, t[1], bc});
+      next.push_back({ca, bc, t[2]});
+      next.push_back({ab, bc, ca});
+    }
+    out.triangles.swap(next);
   }
   return out;
 }

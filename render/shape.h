@@ -2,7 +2,9 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <array>
+#include <cstdlib>
 #include <memory>
 #include <string>
 #include <vector>
@@ -30,6 +32,16 @@ struct TriangleMesh {
   // its face's, where VertexNormals gives the cube's diagonals.
   std::vector<std::array<Vec3, 3>> CornerNormals(double crease_deg) const;
 };
+
+// The mesh the shading pass draws (renderer.cc), with one unit normal per vertex in *normals:
+// `mesh` split at creases (a vertex gets one copy per distinct corner normal, CornerNormals
+// at the renderer's 45 degrees), so that flat faces shade flat; then, while an edge is longer
+// than `max_edge` (mm) and the vertex count below `max_vertices`, every triangle split into
+// four at its edge midpoints (all at once: no T-junctions; midpoints take the mean normal of
+// their edge). Vertex radiance comes from the nearest polygrid boundary nodes, so a mesh
+// coarser than the polygrid would otherwise blur its light between few vertices.
+TriangleMesh ShadingMesh(const TriangleMesh& mesh, double max_edge, int64_t max_vertices,
+                         std::vector<Vec3>* normals);
 
 // Reads a Wavefront OBJ ("v" and "f" records; polygons are fan-triangulated; "f a/b/c" and
 // negative indices accepted) or a PLY (ascii, binary_little_endian or binary_big_endian; vertex
@@ -84,6 +96,17 @@ std::unique_ptr<Shape> MakeBoxShape(const Vec3& extent_mm, int tessellation = 8)
 // A validated mesh, scaled and centred so that its largest extent is size_mm (<= 0: as is).
 std::unique_ptr<Shape> MakeMeshShape(TriangleMesh mesh, const std::string& name,
                                      double size_mm);
+
+// Calls visit(x, y, z) for every cell of a dims[0] x dims[1] x dims[2] grid at Chebyshev
+// distance exactly r from cell c (ring r: the cell itself for r = 0). Nearest-neighbour
+// searches visit rings of growing r until no unvisited cell can hold a nearer item.
+template <typename Visit>
+void ForEachCellInRing(const std::array<int, 3>& c, int r, const std::array<int, 3>& dims, Visit&& visit) {
+  for (int z = std::max(0, c[2] - r); z <= std::min(dims[2] - 1, c[2] + r); ++z)
+    for (int y = std::max(0, c[1] - r); y <= std::min(dims[1] - 1, c[1] + r); ++y)
+      for (int x = std::max(0, c[0] - r); x <= std::min(dims[0] - 1, c[0] + r); ++x)
+        if (std::max({std::abs(x - c[0]), std::abs(y - c[1]), std::abs(z - c[2])}) == r) visit(x, y, z);
+}
 
 // The closest point to p on triangle (a, b, c).
 Vec3 ClosestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c,
