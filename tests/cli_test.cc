@@ -385,6 +385,12 @@ TEST_F(Cli, AcquireStopsCleanlyOnSigint) {
   std::ifstream report(P("b_work/report.json"));
   ASSERT_TRUE(report);
   EXPECT_EQ(nlohmann::json::parse(report)["solve"]["termination"], "stopped");
+  // A work folder that cannot be made (a file stands in the way): the path first, one line
+  // (after acquire's header line).
+  r = Translume("acquire " + P("cap") + " -o " + P("m.vdb/sub/x.vdb"));
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_NE(r.output.find("translume acquire: error: " + P("m.vdb/sub/x_work") +
+                          ": cannot create directories: Not a directory\n"), std::string::npos) << r.output;
 }
 
 // translume render / edit (issue 7, docs/render.md).

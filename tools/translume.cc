@@ -2,6 +2,7 @@
 // translume: acquire heterogeneous translucent materials from photographs (Wang et al. 2008).
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <filesystem>
 #include <cstring>
 #include <new>
 #include <opencv2/core/utils/logger.hpp>
@@ -81,6 +82,14 @@ int main(int argc, char** argv) {
     } catch (const translume::Interrupted& e) {
       std::fprintf(stderr, "translume %s: interrupted: %s\n", c.name, e.what());
       return translume::kInterruptedExit;
+    } catch (const std::filesystem::filesystem_error& e) {
+      // "filesystem error: OPERATION: REASON [PATH]" -> "PATH: OPERATION: REASON", the file first.
+      std::string what = e.what();
+      if (what.rfind("filesystem error: ", 0) == 0) what.erase(0, 18);
+      if (const size_t bracket = what.find(" ["); bracket != std::string::npos) what.resize(bracket);
+      std::fprintf(stderr, "translume %s: error: %s: %s\n", c.name,
+                   e.path1().empty() ? "(a path)" : e.path1().c_str(), what.c_str());
+      return 1;
     } catch (const std::bad_alloc&) {
       std::fprintf(stderr, "translume %s: error: out of memory: the grid or the images are too large "
                    "for this machine (translume info --grid NXxNYxNZ estimates what a grid needs)\n", c.name);
