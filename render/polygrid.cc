@@ -109,9 +109,9 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
     if (x < 0 || y < 0 || z < 0 || x >= cubes[0] || y >= cubes[1] || z >= cubes[2]) return false;
     return bool(occupied[x + cubes[0] * (y + cubes[1] * z)]);
   };
-  // A lattice node is interior iff every cube around it is in the polycube.
-  auto is_interior = [&](const std::array<int, 3>& g) {
-    if (!lat.inside(g)) return false;
+  // Calls f(x, y, z, in_polycube) for every cube around lattice node g (two per axis where g
+  // lies on a cube boundary).
+  auto for_cubes_around = [&](const std::array<int, 3>& g, auto&& f) {
     int lo[3], hi[3];
     for (int a = 0; a < 3; ++a) {
       hi[a] = g[a] / m;
@@ -119,9 +119,14 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
     }
     for (int x = lo[0]; x <= hi[0]; ++x)
       for (int y = lo[1]; y <= hi[1]; ++y)
-        for (int z = lo[2]; z <= hi[2]; ++z)
-          if (!cube_at(x, y, z)) return false;
-    return true;
+        for (int z = lo[2]; z <= hi[2]; ++z) f(x, y, z, cube_at(x, y, z));
+  };
+  // A lattice node is interior iff every cube around it is in the polycube.
+  auto is_interior = [&](const std::array<int, 3>& g) {
+    if (!lat.inside(g)) return false;
+    bool all = true;
+    for_cubes_around(g, [&](int, int, int, bool in) { all &= in; });
+    return all;
   };
   std::vector<int32_t> interior_at(lat.size(), -1);
   for (int z = 0; z < lat.n[2]; ++z)
@@ -179,24 +184,21 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       }
     }
   }
-  // The lattice position of the centre of the cubes that hold boundary node b: the first
-  // projection goes along the line from there (Shape::ProjectAlong).
-  std::vector<std::array<double, 3>> cube_centre(N - pg.num_interior);
-  for (int64_t b = pg.num_interior; b < N; ++b) {
-    const auto& g = pg.lattice[b];
-    std::array<double, 3> sum = {0, 0, 0};
+  // The centre of the polycube's cubes around boundary node b, stretched like the lattice: the
+  // first projection goes along the line from there (Shape::ProjectAlong).
+  auto cubes_centre = [&](int64_t b) {
+    Vec3 sum = Vec3::Zero();
     int count = 0;
-    for (int x = (g[0] - 1) / m; x <= g[0] / m; ++x)
-      for (int y = (g[1] - 1) / m; y <= g[1] / m; ++y)
-        for (int z = (g[2] - 1) / m; z <= g[2] / m; ++z)
-          if (g[0] >= x * m && g[0] <= (x + 1) * m && g[1] >= y * m && g[1] <= (y + 1) * m &&
-              g[2] >= z * m && g[2] <= (z + 1) * m && cube_at(x, y, z)) {
-            sum = {sum[0] + (x + 0.5) * m, sum[1] + (y + 0.5) * m, sum[2] + (z + 0.5) * m};
-            ++count;
-          }
+    for_cubes_around(pg.lattice[b], [&](int x, int y, int z, bool in) {
+      if (!in) return;
+      sum += Vec3(x + 0.5, y + 0.5, z + 0.5) * m;
+      ++count;
+    });
     TL_CHECK(count > 0);
-    for (int a = 0; a < 3; ++a) cube_centre[b - pg.num_interior][a] = sum[a] / count;
-  }
+    Vec3 centre;
+    for (int a = 0; a < 3; ++a) centre[a] = shape.lo[a] + (shape.hi[a] - shape.lo[a]) * sum[a] / count / (lat.n[a] - 1);
+    return centre;
+  };
   // along: from the plain stretch, along the lines from the cubes' centres; else (the crease
   // restart below, whose nodes sit off flat sides along their normals) the closest point.
   auto project_boundary = [&](bool along) {
@@ -206,10 +208,7 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
         shape.Project(pg.position[b], &pg.position[b], &normal);
         continue;
       }
-      Vec3 centre;
-      for (int a = 0; a < 3; ++a)
-        centre[a] = shape.lo[a] + (shape.hi[a] - shape.lo[a]) * cube_centre[b - pg.num_interior][a] / (lat.n[a] - 1);
-      shape.ProjectAlong(pg.position[b], centre, &pg.position[b], &normal);
+      shape.ProjectAlong(pg.position[b], cubes_centre(b), &pg.position[b], &normal);
     }
     for (int it = 0; it < options.boundary_relax_iterations; ++it) {
       std::vector<Vec3> next = pg.position;

@@ -361,6 +361,7 @@ struct Renderer::Impl {
   // The environment's direction samples, computed once per environment image.
   const Image* env_source = nullptr;
   TriangleMesh shading_mesh;  // ShadingMesh of the shape's
+  double node_area = 0;       // the surface's area per finest boundary node, mm^2 (dipole)
   std::vector<std::pair<Vec3, std::array<double, 3>>> env;
 };
 
@@ -385,6 +386,10 @@ Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
   I.shading_mesh = ShadingMesh(shape->mesh(), pg.mean_boundary_spacing,
                                std::max<int64_t>(int64_t(shape->mesh().vertices.size()), 2 * nb), &sc.vertex_normals);
   sc.mesh = &I.shading_mesh;
+  for (const auto& t : shape->mesh().triangles) {
+    const std::vector<Vec3>& v = shape->mesh().vertices;
+    I.node_area += 0.5 * (v[t[1]] - v[t[0]]).cross(v[t[2]] - v[t[0]]).norm() / double(nb);
+  }
   const TriangleMesh& mesh = I.shading_mesh;
   sc.centre = (shape->lo + shape->hi) / 2;
   sc.radius = 0;  // bounding sphere about the box centre
@@ -519,11 +524,7 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
       k[c] = float(ks / pg.size());
       m[c] = float(ms / pg.size());
     }
-    double surface = 0;
-    const TriangleMesh& mesh = I.shape->mesh();
-    for (const auto& t : mesh.triangles)
-      surface += 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]).norm();
-    radiance_ = DipoleRadiance(pg, k, m, I.C, q[0], surface / double(pg.num_boundary()));
+    radiance_ = DipoleRadiance(pg, k, m, I.C, q[0], I.node_area);
   }
   q_finest_ = q[0];
   times_.diffusion = Seconds(t0);

@@ -151,10 +151,7 @@ TEST(Simulate, RefineKeepsCoarseNodesAndInterpolates) {
 // of the refined material's own solve, and differ from a solve on the recovery grid by its
 // discretisation error (~2 % on this 5-node-thick marble: far more than the solves' 1e-9).
 TEST(Simulate, OversampledDataComeFromTheFinerGrid) {
-  SynthOptions syn;
-  syn.preset = "marble";
-  syn.shape = {10, 8, 5};
-  syn.spacing_mm = 0.5;
+  const SynthOptions syn{.preset = "marble", .shape = {10, 8, 5}};
   const Material m = SynthesizeMaterial(syn);
   SimulateOptions o;
   o.lights = {LightSpec::Parse("uniform")};

@@ -83,10 +83,7 @@ TEST_P(RecoverOnBackend, HomogeneousVolumeFromOversampledData) {
 
 // A small heterogeneous recovery from oversampled noise-free data, checked on held-out spots.
 TEST_P(RecoverOnBackend, HeterogeneousVolumeRelightsHeldOutSpots) {
-  SynthOptions syn;
-  syn.preset = "wax";
-  syn.shape = {16, 12, 5};
-  syn.spacing_mm = 0.5;
+  const SynthOptions syn{.preset = "wax", .shape = {16, 12, 5}};
   const Material truth = SynthesizeMaterial(syn);
   SimulateOptions so;
   so.lights = RegionLights("4x4");
@@ -125,10 +122,7 @@ TEST_P(RecoverOnBackend, HeterogeneousVolumeRelightsHeldOutSpots) {
 // (float on gl), and the fit must stop rather than spend its iterations (3 evaluations of 16
 // solves each, more where steps are rejected) wandering among them.
 TEST_P(RecoverOnBackend, HomogeneousFitStopsWhereTheObjectiveStalls) {
-  SynthOptions syn;
-  syn.preset = "wax";
-  syn.shape = {16, 12, 5};
-  syn.spacing_mm = 0.5;
+  const SynthOptions syn{.preset = "wax", .shape = {16, 12, 5}};
   SimulateOptions so;
   so.lights = RegionLights("4x4");
   const Dataset d = SimulateDataset(SynthesizeMaterial(syn), so).training;
@@ -161,9 +155,7 @@ INSTANTIATE_TEST_SUITE_P(Backends, RecoverOnBackend, ::testing::Values(Backend::
 // same result as one uninterrupted run (both to convergence; the resumed L-BFGS starts with an
 // empty history, so the iterates differ on the way).
 TEST(Recover, CheckpointResumeMatchesUninterruptedRun) {
-  SynthOptions syn;
-  syn.preset = "layered";
-  syn.shape = {10, 8, 4};
+  const SynthOptions syn{.preset = "layered", .shape = {10, 8, 4}};
   const Material truth = SynthesizeMaterial(syn);
   SimulateOptions so;
   so.lights = RegionLights("2x2");
@@ -209,9 +201,7 @@ TEST(Recover, CheckpointResumeMatchesUninterruptedRun) {
 // --init: a material's state gives the material back (float values), with the dataset's grid,
 // and a material on another grid is named as the problem.
 TEST(Recover, StateFromMaterialRoundTrips) {
-  SynthOptions syn;
-  syn.preset = "inclusions";
-  syn.shape = {9, 7, 4};
+  const SynthOptions syn{.preset = "inclusions", .shape = {9, 7, 4}};
   const Material m = SynthesizeMaterial(syn);
   Dataset d;
   d.shape = m.shape;

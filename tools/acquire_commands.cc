@@ -122,7 +122,7 @@ int RunAcquire(int argc, char** argv) {
         std::fflush(stdout);
         return !sigint->interrupted();
       });
-  const bool interrupted = sigint->interrupted();
+  const bool interrupted = o.solve && sigint->interrupted();  // (without a solve, the work is done)
   sigint.reset();
   if (tty) std::printf("\n");
   if (o.solve) std::printf("%s\n", rep.solve.BriefReport().c_str());
