@@ -119,7 +119,13 @@ Dataset ReadDataset(const std::string& path) {
     for (float v : q.data)
       if (v < 0) throw InputError(fmt::format("{}: q has a negative pixel", (dir / c["q"].get<std::string>()).string()));
     cond.q = Planes(q);
-    cond.L = Planes(ReadFaceImage(dir / Field<std::string>(c, "L", where), "L", d.shape, 3));
+    const fs::path lf = dir / Field<std::string>(c, "L", where);
+    const Image L = ReadFaceImage(lf, "L", d.shape, 3);
+    // Radiance spans decades below white: 8 or 16 integer bits would round it away silently.
+    if (L.integer_bits != 0)
+      throw InputError(fmt::format("{}: L is stored as {}-bit integers; radiance must be a float or half "
+                                   "image (EXR)", lf.string(), L.integer_bits));
+    cond.L = Planes(L);
     if (c.contains("mask")) {
       const fs::path mf = dir / Field<std::string>(c, "mask", where);
       const Image m = ReadFaceImage(mf, "mask", d.shape, 1);

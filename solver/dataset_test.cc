@@ -114,6 +114,16 @@ TEST_F(DatasetFiles, RejectsBrokenFilesWithOneLineNamingFileAndField) {
   bad[7] = NAN;
   WriteImage((dir_ / "L_c1.exr").string(), Image{8, 6, 3, bad});
   ExpectError({"L_c1.exr", "non-finite"});
+  // Radiance as 8-bit PNG would be rounded to 1/255 of white; a light pattern as PNG is exact.
+  WriteDataset(dir_.string(), d_);
+  WriteImage((dir_ / "L_c1.png").string(), Image{8, 6, 3, std::vector<float>(144, 0.1f)});
+  Rewrite("\"L\": \"L_c1.exr\"", "\"L\": \"L_c1.png\"");
+  ExpectError({"L_c1.png", "8-bit", "float"});
+  WriteDataset(dir_.string(), d_);
+  const FacePattern& q = d_.conditions[1].q;
+  WriteImage((dir_ / "q_c1.png").string(), ImageFromPlanes(8, 6, {q[0].data(), q[1].data(), q[2].data()}));
+  Rewrite("\"q\": \"q_c1.exr\"", "\"q\": \"q_c1.png\"");
+  EXPECT_EQ(ReadDataset(dir_.string()).conditions[1].q, d_.conditions[1].q);
   WriteDataset(dir_.string(), d_);
   Rewrite("\"grid\": [", "\"grid\": [1,");
   ExpectError({"grid"});

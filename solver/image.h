@@ -10,6 +10,9 @@ namespace translume {
 struct Image {
   int width = 0, height = 0, channels = 0;
   std::vector<float> data;
+  // Bits per value of the file's integer format (8, 16, 32; ReadImage maps them to [0, 1]), or
+  // 0 where the file stores float or half values (and for images made in memory).
+  int integer_bits = 0;
   float& at(int x, int y, int c) { return data[(size_t(y) * width + x) * channels + c]; }
   float at(int x, int y, int c) const { return data[(size_t(y) * width + x) * channels + c]; }
 };

@@ -62,6 +62,7 @@ Image ReadImage(const std::string& path) {
   img.width = spec.width;
   img.height = spec.height;
   img.channels = spec.nchannels;
+  if (!spec.format.is_floating_point()) img.integer_bits = int(spec.format.size()) * 8;
   img.data.resize(size_t(img.width) * img.height * img.channels);
   if (!in->read_image(0, 0, 0, img.channels, OIIO::TypeDesc::FLOAT, img.data.data())) {
     throw InputError(fmt::format("{}: cannot read image: {}", path, FirstLine(in->geterror())));
