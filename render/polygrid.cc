@@ -336,7 +336,8 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
     }
   };
   // Laplacian smoothing of the free nodes: red-black Gauss-Seidel with over-relaxation (omega
-  // below), until no node moves more than 1e-6 of the boundary spacing or `iterations` sweeps.
+  // below), until no node moves more than `tol` boundary spacings in a sweep or `iterations`
+  // sweeps.
   // Interior nodes are linked along the lattice only, so the nodes of one lattice parity
   // (x + y + z even or odd) depend only on the other's: each half-sweep runs in parallel and
   // the result does not depend on the thread count.
@@ -350,8 +351,8 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   // with n the lattice's largest extent (a larger factor than a smaller domain's optimum, which
   // costs less than a smaller one would).
   const double omega = 2 / (1 + std::sin(3.14159265358979 / std::max({lat.n[0], lat.n[1], lat.n[2]})));
-  auto smooth = [&](int iterations) {
-    const double tol = 1e-6 * pg.mean_boundary_spacing;
+  auto smooth = [&](int iterations, double tol_spacings) {
+    const double tol = tol_spacings * pg.mean_boundary_spacing;
     for (int it = 0; it < iterations; ++it) {
       double moved = 0;
       for (const std::vector<int32_t>& nodes : colour) {
@@ -385,12 +386,24 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       pg.position[i] = pg.position[b] - d * n;
     }
   };
+  // Only the last smoothing (before the variance steps) runs to 1e-6 spacings. The ones before
+  // an alignment pass stop at 1e-3: the alignment after them moves nodes by 0.04-0.6 spacings
+  // (bunny 16^3; torus 17^3: 0.17-1.8), and the warm-started sweeps after it carry on reducing
+  // what is left. On the bunny's lattice (omega 1.96) a sweep shrinks the largest step only
+  // ~0.96x, so 1e-6 needed 250-360 sweeps per smoothing and every pass ran into its cap of
+  // 200. Measured (docs/benchmarks.md, Rendering): bunny 16^3 1333 sweeps instead of 2359,
+  // nodes within 2.3e-3 spacings of the old ones, the same fallback count; torus 17^3 within
+  // 2.6e-2 spacings; renders within 4e-4 (relative L2).
+  const double loose = 1e-3, tight = 1e-6;
   place_edge_nodes();
-  smooth(options.smooth_iterations);
+  smooth(options.smooth_iterations, options.align_passes > 0 ? loose : tight);
   for (int pass = 0; pass < options.align_passes; ++pass) {
     align();
     place_edge_nodes();
-    smooth(std::min(200, options.smooth_iterations));  // warm-started
+    if (pass + 1 < options.align_passes)
+      smooth(std::min(200, options.smooth_iterations), loose);  // warm-started
+    else
+      smooth(options.smooth_iterations, tight);
   }
   std::vector<Vec3> grad;
   std::vector<std::array<double, 6>> scratch;
