@@ -186,7 +186,7 @@ class GlRenderPasses : public RenderPasses {
     for (size_t s = 0; s < samples.size(); ++s) {
       float* out = &f[s * kSampleFloats];
       const LightSample& smp = samples[s];
-      PutVec(out, smp.v, smp.point ? 1 : 0);
+      PutVec(out, smp.v, !smp.point ? 0 : smp.cube_face < 0 ? 1 : 2 + smp.cube_face);
       PutVec(out + 4, Vec3(smp.E[0], smp.E[1], smp.E[2]), smp.point ? (smp.v - sc_.centre).squaredNorm() : 0);
       put_view(out + 8, smp.view);
     }

@@ -37,12 +37,21 @@ struct PassView {
 // One light sample of pass 1: a directional light (v: unit direction towards the light) or a
 // point light (v: position, mm), with irradiance E at normal incidence (RGB; for a point light,
 // at the object's centre, falling off as 1/r^2), and the view of its shadow map (S x S).
+// cube_face >= 0: a point light close to the object is six samples, the faces of a cube shadow
+// map (90-degree frusta along +x, -x, +y, -y, +z, -z from the light: cube_face 0..5); sample f
+// lights only the points p with CubeFace(p - v) == f, so each point is lit once, through the
+// face whose frustum holds it. -1: the sample lights every point (one map).
 struct LightSample {
   bool point = false;
   Vec3 v = Vec3::UnitZ();
   std::array<double, 3> E = {0, 0, 0};
   PassView view;
+  int cube_face = -1;
 };
+
+// The cube-map face of direction d: 2 a + (d_a < 0) for the axis a of d's largest |component|
+// (ties: the lower axis). The gl passes' cube_face (render/shaders/common.glsl) is the same.
+int CubeFace(const Vec3& d);
 
 // What the passes draw, fixed for a renderer's lifetime.
 struct PassScene {
@@ -68,7 +77,8 @@ class RenderPasses {
   // with f the point light's falloff |v - centre|^2 / |v - x|^2 (1 for directional), cos_i > 0
   // the cosine between the node's normal and the direction to the light, F_t the Fresnel
   // transmittance and V = 0 where the node's depth in the sample's map exceeds the map's by
-  // more than the bias.
+  // more than the bias (the texel under the node, clamped to the map); a cube-map face's
+  // sample adds nothing at nodes of the other faces (LightSample::cube_face).
   virtual std::vector<BoundaryLight> Incident(const std::vector<LightSample>& samples) = 0;
   // Pass 3. Rasterises the mesh into camera.width x camera.height samples (nearest triangle per
   // sample centre; ties: the lower triangle index), and returns the (camera.width / s) x

@@ -67,6 +67,12 @@ struct Raster {
 
 }  // namespace
 
+int CubeFace(const Vec3& d) {
+  const Vec3 a = d.cwiseAbs();
+  const int axis = a.x() >= a.y() && a.x() >= a.z() ? 0 : a.y() >= a.z() ? 1 : 2;
+  return 2 * axis + (d[axis] < 0 ? 1 : 0);
+}
+
 PassView PassView::LookAt(const Vec3& eye, const Vec3& target, int w, int h, bool ortho, double scale) {
   PassView v;
   v.eye = eye;
@@ -327,11 +333,14 @@ class CpuRenderPasses : public RenderPasses {
     }
     *cos_i = n.dot(*l);
     if (*cos_i <= 0) return 0.0;
+    if (smp.cube_face >= 0 && CubeFace(p - smp.v) != smp.cube_face) return 0.0;
+    // Every point drawn lies in its map (the maps cover the bounding sphere, a cube face its
+    // own directions); the clamp keeps a point on a map's edge (p - v on a cube face's
+    // boundary projects to x = S) on its edge texel.
     const Vec3 sp = smp.view.Project(p);
-    const int x = int(sp.x()), y = int(sp.y()), S = smp.view.width;
-    if (x >= 0 && y >= 0 && x < S && y < S &&
-        sp.z() > shadows_[s].depth[size_t(y) * S + x] + sc_.shadow_bias)
-      return 0.0;
+    const int S = smp.view.width;
+    const int x = int(std::clamp(sp.x(), 0.0, S - 1.0)), y = int(std::clamp(sp.y(), 0.0, S - 1.0));
+    if (sp.z() > shadows_[s].depth[size_t(y) * S + x] + sc_.shadow_bias) return 0.0;
     return e;
   }
 
@@ -470,37 +479,51 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
   light.v = rot(light.v);
 
   // Pass 1: incident light at the boundary nodes of every level, shadow-map visibility. Every
-  // light is a list of samples: one for dir and point lights, one per direction for an
-  // environment map (EnvironmentSamples).
+  // light is a list of samples: one for dir and distant point lights, six for a point light
+  // near the object (a cube map), one per direction for an environment map (EnvironmentSamples).
   auto t0 = std::chrono::steady_clock::now();
+  const Vec3& centre = I.scene.centre;
+  const double radius = I.scene.radius;
   std::vector<LightSample> samples;
+  LightSample smp;
+  smp.v = light.v;
+  smp.E = {1, 1, 1};
   if (light.kind == RenderLight::Kind::kEnvironment) {
     if (I.env_source != light.environment.get()) {
       I.env = EnvironmentSamples(*light.environment, o.environment_directions);
       I.env_source = light.environment.get();
     }
+    const int S = I.env.size() > 1 ? std::max(16, o.shadow_map_size / 4) : o.shadow_map_size;
     for (const auto& [dir, E] : I.env) {
-      LightSample smp;
       smp.v = rot(dir);
       smp.E = E;
+      smp.view = PassView::LookAt(centre + 3 * radius * smp.v, centre, S, S, true, 1 / radius);
       samples.push_back(smp);
     }
-  } else {
-    LightSample smp;
-    smp.point = light.kind == RenderLight::Kind::kPoint;
-    smp.v = light.v;
-    smp.E = {1, 1, 1};
+  } else if (light.kind == RenderLight::Kind::kDirectional) {
+    const int S = o.shadow_map_size;
+    smp.view = PassView::LookAt(centre + 3 * radius * smp.v, centre, S, S, true, 1 / radius);
     samples.push_back(smp);
-  }
-  const int S = samples.size() > 1 ? std::max(16, o.shadow_map_size / 4) : o.shadow_map_size;
-  const Vec3& centre = I.scene.centre;
-  const double radius = I.scene.radius;
-  for (LightSample& smp : samples) {
-    if (!smp.point)
-      smp.view = PassView::LookAt(centre + 3 * radius * smp.v, centre, S, S, true, 1 / radius);
-    else
-      smp.view = PassView::LookAt(smp.v, centre, S, S, false,
-                                  1 / std::tan(std::asin(std::min(0.99, radius / std::max(1e-9, (smp.v - centre).norm())))));
+  } else {
+    // A point light sees the bounding sphere within the half-angle asin(radius / distance): up
+    // to 60 degrees one perspective map holds it; nearer (and inside the sphere, where the
+    // object may lie in every direction) a cube map of six 90-degree frusta, as many texels
+    // each.
+    const int S = o.shadow_map_size;
+    smp.point = true;
+    const double sin_half = radius / std::max(1e-9, (smp.v - centre).norm());
+    if (sin_half <= std::sin(kPi / 3)) {
+      smp.view = PassView::LookAt(smp.v, centre, S, S, false, 1 / std::tan(std::asin(sin_half)));
+      samples.push_back(smp);
+    } else {
+      for (int f = 0; f < 6; ++f) {
+        Vec3 axis = Vec3::Zero();
+        axis[f / 2] = f % 2 ? -1 : 1;
+        smp.cube_face = f;
+        smp.view = PassView::LookAt(smp.v, smp.v + axis, S, S, false, 1);  // 1 / tan 45 degrees
+        samples.push_back(smp);
+      }
+    }
   }
   std::vector<BoundaryLight> q = I.passes->Incident(samples);
   times_.incident = Seconds(t0);

@@ -19,7 +19,9 @@ namespace translume {
 //   env:FILE     an environment map: a latitude-longitude HDR image (row 0 looks up +z, column
 //                x at azimuth 2 pi (x + 0.5) / width from +x towards +y), loaded by the caller
 //                into `environment` (this library does no file IO)
-// Visibility from shadow maps: orthographic for dir, perspective for point; for env, one
+// Visibility from shadow maps: orthographic for dir, perspective for point (one map towards
+// the centre where the bounding sphere fills at most a 60-degree half-angle from the light,
+// else, nearer or inside the sphere, a cube map of six); for env, one
 // orthographic map per direction sample (RenderOptions::environment_directions), so each node's
 // irradiance sums only the unoccluded directions (ambient-occlusion visibility).
 struct RenderLight {

@@ -55,7 +55,8 @@ TEST(Render, ImageHasRequestedSizeAndIsNotEmpty) {
 }
 
 // The gl passes (compute shaders: shadow maps, incident light, rasterisation, shading) against
-// the cpu passes, the same scene and light: q at the boundary nodes and the image agree to
+// the cpu passes, the same scene and light (point:2,1,4 is above the torus's hole, inside its
+// bounding sphere: a cube shadow map): q at the boundary nodes and the image agree to
 // float rounding (a pixel whose sample centre lies on a triangle edge may pick the other
 // triangle, so the image is compared in L2 and by the share of pixels that differ).
 TEST(Render, GlPassesMatchCpu) {
@@ -72,7 +73,7 @@ TEST(Render, GlPassesMatchCpu) {
     std::string shape, light;
   };
   for (const Case& k : {Case{"sphere", "dir:1,0.3,0.6"}, Case{"torus", "point:30,10,20"},
-                        Case{"torus", "env"}}) {
+                        Case{"torus", "point:2,1,4"}, Case{"torus", "env"}}) {
     SCOPED_TRACE(k.shape + " " + k.light);
     const auto shape = MakeBuiltinShape(k.shape, 20, 24);
     PolygridOptions po;
@@ -463,6 +464,60 @@ TEST(Render, PointLightIncidentFallsOffAsInverseSquare) {
       if (pg.normal[b].x() > pg.normal[front].x()) front = b;
     ASSERT_LT((pg.position[pg.num_interior + front] - Vec3(10, 0, 0)).norm(), 1e-6);
     EXPECT_NEAR(s.renderer->boundary_light()[0][front], 2.211720, 1e-5);
+  }
+}
+
+// A point light inside the object's bounding sphere, next to a wall: a floor of 8 x 1 x 1 cubes
+// with a wall of 1 x 1 x 2 cubes on its third cube, 5 mm cubes (40 x 5 x 15 mm, bounding
+// radius 21.5 mm), the light 1.5 mm right of the wall and 2 mm above the floor (3.5 mm from the
+// centre). The floor left of the wall faces the light (cos up to 0.2) but the wall hides it:
+// q = 0 there. One frustum towards the centre (capped at 82 degrees before a cube map was
+// used) left those nodes, behind the light as seen from the centre, outside its map: lit.
+// Nodes right of the wall see the light: q = f cos F_t(cos) with f = |v|^2 / |v - p|^2.
+TEST(Render, PointLightNearTheObjectCastsShadowsEverywhere) {
+  Polycube pc;
+  for (int x = 0; x < 8; ++x) pc.cubes.push_back({x, 0, 0});
+  pc.cubes.push_back({2, 0, 1});
+  pc.cubes.push_back({2, 0, 2});
+  const auto shape = MakePolycubeSolidShape(pc, 40, 4, "wall");
+  PolygridOptions po;
+  po.resolution = 9;
+  const auto levels = BuildPolygridHierarchy(pc, *shape, po, 1);
+  const std::vector<NodeMaterial> mats = {ConstantNodeMaterial(levels[0], {0.2f, 0.2f, 0.2f}, {0.05f, 0.05f, 0.05f})};
+  const Vec3 v(-3.5, 0, -0.5);  // the wall spans x in [-10, -5] mm, the floor's top is z = -2.5
+  RenderLight light;
+  light.kind = RenderLight::Kind::kPoint;
+  light.v = v;
+  for (DiffusionBackend backend : {DiffusionBackend::kCpu, DiffusionBackend::kGl}) {
+    SCOPED_TRACE(Name(backend));
+    DiffusionOptions d;
+    d.backend = backend;
+    d.iterations = {20};
+    RenderOptions ro;
+    ro.width = ro.height = 16;
+    Renderer r(shape.get(), &levels, mats, ReflectionParameterC(1.3), d, ro);
+    r.Render(light);
+    const Polygrid& pg = levels[0];
+    const auto& q = r.boundary_light();
+    int behind = 0, seen = 0;
+    for (int64_t b = 0; b < pg.num_boundary(); ++b) {
+      const Vec3& p = pg.position[pg.num_interior + b];
+      const Vec3 l = (v - p).normalized();
+      const double c = pg.normal[b].dot(l);
+      if (p.x() < -10.5 && pg.normal[b].z() > 0.5) {  // the floor's top left of the wall
+        ASSERT_GT(c, 0.01);
+        for (int ch = 0; ch < 3; ++ch) EXPECT_EQ(q[ch][b], 0.f) << "node " << b << " at " << p.transpose();
+        ++behind;
+      } else if (p.x() > -4.5 && c > 0.15) {
+        const double want = v.squaredNorm() / (v - p).squaredNorm() * c * FresnelTransmittance(c, 1.3);
+        for (int ch = 0; ch < 3; ++ch) EXPECT_NEAR(q[ch][b], want, 1e-5 * (1 + want)) << "node " << b;
+        ++seen;
+      }
+    }
+    std::printf("[render] %s, point light next to a wall: %d nodes behind it (q = 0), %d lit as "
+                "unoccluded\n", Name(backend), behind, seen);
+    EXPECT_GT(behind, 20);
+    EXPECT_GT(seen, 20);
   }
 }
 

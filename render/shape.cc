@@ -749,6 +749,11 @@ std::unique_ptr<Shape> MakeBoxShape(const Vec3& extent_mm, int tessellation) {
   return std::make_unique<BoxShape>(extent_mm, tessellation, "box");
 }
 
+std::unique_ptr<Shape> MakePolycubeSolidShape(const Polycube& polycube, double size_mm,
+                                              int tessellation, const std::string& name) {
+  return std::make_unique<PolycubeSolidShape>(polycube, size_mm, std::max(1, tessellation), name);
+}
+
 std::unique_ptr<Shape> MakeMeshShape(TriangleMesh mesh, const std::string& name,
                                      double size_mm) {
   if (std::string err = mesh.Validate(); !err.empty()) throw InputError(name + ": " + err);

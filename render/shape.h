@@ -11,6 +11,8 @@
 
 namespace translume {
 
+struct Polycube;  // render/polycube.h
+
 using Vec3 = Eigen::Vector3d;
 
 // A triangle mesh in mm. Triangles are counter-clockwise seen from outside.
@@ -93,6 +95,10 @@ class Shape {
 std::unique_ptr<Shape> MakeBuiltinShape(const std::string& name, double size_mm,
                                         int tessellation = 48);
 std::unique_ptr<Shape> MakeBoxShape(const Vec3& extent_mm, int tessellation = 8);
+// The solid union of a polycube's unit cubes (as the bunny), centred, largest extent size_mm;
+// each exposed cube face is a tessellation x tessellation grid of quads.
+std::unique_ptr<Shape> MakePolycubeSolidShape(const Polycube& polycube, double size_mm,
+                                              int tessellation, const std::string& name);
 // A validated mesh, scaled and centred so that its largest extent is size_mm (<= 0: as is).
 std::unique_ptr<Shape> MakeMeshShape(TriangleMesh mesh, const std::string& name,
                                      double size_mm);

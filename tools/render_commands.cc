@@ -98,7 +98,7 @@ int RunRender(int argc, char** argv) {
   app.add_option("--iterations", iterations, "Relaxation steps per level, coarsest first")->capture_default_str();
   app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all)");
   app.add_option("--backend", backend, "All three passes on cpu or gl (compute shaders)")->capture_default_str();
-  app.add_option("--light", light, "dir:X,Y,Z | point:X,Y,Z (mm) | env:FILE.exr (lat-long)")->capture_default_str();
+  app.add_option("--light", light, "dir:X,Y,Z | point:X,Y,Z (mm; shadows in every direction: a cube shadow map when near or inside the object's bounding sphere) | env:FILE.exr (lat-long)")->capture_default_str();
   app.add_option("--camera", camera, "AZIMUTH,ELEVATION in degrees (default 30,25)");
   app.add_option("--image", image, "Output size WxH")->capture_default_str();
   app.add_option("--supersample", ro.supersample, "Samples per pixel per axis")->capture_default_str();

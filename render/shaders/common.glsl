@@ -6,9 +6,10 @@
 // A view: p = (ortho ? 1 : 0, scale, width, height); see PassView.
 struct View { vec4 eye; vec4 right; vec4 up; vec4 forward; vec4 p; };
 // A light sample: v.xyz the direction towards a directional light or a point light's position
-// (mm), v.w 1 for a point light; E.rgb the irradiance at normal incidence, E.w |v - centre|^2
-// (a point light's falloff numerator); the view of its shadow map. The camera is appended after
-// the light samples for the shading pass.
+// (mm), v.w 0 for a directional light, 1 for a point light with one map, 2 + f for face f of a
+// point light's cube map (LightSample::cube_face); E.rgb the irradiance at normal incidence,
+// E.w |v - centre|^2 (a point light's falloff numerator); the view of its shadow map. The
+// camera is appended after the light samples for the shading pass.
 struct Sample { vec4 v; vec4 E; View view; };
 // A mesh vertex or a boundary node: position (mm) and unit normal.
 struct Vertex { vec4 p; vec4 n; };
@@ -43,9 +44,18 @@ float fresnel_t(float cos_i, float eta) {
   return 1.0 - 0.5 * (rs * rs + rp * rp);
 }
 
+// The cube-map face of direction d (CubeFace in render/render_passes.h): 2 a + (d_a < 0) for
+// the axis a of d's largest |component|, ties to the lower axis.
+int cube_face(vec3 d) {
+  vec3 a = abs(d);
+  int axis = a.x >= a.y && a.x >= a.z ? 0 : (a.y >= a.z ? 1 : 2);
+  return 2 * axis + (d[axis] < 0.0 ? 1 : 0);
+}
+
 // Irradiance factor (falloff x visibility) of light sample s at p with normal n, 0 when facing
-// away or shadowed in the sample's S x S map (deeper than the map by more than bias); the cosine
-// cos_i and the unit direction l towards the light.
+// away, shadowed in the sample's S x S map (deeper than the map by more than bias, at the texel
+// clamped to the map) or, for a cube-map face, outside that face's directions; the cosine cos_i
+// and the unit direction l towards the light.
 float light(int s, vec3 p, vec3 n, int S, float bias, out float cos_i, out vec3 l) {
   float e = 1.0;
   vec4 v = samples[s].v;
@@ -58,9 +68,9 @@ float light(int s, vec3 p, vec3 n, int S, float bias, out float cos_i, out vec3 
   }
   cos_i = dot(n, l);
   if (cos_i <= 0.0) return 0.0;
+  if (v.w >= 2.0 && cube_face(p - v.xyz) != int(v.w) - 2) return 0.0;
   vec3 sp = project(samples[s].view, p);
-  int x = int(sp.x), y = int(sp.y);
-  if (x >= 0 && y >= 0 && x < S && y < S && sp.z > uintBitsToFloat(depth[s * S * S + y * S + x]) + bias)
-    return 0.0;
+  int x = int(clamp(sp.x, 0.0, float(S - 1))), y = int(clamp(sp.y, 0.0, float(S - 1)));
+  if (sp.z > uintBitsToFloat(depth[s * S * S + y * S + x]) + bias) return 0.0;
   return e;
 }
