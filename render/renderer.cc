@@ -21,6 +21,20 @@ double Seconds(std::chrono::steady_clock::time_point t0) {
 }
 
 // Z-buffer rasterisation: per pixel the nearest triangle and its screen-space barycentrics.
+// Depth (along the view's forward axis) is interpolated linearly in screen space, as in
+// raster.comp. Exact for orthographic views; for perspective ones (point lights' maps, the
+// camera) 1/z is what is affine in screen space, so the linear value is the weighted mean of
+// the vertex depths against the true weighted harmonic mean: never nearer than the surface
+// (so no self-shadowing from it), and at most (sqrt(z_max) - sqrt(z_min))^2 deeper for a
+// triangle whose vertex depths span [z_min, z_max]. Kept because that is far below the shadow
+// bias (0.03 bounding radii): the shading mesh's triangles are no longer than the boundary
+// spacing, and measured over every covered texel the excess was at most 0.004 mm for the
+// torus and sphere under point:30,.. (bias 0.3 mm), 0.03 mm for cube maps 1-2 mm from the
+// torus and bunny, 0.06 mm with a light 1 mm above the slab (bias 0.44 mm), 0.005 mm in the
+// camera's raster. It can only let light past an occluder closer than that in front of a
+// surface facing the light, which the bias allows anyway. A mesh left with large triangles
+// (ShadingMesh's vertex budget) under a near point light could exceed the bias; then
+// interpolate 1/z (z = 1 / sum_i w_i / z_i) here and in raster.comp.
 struct Raster {
   int width = 0, height = 0;
   std::vector<float> depth;

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // Z-buffer rasterisation of a triangle mesh, one invocation per triangle (after common.glsl).
 // A pixel (x, y) is covered when its centre (x + 0.5, y + 0.5) has barycentrics >= 0; its
-// depth is interpolated linearly in screen space. mode 0: depth[base + pixel] = min over the
+// depth is interpolated linearly in screen space (not perspective-correct; why that is kept:
+// the comment on Raster in render/renderer.cc). mode 0: depth[base + pixel] = min over the
 // covering triangles (atomicMin on the float bits); mode 1 (after mode 0): ids[pixel] = the
 // lowest index among the triangles at that depth (the cpu raster keeps the first one drawn).
 layout(local_size_x = 256) in;
