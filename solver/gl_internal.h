@@ -43,8 +43,18 @@ struct Tuning {
   // V-cycle in one dispatch, one work group per field (0: never). TRANSLUME_GL_TAIL_NODES=N
   // overrides it.
   int64_t tail_nodes = 0;
-  // Invocations of the tail's work group.
+  // Invocations of the tail's work group. TRANSLUME_GL_TAIL_GROUP=N overrides it.
   int tail_group = 256;
+  // The most loop iterations one shader invocation may run, all its loops together (0: no
+  // limit). Mesa's llvmpipe (gallivm) gives every shader one counter of
+  // LP_MAX_TGSI_LOOP_ITERATIONS = 65535, decremented by every iteration of every loop (per
+  // SIMD chunk of 8 invocations); once it is spent, each loop still entered runs at most one
+  // iteration, silently: the shader computes garbage and no error is raised (Mesa 22.3's
+  // lp_bld_ir_common.c, lp_exec_mask_function_init and lp_exec_endloop; measured on this
+  // renderer with a shader of two counted loops: one ran 65535 of 100000 iterations, two of
+  // 40000 ran 40000 and 25534). Set from GL_RENDERER whatever the tuning; the host keeps the
+  // coarse tail, whose one work group loops over whole levels, within it (Impl::PackLevels).
+  int64_t loop_budget = 0;
   // Fields per value in the V-cycles of a batch of three or more fields: 1, or 4 with four
   // fields' values interleaved as one vec4 per node (common.glsl's FIELDS4).
   int pack_fields = 1;
@@ -392,17 +402,27 @@ struct GlMultigridSolver::Impl {
   // levels.size(): no tail. tail_coef: their coefficients, packed; tail_work: tail_stride
   // values per field (for whole groups of four where packing is on); tail_work4: its view as
   // tail_stride vec4 per four fields (Packed batches).
-  // pack_fields: Tuning::pack_fields unless SetPackFields changed it.
+  // pack_fields: Tuning::pack_fields unless SetPackFields changed it; tail_group:
+  // Tuning::tail_group (tests may change it before a SetCoarseTail).
   int64_t tail_nodes = 0;
   int pack_fields = 1;
+  int tail_group = 256;
   size_t tail_level = 0;
   Buffer tail_coef, tail_work, tail_work4;
   int64_t tail_stride = 0;
   std::vector<int64_t> tail_coef_offset;  // per level (tail levels only): its cx .. sigma in tail_coef
   bool coefficients_set = false;          // SetCoefficients ran (tail_coef can be filled)
   // Chooses the tail levels for tail_nodes and packs the transfers and the tail's layout
-  // (tail_work is sized by Reserve, the coefficients copied by CopyTailCoefficients).
+  // (tail_work is sized by Reserve, the coefficients copied by CopyTailCoefficients). The
+  // tail starts on the first level with at most tail_nodes nodes where one invocation of
+  // tail.comp stays within Tuning::loop_budget (TailLoopIterations), with at least two levels.
   void PackLevels();
+  // An upper bound of the loop iterations one invocation of tail.comp runs, all its loops
+  // together (as llvmpipe counts them, Tuning::loop_budget), when the tail starts on level
+  // `first` with `tail_group` invocations per group: tail.comp's loops step by step, loops of
+  // a constant count included (as if not unrolled), the CG_ITERATION steps added where
+  // first == 0. About 40-80 iterations per node of the first level and tail_group invocations.
+  int64_t TailLoopIterations(size_t first) const;
   void CopyTailCoefficients();
   // Whether SolveDevice runs each CG iteration of nb fields as one dispatch (tail.comp's
   // CG_ITERATION): the tail covers the whole hierarchy and the batch is Packed.

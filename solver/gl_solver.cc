@@ -138,6 +138,8 @@ const Tuning& GetTuning() {
     t.tail_group = cpu ? 8 : 256;
     t.pack_fields = cpu ? 4 : 1;
     t.quarters = cpu;
+    // A property of the renderer, not of the shaders' tuning (Tuning::loop_budget).
+    if (GlContext::Get().info().renderer.find("llvmpipe") != std::string::npos) t.loop_budget = 65535;
     if (const char* tail = std::getenv("TRANSLUME_GL_TAIL_NODES")) t.tail_nodes = std::atoll(tail);
     if (const char* g = std::getenv("TRANSLUME_GL_TAIL_GROUP")) t.tail_group = std::atoi(g);
     if (const char* f = std::getenv("TRANSLUME_GL_PACK_FIELDS")) t.pack_fields = std::atoi(f) == 4 ? 4 : 1;
@@ -359,6 +361,7 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
   if (gl_internal::GetTuning().pack_fields == 4 && most >= 4) most = most / 4 * 4;
   I.max_batch = int(std::max<int64_t>(1, most));
   I.tail_nodes = gl_internal::GetTuning().tail_nodes;
+  I.tail_group = gl_internal::GetTuning().tail_group;
   I.pack_fields = gl_internal::GetTuning().pack_fields;
   // Quarter rows: an even width, so that the zebra sweeps' colours agree across quarters.
   const GridShape& s0 = I.levels[0]->s;
@@ -374,6 +377,8 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
 constexpr int kMgMeta = 36, kMgAxis = 14;
 // multigrid.glsl's kMgTaps: the most fine nodes one coarse node gathers along one axis.
 constexpr int64_t kMgTaps = 4;
+// The coarsest level is inverted densely (dense_coarse) up to this many nodes.
+constexpr int64_t kDenseCoarsestNodes = 1024;
 
 void GlMultigridSolver::Impl::PackLevels() {
   const size_t nl = levels.size();
@@ -383,6 +388,15 @@ void GlMultigridSolver::Impl::PackLevels() {
       tail_level = l;
       break;
     }
+  // Where one tail invocation would loop past llvmpipe's budget (Tuning::loop_budget), start
+  // the tail lower. Measured against the budget left over (a counted loop appended to
+  // tail.comp on llvmpipe), TailLoopIterations over-counts the tails that come near the
+  // budget 1.5-2.7x, and undercounted tails of a few hundred nodes by up to 25 iterations:
+  // kLoopSlack covers that.
+  constexpr int64_t kLoopSlack = 1024;
+  for (const int64_t budget = GetTuning().loop_budget;
+       budget > 0 && tail_level + 2 <= nl && TailLoopIterations(tail_level) + kLoopSlack > budget;)
+    ++tail_level;
   if (tail_level + 2 > nl) tail_level = nl;  // fewer than two levels: the per-level path is as short
   std::vector<int> idx(nl * kMgMeta, 0);
   std::vector<float> wts;
@@ -429,6 +443,53 @@ void GlMultigridSolver::Impl::PackLevels() {
   tail_stride = work + (tail_level == 0 ? 2 * levels[0]->n : 0);
 }
 
+int64_t GlMultigridSolver::Impl::TailLoopIterations(size_t first) const {
+  // llvmpipe counts a loop of k iterations as k + 1 (the pass that leaves it counts too), per
+  // chunk of 8 invocations, so a group loop counts its slowest lane. Loops of a constant count
+  // (four fields, two taps) count as loops though the compiler may unroll them.
+  const int64_t g = tail_group;
+  // A loop of tail.comp's group over `items` (its invocation's share, rounded up), each
+  // iteration running inner loops of `inner` counted iterations.
+  auto over = [&](int64_t items, int64_t inner) { return (items + g - 1) / g * (1 + inner) + 1; };
+  // HalfSweep: its columns, each SmoothLine's two loops of nz and nz - 1 nodes.
+  auto half_sweep = [&](const GridShape& s) { return over((s.nx + 1) / 2 * s.ny, 2 * s.nz + 1); };
+  // StencilLevel: its columns of kz nodes (or its nodes), each ResidualColumn's loop.
+  auto stencil = [&](const GridShape& s) {
+    const int64_t kz = GetTuning().columns ? s.nz : 1;
+    return over(s.nx * s.ny * ((s.nz + kz - 1) / kz), kz + 1);
+  };
+  const size_t last = levels.size() - 1;
+  const int64_t n0 = levels[first]->n;
+  // main's b in and x out (FIELDS4 on per-field buffers: a loop over four fields each); the
+  // V-cycle's loops over the levels (x = 0, down, up).
+  int64_t it = 2 * over(n0, 5) + 3 * int64_t(levels.size() - first + 1);
+  for (size_t l = first; l < last; ++l) {
+    const GLevel& L = *levels[l];
+    const int nu = l == 0 ? options.pre_smoothing : options.coarse_smoothing;
+    // x = 0; nu half-sweep pairs down and up (each pair one iteration of its own loop); the
+    // residual; the prolongation (ProlongAt's loops of 2, then 2 x 2).
+    it += over(L.n, 0) + 2 * (nu * (1 + 2 * half_sweep(L.s)) + 1) + stencil(L.s) + over(L.n, 3 + 6);
+    // The restriction: per coarse node three MgGathers of t taps, the nested z, y, x sums.
+    int64_t t[3];
+    for (int a = 0; a < 3; ++a) {
+      const std::vector<int64_t>& gs = L.geo.to_coarse[a].g_start;
+      t[a] = 0;
+      for (size_t c = 0; c + 1 < gs.size(); ++c) t[a] = std::max(t[a], gs[c + 1] - gs[c]);
+    }
+    it += over(levels[l + 1]->n, (t[0] + 1) + (t[1] + 1) + (t[2] + 1) + (t[2] + 1) + t[2] * (t[1] + 1) +
+                                     t[2] * t[1] * (t[0] + 1));
+  }
+  // The coarsest level: x = 0, then DenseRow's n per row or coarse_sweeps sweep quadruples.
+  const GLevel& C = *levels[last];
+  it += over(C.n, 0) + (C.n <= kDenseCoarsestNodes ? over(C.n, C.n + 1)
+                                                   : coarse_sweeps * (1 + 4 * half_sweep(C.s)) + 1);
+  if (first == 0)  // CG_ITERATION: p in; q = A p; p.q; x, r (four fields); r.r, r.z; p out;
+    // three GroupSums over the group; four loops over four fields.
+    it += over(n0, 0) + stencil(levels[0]->s) + over(n0, 0) + over(n0, 5) + over(n0, 0) + over(n0, 0) +
+          3 * (g + 1) + 4 * 5;
+  return it;
+}
+
 void GlMultigridSolver::Impl::CopyTailCoefficients() {
   for (size_t l = tail_level; l < levels.size(); ++l) {
     GLevel& L = *levels[l];
@@ -444,7 +505,7 @@ void GlMultigridSolver::Impl::Tail(const Buffer& b, Buffer& x, int nb) {
   // One work group of tail_group invocations per field (Run's tiling makes one group of
   // `group` threads).
   const bool four = Packed(nb);
-  const std::string defines = fmt::format("#define TL_GROUP {}\n{}{}", GetTuning().tail_group,
+  const std::string defines = fmt::format("#define TL_GROUP {}\n{}{}", tail_group,
                                           four ? "#define FIELDS4\n" : "", packed ? "#define PACKED_IO\n" : "");
   RunBatch("tail", {&tail_coef, &xfer_idx, &xfer_w, &minv, &b, &x, four ? &tail_work4 : &tail_work},
            {int(tail_level), int(levels.size() - tail_level), options.pre_smoothing, options.coarse_smoothing,
@@ -579,7 +640,7 @@ void GlMultigridSolver::SetCoefficients(const float* kappa, const float* mu, dou
   // The coarsest level: an exact dense inverse when it is small (one dispatch per V-cycle
   // instead of many sweeps); the few values travel to the host and back once per update.
   GLevel& Lc = *I.levels.back();
-  I.dense_coarse = Lc.n <= 1024;
+  I.dense_coarse = Lc.n <= kDenseCoarsestNodes;
   if (I.dense_coarse) {
     const int64_t n = Lc.n;
     const GridShape& s = Lc.s;
@@ -812,7 +873,7 @@ std::vector<SolveSummary> GlMultigridSolver::Impl::SolveDevice(const Buffer& b_f
   while (any && it < max_it) {
     if (fused) {
       const std::string defines =
-          fmt::format("#define TL_GROUP {}\n#define FIELDS4\n#define CG_ITERATION\n", GetTuning().tail_group);
+          fmt::format("#define TL_GROUP {}\n#define FIELDS4\n#define CG_ITERATION\n", tail_group);
       RunBatch("tail", {&tail_coef, &xfer_idx, &xfer_w, dense_coarse ? &coarse_inverse : &tail_coef, &r, &p, &tail_work4, &x, &scal, &hist},
                {0, int(levels.size()), options.pre_smoothing, options.coarse_smoothing, dense_coarse ? 1 : 0,
                 coarse_sweeps, int(tail_stride), GetTuning().columns ? 1 : 0, nb, max_it},
