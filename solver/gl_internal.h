@@ -32,10 +32,12 @@ struct Tuning {
   bool images = false;
   // One invocation per z-column of a level (kz = nz, common.glsl's Column) instead of one per
   // node (kz = 1), and grid-stride loops over at most `flat_groups` work groups per field for
-  // the element-wise kernels (0: one invocation per element).
+  // the element-wise kernels (0: one invocation per element; FlatThreads adds groups where
+  // loop_budget needs them). TRANSLUME_GL_FLAT_GROUPS=N overrides flat_groups (N >= 1).
   bool columns = false;
   int flat_groups = 0;
-  // Invocations per work group (common.glsl's TL_GROUP).
+  // Invocations per work group (common.glsl's TL_GROUP). TRANSLUME_GL_GROUP=N overrides it
+  // (N >= 8).
   int group = 256;
   // Dots leave one partial sum per invocation, no shared-memory tree (TL_INVOCATION_SUMS).
   bool invocation_sums = false;
@@ -53,7 +55,8 @@ struct Tuning {
   // lp_bld_ir_common.c, lp_exec_mask_function_init and lp_exec_endloop; measured on this
   // renderer with a shader of two counted loops: one ran 65535 of 100000 iterations, two of
   // 40000 ran 40000 and 25534). Set from GL_RENDERER whatever the tuning; the host keeps the
-  // coarse tail, whose one work group loops over whole levels, within it (Impl::PackLevels).
+  // coarse tail, whose one work group loops over whole levels, within it (Impl::PackLevels),
+  // and the grid-stride loops too (FlatThreads, DotThreads).
   int64_t loop_budget = 0;
   // Fields per value in the V-cycles of a batch of three or more fields: 1, or 4 with four
   // fields' values interleaved as one vec4 per node (common.glsl's FIELDS4).
@@ -168,11 +171,21 @@ int64_t RunBatch(const char* name, std::initializer_list<const Buffer*> buffers,
 int64_t DispatchCount();
 // Work groups per field that Run and RunBatch dispatch for `threads` threads.
 int64_t WorkGroups(int64_t threads);
+// Loop iterations of llvmpipe's budget (Tuning::loop_budget) that the host leaves unspent in
+// every invocation it sizes: its counts of a shader's loops may miss a few.
+constexpr int64_t kLoopSlack = 1024;
+// The most inner-loop iterations one element of an element-wise kernel runs (a loop of k
+// iterations counts k + 1): transfer.comp's restriction, three gathers of up to kMgTaps = 4
+// taps, the nested 4 x 4 x 4 sums and the quarter rows' taps, about 130; cg_update.comp and
+// pack.comp 5, the others none. gradient.comp counts its own (its loops over the fields).
+constexpr int64_t kFlatLoopsPerElement = 160;
 // Invocations of dot.comp for n elements, and the partial sums per field they leave.
 int64_t DotThreads(int64_t n);
 int64_t DotPartials(int64_t threads);
-// Invocations for a grid-stride loop over n elements (Tuning::flat_groups).
-int64_t FlatThreads(int64_t n);
+// Invocations for a grid-stride loop over n elements of `loops` inner-loop iterations each:
+// Tuning::flat_groups work groups per field, or more where one invocation would otherwise
+// loop past Tuning::loop_budget (llvmpipe on grids of millions of nodes).
+int64_t FlatThreads(int64_t n, int64_t loops = kFlatLoopsPerElement);
 // Nodes per invocation of a column kernel on a level (common.glsl's kz), and its invocations.
 int ColumnLength(const GridShape& s);
 int64_t ColumnThreads(const GridShape& s);

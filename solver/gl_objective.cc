@@ -95,7 +95,9 @@ class GlChannelObjective : public FrontFaceObjective {
         B.rhs.Upload(sources.data() + g * face_values, face_values * 4, g * stride * 4);
       for (const SolveSummary& s : I.SolveDevice(B.rhs, B.psi, B.count, B.grouped)) Track(s);
       Run("gradient", {&I.levels[0]->geometry, &B.phi, &B.psi, &grad_kappa_, &grad_mu_},
-          {int(shape_.nx), int(shape_.ny), int(shape_.nz), B.count}, gl_internal::FlatThreads(n), -1, 0,
+          {int(shape_.nx), int(shape_.ny), int(shape_.nz), B.count},
+          // Per node: the loop over the fields (or groups of four), six neighbours each.
+          gl_internal::FlatThreads(n, 8 * (B.grouped ? (B.count + 3) / 4 : B.count) + 1), -1, 0,
           B.grouped ? "#define FIELDS4\n" : "");
     }
     if (gk) {

@@ -142,6 +142,8 @@ const Tuning& GetTuning() {
     if (GlContext::Get().info().renderer.find("llvmpipe") != std::string::npos) t.loop_budget = 65535;
     if (const char* tail = std::getenv("TRANSLUME_GL_TAIL_NODES")) t.tail_nodes = std::atoll(tail);
     if (const char* g = std::getenv("TRANSLUME_GL_TAIL_GROUP")) t.tail_group = std::atoi(g);
+    if (const char* g = std::getenv("TRANSLUME_GL_GROUP")) t.group = std::max(8, std::atoi(g));
+    if (const char* g = std::getenv("TRANSLUME_GL_FLAT_GROUPS")) t.flat_groups = std::max(1, std::atoi(g));
     if (const char* f = std::getenv("TRANSLUME_GL_PACK_FIELDS")) t.pack_fields = std::atoi(f) == 4 ? 4 : 1;
     if (const char* q = std::getenv("TRANSLUME_GL_QUARTERS")) t.quarters = std::atoi(q) != 0;
     return t;
@@ -253,9 +255,22 @@ int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
 
 int64_t DispatchCount() { return dispatch_count; }
 
-int64_t FlatThreads(int64_t n) {
+namespace {
+// The fewest invocations among which n elements of `loops` inner-loop iterations each keep
+// every invocation's count (each element one more for the grid-stride loop itself) within
+// Tuning::loop_budget, kLoopSlack spare; 1 where there is no budget.
+int64_t BudgetThreads(int64_t n, int64_t loops) {
+  const int64_t budget = GetTuning().loop_budget;
+  if (budget <= 0) return 1;
+  const int64_t per_invocation = std::max<int64_t>(1, (budget - kLoopSlack) / (loops + 1));
+  return (n + per_invocation - 1) / per_invocation;
+}
+}  // namespace
+
+int64_t FlatThreads(int64_t n, int64_t loops) {
   const int groups = GetTuning().flat_groups;
-  return groups > 0 ? std::min<int64_t>(n, int64_t(groups) * GetTuning().group) : n;
+  if (groups <= 0) return n;
+  return std::min(n, std::max(int64_t(groups) * GetTuning().group, BudgetThreads(n, loops)));
 }
 
 int ColumnLength(const GridShape& s) { return GetTuning().columns ? int(s.nz) : 1; }
@@ -268,7 +283,8 @@ int64_t ColumnThreads(const GridShape& s) {
 // With one partial sum per invocation, two work groups per field: reduce.comp adds the
 // partial sums up in one invocation per field.
 int64_t DotThreads(int64_t n) {
-  return GetTuning().invocation_sums ? std::min<int64_t>(n, 2 * GetTuning().group) : FlatThreads(n);
+  return GetTuning().invocation_sums ? std::min(n, std::max<int64_t>(2 * GetTuning().group, BudgetThreads(n, 0)))
+                                     : FlatThreads(n, 0);
 }
 
 int64_t DotPartials(int64_t threads) {
@@ -393,9 +409,8 @@ void GlMultigridSolver::Impl::PackLevels() {
   // tail.comp, single fields, on llvmpipe: 31 tails of 9 grids, groups of 8, 32 and 64),
   // TailLoopIterations over-counts every one, 1.06-1.8x below 1000 iterations and 1.8-3.2x
   // above; kLoopSlack covers loops it might still miss.
-  constexpr int64_t kLoopSlack = 1024;
   for (const int64_t budget = GetTuning().loop_budget;
-       budget > 0 && tail_level + 2 <= nl && TailLoopIterations(tail_level) + kLoopSlack > budget;)
+       budget > 0 && tail_level + 2 <= nl && TailLoopIterations(tail_level) + gl_internal::kLoopSlack > budget;)
     ++tail_level;
   if (tail_level + 2 > nl) tail_level = nl;  // fewer than two levels: the per-level path is as short
   std::vector<int> idx(nl * kMgMeta, 0);

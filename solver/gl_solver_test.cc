@@ -412,6 +412,47 @@ TEST(GlSolver, LargeCoarseTailStaysWithinTheLoopBudgetAndMatchesTheCpu) {
   }
 }
 
+// The grid-stride loops of the element-wise kernels (FlatThreads, DotThreads) stay within
+// llvmpipe's loop budget (Tuning::loop_budget) on large levels: with few invocations per field,
+// one invocation's loops over its elements ran past it, silently (a forward solve on
+// 256x256x160 returned NaN). The ctest `GlSolver.LoopBudgetWithEightInvocations` runs this test
+// with TRANSLUME_GL_GROUP=8 and TRANSLUME_GL_FLAT_GROUPS=1 (8 invocations per field), where a
+// 96^3 solve's element-wise loops (110k nodes per invocation) returned NaN before the fix.
+TEST(GlSolver, GridStrideLoopsStayWithinTheLoopBudget) {
+  const gl_internal::Tuning& t = gl_internal::GetTuning();
+  if (t.loop_budget > 0) {
+    for (int64_t n : {int64_t(1000), int64_t(64000), int64_t(10485760)}) {
+      for (int64_t loops : {int64_t(0), int64_t(5), gl_internal::kFlatLoopsPerElement, int64_t(129)}) {
+        const int64_t threads = gl_internal::FlatThreads(n, loops);
+        const int64_t invocations = gl_internal::WorkGroups(threads) * t.group;
+        EXPECT_LE((n + invocations - 1) / invocations * (loops + 1) + 1, t.loop_budget) << n << " x " << loops;
+      }
+      const int64_t dots = gl_internal::WorkGroups(gl_internal::DotThreads(n)) * t.group;
+      EXPECT_LE((n + dots - 1) / dots + 1, t.loop_budget) << n;
+    }
+  }
+  const GridShape s{96, 96, 96};
+  const int64_t n = s.size();
+  std::vector<float> kappa, mu, b = SourcesAndASpot(s, 1), x(n, 0.0f), xc(n, 0.0f);
+  VaryingMaterial(n, kappa, mu);
+  MultigridOptions mo;
+  mo.tolerance = 1e-6;
+  MultigridSolver<float> cpu(s, 0.5, mo);
+  cpu.SetCoefficients(kappa.data(), mu.data(), 2.6);
+  const SolveSummary cs = cpu.Solve(b.data(), xc.data());
+  GlMultigridSolver gl(s, 0.5, mo);
+  gl.SetCoefficients(kappa.data(), mu.data(), 2.6);
+  const SolveSummary gs = gl.SolveBatch(1, b.data(), x.data())[0];
+  EXPECT_TRUE(gs.converged) << gs.BriefReport();
+  EXPECT_LE(gs.iterations, cs.iterations + 1) << gs.BriefReport();
+  double dd = 0, xx = 0;
+  for (int64_t p = 0; p < n; ++p) {
+    dd += (double(x[p]) - xc[p]) * (double(x[p]) - xc[p]);
+    xx += double(xc[p]) * xc[p];
+  }
+  EXPECT_LE(std::sqrt(dd / xx), 1e-4);
+}
+
 // A single field's solve in quarter rows (common.glsl's QUARTERS: the finest level four nodes
 // of a row per vec4) gives the plain layout's results: the same iterations, solutions within
 // float rounding. Widths with padding (13 -> 4 x 4, 26 -> 4 x 8) and without (40), with the
