@@ -10,6 +10,7 @@
 #include <cstring>
 #include <fmt/format.h>
 #include <mutex>
+#include <string>
 #include <vector>
 
 #include "solver/gl_api.h"
@@ -210,9 +211,10 @@ std::string GlInfo::ToString() const {
   return fmt::format(
       "platform {}\nGL_VENDOR {}\nGL_RENDERER {}\nGL_VERSION {}\n"
       "GL_MAX_COMPUTE_WORK_GROUP_COUNT {} x {} x {}\nGL_MAX_COMPUTE_WORK_GROUP_INVOCATIONS {}\n"
-      "GL_MAX_SHADER_STORAGE_BLOCK_SIZE {} bytes",
+      "GL_MAX_SHADER_STORAGE_BLOCK_SIZE {} bytes\nloop budget {}",
       platform, vendor, renderer, version, max_work_group_count[0], max_work_group_count[1],
-      max_work_group_count[2], max_work_group_invocations, max_ssbo_bytes);
+      max_work_group_count[2], max_work_group_invocations, max_ssbo_bytes,
+      loop_budget ? std::to_string(loop_budget) + " iterations per invocation (llvmpipe)" : std::string("none"));
 }
 
 GlContext& GlContext::Get() {
@@ -251,6 +253,7 @@ GlContext& GlContext::Get() {
       info.vendor = str(GL_VENDOR);
       info.renderer = str(GL_RENDERER);
       info.version = str(GL_VERSION);
+      if (info.renderer.find("llvmpipe") != std::string::npos) info.loop_budget = 65535;
       GLint major = 0, minor = 0;
       gl::api.GetIntegerv(GL_MAJOR_VERSION, &major);
       gl::api.GetIntegerv(GL_MINOR_VERSION, &minor);

@@ -19,6 +19,16 @@ struct GlInfo {
   int max_work_group_count[3] = {0, 0, 0};
   int max_work_group_invocations = 0;
   int64_t max_ssbo_bytes = 0;
+  // The most loop iterations one shader invocation may run, all its loops together; 0: no
+  // limit. Mesa's llvmpipe (gallivm, Mesa 22.3: LP_MAX_TGSI_LOOP_ITERATIONS in
+  // lp_bld_ir_common.c) gives every invocation, i.e. every SIMD chunk of 8 invocations run
+  // together, one counter of 65535, decremented by every iteration of every loop, nested and
+  // constant-count loops included (a loop of k iterations counts about k + 1; a chunk counts
+  // its slowest lane). Once it is spent each loop still entered runs at most one iteration,
+  // silently: the shader computes garbage and no error is raised. 65535 where GL_RENDERER
+  // contains "llvmpipe", else 0. Shaders whose loops grow with the input keep each invocation's
+  // share well within it (docs/gpu.md, "llvmpipe's loop budget").
+  int64_t loop_budget = 0;
   std::string ToString() const;
 };
 
