@@ -4,7 +4,9 @@
 // the solver's headless context. The mesh, the boundary nodes of every level and the vertex ->
 // boundary node weights are uploaded once; per frame the light samples go up, q and the image
 // come back.
+#include <array>
 #include <cstring>
+#include <fmt/format.h>
 #include <limits>
 #include <memory>
 
@@ -23,6 +25,11 @@ using render_gl::Ssbo;
 
 constexpr int kSampleFloats = 28;  // struct Sample in common.glsl: 7 vec4
 constexpr int32_t kNoTriangle = std::numeric_limits<int32_t>::max();
+// Under llvmpipe's loop budget (GlInfo::loop_budget) raster.comp draws a triangle whose pixel
+// bounds hold more than kTile^2 pixels in kTile x kTile tiles, one invocation each: 16385 loop
+// iterations at most, a quarter of the budget. kLoopSlack: the other loops' iterations, with room.
+constexpr int kTile = 128;
+constexpr int64_t kLoopSlack = 64;
 
 void PutVec(float* out, const Vec3& v, double w) {
   for (int a = 0; a < 3; ++a) out[a] = float(v[a]);
@@ -38,7 +45,9 @@ void Fill(const Ssbo& buffer, uint32_t value) {
 class GlRenderPasses : public RenderPasses {
  public:
   explicit GlRenderPasses(const PassScene* scene) : sc_(*scene) {
-    GlContext::Get();
+    loop_budget_ = GlContext::Get().info().loop_budget;
+    if (loop_budget_ > 0) tile_ = kTile;
+    tiles_.Set(nullptr, size_t(tile_capacity_ + 1) * 4 * sizeof(int32_t));  // ivec4 per tile, after the count
     raster_ = render_gl::Program("render/shaders/raster.comp");
     incident_ = render_gl::Program("render/shaders/incident.comp");
     shade_ = render_gl::Program("render/shaders/shade.comp");
@@ -86,14 +95,9 @@ class GlRenderPasses : public RenderPasses {
     const size_t texels = size_t(map_size_) * map_size_;
     shadow_.Set(nullptr, samples.size() * texels * sizeof(uint32_t));
     Fill(shadow_, FarDepth());
-    api.UseProgram(raster_);
-    api.Uniform1i(0, num_tris_);
-    api.Uniform1i(2, 0);  // depth only
-    for (size_t s = 0; s < samples.size(); ++s) {
-      api.Uniform1i(1, int(s));
-      api.Uniform1i(3, int(s * texels));
-      Dispatch({&samples_, &shadow_, &verts_, &tris_, &ids_}, num_tris_);
-    }
+    std::vector<std::array<int, 2>> maps;
+    for (size_t s = 0; s < samples.size(); ++s) maps.push_back({int(s), int(s * texels)});
+    Raster(maps, map_size_, map_size_, shadow_, 0);  // depth only
     api.UseProgram(incident_);
     api.Uniform1i(0, int(num_nodes_));
     api.Uniform1i(1, int(samples.size()));
@@ -132,14 +136,8 @@ class GlRenderPasses : public RenderPasses {
     }
     Fill(cam_depth_, FarDepth());
     Fill(ids_, uint32_t(kNoTriangle));
-    api.UseProgram(raster_);
-    api.Uniform1i(0, num_tris_);
-    api.Uniform1i(1, int(samples.size()));
-    api.Uniform1i(3, 0);
-    for (int mode = 0; mode < 2; ++mode) {
-      api.Uniform1i(2, mode);
-      Dispatch({&samples_, &cam_depth_, &verts_, &tris_, &ids_}, num_tris_);
-    }
+    for (int mode = 0; mode < 2; ++mode)
+      Raster({{int(samples.size()), 0}}, cam.width, cam.height, cam_depth_, mode);
     const int64_t nb = (*sc_.levels)[0].num_boundary();
     std::vector<float> rad(size_t(nb) * 3);
     for (int c = 0; c < 3; ++c) std::copy(radiance[c].begin(), radiance[c].end(), rad.begin() + c * nb);
@@ -163,6 +161,67 @@ class GlRenderPasses : public RenderPasses {
   }
 
  private:
+  // Draws the mesh with raster.comp in `mode` (0: depth, 1: triangle ids after mode 0) into
+  // each raster of `rasters` (the index of its view in the samples uploaded, its first texel
+  // in `depth`), all width x height texels. Within llvmpipe's loop budget (tile_ > 0), mode 0
+  // lists the tiles of the triangles larger than a tile, over all the rasters, and both modes
+  // then draw those tiles in a second dispatch (mode 1 the tiles mode 0 listed last).
+  void Raster(const std::vector<std::array<int, 2>>& rasters, int width, int height, const Ssbo& depth,
+              int mode) {
+    if (tile_ > 0) {
+      // One invocation loops over at most tile_^2 pixels plus, in mode 0, the tiles it lists.
+      const int64_t most = (int64_t(width) + tile_ - 1) / tile_ * ((int64_t(height) + tile_ - 1) / tile_);
+      if (int64_t(tile_) * tile_ + most + kLoopSlack > loop_budget_)
+        throw InputError(fmt::format("--backend gl: a {}x{} raster is too large for llvmpipe (a shader "
+                                     "invocation may loop {} times); use --backend cpu",
+                                     width, height, loop_budget_));
+    }
+    api.UseProgram(raster_);
+    api.Uniform1i(2, mode);
+    api.Uniform1i(4, tile_);
+    auto triangles = [&] {
+      api.Uniform1i(0, num_tris_);
+      api.Uniform1i(5, 0);
+      api.Uniform1i(6, int(tile_capacity_));
+      for (const auto& [view, base] : rasters) {
+        api.Uniform1i(1, view);
+        api.Uniform1i(3, base);
+        Dispatch({&samples_, &depth, &verts_, &tris_, &ids_, &tiles_}, num_tris_);
+      }
+    };
+    auto listed = [&] {
+      uint32_t n = 0;
+      tiles_.Get(&n, sizeof(n));
+      return int64_t(n);
+    };
+    if (tile_ > 0 && mode == 0) {
+      ResetTiles();
+      triangles();
+      num_tiles_ = listed();
+      if (num_tiles_ > tile_capacity_) {  // grow and list again (drawing twice changes nothing)
+        tile_capacity_ = std::max(num_tiles_, 2 * tile_capacity_);
+        tiles_.Set(nullptr, size_t(tile_capacity_ + 1) * 4 * sizeof(int32_t));
+        ResetTiles();
+        triangles();
+      }
+    } else {
+      triangles();
+    }
+    if (tile_ > 0 && num_tiles_ > 0) {
+      api.Uniform1i(0, int(num_tiles_));
+      api.Uniform1i(5, 1);
+      Dispatch({&samples_, &depth, &verts_, &tris_, &ids_, &tiles_}, num_tiles_);
+    }
+  }
+
+  // Sets raster.comp's count of listed tiles to 0.
+  void ResetTiles() {
+    const uint32_t zero = 0;
+    api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    api.BindBuffer(GL_SHADER_STORAGE_BUFFER, tiles_.id);
+    api.BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, sizeof(zero), &zero);
+  }
+
   static uint32_t FarDepth() {
     const float far = 1e30f;  // as the cpu raster's empty texel
     uint32_t bits;
@@ -200,7 +259,12 @@ class GlRenderPasses : public RenderPasses {
   int64_t num_nodes_ = 0;
   std::vector<int64_t> level_start_;
   size_t cam_pixels_ = 0;
-  Ssbo verts_, tris_, nodes_, near_, samples_, shadow_, q_, cam_depth_, ids_, image_, radiance_;
+  // Large triangles drawn in tiles (raster.comp) where GlInfo::loop_budget limits the loop
+  // iterations of an invocation: the tile side (pixels; 0: no tiles), the budget, the tiles
+  // the buffer holds and the tiles mode 0 listed last.
+  int tile_ = 0;
+  int64_t loop_budget_ = 0, tile_capacity_ = 4096, num_tiles_ = 0;
+  Ssbo verts_, tiles_, tris_, nodes_, near_, samples_, shadow_, q_, cam_depth_, ids_, image_, radiance_;
 };
 
 }  // namespace
