@@ -154,8 +154,16 @@ class GlRenderPasses : public RenderPasses {
     api.Uniform1f(8, float(o.roughness));
     api.Uniform1f(9, float(o.surface_reflectance));
     api.Uniform1i(10, int(nb));
-    Dispatch({&samples_, &shadow_, &verts_, &tris_, &ids_, &near_, &image_, &radiance_},
-             int64_t(img.width) * img.height);
+    // The light samples per dispatch: all, or as many as keep an invocation's ss^2 (s1 - s0 +
+    // 18) loop iterations (shade.comp) within half the loop budget.
+    const int n = int(samples.size());
+    const int per = loop_budget_ > 0 ? int(std::max<int64_t>(1, loop_budget_ / 2 / (ss * ss) - 18)) : n;
+    for (int s0 = 0; s0 < n; s0 += per) {
+      api.Uniform1i(11, s0);
+      api.Uniform1i(12, std::min(n, s0 + per));
+      Dispatch({&samples_, &shadow_, &verts_, &tris_, &ids_, &near_, &image_, &radiance_},
+               int64_t(img.width) * img.height);
+    }
     image_.Get(img.data.data(), img.data.size() * sizeof(float));
     return img;
   }

@@ -135,9 +135,10 @@ TEST(Render, GlPassesMatchCpu) {
 // triangles (ShadingMesh's vertex budget), of up to 4.5 x 10^5 pixel bounds in the 768^2 camera
 // raster (192^2 pixels, 4 x 4 samples); a step (three cubes and one on the last, shading
 // triangles of quarter faces) casts its shadow through triangles of up to 2.5 x 10^5 pixel
-// bounds in a 2048^2 shadow map (raster.comp draws those in 128 x 128 tiles). Before the
-// tiles, llvmpipe cut those loops short silently: the image 0.43 off (relative L2); q 0.28 and
-// the image 0.11.
+// bounds in a 2048^2 shadow map (raster.comp draws those in 128 x 128 tiles); 1100 environment
+// directions at 8 x 8 samples per pixel are 64 x 1100 light terms per pixel (shade.comp sums
+// them over several dispatches). Before the splits, llvmpipe cut those loops short silently:
+// the image 0.43 off (relative L2); q 0.28 and the image 0.11; the image 0.06.
 TEST(Render, GlPassesWithinTheLoopBudgetMatchCpu) {
   PolygridOptions po;
   po.resolution = 3;
@@ -155,6 +156,11 @@ TEST(Render, GlPassesWithinTheLoopBudgetMatchCpu) {
   ro.supersample = 2;
   ro.shadow_map_size = 2048;
   ExpectGlPassesMatchCpu(*shape, levels, ro, RenderLight::Parse("dir:1,0.3,0.6"), "large shadow-map triangles");
+  ro.width = ro.height = 24;
+  ro.supersample = 8;
+  ro.shadow_map_size = 64;
+  ro.environment_directions = 1100;
+  ExpectGlPassesMatchCpu(*cube, cube_levels, ro, TestSky(), "1100 environment directions");
 }
 
 // The stored reference: tests/data/render_sphere_marble.exr (linear RGB). After an intentional

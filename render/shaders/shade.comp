@@ -3,14 +3,16 @@
 // ss x ss samples of the camera raster (ids: nearest triangle, 0x7fffffff where empty) of
 //   F_t(cos_o) L_ms + sum_s (Ward(rho_s, alpha) + rho_d / pi) E_s f cos_i V
 // (RenderPasses::Shade). L_ms: barycentric over the triangle's vertices, each vertex the
-// weighted sum of the radiance at its 4 nearest boundary nodes.
+// weighted sum of the radiance at its 4 nearest boundary nodes. The light samples may be
+// summed over several dispatches (GlInfo::loop_budget: one invocation loops ss^2 (s1 - s0 + 18)
+// times): the one with s0 = 0 writes the image and adds L_ms, the others add their samples.
 layout(local_size_x = 256) in;
 struct Near { ivec4 idx; vec4 w; };
 layout(std430, binding = 2) readonly buffer Verts { Vertex verts[]; };
 layout(std430, binding = 3) readonly buffer Tris { int tris[]; };
 layout(std430, binding = 4) readonly buffer Ids { int ids[]; };
 layout(std430, binding = 5) readonly buffer Nears { Near nears[]; };
-layout(std430, binding = 6) writeonly buffer Image { float image[]; };  // (y * width + x) * 3 + c
+layout(std430, binding = 6) buffer Image { float image[]; };  // (y * width + x) * 3 + c
 layout(std430, binding = 7) readonly buffer Radiance { float radiance[]; };  // c * num_boundary + b
 layout(location = 0) uniform int width;
 layout(location = 1) uniform int height;
@@ -23,6 +25,8 @@ layout(location = 7) uniform float specular;
 layout(location = 8) uniform float roughness;
 layout(location = 9) uniform float reflectance;
 layout(location = 10) uniform int num_boundary;
+layout(location = 11) uniform int s0;  // the light samples [s0, s1) of this dispatch
+layout(location = 12) uniform int s1;
 
 vec3 vertex_radiance(int v) {
   vec3 r = vec3(0.0);
@@ -60,7 +64,7 @@ void main() {
       float ft = fresnel_t(cos_o, eta);
       vec3 surface = vec3(0.0);
       if (cos_o > 0.0 && (specular > 0.0 || reflectance > 0.0)) {
-        for (int s = 0; s < num_samples; ++s) {
+        for (int s = s0; s < s1; ++s) {
           float cos_i;
           vec3 l;
           float e = light(s, p, n, map_size, bias, cos_i, l);
@@ -72,10 +76,12 @@ void main() {
           surface += ((ward + reflectance / kPi) * e * cos_i) * samples[s].E.rgb;
         }
       }
-      vec3 ms = w0 * vertex_radiance(i0) + w1 * vertex_radiance(i1) + w2 * vertex_radiance(i2);
+      vec3 ms = vec3(0.0);
+      if (s0 == 0) ms = w0 * vertex_radiance(i0) + w1 * vertex_radiance(i1) + w2 * vertex_radiance(i2);
       sum += ft * ms + surface;
     }
   sum /= float(ss * ss);
+  if (s0 > 0) sum += vec3(image[3 * pix], image[3 * pix + 1], image[3 * pix + 2]);
   image[3 * pix] = sum.r;
   image[3 * pix + 1] = sum.g;
   image[3 * pix + 2] = sum.b;
