@@ -48,15 +48,9 @@ struct Tuning {
   // Invocations of the tail's work group. TRANSLUME_GL_TAIL_GROUP=N overrides it.
   int tail_group = 256;
   // The most loop iterations one shader invocation may run, all its loops together (0: no
-  // limit). Mesa's llvmpipe (gallivm) gives every shader one counter of
-  // LP_MAX_TGSI_LOOP_ITERATIONS = 65535, decremented by every iteration of every loop (per
-  // SIMD chunk of 8 invocations); once it is spent, each loop still entered runs at most one
-  // iteration, silently: the shader computes garbage and no error is raised (Mesa 22.3's
-  // lp_bld_ir_common.c, lp_exec_mask_function_init and lp_exec_endloop; measured on this
-  // renderer with a shader of two counted loops: one ran 65535 of 100000 iterations, two of
-  // 40000 ran 40000 and 25534). Set from GL_RENDERER whatever the tuning; the host keeps the
-  // coarse tail, whose one work group loops over whole levels, within it (Impl::PackLevels),
-  // and the grid-stride loops too (FlatThreads, DotThreads).
+  // limit): GlInfo::loop_budget (llvmpipe's silent limit, solver/gl_context.h) whatever the
+  // tuning. The host keeps the coarse tail, whose one work group loops over whole levels,
+  // within it (Impl::PackLevels), and the grid-stride loops too (FlatThreads, DotThreads).
   int64_t loop_budget = 0;
   // Fields per value in the V-cycles of a batch of three or more fields: 1, or 4 with four
   // fields' values interleaved as one vec4 per node (common.glsl's FIELDS4).

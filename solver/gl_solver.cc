@@ -138,8 +138,7 @@ const Tuning& GetTuning() {
     t.tail_group = cpu ? 8 : 256;
     t.pack_fields = cpu ? 4 : 1;
     t.quarters = cpu;
-    // A property of the renderer, not of the shaders' tuning (Tuning::loop_budget).
-    if (GlContext::Get().info().renderer.find("llvmpipe") != std::string::npos) t.loop_budget = 65535;
+    t.loop_budget = GlContext::Get().info().loop_budget;  // the renderer's, whatever the tuning
     if (const char* tail = std::getenv("TRANSLUME_GL_TAIL_NODES")) t.tail_nodes = std::atoll(tail);
     if (const char* g = std::getenv("TRANSLUME_GL_TAIL_GROUP")) t.tail_group = std::atoi(g);
     if (const char* g = std::getenv("TRANSLUME_GL_GROUP")) t.group = std::max(8, std::atoi(g));
