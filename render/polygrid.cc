@@ -6,6 +6,7 @@
 #include <cmath>
 #include <deque>
 #include <fmt/format.h>
+#include <numeric>
 #include <unordered_map>
 
 #include "render/laplacian.h"
@@ -347,10 +348,41 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       const auto& g = pg.lattice[i];
       colour[(g[0] + g[1] + g[2]) & 1].push_back(int32_t(i));
     }
-  // SOR's optimal factor for the Laplacian on a cube of n nodes per side, 2 / (1 + sin(pi / n)),
-  // with n the lattice's largest extent (a larger factor than a smaller domain's optimum, which
-  // costs less than a smaller one would).
-  const double omega = 2 / (1 + std::sin(3.14159265358979 / std::max({lat.n[0], lat.n[1], lat.n[2]})));
+  // SOR's optimal factor 2 / (1 + sqrt(1 - rho^2)) (Young), rho the spectral radius of the
+  // Jacobi iteration on the free nodes (the mean of the six neighbours, the fixed nodes held):
+  // estimated by the Rayleigh quotient of a few power steps from all ones (the dominant
+  // eigenvector is positive), which approaches rho from below, so the factor errs low, where
+  // SOR slows gently rather than sharply. On a cube of m free nodes per side rho = cos(pi /
+  // (m + 1)), the classic 2 / (1 + sin(pi / (m + 1))). The lattice's largest extent, used
+  // before, overshot where the solid is thinner than its box: 1.96 where this gives 1.86 on
+  // the bunny, whose build at 16^3 then took 10.3 s instead of 7.5 (docs/benchmarks.md,
+  // Rendering). 30 steps cost about as much as 30 sweeps.
+  const double omega = [&] {
+    std::vector<double> x(pg.num_interior, 0.0), y(pg.num_interior, 0.0);
+    for (int64_t i = 0; i < pg.num_interior; ++i) x[i] = free_node[i] ? 1.0 : 0.0;
+    double rho = 0;
+    for (int step = 0; step < 30; ++step) {
+      double xy = 0, xx = 0;
+#pragma omp parallel for schedule(static) reduction(+ : xy, xx) if (pg.num_interior > 20000)
+      for (int64_t i = 0; i < pg.num_interior; ++i) {
+        if (!free_node[i]) continue;
+        double s = 0;
+        for (int j = 0; j < 6; ++j) {
+          const int32_t k = pg.neighbours[i][j];
+          if (k < pg.num_interior && free_node[k]) s += x[k];
+        }
+        y[i] = s / 6;
+        xy += x[i] * y[i];
+        xx += x[i] * x[i];
+      }
+      if (xx == 0) return 1.0;
+      rho = xy / xx;
+      const double norm = std::sqrt(std::inner_product(y.begin(), y.end(), y.begin(), 0.0));
+      if (norm == 0) return 1.0;
+      for (int64_t i = 0; i < pg.num_interior; ++i) x[i] = y[i] / norm;
+    }
+    return 2 / (1 + std::sqrt(std::max(0.0, 1 - rho * rho)));
+  }();
   auto smooth = [&](int iterations, double tol_spacings) {
     const double tol = tol_spacings * pg.mean_boundary_spacing;
     for (int it = 0; it < iterations; ++it) {
@@ -389,7 +421,7 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   // Only the last smoothing (before the variance steps) runs to 1e-6 spacings. The ones before
   // an alignment pass stop at 1e-3: the alignment after them moves nodes by 0.04-0.6 spacings
   // (bunny 16^3; torus 17^3: 0.17-1.8), and the warm-started sweeps after it carry on reducing
-  // what is left. On the bunny's lattice (omega 1.96) a sweep shrinks the largest step only
+  // what is left. On the bunny's lattice (omega 1.96 then) a sweep shrinks the largest step only
   // ~0.96x, so 1e-6 needed 250-360 sweeps per smoothing and every pass ran into its cap of
   // 200. Measured (docs/benchmarks.md, Rendering): bunny 16^3 1333 sweeps instead of 2359,
   // nodes within 2.3e-3 spacings of the old ones, the same fallback count; torus 17^3 within
