@@ -145,6 +145,12 @@ int RunRender(int argc, char** argv) {
   PolygridOptions po;
   po.resolution = resolution;
   po.first_layer_fraction = first_layer;
+  // The build takes seconds on large polycubes (the bunny: ~10 s on two cores): say so first.
+  if (pc.cubes.size() > 16) {
+    std::printf("render: building the polygrid of %s (%zu cubes x %d^3, up to %d level%s) ...\n",
+                shape->name().c_str(), pc.cubes.size(), resolution, levels, levels == 1 ? "" : "s");
+    std::fflush(stdout);
+  }
   auto t0 = std::chrono::steady_clock::now();
   const std::vector<Polygrid> grids = BuildPolygridHierarchy(pc, *shape, po, levels);
   const double build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
