@@ -328,7 +328,13 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
   if (shape.size() >= (int64_t(1) << 31))
     throw InputError(fmt::format("--backend gl: grid {} has 2^31 nodes or more; use --backend cpu",
                                  shape.ToString()));
-  GlContext::Get();
+  // One invocation solves a whole z-line (smooth.comp, factor.comp: about 2 nz + 2 loop
+  // iterations), which llvmpipe's loop budget (GlInfo::loop_budget) must hold.
+  if (const int64_t budget = GlContext::Get().info().loop_budget;
+      budget > 0 && 2 * shape.nz + 2 + gl_internal::kLoopSlack > budget)
+    throw InputError(fmt::format("--backend gl: grid {} is {} nodes deep, and llvmpipe runs z-lines of at most {} "
+                                 "nodes; use --backend cpu", shape.ToString(), shape.nz,
+                                 (budget - gl_internal::kLoopSlack - 2) / 2));
   Impl& I = *impl_;
   I.options = options.WithCycleDefaults(true, shape.size());
   I.n0 = shape.size();

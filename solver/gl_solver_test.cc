@@ -453,6 +453,21 @@ TEST(GlSolver, GridStrideLoopsStayWithinTheLoopBudget) {
   EXPECT_LE(std::sqrt(dd / xx), 1e-4);
 }
 
+// A grid deeper than llvmpipe's loop budget lets a z-line solve run is refused with one line
+// (the smoother's invocations would silently stop part-way down the line).
+TEST(GlSolver, RefusesZLinesLongerThanTheLoopBudget) {
+  if (GlContext::Get().info().loop_budget == 0) GTEST_SKIP() << "no loop budget on this renderer";
+  try {
+    GlMultigridSolver gl(GridShape{3, 3, 40000}, 0.5, MultigridOptions{});
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("3x3x40000"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("--backend cpu"), std::string::npos) << msg;
+  }
+  EXPECT_NO_THROW(GlMultigridSolver(GridShape{3, 3, 30000}, 0.5, MultigridOptions{}));
+}
+
 // A single field's solve in quarter rows (common.glsl's QUARTERS: the finest level four nodes
 // of a row per vec4) gives the plain layout's results: the same iterations, solutions within
 // float rounding. Widths with padding (13 -> 4 x 4, 26 -> 4 x 8) and without (40), with the
