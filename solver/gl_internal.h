@@ -33,7 +33,7 @@ struct Tuning {
   // One invocation per z-column of a level (kz = nz, common.glsl's Column) instead of one per
   // node (kz = 1), and grid-stride loops over at most `flat_groups` work groups per field for
   // the element-wise kernels (0: one invocation per element; FlatThreads adds groups where
-  // loop_budget needs them). TRANSLUME_GL_FLAT_GROUPS=N overrides flat_groups (N >= 1).
+  // LoopBudget needs them). TRANSLUME_GL_FLAT_GROUPS=N overrides flat_groups (N >= 1).
   bool columns = false;
   int flat_groups = 0;
   // Invocations per work group (common.glsl's TL_GROUP). TRANSLUME_GL_GROUP=N overrides it
@@ -47,11 +47,6 @@ struct Tuning {
   int64_t tail_nodes = 0;
   // Invocations of the tail's work group. TRANSLUME_GL_TAIL_GROUP=N overrides it.
   int tail_group = 256;
-  // The most loop iterations one shader invocation may run, all its loops together (0: no
-  // limit): GlInfo::loop_budget (llvmpipe's silent limit, solver/gl_context.h) whatever the
-  // tuning. The host keeps the coarse tail, whose one work group loops over whole levels,
-  // within it (Impl::PackLevels), and the grid-stride loops too (FlatThreads, DotThreads).
-  int64_t loop_budget = 0;
   // Fields per value in the V-cycles of a batch of three or more fields: 1, or 4 with four
   // fields' values interleaved as one vec4 per node (common.glsl's FIELDS4).
   int pack_fields = 1;
@@ -165,8 +160,14 @@ int64_t RunBatch(const char* name, std::initializer_list<const Buffer*> buffers,
 int64_t DispatchCount();
 // Work groups per field that Run and RunBatch dispatch for `threads` threads.
 int64_t WorkGroups(int64_t threads);
-// Loop iterations of llvmpipe's budget (Tuning::loop_budget) that the host leaves unspent in
-// every invocation it sizes: its counts of a shader's loops may miss a few.
+// The most loop iterations one shader invocation may run, all its loops together (0: no
+// limit): the context's GlInfo::loop_budget (llvmpipe's silent limit, solver/gl_context.h),
+// whatever the tuning. The host keeps the coarse tail, whose one work group loops over whole
+// levels, within it (Impl::PackLevels), the grid-stride loops too (FlatThreads, DotThreads),
+// and refuses grids whose z-lines it cannot hold (GlMultigridSolver's constructor).
+int64_t LoopBudget();
+// Loop iterations of the budget that the host leaves unspent in every invocation it sizes:
+// its counts of a shader's loops may miss a few.
 constexpr int64_t kLoopSlack = 1024;
 // The most inner-loop iterations one element of an element-wise kernel runs (a loop of k
 // iterations counts k + 1): transfer.comp's restriction, three gathers of up to kMgTaps = 4
@@ -178,7 +179,7 @@ int64_t DotThreads(int64_t n);
 int64_t DotPartials(int64_t threads);
 // Invocations for a grid-stride loop over n elements of `loops` inner-loop iterations each:
 // Tuning::flat_groups work groups per field, or more where one invocation would otherwise
-// loop past Tuning::loop_budget (llvmpipe on grids of millions of nodes).
+// loop past LoopBudget() (llvmpipe on grids of millions of nodes).
 int64_t FlatThreads(int64_t n, int64_t loops = kFlatLoopsPerElement);
 // Nodes per invocation of a column kernel on a level (common.glsl's kz), and its invocations.
 int ColumnLength(const GridShape& s);
@@ -422,10 +423,10 @@ struct GlMultigridSolver::Impl {
   // Chooses the tail levels for tail_nodes and packs the transfers and the tail's layout
   // (tail_work is sized by Reserve, the coefficients copied by CopyTailCoefficients). The
   // tail starts on the first level with at most tail_nodes nodes where one invocation of
-  // tail.comp stays within Tuning::loop_budget (TailLoopIterations), with at least two levels.
+  // tail.comp stays within LoopBudget() (TailLoopIterations), with at least two levels.
   void PackLevels();
   // An upper bound of the loop iterations one invocation of tail.comp runs, all its loops
-  // together (as llvmpipe counts them, Tuning::loop_budget), when the tail starts on level
+  // together (as llvmpipe counts them, LoopBudget()), when the tail starts on level
   // `first` with `tail_group` invocations per group: tail.comp's loops step by step, loops of
   // a constant count included (as if not unrolled), the CG_ITERATION steps added where
   // first == 0. About 40-80 iterations per node of the first level and tail_group invocations.

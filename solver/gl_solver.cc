@@ -138,7 +138,6 @@ const Tuning& GetTuning() {
     t.tail_group = cpu ? 8 : 256;
     t.pack_fields = cpu ? 4 : 1;
     t.quarters = cpu;
-    t.loop_budget = GlContext::Get().info().loop_budget;  // the renderer's, whatever the tuning
     if (const char* tail = std::getenv("TRANSLUME_GL_TAIL_NODES")) t.tail_nodes = std::atoll(tail);
     if (const char* g = std::getenv("TRANSLUME_GL_TAIL_GROUP")) t.tail_group = std::atoi(g);
     if (const char* g = std::getenv("TRANSLUME_GL_GROUP")) t.group = std::max(8, std::atoi(g));
@@ -254,12 +253,14 @@ int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
 
 int64_t DispatchCount() { return dispatch_count; }
 
+int64_t LoopBudget() { return GlContext::Get().info().loop_budget; }
+
 namespace {
 // The fewest invocations among which n elements of `loops` inner-loop iterations each keep
 // every invocation's count (each element one more for the grid-stride loop itself) within
-// Tuning::loop_budget, kLoopSlack spare; 1 where there is no budget.
+// LoopBudget(), kLoopSlack spare; 1 where there is no budget.
 int64_t BudgetThreads(int64_t n, int64_t loops) {
-  const int64_t budget = GetTuning().loop_budget;
+  const int64_t budget = LoopBudget();
   if (budget <= 0) return 1;
   const int64_t per_invocation = std::max<int64_t>(1, (budget - kLoopSlack) / (loops + 1));
   return (n + per_invocation - 1) / per_invocation;
@@ -330,7 +331,7 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
                                  shape.ToString()));
   // One invocation solves a whole z-line (smooth.comp, factor.comp: about 2 nz + 2 loop
   // iterations), which llvmpipe's loop budget (GlInfo::loop_budget) must hold.
-  if (const int64_t budget = GlContext::Get().info().loop_budget;
+  if (const int64_t budget = gl_internal::LoopBudget();
       budget > 0 && 2 * shape.nz + 2 + gl_internal::kLoopSlack > budget)
     throw InputError(fmt::format("--backend gl: grid {} is {} nodes deep, and llvmpipe runs z-lines of at most {} "
                                  "nodes; use --backend cpu", shape.ToString(), shape.nz,
@@ -409,12 +410,12 @@ void GlMultigridSolver::Impl::PackLevels() {
       tail_level = l;
       break;
     }
-  // Where one tail invocation would loop past llvmpipe's budget (Tuning::loop_budget), start
+  // Where one tail invocation would loop past llvmpipe's budget (LoopBudget), start
   // the tail lower. Measured against the budget left over (a counted loop appended to
   // tail.comp, single fields, on llvmpipe: 31 tails of 9 grids, groups of 8, 32 and 64),
   // TailLoopIterations over-counts every one, 1.06-1.8x below 1000 iterations and 1.8-3.2x
   // above; kLoopSlack covers loops it might still miss.
-  for (const int64_t budget = GetTuning().loop_budget;
+  for (const int64_t budget = gl_internal::LoopBudget();
        budget > 0 && tail_level + 2 <= nl && TailLoopIterations(tail_level) + gl_internal::kLoopSlack > budget;)
     ++tail_level;
   if (tail_level + 2 > nl) tail_level = nl;  // fewer than two levels: the per-level path is as short

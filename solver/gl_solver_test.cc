@@ -357,7 +357,7 @@ TEST(GlSolver, OneDispatchCgIterationMatchesTheDispatchedOne) {
 
 // A coarse tail whose first level is large. One invocation of tail.comp loops over whole
 // levels, and llvmpipe silently ends every loop of a shader once the shader has run 65535 loop
-// iterations in all (Tuning::loop_budget): a tail over the whole 32^3 hierarchy with 8
+// iterations in all (gl_internal::LoopBudget): a tail over the whole 32^3 hierarchy with 8
 // invocations per group broke the preconditioner (100 iterations, not converged). The host
 // now starts the tail where one invocation stays within the budget. With SetCoarseTail over
 // the whole hierarchy, the tuning's tail group and a larger one, a single solve and a packed
@@ -380,7 +380,7 @@ TEST(GlSolver, LargeCoarseTailStaysWithinTheLoopBudgetAndMatchesTheCpu) {
   GlMultigridSolver gl(s, 0.5, mo);
   gl.SetCoefficients(kappa.data(), mu.data(), 2.6);
   GlMultigridSolver::Impl& I = gl.impl();
-  const int64_t budget = gl_internal::GetTuning().loop_budget;
+  const int64_t budget = gl_internal::LoopBudget();
   for (int group : {gl_internal::GetTuning().tail_group, 64}) {
     I.tail_group = group;
     gl.SetCoarseTail(n);
@@ -413,22 +413,23 @@ TEST(GlSolver, LargeCoarseTailStaysWithinTheLoopBudgetAndMatchesTheCpu) {
 }
 
 // The grid-stride loops of the element-wise kernels (FlatThreads, DotThreads) stay within
-// llvmpipe's loop budget (Tuning::loop_budget) on large levels: with few invocations per field,
+// llvmpipe's loop budget (gl_internal::LoopBudget) on large levels: with few invocations per field,
 // one invocation's loops over its elements ran past it, silently (a forward solve on
 // 256x256x160 returned NaN). The ctest `GlSolver.LoopBudgetWithEightInvocations` runs this test
 // with TRANSLUME_GL_GROUP=8 and TRANSLUME_GL_FLAT_GROUPS=1 (8 invocations per field), where a
 // 96^3 solve's element-wise loops (110k nodes per invocation) returned NaN before the fix.
 TEST(GlSolver, GridStrideLoopsStayWithinTheLoopBudget) {
   const gl_internal::Tuning& t = gl_internal::GetTuning();
-  if (t.loop_budget > 0) {
+  const int64_t budget = gl_internal::LoopBudget();
+  if (budget > 0) {
     for (int64_t n : {int64_t(1000), int64_t(64000), int64_t(10485760)}) {
       for (int64_t loops : {int64_t(0), int64_t(5), gl_internal::kFlatLoopsPerElement, int64_t(129)}) {
         const int64_t threads = gl_internal::FlatThreads(n, loops);
         const int64_t invocations = gl_internal::WorkGroups(threads) * t.group;
-        EXPECT_LE((n + invocations - 1) / invocations * (loops + 1) + 1, t.loop_budget) << n << " x " << loops;
+        EXPECT_LE((n + invocations - 1) / invocations * (loops + 1) + 1, budget) << n << " x " << loops;
       }
       const int64_t dots = gl_internal::WorkGroups(gl_internal::DotThreads(n)) * t.group;
-      EXPECT_LE((n + dots - 1) / dots + 1, t.loop_budget) << n;
+      EXPECT_LE((n + dots - 1) / dots + 1, budget) << n;
     }
   }
   const GridShape s{96, 96, 96};
@@ -456,7 +457,7 @@ TEST(GlSolver, GridStrideLoopsStayWithinTheLoopBudget) {
 // A grid deeper than llvmpipe's loop budget lets a z-line solve run is refused with one line
 // (the smoother's invocations would silently stop part-way down the line).
 TEST(GlSolver, RefusesZLinesLongerThanTheLoopBudget) {
-  if (GlContext::Get().info().loop_budget == 0) GTEST_SKIP() << "no loop budget on this renderer";
+  if (gl_internal::LoopBudget() == 0) GTEST_SKIP() << "no loop budget on this renderer";
   try {
     GlMultigridSolver gl(GridShape{3, 3, 40000}, 0.5, MultigridOptions{});
     ADD_FAILURE() << "no error";
