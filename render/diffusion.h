@@ -25,7 +25,8 @@ struct NodeMaterial {
 // instead, a different equation wherever kappa varies), so in phi':
 //   w_k = w_ji kbar_ij kappa_i / kappa_j, s = 0,  1/inv_diag = mu_i + sum_j w_ji kbar_ij
 // (homogeneous: w_k = kappa w_ji, 1/inv_diag = mu + kappa sum_j w_ji, the paper's row times kappa).
-// Boundary node b linked to interior j at distance d: the Robin condition phi + 2 C kappa
+// Boundary node b linked to interior j, d = Polygrid::link_length (the link's extent along b's
+// normal, so that (phi_j - phi_b) / d estimates -dphi/dn): the Robin condition phi + 2 C kappa
 // dphi/dn = q (Equation (9)) as a balance over the slab of depth d/2 that b owns along its link
 // (vertex-centred finite volumes, the boundary half cells of SPEC section 3):
 //   (phi_b - q_b) / (2 C) = kappa_b (phi_j - phi_b) / d - (d/2) mu_b phi_b

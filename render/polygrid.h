@@ -56,7 +56,9 @@ struct Polygrid {
   std::vector<std::array<int32_t, 6>> neighbours;
   std::vector<std::array<float, 6>> weights;      // interior: Laplacian weights w_ji, 1/mm^2
   // Boundary nodes (index b - num_interior): outward unit normal, link direction (0..5, the
-  // direction from the interior node to the boundary node), and d_ji = |v_b - v_j| (mm).
+  // direction from the interior node to the boundary node), and d_ji (mm): |v_b - v_j| where
+  // v_j has this one boundary link (a normal of length d), else (v_b - v_j) . normal, the link's
+  // extent along the normal (such links can lean far off it; at least d / 4).
   std::vector<Vec3> normal;
   std::vector<int> link_dir;
   std::vector<double> link_length;
