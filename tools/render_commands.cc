@@ -83,7 +83,7 @@ int RunRender(int argc, char** argv) {
   std::string material, shape_name = "sphere", polycube_path, light = "dir:1,0.3,0.6", out,
               camera, image = "256x256", iterations = "200,100,100", depth, backend = "cpu";
   double size_mm = 20, map_scale = 1, first_layer = 0.1;
-  int resolution = 17, levels = 3, turntable = 1;
+  int resolution = 17, levels = 3, turntable = 1, variance_steps = PolygridOptions().variance_iterations;
   bool coherence = false, clamp = false;
   std::optional<double> exposure;  // stops; none: auto exposure
   RenderOptions ro;
@@ -94,6 +94,10 @@ int RunRender(int argc, char** argv) {
   app.add_option("--resolution", resolution, "Polygrid nodes per cube edge")->capture_default_str();
   app.add_option("--levels", levels, "Hierarchy levels (Section 5.3)")->capture_default_str();
   app.add_option("--first-layer", first_layer, "First interior nodes at this fraction of the boundary spacing")
+      ->capture_default_str();
+  app.add_option("--variance-steps", variance_steps,
+                 "Gradient steps on the interior nodes' edge-length variance (the paper's placement; 0: smoothing only, "
+                 "fewer axis-fallback Laplacian weights, docs/render.md)")
       ->capture_default_str();
   app.add_option("--iterations", iterations, "Relaxation steps per level, coarsest first")->capture_default_str();
   app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all)");
@@ -124,6 +128,7 @@ int RunRender(int argc, char** argv) {
   if (exposure && !std::isfinite(*exposure)) throw InputError("--exposure: must be a finite number of stops");
   if (turntable < 1) throw InputError("--turntable: must be >= 1");
   if (levels < 1) throw InputError("--levels: must be >= 1");
+  if (variance_steps < 0) throw InputError("--variance-steps: must be >= 0");
   if (std::string err = ro.Validate(); !err.empty()) throw InputError("render: " + err);
   RenderLight L = RenderLight::Parse(light);
   const bool mesh = Extension(shape_name) == ".obj" || Extension(shape_name) == ".ply";
@@ -145,6 +150,7 @@ int RunRender(int argc, char** argv) {
   PolygridOptions po;
   po.resolution = resolution;
   po.first_layer_fraction = first_layer;
+  po.variance_iterations = variance_steps;
   // The build takes seconds on large polycubes (the bunny: ~10 s on two cores): say so first.
   if (pc.cubes.size() > 16) {
     std::printf("render: building the polygrid of %s (%zu cubes x %d^3, up to %d level%s) ...\n",
@@ -165,9 +171,10 @@ int RunRender(int argc, char** argv) {
   if (!depth.empty()) dopt.depth = ParseIntList(depth, "--depth");
   dopt.frame_coherence = coherence;
   if (std::string err = dopt.Validate(); !err.empty()) throw InputError("--iterations/--depth: " + err);
-  std::printf("render: %s on %s, polygrid %zu cubes x %d^3 (%lld nodes, %lld boundary), %zu levels, "
-              "built in %.2f s\n", material.c_str(), shape->name().c_str(), pc.cubes.size(), resolution,
-              (long long)grids[0].size(), (long long)grids[0].num_boundary(), grids.size(), build_s);
+  std::printf("render: %s on %s, polygrid %zu cubes x %d^3 (%lld nodes, %lld boundary, %lld with axis-fallback "
+              "Laplacian weights), %zu levels, built in %.2f s\n", material.c_str(), shape->name().c_str(),
+              pc.cubes.size(), resolution, (long long)grids[0].size(), (long long)grids[0].num_boundary(),
+              (long long)grids[0].fallback_weights, grids.size(), build_s);
   if (ro.model == "dipole") {
     bool homogeneous = true;
     for (int ch = 0; ch < 3; ++ch)
