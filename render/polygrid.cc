@@ -258,6 +258,8 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
           crease_votes[dir1] += dot < 0.866 ? 1 : -1;
         }
   }
+  std::array<bool, 6> crease_side;
+  for (int k = 0; k < 6; ++k) crease_side[k] = crease_votes[k] > 0;
   if (*std::max_element(crease_votes.begin(), crease_votes.end()) > 0) {
     pg.position = lattice_position;
     for (int a = 0; a < 3; ++a) {
@@ -404,11 +406,18 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   };
   // Alignment: a boundary node and its first interior node follow the grid line of the free
   // interior node behind them (that node's surface point, and d inside it), so
-  // boundary links continue the interior grid lines along the normal.
+  // boundary links continue the interior grid lines along the normal. On crease sides only (a
+  // box's, the bunny's): on a smooth side the interior grid lines converge towards the
+  // polycube's edges, and following them undid the evening out of the boundary nodes, more
+  // with every pass. On the sphere at 17^3 after the 10 passes the surface spacing ran from 0.39
+  // mm next to the faces' rims to 2.05 mm at their centres (0.80 to 1.22 mm as evened out),
+  // and renders showed it: streaks along the cube's edges in the polygrid's radiance, blotches
+  // in the dipole's (docs/benchmarks.md).
   auto align = [&] {
     for (int64_t i = 0; i < pg.num_interior; ++i) {
       if (blinks[i].size() != 1 || split[blinks[i][0]]) continue;
       const int32_t b = blinks[i][0];
+      if (!crease_side[pg.link_dir[b - pg.num_interior]]) continue;
       const int32_t f = pg.neighbours[i][pg.link_dir[b - pg.num_interior] ^ 1];
       if (f >= pg.num_interior || !free_node[f]) continue;
       // Onto b's tangent plane first, so the projection stays on b's side of the surface.
@@ -428,11 +437,13 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   // 2.6e-2 spacings; renders within 4e-4 (relative L2).
   const double loose = 1e-3, tight = 1e-6;
   place_edge_nodes();
-  smooth(options.smooth_iterations, options.align_passes > 0 ? loose : tight);
-  for (int pass = 0; pass < options.align_passes; ++pass) {
+  const int align_passes =
+      std::any_of(crease_side.begin(), crease_side.end(), [](bool c) { return c; }) ? options.align_passes : 0;
+  smooth(options.smooth_iterations, align_passes > 0 ? loose : tight);
+  for (int pass = 0; pass < align_passes; ++pass) {
     align();
     place_edge_nodes();
-    if (pass + 1 < options.align_passes)
+    if (pass + 1 < align_passes)
       smooth(std::min(200, options.smooth_iterations), loose);  // warm-started
     else
       smooth(options.smooth_iterations, tight);
@@ -521,6 +532,60 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   pg.depth_mm.resize(N);
   for (int64_t n = 0; n < N; ++n) pg.depth_mm[n] = (pg.position[n] - pg.position[pg.source[n]]).norm();
   return pg;
+}
+
+std::vector<double> BoundaryNodeAreas(const Polygrid& pg, double total_mm2) {
+  std::unordered_map<int64_t, int64_t> at;
+  for (int64_t b = pg.num_interior; b < pg.size(); ++b) at[Key(pg.lattice[b], pg.link_dir[b - pg.num_interior])] = b;
+  std::vector<double> area(pg.num_boundary());
+  double sum = 0;
+  for (int64_t b = pg.num_interior; b < pg.size(); ++b) {
+    const int dir = pg.link_dir[b - pg.num_interior];
+    std::array<Vec3, 2> t;
+    for (int a = 0, k = 0; a < 3; ++a) {
+      if (a == dir / 2) continue;
+      std::array<int64_t, 2> nb;
+      for (int s : {0, 1}) {
+        auto g = pg.lattice[b];
+        g[a] += s ? 1 : -1;
+        const auto it = at.find(Key(g, dir));
+        nb[s] = it == at.end() ? -1 : it->second;
+      }
+      if (nb[0] >= 0 && nb[1] >= 0) {
+        t[k] = (pg.position[nb[1]] - pg.position[nb[0]]) / 2;
+      } else if (nb[0] >= 0 || nb[1] >= 0) {
+        // At a face's rim the patch reaches half-way to the neighbour inside the face and
+        // half-way to the nearest node of the face across the edge (the lattice node beyond
+        // the rim, or one step from it along this face's normal axis), else as far again.
+        const int side = nb[1] >= 0 ? 0 : 1;  // the missing side
+        const Vec3 inner = pg.position[nb[1 - side]] - pg.position[b];
+        auto g = pg.lattice[b];
+        g[a] += side ? 1 : -1;
+        double across = inner.norm();
+        for (int step : {0, -1, 1}) {
+          auto h = g;
+          h[dir / 2] += step;
+          for (int dir2 = 0; dir2 < 6; ++dir2) {
+            if (dir2 == dir) continue;
+            if (const auto it = at.find(Key(h, dir2)); it != at.end())
+              across = std::min(across, (pg.position[it->second] - pg.position[b]).norm());
+          }
+        }
+        t[k] = inner.normalized() * (inner.norm() + across) / 2;
+      } else {
+        t[k] = Vec3::Zero();
+      }
+      ++k;
+    }
+    const double A = t[0].norm() == 0 || t[1].norm() == 0
+                         ? pg.mean_boundary_spacing * pg.mean_boundary_spacing
+                         : t[0].cross(t[1]).norm();
+    area[b - pg.num_interior] = A;
+    sum += A;
+  }
+  if (total_mm2 > 0 && sum > 0)
+    for (double& A : area) A *= total_mm2 / sum;
+  return area;
 }
 
 std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Shape& shape,

@@ -27,7 +27,9 @@ struct PolygridOptions {
   int variance_iterations = 100;
   // Passes that align each boundary node and its first interior node with the grid line of the
   // free interior node behind them (then re-smooth): links along the normal, grid lines
-  // continued to the surface. On a box this gives a tensor-product grid.
+  // continued to the surface. On a box this gives a tensor-product grid. Only on the sides of
+  // the polycube that meet creases of the surface (a box's, the bunny's; none on the sphere,
+  // torus and blob), where it keeps the boundary nodes' spacing.
   int align_passes = 10;
 
   std::string Validate() const;
@@ -78,6 +80,14 @@ struct Polygrid {
   // its polycube face (the axes other than link_dir / 2, in increasing order).
   std::array<double, 2> SurfaceUV(int64_t b) const;
 };
+
+// The surface area each boundary node stands for (mm^2), [b - num_interior]: the parallelogram
+// spanned by its half-way vectors to its neighbours on the same polycube face (lattice
+// neighbours with the same link direction; at a face's rim, half-way to the nearest node of the
+// face across the edge; the mean boundary spacing where a face is one node wide). With
+// total_mm2 > 0 they are scaled to sum to it (the surface's area); unscaled they sum to about
+// the surface's area. Sums over the surface (the dipole baseline) weight each node by it.
+std::vector<double> BoundaryNodeAreas(const Polygrid& pg, double total_mm2 = 0);
 
 // Builds the polygrid of `shape` from `polycube`, stretched onto the shape's bounding box.
 // Throws InputError on bad options or a polycube whose grid has no interior node.

@@ -163,27 +163,52 @@ double FresnelTransmittance(double cos_i, double eta) {
 
 BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kappa,
                              const std::array<float, 3>& mu, double C, const BoundaryLight& q,
-                             double node_area) {
+                             const std::vector<double>& node_areas) {
   const int64_t nb = pg.num_boundary();
-  const double area = node_area > 0 ? node_area : pg.mean_boundary_spacing * pg.mean_boundary_spacing;
+  TL_CHECK(node_areas.empty() || int64_t(node_areas.size()) == nb);
+  const double spacing_area = pg.mean_boundary_spacing * pg.mean_boundary_spacing;
   BoundaryLight L;
   for (int c = 0; c < 3; ++c) {
     const double sa = mu[c], ss = std::max(1e-6, 1 / (3.0 * kappa[c]) - mu[c]);
     const double st = sa + ss, alpha = ss / st, tr = std::sqrt(sa / kappa[c]);
     const double zr = 1 / st, zv = zr * (1 + 4 * C / 3);
     L[c].assign(nb, 0.f);
-#pragma omp parallel for schedule(static)
+    // int_0^rho R_d(r) 2 pi r dr in closed form, since (sigma d + 1) e^(-sigma d) r / d^3 =
+    // -d/dr (e^(-sigma d) / d) with d = sqrt(r^2 + z^2).
+    auto disc = [&](double rho2) {
+      const double dr = std::sqrt(rho2 + zr * zr), dv = std::sqrt(rho2 + zv * zv);
+      return alpha / 2 *
+             (zr * (std::exp(-tr * zr) / zr - std::exp(-tr * dr) / dr) +
+              zv * (std::exp(-tr * zv) / zv - std::exp(-tr * dv) / dv));
+    };
+    const double near = std::max(3 * zr, 2.5 * pg.mean_boundary_spacing);
+#pragma omp parallel for schedule(dynamic, 16)
     for (int64_t b = 0; b < nb; ++b) {
       const Vec3& x = pg.position[pg.num_interior + b];
       double acc = 0;
+      std::vector<std::pair<double, int64_t>> close;  // (r^2, source) within `near`
       for (int64_t s = 0; s < nb; ++s) {
-        if (q[c][s] == 0) continue;
         const double r2 = (x - pg.position[pg.num_interior + s]).squaredNorm();
+        if (r2 < near * near) {
+          close.emplace_back(r2, s);
+          continue;
+        }
+        if (q[c][s] == 0) continue;
         const double dr = std::sqrt(r2 + zr * zr), dv = std::sqrt(r2 + zv * zv);
         const double rd = alpha / (4 * kPi) *
                           (zr * (tr * dr + 1) * std::exp(-tr * dr) / (dr * dr * dr) +
                            zv * (tr * dv + 1) * std::exp(-tr * dv) / (dv * dv * dv));
-        acc += rd * q[c][s] * area;
+        acc += rd * q[c][s] * (node_areas.empty() ? spacing_area : node_areas[s]);
+      }
+      // Near sources, where R_d changes within a node's patch: the patches, nearest first, as
+      // the annuli of a disc that grows by each one's area (exact for uniform light on a
+      // plane whatever the nodes' spacing).
+      std::sort(close.begin(), close.end());
+      double area = 0;
+      for (const auto& [r2, s] : close) {
+        const double before = disc(area / kPi);
+        area += node_areas.empty() ? spacing_area : node_areas[s];
+        acc += q[c][s] * (disc(area / kPi) - before);
       }
       L[c][b] = float(acc / kPi);
     }
@@ -384,7 +409,7 @@ struct Renderer::Impl {
   // The environment's direction samples, computed once per environment image.
   const Image* env_source = nullptr;
   TriangleMesh shading_mesh;  // ShadingMesh of the shape's
-  double node_area = 0;       // the surface's area per finest boundary node, mm^2 (dipole)
+  std::vector<double> node_areas;  // the finest boundary nodes' areas, mm^2 (dipole)
   std::vector<std::pair<Vec3, std::array<double, 3>>> env;
 };
 
@@ -409,10 +434,7 @@ Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
   I.shading_mesh = ShadingMesh(shape->mesh(), pg.mean_boundary_spacing,
                                std::max<int64_t>(int64_t(shape->mesh().vertices.size()), 2 * nb), &sc.vertex_normals);
   sc.mesh = &I.shading_mesh;
-  for (const auto& t : shape->mesh().triangles) {
-    const std::vector<Vec3>& v = shape->mesh().vertices;
-    I.node_area += 0.5 * (v[t[1]] - v[t[0]]).cross(v[t[2]] - v[t[0]]).norm() / double(nb);
-  }
+  if (options.model == "dipole") I.node_areas = BoundaryNodeAreas(pg, shape->mesh().Area());
   const TriangleMesh& mesh = I.shading_mesh;
   sc.centre = (shape->lo + shape->hi) / 2;
   sc.radius = 0;  // bounding sphere about the box centre
@@ -561,7 +583,7 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
       k[c] = float(ks / pg.size());
       m[c] = float(ms / pg.size());
     }
-    radiance_ = DipoleRadiance(pg, k, m, I.C, q[0], I.node_area);
+    radiance_ = DipoleRadiance(pg, k, m, I.C, q[0], I.node_areas);
   }
   q_finest_ = q[0];
   times_.diffusion = Seconds(t0);

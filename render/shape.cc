@@ -579,6 +579,13 @@ void TriangleMesh::Bounds(Vec3* lo, Vec3* hi) const {
   }
 }
 
+double TriangleMesh::Area() const {
+  double area = 0;
+  for (const auto& t : triangles)
+    area += 0.5 * (vertices[t[1]] - vertices[t[0]]).cross(vertices[t[2]] - vertices[t[0]]).norm();
+  return area;
+}
+
 std::vector<Vec3> TriangleMesh::VertexNormals() const {
   std::vector<Vec3> n(vertices.size(), Vec3::Zero());
   for (const auto& t : triangles) {

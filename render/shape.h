@@ -26,6 +26,7 @@ struct TriangleMesh {
   // non-manifold edge (three or more triangles) or inconsistent orientation.
   std::string Validate() const;
   void Bounds(Vec3* lo, Vec3* hi) const;
+  double Area() const;  // mm^2
   // Area-weighted vertex normals (unit length).
   std::vector<Vec3> VertexNormals() const;
   // Per triangle corner: the area-weighted mean of the face normals of the triangles around
