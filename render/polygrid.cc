@@ -409,10 +409,10 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   // boundary links continue the interior grid lines along the normal. On crease sides only (a
   // box's, the bunny's): on a smooth side the interior grid lines converge towards the
   // polycube's edges, and following them undid the evening out of the boundary nodes, more
-  // with every pass. On the sphere at 17^3 after the 10 passes the surface spacing ran from 0.39
-  // mm next to the faces' rims to 2.05 mm at their centres (0.80 to 1.22 mm as evened out),
-  // and renders showed it: streaks along the cube's edges in the polygrid's radiance, blotches
-  // in the dipole's (docs/benchmarks.md).
+  // with every pass. On the sphere at 17^3 after the 10 passes neighbouring boundary nodes were
+  // 0.35 mm apart next to the faces' rims and 2.05 mm at their centres (0.69 to 1.22 mm as
+  // evened out; the blob: 0.10 to 3.33 mm), and renders showed it: streaks along the cube's
+  // edges (docs/benchmarks.md).
   auto align = [&] {
     for (int64_t i = 0; i < pg.num_interior; ++i) {
       if (blinks[i].size() != 1 || split[blinks[i][0]]) continue;
