@@ -82,9 +82,15 @@ std::string PolygridOptions::Validate() const {
   if (!(first_layer_fraction > 0 && first_layer_fraction < 0.5))
     return "first_layer_fraction must be in (0, 0.5)";
   if (boundary_relax_iterations < 0 || smooth_iterations < 0 || variance_iterations < 0 ||
-      align_passes < 0)
+      align_passes < 0 || winslow_iterations < 0)
     return "iteration counts must be >= 0";
   return "";
+}
+
+InteriorPlacement ParseInteriorPlacement(const std::string& text) {
+  if (text == "variance") return InteriorPlacement::kVariance;
+  if (text == "winslow") return InteriorPlacement::kWinslow;
+  throw InputError("--placement: unknown placement '" + text + "' (expected variance or winslow)");
 }
 
 std::array<double, 2> Polygrid::SurfaceUV(int64_t b) const {
@@ -448,11 +454,79 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
     else
       smooth(options.smooth_iterations, tight);
   }
+  if (options.placement == InteriorPlacement::kWinslow) {
+    // Winslow smoothing of the free nodes (see InteriorPlacement). With unit lattice spacing,
+    // x = (sum_a g^aa (x_-a + x_+a) + 2 sum_{a<b} g^ab x_ab) / (2 sum_a g^aa), where
+    // x_ab = (x_{+a+b} - x_{+a-b} - x_{-a+b} + x_{-a-b}) / 4 and g = (J^-1)(J^-1)^T with J's
+    // columns the central differences (x_+a - x_-a) / 2. A node whose edge-diagonal lattice
+    // neighbours are not all interior, or whose J is singular, takes the mean of its six
+    // neighbours instead. Gauss-Seidel over the 8 lattice parities (x, y, z mod 2): face and
+    // edge-diagonal neighbours always differ in parity, so each colour updates in parallel.
+    // Over-relaxed by the Laplacian smoothing's factor (the same fixed point, reached in fewer
+    // sweeps).
+    constexpr int kPairs[3][2] = {{0, 1}, {1, 2}, {0, 2}};
+    std::vector<std::array<int32_t, 12>> diag(pg.num_interior);
+    std::array<std::vector<int32_t>, 8> parity;
+    for (int64_t i = 0; i < pg.num_interior; ++i) {
+      if (!free_node[i]) continue;
+      const auto& g = pg.lattice[i];
+      parity[(g[0] & 1) | (g[1] & 1) << 1 | (g[2] & 1) << 2].push_back(int32_t(i));
+      for (int p = 0, k = 0; p < 3; ++p)
+        for (int sa : {1, -1})
+          for (int sb : {1, -1}) {
+            auto h = g;
+            h[kPairs[p][0]] += sa;
+            h[kPairs[p][1]] += sb;
+            diag[i][k++] = lat.inside(h) ? interior_at[lat.index(h)] : -1;
+          }
+    }
+    const double tol = 1e-6 * pg.mean_boundary_spacing;
+    for (int it = 0; it < options.winslow_iterations; ++it) {
+      double moved = 0;
+      for (const std::vector<int32_t>& nodes : parity) {
+        const int64_t n = int64_t(nodes.size());
+#pragma omp parallel for schedule(static) reduction(max : moved) if (n > 20000)
+        for (int64_t c = 0; c < n; ++c) {
+          const int32_t i = nodes[c];
+          const auto& nb = pg.neighbours[i];
+          Vec3 target = Vec3::Zero();
+          for (int j = 0; j < 6; ++j) target += pg.position[nb[j]] / 6;
+          Eigen::Matrix3d J;
+          for (int a = 0; a < 3; ++a) J.col(a) = (pg.position[nb[2 * a + 1]] - pg.position[nb[2 * a]]) / 2;
+          const double det = J.determinant();
+          const bool diagonals = std::none_of(diag[i].begin(), diag[i].end(), [](int32_t k) { return k < 0; });
+          if (diagonals && std::abs(det) > 1e-12 * std::pow(J.norm(), 3)) {
+            const Eigen::Matrix3d Ji = J.inverse();
+            const Eigen::Matrix3d G = Ji * Ji.transpose();
+            Vec3 num = Vec3::Zero();
+            double den = 0;
+            for (int a = 0; a < 3; ++a) {
+              num += G(a, a) * (pg.position[nb[2 * a]] + pg.position[nb[2 * a + 1]]);
+              den += 2 * G(a, a);
+            }
+            for (int p = 0; p < 3; ++p) {
+              const auto& d = diag[i];
+              const Vec3 xab = (pg.position[d[4 * p]] - pg.position[d[4 * p + 1]] - pg.position[d[4 * p + 2]] +
+                                pg.position[d[4 * p + 3]]) / 4;
+              num += 2 * G(kPairs[p][0], kPairs[p][1]) * xab;
+            }
+            if (den > 0 && num.allFinite()) target = num / den;
+          }
+          const Vec3 step = omega * (target - pg.position[i]);
+          moved = std::max(moved, step.norm());
+          pg.position[i] += step;
+        }
+      }
+      if (moved < tol) break;
+    }
+  }
+  const int variance_iterations =
+      options.placement == InteriorPlacement::kVariance ? options.variance_iterations : 0;
   std::vector<Vec3> grad;
   std::vector<std::array<double, 6>> scratch;
-  double f = VarianceObjective(pg, free_node, &grad, scratch);
+  double f = variance_iterations > 0 ? VarianceObjective(pg, free_node, &grad, scratch) : 0;
   double step = 0.5;
-  for (int it = 0; it < options.variance_iterations && f > 0; ++it) {
+  for (int it = 0; it < variance_iterations && f > 0; ++it) {
     const std::vector<Vec3> saved = pg.position;
     for (int64_t i = 0; i < pg.num_interior; ++i)
       if (free_node[i]) pg.position[i] -= step * grad[i];

@@ -11,6 +11,16 @@
 
 namespace translume {
 
+// How the interior nodes behind the first layer are placed after Laplacian smoothing.
+//  kVariance: the paper's gradient steps on sum_i Var({|v_i - v_j|}) (Section 5.1).
+//  kWinslow: Winslow's elliptic grid generation (the lattice coordinates harmonic functions of
+//    position): per free node sum_ab g^ab d^2 x / (d xi_a d xi_b) = 0 with g^ab = grad xi_a .
+//    grad xi_b the inverse metric, discretised with the face and edge-diagonal lattice
+//    neighbours. Its cells stay nearer orthogonal, so fewer nodes need the axis-fallback
+//    Laplacian weights (docs/render.md, "Accuracy on curved shapes").
+enum class InteriorPlacement { kVariance, kWinslow };
+InteriorPlacement ParseInteriorPlacement(const std::string& text);  // "variance" | "winslow"
+
 struct PolygridOptions {
   // Nodes per cube edge (the same in every cube, Section 5.1); >= 3.
   int resolution = 9;
@@ -25,6 +35,10 @@ struct PolygridOptions {
   // sum_i Var({|v_i - v_j|}) over the free nodes.
   int smooth_iterations = 2000;
   int variance_iterations = 100;
+  InteriorPlacement placement = InteriorPlacement::kVariance;
+  // kWinslow: at most this many Gauss-Seidel sweeps, stopping when no node moves more than 1e-6
+  // boundary spacings in a sweep.
+  int winslow_iterations = 2000;
   // Passes that align each boundary node and its first interior node with the grid line of the
   // free interior node behind them (then re-smooth): links along the normal, grid lines
   // continued to the surface. On a box this gives a tensor-product grid. Only on the sides of

@@ -81,6 +81,23 @@ TEST(Polygrid, SingleCubeBoxCountsAndGeometry) {
     }
 }
 
+// Winslow's placement leaves a box's tensor-product grid where it is (it solves the same
+// equations there: straight, evenly spaced grid lines).
+TEST(Polygrid, WinslowPlacementKeepsTheBoxGrid) {
+  const auto box = MakeBoxShape(Vec3(4, 4, 4));
+  PolygridOptions o;
+  o.resolution = 9;
+  const Polygrid a = BuildPolygrid(BuiltinPolycube("box"), *box, o);
+  o.placement = InteriorPlacement::kWinslow;
+  const Polygrid b = BuildPolygrid(BuiltinPolycube("box"), *box, o);
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_EQ(b.fallback_weights, 0);
+  double worst = 0;
+  for (int64_t n = 0; n < a.size(); ++n) worst = std::max(worst, (a.position[n] - b.position[n]).norm());
+  EXPECT_LT(worst, 1e-6);
+  EXPECT_THROW(ParseInteriorPlacement("conformal"), InputError);
+}
+
 // A 12-triangle cube read as a mesh is the same box as the built-in one, so its polygrid must
 // be the same: boundary nodes, normals, links along the face normals. The mesh's normals used
 // to be interpolated from the vertex normals (the cube's diagonals at every corner), which
@@ -245,6 +262,49 @@ TEST(Polygrid, UniformlyLitSphereMatchesTheRadialSolution) {
     EXPECT_NEAR(mean / exact, 1.0, 0.05) << resolution;
     EXPECT_LT(sd / mean, 0.04) << resolution;
     EXPECT_LT((hi - lo) / mean, 0.14) << resolution;
+  }
+}
+
+// With Winslow's placement the sphere's cells stay nearer orthogonal: about a third as many
+// nodes need the axis-fallback weights, and the radiance follows the radial solution more
+// closely, the more so the finer the grid (sd 1.4 %, 2.6 % at 17^3, 25^3 against 3.3 %, 4.9 %
+// with the variance steps; mean -0.7 %, +1.2 % against +0.4 %, +4.9 %).
+TEST(Polygrid, WinslowPlacementFollowsTheRadialSolutionMoreClosely) {
+  const double kappa = 0.5, mu = 0.05, R = 10, C = ReflectionParameterC(1.3), l = std::sqrt(kappa / mu);
+  const double phi_R = std::sinh(R / l) / R;
+  const double dphi_R = std::cosh(R / l) / (l * R) - std::sinh(R / l) / (R * R);
+  const double exact = phi_R / (phi_R + 2 * C * kappa * dphi_R) / (2 * M_PI);
+  const auto shape = MakeBuiltinShape("sphere", 2 * R);
+  for (int resolution : {17, 25}) {
+    std::array<double, 2> sd_of;
+    std::array<int64_t, 2> fallback;
+    for (int k = 0; k < 2; ++k) {
+      PolygridOptions o;
+      o.resolution = resolution;
+      o.placement = k ? InteriorPlacement::kWinslow : InteriorPlacement::kVariance;
+      const Polygrid pg = BuildPolygrid(BuiltinPolycube("sphere"), *shape, o);
+      const NodeMaterial m = ConstantNodeMaterial(pg, {0.5f, 0.5f, 0.5f}, {0.05f, 0.05f, 0.05f});
+      BoundaryLight q, none;
+      for (int c = 0; c < 3; ++c) {
+        q[c].assign(pg.num_boundary(), 1.f);
+        none[c].assign(pg.num_boundary(), 0.f);
+      }
+      const BoundaryLight L = BoundaryRadiance(pg, m, none, SolveReference(BuildJacobiSystem(pg, m, C, q), 1));
+      double sum = 0, sq = 0;
+      for (float v : L[0]) sum += v, sq += double(v) * v;
+      const double mean = sum / double(L[0].size());
+      sd_of[k] = std::sqrt(std::max(0.0, sq / double(L[0].size()) - mean * mean)) / mean;
+      fallback[k] = pg.fallback_weights;
+      std::printf("[polygrid] sphere %d^3, %s placement: mean radiance %+.2f %% off the exact value, sd %.4f, %lld "
+                  "fallback nodes\n", resolution, k ? "winslow" : "variance", 100 * (mean / exact - 1), sd_of[k],
+                  (long long)pg.fallback_weights);
+      if (k) {
+        EXPECT_NEAR(mean / exact, 1.0, 0.02) << resolution;
+      }
+    }
+    EXPECT_LT(sd_of[1], 0.03) << resolution;
+    EXPECT_LT(sd_of[1], 0.6 * sd_of[0]) << resolution;
+    EXPECT_LT(fallback[1], fallback[0] / 2) << resolution;
   }
 }
 

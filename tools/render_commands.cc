@@ -81,7 +81,7 @@ int RunRender(int argc, char** argv) {
                " a closed mesh (.obj, .ply) with an optional --polycube file.",
                "translume render"};
   std::string material, shape_name = "sphere", polycube_path, light = "dir:1,0.3,0.6", out,
-              camera, image = "256x256", iterations = "200,100,100", depth, backend = "cpu";
+              camera, image = "256x256", iterations = "200,100,100", depth, backend = "cpu", placement = "variance";
   double size_mm = 20, map_scale = 1, first_layer = 0.1;
   int resolution = 17, levels = 3, turntable = 1, variance_steps = PolygridOptions().variance_iterations;
   bool coherence = false, clamp = false;
@@ -94,6 +94,10 @@ int RunRender(int argc, char** argv) {
   app.add_option("--resolution", resolution, "Polygrid nodes per cube edge")->capture_default_str();
   app.add_option("--levels", levels, "Hierarchy levels (Section 5.3)")->capture_default_str();
   app.add_option("--first-layer", first_layer, "First interior nodes at this fraction of the boundary spacing")
+      ->capture_default_str();
+  app.add_option("--placement", placement,
+                 "Interior nodes: variance (the paper's edge-length variance steps) or winslow (elliptic grid "
+                 "generation: nearer-orthogonal cells, more accurate on curved shapes; docs/render.md)")
       ->capture_default_str();
   app.add_option("--variance-steps", variance_steps,
                  "Gradient steps on the interior nodes' edge-length variance (the paper's placement; 0: smoothing only, "
@@ -151,6 +155,7 @@ int RunRender(int argc, char** argv) {
   po.resolution = resolution;
   po.first_layer_fraction = first_layer;
   po.variance_iterations = variance_steps;
+  po.placement = ParseInteriorPlacement(placement);
   // The build takes seconds on large polycubes (the bunny: ~10 s on two cores): say so first.
   if (pc.cubes.size() > 16) {
     std::printf("render: building the polygrid of %s (%zu cubes x %d^3, up to %d level%s) ...\n",
