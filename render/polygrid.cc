@@ -391,24 +391,32 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
     }
     return 2 / (1 + std::sqrt(std::max(0.0, 1 - rho * rho)));
   }();
-  auto smooth = [&](int iterations, double tol_spacings) {
-    const double tol = tol_spacings * pg.mean_boundary_spacing;
+  // Over-relaxed Gauss-Seidel sweeps of the free nodes towards target(i), colour by colour (a
+  // colour's nodes depend only on other colours', so each colour updates in parallel and the
+  // result does not depend on the thread count), until no node moves more than tol mm in a
+  // sweep or `iterations` sweeps.
+  auto relax = [&](const auto& colours, int iterations, double tol, auto&& target) {
     for (int it = 0; it < iterations; ++it) {
       double moved = 0;
-      for (const std::vector<int32_t>& nodes : colour) {
+      for (const std::vector<int32_t>& nodes : colours) {
         const int64_t n = int64_t(nodes.size());
 #pragma omp parallel for schedule(static) reduction(max : moved) if (n > 20000)
         for (int64_t c = 0; c < n; ++c) {
           const int32_t i = nodes[c];
-          Vec3 mean = Vec3::Zero();
-          for (int j = 0; j < 6; ++j) mean += pg.position[pg.neighbours[i][j]];
-          const Vec3 step = omega * (mean / 6 - pg.position[i]);
+          const Vec3 step = omega * (target(i) - pg.position[i]);
           pg.position[i] += step;
           moved = std::max(moved, step.norm());
         }
       }
       if (moved < tol) break;
     }
+  };
+  auto smooth = [&](int iterations, double tol_spacings) {
+    relax(colour, iterations, tol_spacings * pg.mean_boundary_spacing, [&](int32_t i) {
+      Vec3 mean = Vec3::Zero();
+      for (int j = 0; j < 6; ++j) mean += pg.position[pg.neighbours[i][j]];
+      return Vec3(mean / 6);
+    });
   };
   // Alignment: a boundary node and its first interior node follow the grid line of the free
   // interior node behind them (that node's surface point, and d inside it), so
@@ -480,45 +488,31 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
             diag[i][k++] = lat.inside(h) ? interior_at[lat.index(h)] : -1;
           }
     }
-    const double tol = 1e-6 * pg.mean_boundary_spacing;
-    for (int it = 0; it < options.winslow_iterations; ++it) {
-      double moved = 0;
-      for (const std::vector<int32_t>& nodes : parity) {
-        const int64_t n = int64_t(nodes.size());
-#pragma omp parallel for schedule(static) reduction(max : moved) if (n > 20000)
-        for (int64_t c = 0; c < n; ++c) {
-          const int32_t i = nodes[c];
-          const auto& nb = pg.neighbours[i];
-          Vec3 target = Vec3::Zero();
-          for (int j = 0; j < 6; ++j) target += pg.position[nb[j]] / 6;
-          Eigen::Matrix3d J;
-          for (int a = 0; a < 3; ++a) J.col(a) = (pg.position[nb[2 * a + 1]] - pg.position[nb[2 * a]]) / 2;
-          const double det = J.determinant();
-          const bool diagonals = std::none_of(diag[i].begin(), diag[i].end(), [](int32_t k) { return k < 0; });
-          if (diagonals && std::abs(det) > 1e-12 * std::pow(J.norm(), 3)) {
-            const Eigen::Matrix3d Ji = J.inverse();
-            const Eigen::Matrix3d G = Ji * Ji.transpose();
-            Vec3 num = Vec3::Zero();
-            double den = 0;
-            for (int a = 0; a < 3; ++a) {
-              num += G(a, a) * (pg.position[nb[2 * a]] + pg.position[nb[2 * a + 1]]);
-              den += 2 * G(a, a);
-            }
-            for (int p = 0; p < 3; ++p) {
-              const auto& d = diag[i];
-              const Vec3 xab = (pg.position[d[4 * p]] - pg.position[d[4 * p + 1]] - pg.position[d[4 * p + 2]] +
-                                pg.position[d[4 * p + 3]]) / 4;
-              num += 2 * G(kPairs[p][0], kPairs[p][1]) * xab;
-            }
-            if (den > 0 && num.allFinite()) target = num / den;
-          }
-          const Vec3 step = omega * (target - pg.position[i]);
-          moved = std::max(moved, step.norm());
-          pg.position[i] += step;
-        }
+    relax(parity, options.winslow_iterations, 1e-6 * pg.mean_boundary_spacing, [&](int32_t i) {
+      const auto& nb = pg.neighbours[i];
+      Vec3 target = Vec3::Zero();
+      for (int j = 0; j < 6; ++j) target += pg.position[nb[j]] / 6;
+      Eigen::Matrix3d J;
+      for (int a = 0; a < 3; ++a) J.col(a) = (pg.position[nb[2 * a + 1]] - pg.position[nb[2 * a]]) / 2;
+      const double det = J.determinant();
+      const bool diagonals = std::none_of(diag[i].begin(), diag[i].end(), [](int32_t k) { return k < 0; });
+      if (!diagonals || !(std::abs(det) > 1e-12 * std::pow(J.norm(), 3))) return target;
+      const Eigen::Matrix3d Ji = J.inverse();
+      const Eigen::Matrix3d G = Ji * Ji.transpose();
+      Vec3 num = Vec3::Zero();
+      double den = 0;
+      for (int a = 0; a < 3; ++a) {
+        num += G(a, a) * (pg.position[nb[2 * a]] + pg.position[nb[2 * a + 1]]);
+        den += 2 * G(a, a);
       }
-      if (moved < tol) break;
-    }
+      for (int p = 0; p < 3; ++p) {
+        const auto& d = diag[i];
+        const Vec3 xab = (pg.position[d[4 * p]] - pg.position[d[4 * p + 1]] - pg.position[d[4 * p + 2]] +
+                          pg.position[d[4 * p + 3]]) / 4;
+        num += 2 * G(kPairs[p][0], kPairs[p][1]) * xab;
+      }
+      return den > 0 && num.allFinite() ? Vec3(num / den) : target;
+    });
   }
   const int variance_iterations =
       options.placement == InteriorPlacement::kVariance ? options.variance_iterations : 0;

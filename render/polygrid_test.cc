@@ -52,6 +52,45 @@ void ExpectWellFormed(const Polygrid& pg) {
   }
 }
 
+// The exact boundary radiance phi(R) / (2 pi) of a homogeneous sphere of radius R (mm) under
+// uniform light q = 1: by symmetry phi(r) = A sinh(r / l) / r with l = sqrt(kappa / mu), and A
+// from the Robin condition phi + 2 C kappa dphi/dr = 1 at r = R.
+double RadialSphereRadiance(double kappa, double mu, double R, double C) {
+  const double l = std::sqrt(kappa / mu), phi_R = std::sinh(R / l) / R;
+  const double dphi_R = std::cosh(R / l) / (l * R) - std::sinh(R / l) / (R * R);
+  return phi_R / (phi_R + 2 * C * kappa * dphi_R) / (2 * M_PI);
+}
+
+// The boundary radiance (red) of a homogeneous polygrid under uniform light q = 1, from the
+// reference solve; L = phi / (2 pi), as the renderer shades (renderer.cc).
+std::vector<float> UniformlyLitRadiance(const Polygrid& pg, float kappa, float mu, double C) {
+  const NodeMaterial m = ConstantNodeMaterial(pg, {kappa, kappa, kappa}, {mu, mu, mu});
+  BoundaryLight q, none;
+  for (int c = 0; c < 3; ++c) {
+    q[c].assign(pg.num_boundary(), 1.f);
+    none[c].assign(pg.num_boundary(), 0.f);
+  }
+  return BoundaryRadiance(pg, m, none, SolveReference(BuildJacobiSystem(pg, m, C, q), 1))[0];
+}
+
+struct Spread {
+  double mean = 0, sd = 0, range = 0;  // sd and max - min relative to the mean
+};
+Spread SpreadOf(const std::vector<float>& v) {
+  double sum = 0, sq = 0, lo = 1e300, hi = -1e300;
+  for (float x : v) {
+    sum += x;
+    sq += double(x) * x;
+    lo = std::min(lo, double(x));
+    hi = std::max(hi, double(x));
+  }
+  Spread s;
+  s.mean = sum / double(v.size());
+  s.sd = std::sqrt(std::max(0.0, sq / double(v.size()) - s.mean * s.mean)) / s.mean;
+  s.range = (hi - lo) / s.mean;
+  return s;
+}
+
 TEST(Polygrid, SingleCubeBoxCountsAndGeometry) {
   const auto box = MakeBoxShape(Vec3(4, 4, 4));
   PolygridOptions o;
@@ -169,16 +208,7 @@ TEST(Polygrid, FacetedMeshesAreWellFormed) {
       EXPECT_GT(nearest, 1e-3 * pg.mean_boundary_spacing);
       std::printf("[polygrid] %s (%s): nearest boundary nodes %.3g spacings apart\n", name.c_str(),
                   s ? "mesh" : "analytic", nearest / pg.mean_boundary_spacing);
-      const NodeMaterial m = ConstantNodeMaterial(pg, {0.5f, 0.5f, 0.5f}, {0.05f, 0.05f, 0.05f});
-      BoundaryLight q;
-      for (int c = 0; c < 3; ++c) q[c].assign(pg.num_boundary(), 1.f);
-      const double C = ReflectionParameterC(1.3);
-      BoundaryLight none;  // L = phi / (2 pi), as the renderer shades (renderer.cc)
-      for (int c = 0; c < 3; ++c) none[c].assign(pg.num_boundary(), 0.f);
-      const BoundaryLight L = BoundaryRadiance(pg, m, none, SolveReference(BuildJacobiSystem(pg, m, C, q), 1));
-      double sum = 0;
-      for (float v : L[0]) sum += v;
-      mean_radiance[s] = sum / pg.num_boundary();
+      mean_radiance[s] = SpreadOf(UniformlyLitRadiance(pg, 0.5f, 0.05f, ReflectionParameterC(1.3))).mean;
     }
     std::printf("[polygrid] %s under uniform light: mean boundary radiance %.5f (analytic) %.5f "
                 "(mesh)\n", name.c_str(), mean_radiance[0], mean_radiance[1]);
@@ -232,36 +262,19 @@ TEST(Polygrid, BoundaryNodesStayEvenOnSmoothShapes) {
 // with the resolution, and at 9^3 from the coarse grid (mean -11 %, h = 2.5 mm against a
 // diffusion length of 3.2 mm); the bounds guard against making it worse.
 TEST(Polygrid, UniformlyLitSphereMatchesTheRadialSolution) {
-  const double kappa = 0.5, mu = 0.05, R = 10, C = ReflectionParameterC(1.3), l = std::sqrt(kappa / mu);
-  const double phi_R = std::sinh(R / l) / R;
-  const double dphi_R = std::cosh(R / l) / (l * R) - std::sinh(R / l) / (R * R);
-  const double exact = phi_R / (phi_R + 2 * C * kappa * dphi_R) / (2 * M_PI);
+  const double R = 10, C = ReflectionParameterC(1.3), exact = RadialSphereRadiance(0.5, 0.05, R, C);
   const auto shape = MakeBuiltinShape("sphere", 2 * R);
   for (int resolution : {13, 17}) {
     PolygridOptions o;
     o.resolution = resolution;
     const Polygrid pg = BuildPolygrid(BuiltinPolycube("sphere"), *shape, o);
-    const NodeMaterial m = ConstantNodeMaterial(pg, {float(kappa), float(kappa), float(kappa)}, {float(mu), float(mu), float(mu)});
-    BoundaryLight q, none;
-    for (int c = 0; c < 3; ++c) {
-      q[c].assign(pg.num_boundary(), 1.f);
-      none[c].assign(pg.num_boundary(), 0.f);
-    }
-    const BoundaryLight L = BoundaryRadiance(pg, m, none, SolveReference(BuildJacobiSystem(pg, m, C, q), 1));
-    double sum = 0, sq = 0, lo = 1e300, hi = -1e300;
-    for (float v : L[0]) {
-      sum += v;
-      sq += double(v) * v;
-      lo = std::min(lo, double(v));
-      hi = std::max(hi, double(v));
-    }
-    const double mean = sum / double(L[0].size()), sd = std::sqrt(std::max(0.0, sq / double(L[0].size()) - mean * mean));
+    const Spread L = SpreadOf(UniformlyLitRadiance(pg, 0.5f, 0.05f, C));
     std::printf("[polygrid] uniformly lit sphere %d^3: mean radiance %.5f (exact %.5f), sd %.4f, max - min %.4f of "
-                "the mean (%lld fallback nodes of %lld interior)\n", resolution, mean, exact, sd / mean, (hi - lo) / mean,
+                "the mean (%lld fallback nodes of %lld interior)\n", resolution, L.mean, exact, L.sd, L.range,
                 (long long)pg.fallback_weights, (long long)pg.num_interior);
-    EXPECT_NEAR(mean / exact, 1.0, 0.05) << resolution;
-    EXPECT_LT(sd / mean, 0.04) << resolution;
-    EXPECT_LT((hi - lo) / mean, 0.14) << resolution;
+    EXPECT_NEAR(L.mean / exact, 1.0, 0.05) << resolution;
+    EXPECT_LT(L.sd, 0.04) << resolution;
+    EXPECT_LT(L.range, 0.14) << resolution;
   }
 }
 
@@ -270,40 +283,25 @@ TEST(Polygrid, UniformlyLitSphereMatchesTheRadialSolution) {
 // closely, the more so the finer the grid (sd 1.4 %, 2.6 % at 17^3, 25^3 against 3.3 %, 4.9 %
 // with the variance steps; mean -0.7 %, +1.2 % against +0.4 %, +4.9 %).
 TEST(Polygrid, WinslowPlacementFollowsTheRadialSolutionMoreClosely) {
-  const double kappa = 0.5, mu = 0.05, R = 10, C = ReflectionParameterC(1.3), l = std::sqrt(kappa / mu);
-  const double phi_R = std::sinh(R / l) / R;
-  const double dphi_R = std::cosh(R / l) / (l * R) - std::sinh(R / l) / (R * R);
-  const double exact = phi_R / (phi_R + 2 * C * kappa * dphi_R) / (2 * M_PI);
+  const double R = 10, C = ReflectionParameterC(1.3), exact = RadialSphereRadiance(0.5, 0.05, R, C);
   const auto shape = MakeBuiltinShape("sphere", 2 * R);
   for (int resolution : {17, 25}) {
-    std::array<double, 2> sd_of;
+    std::array<Spread, 2> L;
     std::array<int64_t, 2> fallback;
     for (int k = 0; k < 2; ++k) {
       PolygridOptions o;
       o.resolution = resolution;
       o.placement = k ? InteriorPlacement::kWinslow : InteriorPlacement::kVariance;
       const Polygrid pg = BuildPolygrid(BuiltinPolycube("sphere"), *shape, o);
-      const NodeMaterial m = ConstantNodeMaterial(pg, {0.5f, 0.5f, 0.5f}, {0.05f, 0.05f, 0.05f});
-      BoundaryLight q, none;
-      for (int c = 0; c < 3; ++c) {
-        q[c].assign(pg.num_boundary(), 1.f);
-        none[c].assign(pg.num_boundary(), 0.f);
-      }
-      const BoundaryLight L = BoundaryRadiance(pg, m, none, SolveReference(BuildJacobiSystem(pg, m, C, q), 1));
-      double sum = 0, sq = 0;
-      for (float v : L[0]) sum += v, sq += double(v) * v;
-      const double mean = sum / double(L[0].size());
-      sd_of[k] = std::sqrt(std::max(0.0, sq / double(L[0].size()) - mean * mean)) / mean;
+      L[k] = SpreadOf(UniformlyLitRadiance(pg, 0.5f, 0.05f, C));
       fallback[k] = pg.fallback_weights;
       std::printf("[polygrid] sphere %d^3, %s placement: mean radiance %+.2f %% off the exact value, sd %.4f, %lld "
-                  "fallback nodes\n", resolution, k ? "winslow" : "variance", 100 * (mean / exact - 1), sd_of[k],
-                  (long long)pg.fallback_weights);
-      if (k) {
-        EXPECT_NEAR(mean / exact, 1.0, 0.02) << resolution;
-      }
+                  "fallback nodes\n", resolution, k ? "winslow" : "variance", 100 * (L[k].mean / exact - 1), L[k].sd,
+                  (long long)fallback[k]);
     }
-    EXPECT_LT(sd_of[1], 0.03) << resolution;
-    EXPECT_LT(sd_of[1], 0.6 * sd_of[0]) << resolution;
+    EXPECT_NEAR(L[1].mean / exact, 1.0, 0.02) << resolution;
+    EXPECT_LT(L[1].sd, 0.03) << resolution;
+    EXPECT_LT(L[1].sd, 0.6 * L[0].sd) << resolution;
     EXPECT_LT(fallback[1], fallback[0] / 2) << resolution;
   }
 }
@@ -318,14 +316,7 @@ TEST(Polygrid, UniformlyLitTorusIsRotationallySymmetric) {
   PolygridOptions o;
   o.resolution = 13;
   const Polygrid pg = BuildPolygrid(BuiltinPolycube("torus"), *shape, o);
-  const NodeMaterial m = ConstantNodeMaterial(pg, {0.5f, 0.5f, 0.5f}, {0.05f, 0.05f, 0.05f});
-  BoundaryLight q, none;
-  for (int c = 0; c < 3; ++c) {
-    q[c].assign(pg.num_boundary(), 1.f);
-    none[c].assign(pg.num_boundary(), 0.f);
-  }
-  const BoundaryLight L =
-      BoundaryRadiance(pg, m, none, SolveReference(BuildJacobiSystem(pg, m, ReflectionParameterC(1.3), q), 1));
+  const std::vector<float> L = UniformlyLitRadiance(pg, 0.5f, 0.05f, ReflectionParameterC(1.3));
   const int bins = 24;
   std::vector<double> sum(bins), sq(bins);
   std::vector<int> count(bins);
@@ -333,8 +324,8 @@ TEST(Polygrid, UniformlyLitTorusIsRotationallySymmetric) {
     const Vec3& p = pg.position[pg.num_interior + b];
     const double tube = std::atan2(p.z(), std::hypot(p.x(), p.y()) - R);
     const int k = std::clamp(int((tube + M_PI) / (2 * M_PI) * bins), 0, bins - 1);
-    sum[k] += L[0][b];
-    sq[k] += double(L[0][b]) * L[0][b];
+    sum[k] += L[b];
+    sq[k] += double(L[b]) * L[b];
     ++count[k];
   }
   double weighted = 0;
