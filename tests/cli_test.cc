@@ -404,11 +404,8 @@ TEST_F(Cli, RenderAndEdit) {
     EXPECT_EQ(img.width, 40);
     EXPECT_EQ(img.height, 30);
   }
-  r = Translume("render homogeneous:0.2,0.02 --shape torus --resolution 5 --variance-steps 0 --image 16x16 -o " +
-                P("v.png"));
-  ASSERT_EQ(r.status, 0) << r.output;
-  r = Translume("render homogeneous:0.2,0.02 --shape torus --resolution 5 --placement winslow --image 16x16 -o " +
-                P("w.png"));
+  r = Translume("render homogeneous:0.2,0.02 --shape torus --resolution 5 --placement variance --variance-steps 0 "
+                "--image 16x16 -o " + P("v.png"));
   ASSERT_EQ(r.status, 0) << r.output;
   r = Translume("render homogeneous:0.2,0.02 --shape torus --resolution 5 --model dipole --image 16x16 -o " + P("t.exr"));
   ASSERT_EQ(r.status, 0) << r.output;
@@ -420,7 +417,9 @@ TEST_F(Cli, RenderAndEdit) {
 
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --shape cone -o " + P("x.png")), "cone");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --light sun:1 -o " + P("x.png")), "--light");
-  ExpectOneLineError(Translume("render " + P("m.vdb") + " --variance-steps -1 -o " + P("x.png")), "--variance-steps");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --placement variance --variance-steps -1 -o " + P("x.png")),
+                     "--variance-steps");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --variance-steps 10 -o " + P("x.png")), "--variance-steps");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --placement conformal -o " + P("x.png")), "--placement");
   { std::FILE* f = std::fopen(P("open.obj").c_str(), "w");
     std::fputs("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\n", f);

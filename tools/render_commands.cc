@@ -81,7 +81,7 @@ int RunRender(int argc, char** argv) {
                " a closed mesh (.obj, .ply) with an optional --polycube file.",
                "translume render"};
   std::string material, shape_name = "sphere", polycube_path, light = "dir:1,0.3,0.6", out,
-              camera, image = "256x256", iterations = "200,100,100", depth, backend = "cpu", placement = "variance";
+              camera, image = "256x256", iterations = "200,100,100", depth, backend = "cpu", placement = "winslow";
   double size_mm = 20, map_scale = 1, first_layer = 0.1;
   int resolution = 17, levels = 3, turntable = 1, variance_steps = PolygridOptions().variance_iterations;
   bool coherence = false, clamp = false;
@@ -96,12 +96,12 @@ int RunRender(int argc, char** argv) {
   app.add_option("--first-layer", first_layer, "First interior nodes at this fraction of the boundary spacing")
       ->capture_default_str();
   app.add_option("--placement", placement,
-                 "Interior nodes: variance (the paper's edge-length variance steps) or winslow (elliptic grid "
-                 "generation: nearer-orthogonal cells, more accurate on curved shapes; docs/render.md)")
+                 "Interior nodes: winslow (elliptic grid generation: nearer-orthogonal cells, more accurate on "
+                 "curved shapes) or variance (the paper's edge-length variance steps); docs/render.md")
       ->capture_default_str();
   app.add_option("--variance-steps", variance_steps,
-                 "Gradient steps on the interior nodes' edge-length variance (the paper's placement; 0: smoothing only, "
-                 "fewer axis-fallback Laplacian weights, docs/render.md)")
+                 "With --placement variance: gradient steps on the interior nodes' edge-length variance (0: "
+                 "smoothing only)")
       ->capture_default_str();
   app.add_option("--iterations", iterations, "Relaxation steps per level, coarsest first")->capture_default_str();
   app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all)");
@@ -133,6 +133,8 @@ int RunRender(int argc, char** argv) {
   if (turntable < 1) throw InputError("--turntable: must be >= 1");
   if (levels < 1) throw InputError("--levels: must be >= 1");
   if (variance_steps < 0) throw InputError("--variance-steps: must be >= 0");
+  if (app.count("--variance-steps") && placement != "variance")
+    throw InputError("--variance-steps: applies to --placement variance only (placement is " + placement + ")");
   if (std::string err = ro.Validate(); !err.empty()) throw InputError("render: " + err);
   RenderLight L = RenderLight::Parse(light);
   const bool mesh = Extension(shape_name) == ".obj" || Extension(shape_name) == ".ply";
