@@ -163,16 +163,37 @@ double FresnelTransmittance(double cos_i, double eta) {
 
 BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kappa,
                              const std::array<float, 3>& mu, double C, const BoundaryLight& q,
-                             const std::vector<double>& node_areas) {
+                             const std::vector<double>& node_areas, double cluster_theta) {
   const int64_t nb = pg.num_boundary();
   TL_CHECK(node_areas.empty() || int64_t(node_areas.size()) == nb);
   const double spacing_area = pg.mean_boundary_spacing * pg.mean_boundary_spacing;
+  auto area_of = [&](int64_t s) { return node_areas.empty() ? spacing_area : node_areas[s]; };
+  auto pos = [&](int64_t s) -> const Vec3& { return pg.position[pg.num_interior + s]; };
+  // Sources in cubic cells of 4 boundary spacings (a uniform grid over their bounds).
+  Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
+  for (int64_t s = 0; s < nb; ++s) lo = lo.cwiseMin(pos(s)), hi = hi.cwiseMax(pos(s));
+  const double cell = std::max(4 * pg.mean_boundary_spacing, 1e-9 + 1e-6 * (hi - lo).norm());
+  std::array<int, 3> dims;
+  for (int a = 0; a < 3; ++a) dims[a] = std::clamp(int((hi[a] - lo[a]) / cell) + 1, 1, 256);
+  std::vector<std::vector<int64_t>> members(size_t(dims[0]) * dims[1] * dims[2]);
+  for (int64_t s = 0; s < nb; ++s) {
+    std::array<int, 3> g;
+    for (int a = 0; a < 3; ++a) g[a] = std::clamp(int((pos(s)[a] - lo[a]) / cell), 0, dims[a] - 1);
+    members[g[0] + size_t(dims[0]) * (g[1] + size_t(dims[1]) * g[2])].push_back(s);
+  }
+  std::erase_if(members, [](const std::vector<int64_t>& m) { return m.empty(); });
   BoundaryLight L;
   for (int c = 0; c < 3; ++c) {
     const double sa = mu[c], ss = std::max(1e-6, 1 / (3.0 * kappa[c]) - mu[c]);
     const double st = sa + ss, alpha = ss / st, tr = std::sqrt(sa / kappa[c]);
     const double zr = 1 / st, zv = zr * (1 + 4 * C / 3);
     L[c].assign(nb, 0.f);
+    auto rd = [&](double r2) {
+      const double dr = std::sqrt(r2 + zr * zr), dv = std::sqrt(r2 + zv * zv);
+      return alpha / (4 * kPi) *
+             (zr * (tr * dr + 1) * std::exp(-tr * dr) / (dr * dr * dr) +
+              zv * (tr * dv + 1) * std::exp(-tr * dv) / (dv * dv * dv));
+    };
     // int_0^rho R_d(r) 2 pi r dr in closed form, since (sigma d + 1) e^(-sigma d) r / d^3 =
     // -d/dr (e^(-sigma d) / d) with d = sqrt(r^2 + z^2).
     auto disc = [&](double rho2) {
@@ -181,24 +202,44 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
              (zr * (std::exp(-tr * zr) / zr - std::exp(-tr * dr) / dr) +
               zv * (std::exp(-tr * zv) / zv - std::exp(-tr * dv) / dv));
     };
+    // Per cell: its light q A, the centroid of its sources weighted by q A, and its radius about
+    // that centroid.
+    struct Cluster {
+      double qa = 0, radius = 0;
+      Vec3 centre = Vec3::Zero();
+    };
+    std::vector<Cluster> clusters(members.size());
+    for (size_t k = 0; k < members.size(); ++k) {
+      Cluster& cl = clusters[k];
+      for (int64_t s : members[k]) cl.qa += q[c][s] * area_of(s), cl.centre += q[c][s] * area_of(s) * pos(s);
+      if (cl.qa > 0) cl.centre /= cl.qa;
+      for (int64_t s : members[k]) cl.radius = std::max(cl.radius, (pos(s) - cl.centre).norm());
+    }
     const double near = std::max(3 * zr, 2.5 * pg.mean_boundary_spacing);
 #pragma omp parallel for schedule(dynamic, 16)
     for (int64_t b = 0; b < nb; ++b) {
-      const Vec3& x = pg.position[pg.num_interior + b];
+      const Vec3& x = pos(b);
       double acc = 0;
       std::vector<std::pair<double, int64_t>> close;  // (r^2, source) within `near`
-      for (int64_t s = 0; s < nb; ++s) {
-        const double r2 = (x - pg.position[pg.num_interior + s]).squaredNorm();
-        if (r2 < near * near) {
-          close.emplace_back(r2, s);
-          continue;
+      for (size_t k = 0; k < members.size(); ++k) {
+        const Cluster& cl = clusters[k];
+        if (cl.qa == 0) {
+          // Dark sources still take their ring of the disc around a near node.
+          if ((x - cl.centre).norm() > near + 2 * cell) continue;
+        } else if (cluster_theta > 0) {
+          const double D = (x - cl.centre).norm();
+          if (D > near + cl.radius && cl.radius < cluster_theta * (D - cl.radius)) {
+            acc += rd(D * D) * cl.qa;
+            continue;
+          }
         }
-        if (q[c][s] == 0) continue;
-        const double dr = std::sqrt(r2 + zr * zr), dv = std::sqrt(r2 + zv * zv);
-        const double rd = alpha / (4 * kPi) *
-                          (zr * (tr * dr + 1) * std::exp(-tr * dr) / (dr * dr * dr) +
-                           zv * (tr * dv + 1) * std::exp(-tr * dv) / (dv * dv * dv));
-        acc += rd * q[c][s] * (node_areas.empty() ? spacing_area : node_areas[s]);
+        for (int64_t s : members[k]) {
+          const double r2 = (x - pos(s)).squaredNorm();
+          if (r2 < near * near)
+            close.emplace_back(r2, s);
+          else if (q[c][s] != 0)
+            acc += rd(r2) * q[c][s] * area_of(s);
+        }
       }
       // Near sources, where R_d changes within a node's patch: the patches, nearest first, as
       // the annuli of a disc that grows by each one's area (exact for uniform light on a
@@ -207,7 +248,7 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
       double area = 0;
       for (const auto& [r2, s] : close) {
         const double before = disc(area / kPi);
-        area += node_areas.empty() ? spacing_area : node_areas[s];
+        area += area_of(s);
         acc += q[c][s] * (disc(area / kPi) - before);
       }
       L[c][b] = float(acc / kPi);

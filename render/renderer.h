@@ -90,9 +90,12 @@ class Renderer {
 // b grows with the source's area, weighted by the closed-form integral of R_d over that ring
 // (exact for uniform light on a plane whatever the spacing; the node's own patch weighted by
 // R_d(0) A_b instead overshot: 1.6x for 1 mm^2 at z_r = 0.6 mm).
+// Far sources are summed per cell of 4 boundary spacings (Barnes-Hut style): a cell whose
+// radius about its light-weighted centroid is below cluster_theta times its distance counts
+// as one source of its summed q A at that centroid (0: every source on its own, O(n^2)).
 BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kappa,
                              const std::array<float, 3>& mu, double C, const BoundaryLight& q,
-                             const std::vector<double>& node_areas = {});
+                             const std::vector<double>& node_areas = {}, double cluster_theta = 0.1);
 
 // Tone map for 8-bit output: scale by 2^stops (any finite stops, negative darkens), or, without
 // stops (auto exposure), so that the 99th percentile of the non-zero pixel values is 0.8; then
