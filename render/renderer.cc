@@ -202,8 +202,8 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
              (zr * (std::exp(-tr * zr) / zr - std::exp(-tr * dr) / dr) +
               zv * (std::exp(-tr * zv) / zv - std::exp(-tr * dv) / dv));
     };
-    // Per cell: its light q A, the centroid of its sources weighted by q A, and its radius about
-    // that centroid.
+    // Per cell: its light q A, the centroid of its sources weighted by q A (a dark cell: their
+    // mean position), and its radius about that centroid.
     struct Cluster {
       double qa = 0, radius = 0;
       Vec3 centre = Vec3::Zero();
@@ -212,7 +212,11 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
     for (size_t k = 0; k < members.size(); ++k) {
       Cluster& cl = clusters[k];
       for (int64_t s : members[k]) cl.qa += q[c][s] * area_of(s), cl.centre += q[c][s] * area_of(s) * pos(s);
-      if (cl.qa > 0) cl.centre /= cl.qa;
+      if (cl.qa > 0) {
+        cl.centre /= cl.qa;
+      } else {
+        for (int64_t s : members[k]) cl.centre += pos(s) / double(members[k].size());
+      }
       for (int64_t s : members[k]) cl.radius = std::max(cl.radius, (pos(s) - cl.centre).norm());
     }
     const double near = std::max(3 * zr, 2.5 * pg.mean_boundary_spacing);
@@ -224,8 +228,8 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
       for (size_t k = 0; k < members.size(); ++k) {
         const Cluster& cl = clusters[k];
         if (cl.qa == 0) {
-          // Dark sources still take their ring of the disc around a near node.
-          if ((x - cl.centre).norm() > near + 2 * cell) continue;
+          // Dark sources add no light but still take their ring of a near node's disc.
+          if ((x - cl.centre).norm() > near + cl.radius) continue;
         } else if (cluster_theta > 0) {
           const double D = (x - cl.centre).norm();
           if (D > near + cl.radius && cl.radius < cluster_theta * (D - cl.radius)) {
@@ -246,10 +250,19 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
       // plane whatever the nodes' spacing).
       std::sort(close.begin(), close.end());
       double area = 0;
-      for (const auto& [r2, s] : close) {
+      for (size_t i = 0; i < close.size();) {
+        // Sources at one distance (to rounding) share their rings, so that the order among
+        // them, which rounding decides, does not matter.
+        size_t j = i;
+        double group_area = 0, group_qa = 0;
+        for (; j < close.size() && close[j].first <= close[i].first * (1 + 1e-9) + 1e-18; ++j) {
+          group_area += area_of(close[j].second);
+          group_qa += q[c][close[j].second] * area_of(close[j].second);
+        }
         const double before = disc(area / kPi);
-        area += area_of(s);
-        acc += q[c][s] * (disc(area / kPi) - before);
+        area += group_area;
+        acc += group_qa / group_area * (disc(area / kPi) - before);
+        i = j;
       }
       L[c][b] = float(acc / kPi);
     }

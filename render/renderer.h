@@ -88,7 +88,8 @@ class Renderer {
 // Sources within max(3 z_r, 2.5 mean spacings) of b, b itself included, where R_d changes
 // within a patch, count as annuli instead: nearest first, each the ring by which a disc around
 // b grows with the source's area, weighted by the closed-form integral of R_d over that ring
-// (exact for uniform light on a plane whatever the spacing; the node's own patch weighted by
+// (exact for uniform light on a plane whatever the spacing; sources at one distance share
+// their rings, so rounding cannot reorder them; the node's own patch weighted by
 // R_d(0) A_b instead overshot: 1.6x for 1 mm^2 at z_r = 0.6 mm).
 // Far sources are summed per cell of 4 boundary spacings (Barnes-Hut style): a cell whose
 // radius about its light-weighted centroid is below cluster_theta times its distance counts
