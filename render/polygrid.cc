@@ -264,9 +264,8 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
           crease_votes[dir1] += dot < 0.866 ? 1 : -1;
         }
   }
-  std::array<bool, 6> crease_side;
-  for (int k = 0; k < 6; ++k) crease_side[k] = crease_votes[k] > 0;
-  if (*std::max_element(crease_votes.begin(), crease_votes.end()) > 0) {
+  const bool any_crease_side = *std::max_element(crease_votes.begin(), crease_votes.end()) > 0;
+  if (any_crease_side) {
     pg.position = lattice_position;
     for (int a = 0; a < 3; ++a) {
       if (lat.n[a] <= 3) continue;
@@ -431,7 +430,7 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
     for (int64_t i = 0; i < pg.num_interior; ++i) {
       if (blinks[i].size() != 1 || split[blinks[i][0]]) continue;
       const int32_t b = blinks[i][0];
-      if (!crease_side[pg.link_dir[b - pg.num_interior]]) continue;
+      if (crease_votes[pg.link_dir[b - pg.num_interior]] <= 0) continue;  // not a crease side
       const int32_t f = pg.neighbours[i][pg.link_dir[b - pg.num_interior] ^ 1];
       if (f >= pg.num_interior || !free_node[f]) continue;
       // Onto b's tangent plane first, so the projection stays on b's side of the surface.
@@ -451,8 +450,7 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   // 2.6e-2 spacings; renders within 4e-4 (relative L2).
   const double loose = 1e-3, tight = 1e-6;
   place_edge_nodes();
-  const int align_passes =
-      std::any_of(crease_side.begin(), crease_side.end(), [](bool c) { return c; }) ? options.align_passes : 0;
+  const int align_passes = any_crease_side ? options.align_passes : 0;
   smooth(options.smooth_iterations, align_passes > 0 ? loose : tight);
   for (int pass = 0; pass < align_passes; ++pass) {
     align();
@@ -563,11 +561,9 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   pg.link_length.resize(N - pg.num_interior);
   for (int64_t b = pg.num_interior; b < N; ++b) {
     const int32_t j = pg.neighbours[b][0];
-    int links = 0;
-    for (int k = 0; k < 6; ++k) links += pg.is_boundary(pg.neighbours[j][k]);
     const Vec3 link = pg.position[b] - pg.position[j];
     pg.link_length[b - pg.num_interior] =
-        links == 1 ? link.norm()
+        blinks[j].size() == 1 ? link.norm()
                    : std::max(link.dot(pg.normal[b - pg.num_interior]), 0.25 * pg.first_layer_distance);
   }
 

@@ -161,6 +161,41 @@ double FresnelTransmittance(double cos_i, double eta) {
   return 1 - 0.5 * (rs * rs + rp * rp);
 }
 
+namespace {
+
+// The boundary nodes binned in a uniform grid of cubic cells over their bounds (at most
+// max_dims cells per axis); cells[Index(x, y, z)] lists the nodes (b - num_interior) in a cell.
+struct NodeGrid {
+  Vec3 lo = Vec3::Constant(1e300);
+  double cell = 0;
+  std::array<int, 3> dims = {1, 1, 1};
+  std::vector<std::vector<int32_t>> cells;
+
+  NodeGrid(const Polygrid& pg, double cell_mm, int max_dims) {
+    Vec3 hi = Vec3::Constant(-1e300);
+    for (int64_t b = pg.num_interior; b < pg.size(); ++b) {
+      lo = lo.cwiseMin(pg.position[b]);
+      hi = hi.cwiseMax(pg.position[b]);
+    }
+    cell = std::max(cell_mm, 1e-6 * (hi - lo).norm() + 1e-12);
+    for (int a = 0; a < 3; ++a) dims[a] = std::clamp(int((hi[a] - lo[a]) / cell) + 1, 1, max_dims);
+    cells.resize(size_t(dims[0]) * dims[1] * dims[2]);
+    for (int64_t b = pg.num_interior; b < pg.size(); ++b) {
+      const auto c = CellOf(pg.position[b]);
+      cells[Index(c[0], c[1], c[2])].push_back(int32_t(b - pg.num_interior));
+    }
+  }
+  // The cell holding p, clamped to the grid.
+  std::array<int, 3> CellOf(const Vec3& p) const {
+    std::array<int, 3> c;
+    for (int a = 0; a < 3; ++a) c[a] = std::clamp(int(std::floor((p[a] - lo[a]) / cell)), 0, dims[a] - 1);
+    return c;
+  }
+  size_t Index(int x, int y, int z) const { return x + size_t(dims[0]) * (y + size_t(dims[1]) * z); }
+};
+
+}  // namespace
+
 BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kappa,
                              const std::array<float, 3>& mu, double C, const BoundaryLight& q,
                              const std::vector<double>& node_areas, double cluster_theta) {
@@ -169,21 +204,21 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
   const double spacing_area = pg.mean_boundary_spacing * pg.mean_boundary_spacing;
   auto area_of = [&](int64_t s) { return node_areas.empty() ? spacing_area : node_areas[s]; };
   auto pos = [&](int64_t s) -> const Vec3& { return pg.position[pg.num_interior + s]; };
-  // Sources in cubic cells of 4 boundary spacings (a uniform grid over their bounds).
-  Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
-  for (int64_t s = 0; s < nb; ++s) lo = lo.cwiseMin(pos(s)), hi = hi.cwiseMax(pos(s));
-  const double cell = std::max(4 * pg.mean_boundary_spacing, 1e-9 + 1e-6 * (hi - lo).norm());
-  std::array<int, 3> dims;
-  for (int a = 0; a < 3; ++a) dims[a] = std::clamp(int((hi[a] - lo[a]) / cell) + 1, 1, 256);
-  std::vector<std::vector<int64_t>> members(size_t(dims[0]) * dims[1] * dims[2]);
-  for (int64_t s = 0; s < nb; ++s) {
-    std::array<int, 3> g;
-    for (int a = 0; a < 3; ++a) g[a] = std::clamp(int((pos(s)[a] - lo[a]) / cell), 0, dims[a] - 1);
-    members[g[0] + size_t(dims[0]) * (g[1] + size_t(dims[1]) * g[2])].push_back(s);
-  }
-  std::erase_if(members, [](const std::vector<int64_t>& m) { return m.empty(); });
+  // Sources in cubic cells of 4 boundary spacings.
+  std::vector<std::vector<int32_t>> members = NodeGrid(pg, 4 * pg.mean_boundary_spacing, 256).cells;
+  std::erase_if(members, [](const std::vector<int32_t>& m) { return m.empty(); });
   BoundaryLight L;
   for (int c = 0; c < 3; ++c) {
+    // A grey material under white light: the channel repeats an earlier one.
+    if (const int same = [&] {
+          for (int e = 0; e < c; ++e)
+            if (kappa[e] == kappa[c] && mu[e] == mu[c] && q[e] == q[c]) return e;
+          return -1;
+        }();
+        same >= 0) {
+      L[c] = L[same];
+      continue;
+    }
     const double sa = mu[c], ss = std::max(1e-6, 1 / (3.0 * kappa[c]) - mu[c]);
     const double st = sa + ss, alpha = ss / st, tr = std::sqrt(sa / kappa[c]);
     const double zr = 1 / st, zv = zr * (1 + 4 * C / 3);
@@ -211,13 +246,13 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
     std::vector<Cluster> clusters(members.size());
     for (size_t k = 0; k < members.size(); ++k) {
       Cluster& cl = clusters[k];
-      for (int64_t s : members[k]) cl.qa += q[c][s] * area_of(s), cl.centre += q[c][s] * area_of(s) * pos(s);
+      for (int32_t s : members[k]) cl.qa += q[c][s] * area_of(s), cl.centre += q[c][s] * area_of(s) * pos(s);
       if (cl.qa > 0) {
         cl.centre /= cl.qa;
       } else {
-        for (int64_t s : members[k]) cl.centre += pos(s) / double(members[k].size());
+        for (int32_t s : members[k]) cl.centre += pos(s) / double(members[k].size());
       }
-      for (int64_t s : members[k]) cl.radius = std::max(cl.radius, (pos(s) - cl.centre).norm());
+      for (int32_t s : members[k]) cl.radius = std::max(cl.radius, (pos(s) - cl.centre).norm());
     }
     const double near = std::max(3 * zr, 2.5 * pg.mean_boundary_spacing);
 #pragma omp parallel for schedule(dynamic, 16)
@@ -237,7 +272,7 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
             continue;
           }
         }
-        for (int64_t s : members[k]) {
+        for (int32_t s : members[k]) {
           const double r2 = (x - pos(s)).squaredNorm();
           if (r2 < near * near)
             close.emplace_back(r2, s);
@@ -499,49 +534,31 @@ Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
   // The 4 nearest boundary nodes of every vertex, through a uniform grid of the nodes (cells of
   // about two node spacings), searched in rings of growing Chebyshev radius until no unvisited
   // cell can hold a nearer node than the 4th found.
-  Vec3 glo = Vec3::Constant(1e300), ghi = Vec3::Constant(-1e300);
-  for (int64_t b = 0; b < nb; ++b) {
-    glo = glo.cwiseMin(pg.position[pg.num_interior + b]);
-    ghi = ghi.cwiseMax(pg.position[pg.num_interior + b]);
-  }
-  const double cell = std::max(2 * pg.mean_boundary_spacing, 1e-6 * (ghi - glo).norm() + 1e-12);
-  std::array<int, 3> dims;
-  for (int a = 0; a < 3; ++a) dims[a] = std::clamp(int((ghi[a] - glo[a]) / cell) + 1, 1, 512);
-  auto cell_of = [&](const Vec3& p) {
-    std::array<int, 3> c;
-    for (int a = 0; a < 3; ++a) c[a] = std::clamp(int(std::floor((p[a] - glo[a]) / cell)), 0, dims[a] - 1);
-    return c;
-  };
-  std::vector<std::vector<int32_t>> cells(size_t(dims[0]) * dims[1] * dims[2]);
-  auto index = [&](int x, int y, int z) { return x + size_t(dims[0]) * (y + size_t(dims[1]) * z); };
-  for (int64_t b = 0; b < nb; ++b) {
-    const auto c = cell_of(pg.position[pg.num_interior + b]);
-    cells[index(c[0], c[1], c[2])].push_back(int32_t(b));
-  }
+  const NodeGrid grid(pg, 2 * pg.mean_boundary_spacing, 512);
 #pragma omp parallel for schedule(dynamic, 64)
   for (int64_t v = 0; v < int64_t(mesh.vertices.size()); ++v) {
     const Vec3& x = mesh.vertices[v];
     std::array<std::pair<double, int32_t>, 4> best;
     best.fill({1e300, 0});
-    const auto c = cell_of(x);
+    const auto c = grid.CellOf(x);
     // Distance from x to its (clamped) cell's box: the cells of ring r + 1 are at least
     // r * cell - outside away.
     double outside = 0;
     for (int a = 0; a < 3; ++a) {
-      const double lo = glo[a] + c[a] * cell, hi = lo + cell;
+      const double lo = grid.lo[a] + c[a] * grid.cell, hi = lo + grid.cell;
       outside = std::max({outside, lo - x[a], x[a] - hi});
     }
-    const int max_r = std::max({dims[0], dims[1], dims[2]});
+    const int max_r = std::max({grid.dims[0], grid.dims[1], grid.dims[2]});
     for (int r = 0; r <= max_r; ++r) {
-      ForEachCellInRing(c, r, dims, [&](int cx, int cy, int cz) {
-        for (int32_t b : cells[index(cx, cy, cz)]) {
+      ForEachCellInRing(c, r, grid.dims, [&](int cx, int cy, int cz) {
+        for (int32_t b : grid.cells[grid.Index(cx, cy, cz)]) {
           const double d2 = (x - pg.position[pg.num_interior + b]).squaredNorm();
           if (d2 >= best[3].first) continue;
           best[3] = {d2, b};
           std::sort(best.begin(), best.end());
         }
       });
-      const double bound = r * cell - outside;
+      const double bound = r * grid.cell - outside;
       if (best[3].first < 1e300 && bound > 0 && best[3].first <= bound * bound) break;
     }
     double wsum = 0;
