@@ -6,6 +6,7 @@
 #include <cmath>
 #include <deque>
 #include <fmt/format.h>
+#include <limits>
 #include <numeric>
 #include <unordered_map>
 
@@ -82,7 +83,7 @@ std::string PolygridOptions::Validate() const {
   if (!(first_layer_fraction > 0 && first_layer_fraction < 0.5))
     return "first_layer_fraction must be in (0, 0.5)";
   if (boundary_relax_iterations < 0 || smooth_iterations < 0 || variance_iterations < 0 ||
-      align_passes < 0 || winslow_iterations < 0)
+      align_passes < 0 || winslow_iterations < 0 || winslow_stall < 0)
     return "iteration counts must be >= 0";
   return "";
 }
@@ -394,8 +395,11 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   // colour's nodes depend only on other colours', so each colour updates in parallel and the
   // result does not depend on the thread count), until no node moves more than tol mm in a
   // sweep or `iterations` sweeps.
-  auto relax = [&](const auto& colours, int iterations, double tol, auto&& target) {
-    for (int it = 0; it < iterations; ++it) {
+  // Returns the sweeps run, negated where it stopped without converging: at `iterations`, or
+  // with `stall` > 0 after that many sweeps without a new smallest largest step.
+  auto relax = [&](const auto& colours, int iterations, double tol, auto&& target, int stall = 0) {
+    double best = std::numeric_limits<double>::infinity();
+    for (int it = 0, best_it = 0; it < iterations; ++it) {
       double moved = 0;
       for (const std::vector<int32_t>& nodes : colours) {
         const int64_t n = int64_t(nodes.size());
@@ -407,8 +411,15 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
           moved = std::max(moved, step.norm());
         }
       }
-      if (moved < tol) break;
+      if (moved < tol) return it + 1;
+      if (moved < best) {
+        best = moved;
+        best_it = it;
+      } else if (stall > 0 && it - best_it >= stall) {
+        return -(it + 1);
+      }
     }
+    return -iterations;
   };
   auto smooth = [&](int iterations, double tol_spacings) {
     relax(colour, iterations, tol_spacings * pg.mean_boundary_spacing, [&](int32_t i) {
@@ -486,7 +497,8 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
             diag[i][k++] = lat.inside(h) ? interior_at[lat.index(h)] : -1;
           }
     }
-    relax(parity, options.winslow_iterations, 1e-4 * pg.mean_boundary_spacing, [&](int32_t i) {
+    const std::vector<Vec3> smoothed = pg.position;
+    const int sweeps = relax(parity, options.winslow_iterations, 1e-4 * pg.mean_boundary_spacing, [&](int32_t i) {
       const auto& nb = pg.neighbours[i];
       Vec3 target = Vec3::Zero();
       for (int j = 0; j < 6; ++j) target += pg.position[nb[j]] / 6;
@@ -510,7 +522,21 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
         num += 2 * G(kPairs[p][0], kPairs[p][1]) * xab;
       }
       return den > 0 && num.allFinite() ? Vec3(num / den) : target;
-    });
+    }, options.winslow_stall);
+    // Diverged: a node left the boundary nodes' bounding box (widened by a spacing).
+    Eigen::AlignedBox3d box;
+    for (int64_t b = pg.num_interior; b < N; ++b) box.extend(pg.position[b]);
+    box.min().array() -= pg.mean_boundary_spacing;
+    box.max().array() += pg.mean_boundary_spacing;
+    const bool diverged = std::any_of(pg.position.begin(), pg.position.begin() + pg.num_interior,
+                                      [&](const Vec3& x) { return !x.allFinite() || !box.contains(x); });
+    if (diverged) pg.position = smoothed;
+    if (sweeps < 0 || diverged)
+      pg.placement_note = fmt::format("Winslow placement {} after {} sweeps{}",
+                                      sweeps >= 0 ? "converged" : -sweeps < options.winslow_iterations
+                                          ? "stopped unconverged (its steps stalled)" : "stopped unconverged (the cap)",
+                                      std::abs(sweeps),
+                                      diverged ? " and had diverged: the Laplacian-smoothed nodes are kept" : "");
   }
   const int variance_iterations =
       options.placement == InteriorPlacement::kVariance ? options.variance_iterations : 0;

@@ -185,7 +185,8 @@ TEST(Polygrid, BuiltinShapesAreWellFormed) {
 // than the polygrid's ~1.7 mm): the closest point on such a mesh takes every node of a convex
 // vertex's region to that vertex, which put polycube-edge nodes of two faces on one point
 // (infinite Laplacian weights, NaN diffusion, a black render). The nodes must stay apart, and
-// under uniform light the mesh's boundary radiance must match the analytic shape's.
+// under uniform light the mesh's boundary radiance must match the analytic shape's (within 3 %;
+// 0.1 % for the sphere, 1.4 % for the torus).
 TEST(Polygrid, FacetedMeshesAreWellFormed) {
   for (const std::string name : {"sphere", "torus"}) {
     SCOPED_TRACE(name);
@@ -194,8 +195,18 @@ TEST(Polygrid, FacetedMeshesAreWellFormed) {
     PolygridOptions o;
     o.resolution = 13;
     double mean_radiance[2];
-    for (int s = 0; s < 2; ++s) {
+    // The mesh first: where Winslow's placement diverged on it (the faceted torus: nodes
+    // outside the solid's box after 124 sweeps) and the smoothed nodes were kept, the analytic
+    // shape is placed the same way, so that the comparison is of the surfaces alone (the
+    // placements differ by 1.8 % in the torus's mean: smoothed 0.1185, Winslow 0.1164).
+    for (int s = 1; s >= 0; --s) {
       const Polygrid pg = BuildPolygrid(BuiltinPolycube(name), s ? *mesh : *analytic, o);
+      if (s == 1 && pg.placement_note.find("diverged") != std::string::npos) {
+        o.placement = InteriorPlacement::kVariance;
+        o.variance_iterations = 0;
+      }
+      if (!pg.placement_note.empty())
+        std::printf("[polygrid] %s (%s): %s\n", name.c_str(), s ? "mesh" : "analytic", pg.placement_note.c_str());
       ExpectWellFormed(pg);
       double nearest = 1e300;  // between boundary nodes of nearby lattice points (split concave
       // nodes, one lattice point, share their surface point by design)
@@ -302,6 +313,55 @@ TEST(Polygrid, WinslowPlacementFollowsTheRadialSolutionMoreClosely) {
     EXPECT_LT(L[1].sd, 0.6 * L[0].sd) << resolution;
     EXPECT_LT(fallback[1], fallback[0] / 2) << resolution;
   }
+}
+
+// Taubin's lambda|mu smoothing (lambda 0.5, mu -0.53) of a mesh with uniform one-ring
+// weights: rounds creases without shrinking the solid much.
+TriangleMesh TaubinSmoothed(TriangleMesh mesh, int iterations) {
+  std::vector<std::vector<int>> ring(mesh.vertices.size());
+  for (const auto& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k)
+      for (int e : {1, 2}) ring[t[k]].push_back(t[(k + e) % 3]);
+  for (auto& r : ring) {
+    std::sort(r.begin(), r.end());
+    r.erase(std::unique(r.begin(), r.end()), r.end());
+  }
+  for (int it = 0; it < 2 * iterations; ++it) {
+    const double f = it % 2 ? -0.53 : 0.5;
+    std::vector<Vec3> next = mesh.vertices;
+    for (size_t v = 0; v < next.size(); ++v) {
+      Vec3 mean = Vec3::Zero();
+      for (int j : ring[v]) mean += mesh.vertices[j];
+      next[v] += f * (mean / double(ring[v].size()) - mesh.vertices[v]);
+    }
+    mesh.vertices.swap(next);
+  }
+  return mesh;
+}
+
+// Winslow's sweeps need not converge (its equations are nonlinear). On the bunny's polycube
+// under a rounded mesh of its solid (Taubin-smoothed, as a user's mesh with its polycube) they
+// stall at 13^3, and run on to their cap of 2000 they diverged: 401654 of 460553 nodes on
+// fallback weights in a 53 s build, where the Laplacian smoothing they start from has 21252.
+// Stopped where their steps stall, the grid keeps to the smoothed one's quality.
+TEST(Polygrid, WinslowPlacementStopsWhereItsSweepsStall) {
+  const Polycube pc = BuiltinPolycube("bunny");
+  const auto blocky = MakePolycubeSolidShape(pc, 20, 4, "bunny");
+  const auto rounded = MakeMeshShape(TaubinSmoothed(blocky->mesh(), 30), "rounded_bunny.obj", 20);
+  PolygridOptions o;
+  o.resolution = 13;
+  o.placement = InteriorPlacement::kVariance;
+  o.variance_iterations = 0;  // the Laplacian smoothing alone
+  const Polygrid smoothed = BuildPolygrid(pc, *rounded, o);
+  o.placement = InteriorPlacement::kWinslow;
+  const Polygrid winslow = BuildPolygrid(pc, *rounded, o);
+  ExpectWellFormed(winslow);
+  std::printf("[polygrid] rounded bunny, 13^3: %lld of %lld nodes on fallback weights after smoothing, %lld "
+              "with winslow placement (%s)\n", (long long)smoothed.fallback_weights, (long long)smoothed.num_interior,
+              (long long)winslow.fallback_weights, winslow.placement_note.c_str());
+  EXPECT_NE(winslow.placement_note.find("stalled"), std::string::npos) << winslow.placement_note;
+  EXPECT_GT(smoothed.fallback_weights, 0);
+  EXPECT_LT(winslow.fallback_weights, 1.6 * smoothed.fallback_weights);
 }
 
 // A homogeneous torus under uniform light is symmetric about its axis, so the boundary radiance

@@ -182,6 +182,9 @@ int RunRender(int argc, char** argv) {
               "Laplacian weights), %zu levels, built in %.2f s\n", material.c_str(), shape->name().c_str(),
               pc.cubes.size(), resolution, (long long)grids[0].size(), (long long)grids[0].num_boundary(),
               (long long)grids[0].fallback_weights, grids.size(), build_s);
+  for (size_t l = 0; l < grids.size(); ++l)
+    if (!grids[l].placement_note.empty())
+      std::printf("render: note: level %zu (%d^3): %s\n", l, grids[l].resolution, grids[l].placement_note.c_str());
   if (ro.model == "dipole") {
     bool homogeneous = true;
     for (int ch = 0; ch < 3; ++ch)
