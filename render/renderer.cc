@@ -6,6 +6,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fmt/format.h>
+#include <limits>
 #include <sstream>
 
 #include "render/render_passes.h"
@@ -139,6 +141,13 @@ std::string RenderOptions::Validate() const {
   if (width < 1 || height < 1 || width > 16384 || height > 16384)
     return "the image size must be 1..16384 pixels per side";
   if (supersample < 1 || supersample > 8) return "supersample must be 1..8";
+  // The camera's raster holds (width S) x (height S) samples, 16 bytes each, indexed by a
+  // 32-bit int on the gl backend.
+  if (const int64_t samples = int64_t(width) * supersample * int64_t(height) * supersample;
+      samples > std::numeric_limits<int32_t>::max())
+    return fmt::format("{}x{} pixels at supersample {} are {} samples (~{} GB of raster); at most 2^31 - 1: "
+                       "lower the image size or the supersampling", width, height, supersample, samples,
+                       samples * 16 / 1000000000);
   if (!(fov_deg > 1 && fov_deg < 170)) return "the field of view must be in (1, 170) degrees";
   if (!std::isfinite(azimuth_deg) || !std::isfinite(elevation_deg)) return "the camera angles must be finite";
   if (!(eta >= 1)) return "eta must be >= 1";

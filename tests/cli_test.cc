@@ -421,6 +421,9 @@ TEST_F(Cli, RenderAndEdit) {
                      "--variance-steps");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --variance-steps 10 -o " + P("x.png")), "--variance-steps");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --placement conformal -o " + P("x.png")), "--placement");
+  // 16384^2 pixels at 8x8 samples would overflow the rasters' 32-bit index (and need ~275 GB).
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --image 16384x16384 --supersample 8 -o " + P("x.png")),
+                     "at most 2^31 - 1");
   { std::FILE* f = std::fopen(P("open.obj").c_str(), "w");
     std::fputs("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\n", f);
     std::fclose(f); }
