@@ -52,6 +52,66 @@ std::string Polycube::Validate() const {
   return "";
 }
 
+int Polycube::Genus() const {
+  const std::set<std::array<int, 3>> solid(cubes.begin(), cubes.end());
+  auto has = [&](int x, int y, int z) { return solid.count({x, y, z}) > 0; };
+  // Manifold at every lattice vertex: around it, the filled cells of the 2 x 2 x 2 block form
+  // one face-connected group and so do the empty ones.
+  std::set<std::array<int, 3>> corners;
+  for (const auto& c : cubes)
+    for (int k = 0; k < 8; ++k) corners.insert({c[0] + (k & 1), c[1] + (k >> 1 & 1), c[2] + (k >> 2 & 1)});
+  for (const auto& v : corners)
+    for (bool filled : {true, false}) {
+      int groups = 0, seen = 0;
+      for (int k = 0; k < 8; ++k) {
+        if (seen >> k & 1 || has(v[0] - 1 + (k & 1), v[1] - 1 + (k >> 1 & 1), v[2] - 1 + (k >> 2 & 1)) != filled)
+          continue;
+        ++groups;
+        std::vector<int> stack = {k};
+        seen |= 1 << k;
+        while (!stack.empty()) {
+          const int a = stack.back();
+          stack.pop_back();
+          for (int bit : {1, 2, 4}) {
+            const int b = a ^ bit;
+            if (!(seen >> b & 1) &&
+                has(v[0] - 1 + (b & 1), v[1] - 1 + (b >> 1 & 1), v[2] - 1 + (b >> 2 & 1)) == filled) {
+              seen |= 1 << b;
+              stack.push_back(b);
+            }
+          }
+        }
+      }
+      if (groups > 1) return -1;
+    }
+  // Exposed faces: F; their corners and unit edges: V, E.
+  int64_t faces = 0;
+  std::set<std::array<int, 3>> verts;
+  std::set<std::array<int, 4>> edges;  // lower end and axis
+  for (const auto& c : cubes)
+    for (int a = 0; a < 3; ++a)
+      for (int side : {0, 1}) {
+        auto n = c;
+        n[a] += side ? 1 : -1;
+        if (solid.count(n)) continue;
+        ++faces;
+        const int u = (a + 1) % 3, w = (a + 2) % 3;
+        auto o = c;
+        o[a] += side;
+        for (int k = 0; k < 4; ++k) {
+          auto p = o;
+          p[u] += k & 1;
+          p[w] += k >> 1;
+          verts.insert(p);
+          // The edge along u from p (k = 0, 2) and along w from p (k = 0, 1).
+          if (!(k & 1)) edges.insert({p[0], p[1], p[2], u});
+          if (!(k >> 1)) edges.insert({p[0], p[1], p[2], w});
+        }
+      }
+  const int64_t euler = int64_t(verts.size()) - int64_t(edges.size()) + faces;
+  return int((2 - euler) / 2);
+}
+
 Polycube ParsePolycube(const std::string& text, const std::string& what) {
   Polycube p;
   std::istringstream in(text);

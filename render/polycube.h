@@ -20,6 +20,10 @@ struct Polycube {
   bool Has(int x, int y, int z) const;
   // Empty if valid, else the broken constraint.
   std::string Validate() const;
+  // The genus of the solid's surface (its holes: 0 for a cube, 1 for a ring), from
+  // V - E + F = 2 - 2 genus over the exposed unit faces; -1 where the surface is not a
+  // 2-manifold (cubes that meet along an edge or at a corner only).
+  int Genus() const;
 };
 
 // Parses the text format; throws InputError naming `what` (a file name) and the line.

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <set>
 #include <sstream>
 
 #include "solver/atomic_file.h"
@@ -568,6 +569,31 @@ std::string TriangleMesh::Validate() const {
              std::to_string(e.second);
   }
   return "";
+}
+
+int TriangleMesh::Genus() const {
+  std::vector<int> parent(vertices.size(), -1);  // union-find over the used vertices
+  auto find = [&](int v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  };
+  std::set<std::pair<int, int>> edges;
+  for (const auto& t : triangles)
+    for (int c = 0; c < 3; ++c) {
+      const int a = t[c], b = t[(c + 1) % 3];
+      edges.insert({std::min(a, b), std::max(a, b)});
+      for (int v : {a, b})
+        if (parent[v] < 0) parent[v] = v;
+      parent[find(a)] = find(b);
+    }
+  int64_t used = 0, pieces = 0;
+  for (size_t v = 0; v < parent.size(); ++v)
+    if (parent[v] >= 0) {
+      ++used;
+      pieces += find(int(v)) == int(v);
+    }
+  const int64_t euler = used - int64_t(edges.size()) + int64_t(triangles.size());
+  return int((2 * pieces - euler) / 2);
 }
 
 void TriangleMesh::Bounds(Vec3* lo, Vec3* hi) const {

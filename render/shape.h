@@ -27,6 +27,9 @@ struct TriangleMesh {
   std::string Validate() const;
   void Bounds(Vec3* lo, Vec3* hi) const;
   double Area() const;  // mm^2
+  // For a closed 2-manifold (Validate() empty): the handles summed over the connected pieces,
+  // from V - E + F = 2 (pieces - genus) over the vertices that triangles use.
+  int Genus() const;
   // Area-weighted vertex normals (unit length).
   std::vector<Vec3> VertexNormals() const;
   // Per triangle corner: the area-weighted mean of the face normals of the triangles around

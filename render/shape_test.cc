@@ -42,6 +42,21 @@ TEST(Shape, BuiltinsAreClosedAndProjectOntoThemselves) {
   EXPECT_THROW(MakeBuiltinShape("sphere", -1), InputError);
 }
 
+TEST(Shape, MeshGenus) {
+  EXPECT_EQ(MakeBuiltinShape("sphere", 12, 16)->mesh().Genus(), 0);
+  EXPECT_EQ(MakeBuiltinShape("slab", 12, 16)->mesh().Genus(), 0);
+  EXPECT_EQ(MakeBuiltinShape("torus", 12, 16)->mesh().Genus(), 1);
+  EXPECT_EQ(MakeBuiltinShape("bunny", 12, 16)->mesh().Genus(), 0);
+  // Two separate tori: the handles add up.
+  TriangleMesh two = MakeBuiltinShape("torus", 12, 16)->mesh();
+  const int n = int(two.vertices.size());
+  const TriangleMesh one = two;
+  for (const Vec3& v : one.vertices) two.vertices.push_back(v + Vec3(30, 0, 0));
+  for (const auto& t : one.triangles) two.triangles.push_back({t[0] + n, t[1] + n, t[2] + n});
+  ASSERT_EQ(two.Validate(), "");
+  EXPECT_EQ(two.Genus(), 2);
+}
+
 TEST(Shape, ObjAndPlyMeshes) {
   const auto closed = ReadMesh(Write("tl_closed.obj", kTet + "f 1 3 2\nf 1 2 4\nf 2/1 3/1 4/1\nf -4 -1 -2\n"));
   EXPECT_EQ(closed.triangles.size(), 4u);

@@ -409,6 +409,16 @@ TEST_F(Cli, RenderAndEdit) {
   ASSERT_EQ(r.status, 0) << r.output;
   r = Translume("render homogeneous:0.2,0.02 --shape torus --resolution 5 --model dipole --image 16x16 -o " + P("t.exr"));
   ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(r.output.find("genus"), std::string::npos) << r.output;
+  // A polycube with a hole on a shape without one renders, with a note naming both genera.
+  { std::FILE* f = std::fopen(P("ring.cubes").c_str(), "w");
+    std::fputs("0 0 0\n1 0 0\n2 0 0\n0 1 0\n2 1 0\n0 2 0\n1 2 0\n2 2 0\n", f);
+    std::fclose(f); }
+  r = Translume("render homogeneous:0.2,0.02 --shape sphere --polycube " + P("ring.cubes") +
+                " --resolution 5 --image 16x16 -o " + P("ring.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("sphere has genus 0 but the polycube " + P("ring.cubes") + " has genus 1"),
+            std::string::npos) << r.output;
   r = Translume("edit " + P("m.vdb") + " --scale kappa=2 --add mu=0.01 --depth 0:2 -o " + P("e.vdb"));
   ASSERT_EQ(r.status, 0) << r.output;
   const Material a = ReadMaterial(P("m.vdb")), b = ReadMaterial(P("e.vdb"));

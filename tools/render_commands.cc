@@ -153,6 +153,11 @@ int RunRender(int argc, char** argv) {
     shape = MakeBuiltinShape(shape_name, size_mm);
     pc = polycube_path.empty() ? BuiltinPolycube(shape_name) : ReadPolycube(polycube_path);
   }
+  if (const int mesh_genus = shape->mesh().Genus(), pc_genus = pc.Genus(); pc_genus >= 0 && pc_genus != mesh_genus)
+    std::printf("render: note: %s has genus %d but the polycube %s has genus %d: the polygrid's holes are not the "
+                "shape's, so light diffuses across a hole or stops at one that is not there; give a polycube with "
+                "as many holes (--polycube, docs/render.md \"Polycube files\")\n", shape->name().c_str(), mesh_genus,
+                polycube_path.empty() ? "(one cube)" : polycube_path.c_str(), pc_genus);
   PolygridOptions po;
   po.resolution = resolution;
   po.first_layer_fraction = first_layer;
