@@ -10,6 +10,7 @@
 #include <limits>
 #include <sstream>
 
+#include "render/boundary_interpolation.h"
 #include "render/render_passes.h"
 #include "solver/status.h"
 
@@ -528,7 +529,7 @@ Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
   sc.levels = levels;
   const Polygrid& pg = (*levels)[0];
   const int64_t nb = pg.num_boundary();
-  // Vertices about as dense as the boundary nodes (their radiance comes from the 4 nearest).
+  // Vertices about as dense as the boundary nodes (their radiance is interpolated from them).
   I.shading_mesh = ShadingMesh(shape->mesh(), pg.mean_boundary_spacing,
                                std::max<int64_t>(int64_t(shape->mesh().vertices.size()), 2 * nb), &sc.vertex_normals);
   sc.mesh = &I.shading_mesh;
@@ -544,6 +545,7 @@ Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
   // about two node spacings), searched in rings of growing Chebyshev radius until no unvisited
   // cell can hold a nearer node than the 4th found.
   const NodeGrid grid(pg, 2 * pg.mean_boundary_spacing, 512);
+  const BoundaryElements elements(pg);
 #pragma omp parallel for schedule(dynamic, 64)
   for (int64_t v = 0; v < int64_t(mesh.vertices.size()); ++v) {
     const Vec3& x = mesh.vertices[v];
@@ -570,6 +572,10 @@ Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
       const double bound = r * grid.cell - outside;
       if (best[3].first < 1e300 && bound > 0 && best[3].first <= bound * bound) break;
     }
+    if (elements.Weights(x, {best[0].second, best[1].second, best[2].second, best[3].second}, &sc.near_idx[v],
+                         &sc.near_w[v]))
+      continue;
+    // More than a boundary spacing from every element: inverse-distance weights.
     double wsum = 0;
     for (int k = 0; k < 4; ++k) {
       const double w = 1 / (best[k].first + 1e-6 * pg.mean_boundary_spacing * pg.mean_boundary_spacing);
