@@ -209,6 +209,11 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   };
   // along: from the plain stretch, along the lines from the cubes' centres; else (the crease
   // restart below, whose nodes sit off flat sides along their normals) the closest point.
+  auto lattice_step = [](int dir) {
+    Vec3 v = Vec3::Zero();
+    v[dir / 2] = dir & 1 ? 1 : -1;
+    return v;
+  };
   auto project_boundary = [&](bool along) {
     for (int64_t b = pg.num_interior; b < N; ++b) {
       Vec3& normal = pg.normal[b - pg.num_interior];
@@ -216,7 +221,24 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
         shape.Project(pg.position[b], &pg.position[b], &normal);
         continue;
       }
-      shape.ProjectAlong(pg.position[b], cubes_centre(b), &pg.position[b], &normal);
+      const Vec3 p = pg.position[b], centre = cubes_centre(b);
+      shape.ProjectAlong(p, centre, &pg.position[b], &normal);
+      // Where the line's hit lies further than the surface's nearest point by more than the way
+      // to the centre, the line ran past the surface near p and met it beyond the cube (a
+      // torus's inner wall near the polycube's hole corners, seen from the one cube's centre:
+      // the folded boundary inverted ~300 interior cells of a torus mesh). The line along the
+      // node's face normal instead, where that hit is nearer.
+      Vec3 nearest, unused;
+      shape.Project(p, &nearest, &unused);
+      const double len = (p - centre).norm();
+      if ((pg.position[b] - p).norm() > (nearest - p).norm() + len) {
+        Vec3 s2, n2;
+        shape.ProjectAlong(p, p - len * Vec3(lattice_step(pg.link_dir[b - pg.num_interior])), &s2, &n2);
+        if ((s2 - p).norm() < (pg.position[b] - p).norm()) {
+          pg.position[b] = s2;
+          normal = n2;
+        }
+      }
     }
     for (int it = 0; it < options.boundary_relax_iterations; ++it) {
       std::vector<Vec3> next = pg.position;

@@ -43,9 +43,8 @@ struct PolygridOptions {
   // boundary spacings in a sweep (1e-6 gives the same fallback counts and sphere figures to
   // the digits printed, and doubled the bunny's build), or after winslow_stall sweeps in a row
   // without a new smallest largest step (0: never). Winslow's equations are nonlinear: on some
-  // meshes (a faceted torus, a rounded polycube solid) the sweeps stall at a cycle and, run on,
-  // can diverge (the rounded bunny at 13^3: after 1600 sweeps, 401654 of 460553 nodes on
-  // fallback weights). Where the nodes diverged (left the boundary's bounding box), the
+  // meshes (a rounded polycube solid) the sweeps stall at a cycle and, run on, can diverge (the
+  // rounded bunny at 13^3: after 1600 sweeps, 401654 of 460553 nodes on fallback weights). Where the nodes diverged (left the boundary's bounding box), the
   // Laplacian-smoothed nodes are kept. Polygrid::placement_note says what happened.
   int winslow_iterations = 2000;
   int winslow_stall = 100;
