@@ -4,7 +4,6 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
-#include <unordered_map>
 #include <utility>
 
 #include "render/shape.h"
@@ -13,13 +12,6 @@ namespace translume {
 namespace {
 
 using Lattice = std::array<int, 3>;
-
-// Unit lattice step of direction `dir` (0..5: -x, +x, -y, +y, -z, +z).
-Lattice Step(int dir) {
-  Lattice s = {0, 0, 0};
-  s[dir / 2] = dir & 1 ? 1 : -1;
-  return s;
-}
 
 Lattice Add(Lattice a, const Lattice& b, int sign = 1) {
   for (int k = 0; k < 3; ++k) a[k] += sign * b[k];
@@ -65,38 +57,32 @@ std::pair<double, double> NearestOnBilinearPatch(const Vec3& x, const Vec3& p00,
 
 BoundaryElements::BoundaryElements(const Polygrid& pg) : pg_(pg) {
   const int64_t nb = pg.num_boundary();
-  // (lattice, link direction) -> boundary index; split concave nodes differ in direction.
-  auto key = [](const Lattice& g, int dir) {
-    return (uint64_t(g[0] + 1) << 43) | (uint64_t(g[1] + 1) << 23) | (uint64_t(g[2] + 1) << 3) | uint64_t(dir);
-  };
-  std::unordered_map<uint64_t, int32_t> at;
-  at.reserve(size_t(nb) * 2);
-  for (int64_t b = 0; b < nb; ++b)
-    at[key(pg.lattice[pg.num_interior + b], pg.link_dir[b])] = int32_t(b);
+  // The boundary node (index b - num_interior) at lattice g linked along dir, or -1.
+  const BoundaryNodeIndex index(pg);
   auto find = [&](const Lattice& g, int dir) {
-    const auto it = at.find(key(g, dir));
-    return it == at.end() ? -1 : it->second;
+    const int64_t k = index.Find(g, dir);
+    return int32_t(k < 0 ? -1 : k - pg.num_interior);
   };
   for (int64_t b = 0; b < nb; ++b) {
     const int dir = pg.link_dir[b];
-    const Lattice g = pg.lattice[pg.num_interior + b], n = Step(dir);
+    const Lattice g = pg.lattice[pg.num_interior + b], n = LatticeStep(dir);
     const int a = dir / 2, u = (a + 1) % 3, v = (a + 2) % 3;
     // A face's quad, from its lowest corner.
-    const int32_t bu = find(Add(g, Step(2 * u + 1)), dir), bv = find(Add(g, Step(2 * v + 1)), dir);
-    const int32_t buv = find(Add(Add(g, Step(2 * u + 1)), Step(2 * v + 1)), dir);
+    const int32_t bu = find(Add(g, LatticeStep(2 * u + 1)), dir), bv = find(Add(g, LatticeStep(2 * v + 1)), dir);
+    const int32_t buv = find(Add(Add(g, LatticeStep(2 * u + 1)), LatticeStep(2 * v + 1)), dir);
     if (bu >= 0 && bv >= 0 && buv >= 0) elements_.push_back({{int32_t(b), bu, bv, buv}});
     // Across a convex edge: towards the edge (direction s in the face) no node of this face,
     // the other face's counterpart at g + s - n. Each quad from the lower-indexed rim node, and
     // along the edge from the lower lattice end.
     for (int k = 0; k < 4; ++k) {
       const int sdir = k < 2 ? 2 * u + k : 2 * v + k - 2;
-      const Lattice s = Step(sdir);
+      const Lattice s = LatticeStep(sdir);
       if (find(Add(g, s), dir) >= 0) continue;
       const int32_t p = find(Add(Add(g, s), n, -1), sdir);
       if (p < 0 || p < b) continue;
       const int t = k < 2 ? v : u;  // along the edge
-      const int32_t bt = find(Add(g, Step(2 * t + 1)), dir);
-      const int32_t pt = find(Add(pg.lattice[pg.num_interior + p], Step(2 * t + 1)), sdir);
+      const int32_t bt = find(Add(g, LatticeStep(2 * t + 1)), dir);
+      const int32_t pt = find(Add(pg.lattice[pg.num_interior + p], LatticeStep(2 * t + 1)), sdir);
       if (bt >= 0 && pt >= 0) elements_.push_back({{int32_t(b), bt, int32_t(p), pt}});
     }
   }
@@ -104,12 +90,12 @@ BoundaryElements::BoundaryElements(const Polygrid& pg) : pg_(pg) {
   // Convex corners: a node with counterparts across both of its face's rims at the corner.
   for (int64_t b = 0; b < nb; ++b) {
     const int dir = pg.link_dir[b];
-    const Lattice g = pg.lattice[pg.num_interior + b], n = Step(dir);
+    const Lattice g = pg.lattice[pg.num_interior + b], n = LatticeStep(dir);
     const int a = dir / 2, u = (a + 1) % 3, v = (a + 2) % 3;
     for (int su : {2 * u, 2 * u + 1})
       for (int sv : {2 * v, 2 * v + 1}) {
-        if (find(Add(g, Step(su)), dir) >= 0 || find(Add(g, Step(sv)), dir) >= 0) continue;
-        const int32_t p = find(Add(Add(g, Step(su)), n, -1), su), q = find(Add(Add(g, Step(sv)), n, -1), sv);
+        if (find(Add(g, LatticeStep(su)), dir) >= 0 || find(Add(g, LatticeStep(sv)), dir) >= 0) continue;
+        const int32_t p = find(Add(Add(g, LatticeStep(su)), n, -1), su), q = find(Add(Add(g, LatticeStep(sv)), n, -1), sv);
         if (p < 0 || q < 0 || p < b || q < b) continue;
         elements_.push_back({{int32_t(b), p, q, -1}});
       }

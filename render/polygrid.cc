@@ -28,8 +28,9 @@ struct Lattice {
   }
 };
 
+// Lattice coordinates are below 1024 cubes x 32 intervals < 2^20.
 int64_t Key(const std::array<int, 3>& g, int dir) {
-  return ((int64_t(g[0]) * 4096 + g[1]) * 4096 + g[2]) * 8 + dir;
+  return ((int64_t(g[0]) << 40) | (int64_t(g[1]) << 20) | int64_t(g[2])) * 8 + dir;
 }
 
 // Sum over the interior (free) nodes of the variance of their six edge lengths, and its
@@ -209,11 +210,6 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   };
   // along: from the plain stretch, along the lines from the cubes' centres; else (the crease
   // restart below, whose nodes sit off flat sides along their normals) the closest point.
-  auto lattice_step = [](int dir) {
-    Vec3 v = Vec3::Zero();
-    v[dir / 2] = dir & 1 ? 1 : -1;
-    return v;
-  };
   auto project_boundary = [&](bool along) {
     for (int64_t b = pg.num_interior; b < N; ++b) {
       Vec3& normal = pg.normal[b - pg.num_interior];
@@ -228,13 +224,14 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       // torus's inner wall near the polycube's hole corners, seen from the one cube's centre:
       // the folded boundary inverted ~300 interior cells of a torus mesh). The line along the
       // node's face normal instead, where that hit is nearer.
+      const double len = (p - centre).norm(), hit = (pg.position[b] - p).norm();
       Vec3 nearest, unused;
-      shape.Project(p, &nearest, &unused);
-      const double len = (p - centre).norm();
-      if ((pg.position[b] - p).norm() > (nearest - p).norm() + len) {
+      if (hit > len) shape.Project(p, &nearest, &unused);  // else the test below fails anyway
+      if (hit > len && hit > (nearest - p).norm() + len) {
         Vec3 s2, n2;
-        shape.ProjectAlong(p, p - len * Vec3(lattice_step(pg.link_dir[b - pg.num_interior])), &s2, &n2);
-        if ((s2 - p).norm() < (pg.position[b] - p).norm()) {
+        const Vec3 outward = Eigen::Vector3i(LatticeStep(pg.link_dir[b - pg.num_interior]).data()).cast<double>();
+        shape.ProjectAlong(p, p - len * outward, &s2, &n2);
+        if ((s2 - p).norm() < hit) {
           pg.position[b] = s2;
           normal = n2;
         }
@@ -654,9 +651,24 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   return pg;
 }
 
+std::array<int, 3> LatticeStep(int dir) {
+  std::array<int, 3> s = {0, 0, 0};
+  s[dir / 2] = dir & 1 ? 1 : -1;
+  return s;
+}
+
+BoundaryNodeIndex::BoundaryNodeIndex(const Polygrid& pg) {
+  at_.reserve(size_t(pg.num_boundary()));
+  for (int64_t b = pg.num_interior; b < pg.size(); ++b) at_[Key(pg.lattice[b], pg.link_dir[b - pg.num_interior])] = b;
+}
+
+int64_t BoundaryNodeIndex::Find(const std::array<int, 3>& g, int dir) const {
+  const auto it = at_.find(Key(g, dir));
+  return it == at_.end() ? -1 : it->second;
+}
+
 std::vector<double> BoundaryNodeAreas(const Polygrid& pg, double total_mm2) {
-  std::unordered_map<int64_t, int64_t> at;
-  for (int64_t b = pg.num_interior; b < pg.size(); ++b) at[Key(pg.lattice[b], pg.link_dir[b - pg.num_interior])] = b;
+  const BoundaryNodeIndex at(pg);
   std::vector<double> area(pg.num_boundary());
   double sum = 0;
   for (int64_t b = pg.num_interior; b < pg.size(); ++b) {
@@ -668,8 +680,7 @@ std::vector<double> BoundaryNodeAreas(const Polygrid& pg, double total_mm2) {
       for (int s : {0, 1}) {
         auto g = pg.lattice[b];
         g[a] += s ? 1 : -1;
-        const auto it = at.find(Key(g, dir));
-        nb[s] = it == at.end() ? -1 : it->second;
+        nb[s] = at.Find(g, dir);
       }
       if (nb[0] >= 0 && nb[1] >= 0) {
         t[k] = (pg.position[nb[1]] - pg.position[nb[0]]) / 2;
@@ -687,8 +698,8 @@ std::vector<double> BoundaryNodeAreas(const Polygrid& pg, double total_mm2) {
           h[dir / 2] += step;
           for (int dir2 = 0; dir2 < 6; ++dir2) {
             if (dir2 == dir) continue;
-            if (const auto it = at.find(Key(h, dir2)); it != at.end())
-              across = std::min(across, (pg.position[it->second] - pg.position[b]).norm());
+            if (const int64_t k = at.Find(h, dir2); k >= 0)
+              across = std::min(across, (pg.position[k] - pg.position[b]).norm());
           }
         }
         t[k] = inner.normalized() * (inner.norm() + across) / 2;

@@ -4,6 +4,7 @@
 #include <array>
 #include <cstdint>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "render/polycube.h"
@@ -104,6 +105,21 @@ struct Polygrid {
   // Surface coordinates (u, v) of boundary node b in lattice units: the two lattice axes of
   // its polycube face (the axes other than link_dir / 2, in increasing order).
   std::array<double, 2> SurfaceUV(int64_t b) const;
+};
+
+// The unit lattice step of link direction dir (0..5: -x, +x, -y, +y, -z, +z).
+std::array<int, 3> LatticeStep(int dir);
+
+// Boundary nodes by lattice position and link direction (the split nodes of a concave edge
+// share a lattice position and differ in direction).
+class BoundaryNodeIndex {
+ public:
+  explicit BoundaryNodeIndex(const Polygrid& pg);
+  // The boundary node (a node index, >= num_interior) at lattice g linked along dir, or -1.
+  int64_t Find(const std::array<int, 3>& g, int dir) const;
+
+ private:
+  std::unordered_map<int64_t, int64_t> at_;
 };
 
 // The surface area each boundary node stands for (mm^2), [b - num_interior]: the parallelogram
