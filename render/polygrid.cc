@@ -210,6 +210,7 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   };
   // along: from the plain stretch, along the lines from the cubes' centres; else (the crease
   // restart below, whose nodes sit off flat sides along their normals) the closest point.
+  const double h = ((shape.hi - shape.lo).array() / (Eigen::Array3d(lat.n[0], lat.n[1], lat.n[2]) - 1)).minCoeff();
   auto project_boundary = [&](bool along) {
     for (int64_t b = pg.num_interior; b < N; ++b) {
       Vec3& normal = pg.normal[b - pg.num_interior];
@@ -219,21 +220,27 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       }
       const Vec3 p = pg.position[b], centre = cubes_centre(b);
       shape.ProjectAlong(p, centre, &pg.position[b], &normal);
-      // Where the line's hit lies further than the surface's nearest point by more than the way
-      // to the centre, the line ran past the surface near p and met it beyond the cube (a
-      // torus's inner wall near the polycube's hole corners, seen from the one cube's centre:
-      // the folded boundary inverted ~300 interior cells of a torus mesh). The line along the
-      // node's face normal instead, where that hit is nearer.
+      // Where the line's hit lies further than twice the surface's nearest point plus half a
+      // lattice step, the line met the surface at a glancing angle or ran past it near p and
+      // met it beyond the cube: a torus's inner wall near the polycube's hole corners, seen from
+      // the one cube's centre (the folded boundary inverted ~300 interior cells of a torus
+      // mesh), or a concave edge of the polycube that a rounded mesh fills in (nodes along the
+      // edge landed out of order; 775 folded cells on a rounded bunny at 13^3). The lines along
+      // the node's face normal and along the nearest point's normal instead, where their hits
+      // are nearer. (The nearest point itself would gather the nodes near a faceted mesh's
+      // convex edges and corners onto them.)
       const double len = (p - centre).norm(), hit = (pg.position[b] - p).norm();
-      Vec3 nearest, unused;
-      if (hit > len) shape.Project(p, &nearest, &unused);  // else the test below fails anyway
-      if (hit > len && hit > (nearest - p).norm() + len) {
-        Vec3 s2, n2;
+      Vec3 nearest, nearest_normal;
+      if (hit > 0.5 * h) shape.Project(p, &nearest, &nearest_normal);  // else the test below fails anyway
+      if (hit > 0.5 * h && hit > 2 * (nearest - p).norm() + 0.5 * h) {
         const Vec3 outward = Eigen::Vector3i(LatticeStep(pg.link_dir[b - pg.num_interior]).data()).cast<double>();
-        shape.ProjectAlong(p, p - len * outward, &s2, &n2);
-        if ((s2 - p).norm() < hit) {
-          pg.position[b] = s2;
-          normal = n2;
+        for (const Vec3& dir : {outward, nearest_normal}) {
+          Vec3 s2, n2;
+          shape.ProjectAlong(p, p - len * dir, &s2, &n2);
+          if ((s2 - p).norm() < (pg.position[b] - p).norm()) {
+            pg.position[b] = s2;
+            normal = n2;
+          }
         }
       }
     }
