@@ -194,6 +194,26 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       }
     }
   }
+  // Evening out moves a node half-way to the mean of these neighbours: the 4 of its face inside
+  // a face; along a concave edge of the polycube (split nodes), its 2 split neighbours along
+  // the edge, the same for every copy, so the copies stay together; none on the rims of faces
+  // at convex edges and at concave corners, which stay where they were projected. (Along
+  // concave edges that a rounded mesh fills in, nodes landed out of order near the edge's ends.)
+  std::vector<std::vector<int32_t>> relax_nbrs(N - pg.num_interior);
+  for (int64_t b = pg.num_interior; b < N; ++b) {
+    const auto& nb = face_nbrs[b - pg.num_interior];
+    auto& out = relax_nbrs[b - pg.num_interior];
+    if (nb.size() == 4) {
+      out = nb;
+    } else if (surface_count[Key(pg.lattice[b], 0)] == 2) {
+      for (int32_t k : nb)
+        if (surface_count[Key(pg.lattice[k], 0)] > 1) out.push_back(k);
+      int gap = 0;
+      if (out.size() == 2)
+        for (int a = 0; a < 3; ++a) gap += std::abs(pg.lattice[out[0]][a] - pg.lattice[out[1]][a]);
+      if (gap != 2) out.clear();
+    }
+  }
   // The centre of the polycube's cubes around boundary node b, stretched like the lattice: the
   // first projection goes along the line from there (Shape::ProjectAlong).
   auto cubes_centre = [&](int64_t b) {
@@ -248,8 +268,8 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
     for (int it = 0; it < options.boundary_relax_iterations; ++it) {
       std::vector<Vec3> next = pg.position;
       for (int64_t b = pg.num_interior; b < N; ++b) {
-        const auto& nb = face_nbrs[b - pg.num_interior];
-        if (nb.size() < 4) continue;  // the rim of a face stays where it was projected
+        const auto& nb = relax_nbrs[b - pg.num_interior];
+        if (nb.empty()) continue;
         Vec3 mean = Vec3::Zero();
         for (int32_t k : nb) mean += pg.position[k] / double(nb.size());
         shape.Project(0.5 * (pg.position[b] + mean), &next[b], &pg.normal[b - pg.num_interior]);
