@@ -659,8 +659,8 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
 
   // Laplacian weights (Appendix B) and the boundary links.
   pg.weights.assign(N, {0, 0, 0, 0, 0, 0});
-  int64_t fallback = 0;
-#pragma omp parallel for schedule(static) reduction(+ : fallback) if (pg.num_interior > 50000)
+  int64_t fallback = 0, inverted = 0;
+#pragma omp parallel for schedule(static) reduction(+ : fallback, inverted) if (pg.num_interior > 50000)
   for (int64_t i = 0; i < pg.num_interior; ++i) {
     std::array<Vec3, 6> off;
     for (int j = 0; j < 6; ++j) off[j] = pg.position[pg.neighbours[i][j]] - pg.position[i];
@@ -670,8 +670,10 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       ++fallback;
     }
     for (int j = 0; j < 6; ++j) pg.weights[i][j] = float(w[j]);
+    inverted += (off[1] - off[0]).dot((off[3] - off[2]).cross(off[5] - off[4])) <= 0;
   }
   pg.fallback_weights = fallback;
+  pg.inverted_cells = inverted;
   // A first interior node with two or three boundary links on a smooth part of the surface sits
   // between its boundary nodes (the mean of the d-offset points above), so its links lean up to
   // ~80 degrees off the normal (|link| up to 5 d). The Robin condition needs dphi/dn, so such a

@@ -411,14 +411,24 @@ TEST_F(Cli, RenderAndEdit) {
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(r.output.find("genus"), std::string::npos) << r.output;
   // A polycube with a hole on a shape without one renders, with a note naming both genera.
-  { std::FILE* f = std::fopen(P("ring.cubes").c_str(), "w");
-    std::fputs("0 0 0\n1 0 0\n2 0 0\n0 1 0\n2 1 0\n0 2 0\n1 2 0\n2 2 0\n", f);
-    std::fclose(f); }
+  std::ofstream(P("ring.cubes")) << "0 0 0\n1 0 0\n2 0 0\n0 1 0\n2 1 0\n0 2 0\n1 2 0\n2 2 0\n";
   r = Translume("render homogeneous:0.2,0.02 --shape sphere --polycube " + P("ring.cubes") +
                 " --resolution 5 --image 16x16 -o " + P("ring.png"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("sphere has genus 0 but the polycube " + P("ring.cubes") + " has genus 1"),
             std::string::npos) << r.output;
+  // Nor does a ring follow a sphere: its grid folds (67 of 288 cells), with a note. One cube
+  // for the bunny (ears, tail) folds 4 of 343 cells at 9^3; the bunny's own polycube none.
+  EXPECT_NE(r.output.find("interior cells are folded"), std::string::npos) << r.output;
+  std::ofstream(P("one.cubes")) << "0 0 0\n";
+  r = Translume("render homogeneous:0.2,0.02 --shape bunny --polycube " + P("one.cubes") +
+                " --resolution 9 --image 16x16 -o " + P("one.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("interior cells are folded (inverted): the polycube " + P("one.cubes") +
+                          " does not follow the shape of bunny"), std::string::npos) << r.output;
+  r = Translume("render homogeneous:0.2,0.02 --shape bunny --resolution 9 --levels 1 --image 16x16 -o " + P("own.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(r.output.find("folded"), std::string::npos) << r.output;
   r = Translume("edit " + P("m.vdb") + " --scale kappa=2 --add mu=0.01 --depth 0:2 -o " + P("e.vdb"));
   ASSERT_EQ(r.status, 0) << r.output;
   const Material a = ReadMaterial(P("m.vdb")), b = ReadMaterial(P("e.vdb"));
@@ -434,13 +444,9 @@ TEST_F(Cli, RenderAndEdit) {
   // 16384^2 pixels at 8x8 samples would overflow the rasters' 32-bit index (and need ~275 GB).
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --image 16384x16384 --supersample 8 -o " + P("x.png")),
                      "at most 2^31 - 1");
-  { std::FILE* f = std::fopen(P("open.obj").c_str(), "w");
-    std::fputs("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\n", f);
-    std::fclose(f); }
+  std::ofstream(P("open.obj")) << "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\n";
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --shape " + P("open.obj") + " -o " + P("x.png")), "open");
-  { std::FILE* f = std::fopen(P("bad.cubes").c_str(), "w");
-    std::fputs("0 0 0\n5 5 5\n", f);
-    std::fclose(f); }
+  std::ofstream(P("bad.cubes")) << "0 0 0\n5 5 5\n";
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --polycube " + P("bad.cubes") + " -o " + P("x.png")),
                      "face-connected");
   ExpectOneLineError(Translume("edit " + P("m.vdb") + " --add mu=-1 -o " + P("x.vdb")), "mu");

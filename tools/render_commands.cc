@@ -145,8 +145,8 @@ int RunRender(int argc, char** argv) {
 
   std::unique_ptr<Shape> shape;
   Polycube pc;
-  const std::string sext = Extension(shape_name);
-  if (sext == ".obj" || sext == ".ply") {
+  const std::string polycube_label = !polycube_path.empty() ? polycube_path : mesh ? "(one cube)" : "(the shape's own)";
+  if (mesh) {
     shape = MakeMeshShape(ReadMesh(shape_name), shape_name, size_mm);
     pc = polycube_path.empty() ? BuiltinPolycube("box") : ReadPolycube(polycube_path);
   } else {
@@ -157,7 +157,7 @@ int RunRender(int argc, char** argv) {
     std::printf("render: note: %s has genus %d but the polycube %s has genus %d: the polygrid's holes are not the "
                 "shape's, so light diffuses across a hole or stops at one that is not there; give a polycube with "
                 "as many holes (--polycube, docs/render.md \"Polycube files\")\n", shape->name().c_str(), mesh_genus,
-                polycube_path.empty() ? "(one cube)" : polycube_path.c_str(), pc_genus);
+                polycube_label.c_str(), pc_genus);
   PolygridOptions po;
   po.resolution = resolution;
   po.first_layer_fraction = first_layer;
@@ -190,6 +190,11 @@ int RunRender(int argc, char** argv) {
   for (size_t l = 0; l < grids.size(); ++l)
     if (!grids[l].placement_note.empty())
       std::printf("render: note: level %zu (%d^3): %s\n", l, grids[l].resolution, grids[l].placement_note.c_str());
+  if (grids[0].inverted_cells > grids[0].num_interior / 200)
+    std::printf("render: note: %lld of the polygrid's %lld interior cells are folded (inverted): the polycube %s "
+                "does not follow the shape of %s well; give one whose cubes follow its parts (--polycube, "
+                "docs/render.md \"Polycube files\")\n", (long long)grids[0].inverted_cells,
+                (long long)grids[0].num_interior, polycube_label.c_str(), shape->name().c_str());
   if (ro.model == "dipole") {
     bool homogeneous = true;
     for (int ch = 0; ch < 3; ++ch)
