@@ -2,6 +2,7 @@
 #include "render/laplacian.h"
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 
 namespace translume {
@@ -40,10 +41,10 @@ bool LaplacianWeights(const std::array<Vec3, 6>& offsets, std::array<double, 6>*
   return true;
 }
 
-std::array<double, 6> AxisLaplacianWeights(const std::array<Vec3, 6>& offsets) {
+std::array<double, 6> AxisLaplacianWeights(const std::array<Vec3, 6>& offsets, double min_length) {
   std::array<double, 6> w;
   for (int j = 0; j < 6; ++j) {
-    const double l = offsets[j].norm(), lo = offsets[j ^ 1].norm();
+    const double l = std::max(offsets[j].norm(), min_length), lo = std::max(offsets[j ^ 1].norm(), min_length);
     w[j] = 2 / (l * (l + lo));
   }
   return w;

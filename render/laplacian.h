@@ -20,8 +20,10 @@ namespace translume {
 bool LaplacianWeights(const std::array<Vec3, 6>& offsets, std::array<double, 6>* weights,
                       bool local_frame = true);
 
-// The per-axis three-point weights 2 / (l_j (l_j + l_opposite)) on the neighbour distances:
-// the fallback for nodes whose 6x6 system is singular or gives a non-positive weight.
-std::array<double, 6> AxisLaplacianWeights(const std::array<Vec3, 6>& offsets);
+// The per-axis three-point weights 2 / (l_j (l_j + l_opposite)) on the neighbour distances
+// l_j = max(|offsets[j]|, min_length): the fallback for nodes whose 6x6 system is singular or
+// gives a non-positive weight. min_length > 0 keeps them finite where a neighbour coincides
+// with the node (a grid folded onto itself).
+std::array<double, 6> AxisLaplacianWeights(const std::array<Vec3, 6>& offsets, double min_length = 0);
 
 }  // namespace translume

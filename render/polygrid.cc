@@ -666,7 +666,9 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
     for (int j = 0; j < 6; ++j) off[j] = pg.position[pg.neighbours[i][j]] - pg.position[i];
     std::array<double, 6> w;
     if (!LaplacianWeights(off, &w)) {
-      w = AxisLaplacianWeights(off);
+      // A neighbour on the node itself (a folded grid: a polycube that does not fit the shape;
+      // the bunny under one cube at 9^3 had 12 infinite weights, and its solve went to zero).
+      w = AxisLaplacianWeights(off, 1e-3 * pg.mean_boundary_spacing);
       ++fallback;
     }
     for (int j = 0; j < 6; ++j) pg.weights[i][j] = float(w[j]);
@@ -788,6 +790,45 @@ std::vector<double> BoundaryNodeAreas(const Polygrid& pg, double total_mm2) {
   if (total_mm2 > 0 && sum > 0)
     for (double& A : area) A *= total_mm2 / sum;
   return area;
+}
+
+Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, std::string* report) {
+  const int mesh_genus = shape.mesh().Genus();
+  PolygridOptions po;
+  po.resolution = options.resolution;
+  report->clear();
+  Polycube best;
+  std::pair<bool, double> best_key = {false, 2.0};  // (genus matches, inverted fraction)
+  int best_n = 0;
+  for (int n = 1; n <= options.max_cells; ++n) {
+    std::string note;
+    Polycube pc;
+    try {
+      pc = VoxelPolycube(shape, n, &note);
+    } catch (const InputError&) {
+      *report += fmt::format("  N = {}: no cell inside\n", n);
+      continue;
+    }
+    const int genus = pc.Genus();
+    const Polygrid pg = BuildPolygrid(pc, shape, po);
+    const double inverted = double(pg.inverted_cells) / double(pg.num_interior);
+    *report += fmt::format("  N = {}: {} cubes, genus {}, {:.1f} % of the cells inverted at {}^3{}\n", n,
+                           pc.cubes.size(), genus, 100 * inverted, po.resolution, note.empty() ? "" : " (" + note + ")");
+    const bool genus_ok = genus == mesh_genus;
+    if (genus_ok && inverted <= options.max_inverted) {
+      *report += fmt::format("  chose N = {}\n", n);
+      return pc;
+    }
+    if (best_n == 0 || std::pair(genus_ok, -inverted) > std::pair(best_key.first, -best_key.second)) {
+      best = pc;
+      best_key = {genus_ok, inverted};
+      best_n = n;
+    }
+  }
+  if (best_n == 0) throw InputError(shape.name() + ": no voxel polycube up to N = " + std::to_string(options.max_cells));
+  *report += fmt::format("  none of genus {} with at most {:.1f} % inverted; chose N = {}\n", mesh_genus,
+                         100 * options.max_inverted, best_n);
+  return best;
 }
 
 std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Shape& shape,

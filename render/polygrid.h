@@ -139,6 +139,20 @@ std::vector<double> BoundaryNodeAreas(const Polygrid& pg, double total_mm2 = 0);
 Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
                        const PolygridOptions& options);
 
+// `--polycube auto`: the voxel polycubes of the shape (VoxelPolycube) for N = 1, 2, ...,
+// max_cells, each tried as a polygrid of `resolution` nodes per cube edge (default options
+// otherwise): the first whose genus is the mesh's and whose grid has at most max_inverted of
+// its interior cells inverted (Polygrid::inverted_cells); where none passes, the one of the
+// mesh's genus with the fewest inverted (else the fewest of all). Small N first: a smooth
+// shape is best served by few cubes (the sphere by one, the torus by a ring of 8). report: one
+// line per N tried and the choice.
+struct AutoPolycubeOptions {
+  int max_cells = 12;
+  int resolution = 5;
+  double max_inverted = 0.005;
+};
+Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, std::string* report);
+
 // Levels for the hierarchical scheme (Section 5.3), finest first: resolution n, (n-1)/2+1, ...
 // while (n-1) is even and the coarser resolution is >= 3, at most max_levels.
 std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Shape& shape,

@@ -471,6 +471,59 @@ TEST(Polygrid, WinslowPlacementStopsWhereItsSweepsStall) {
   EXPECT_LT(winslow.fallback_weights, 1.6 * smoothed.fallback_weights);
 }
 
+// A polycube that does not fit the shape folds the grid, here onto itself: under one cube the
+// bunny's 9^3 grid has nodes whose neighbour coincides with them (4 inverted cells). Their axis
+// weights were infinite (12) and the render's diffusion went to zero everywhere; a link counts
+// as at least 1e-3 boundary spacings now.
+TEST(Polygrid, FoldedGridKeepsFiniteWeights) {
+  Polycube one;
+  one.cubes.push_back({0, 0, 0});
+  PolygridOptions o;
+  o.resolution = 9;
+  const Polygrid pg = BuildPolygrid(one, *MakeBuiltinShape("bunny", 20), o);
+  EXPECT_GT(pg.inverted_cells, 0);
+  for (int64_t i = 0; i < pg.num_interior; ++i)
+    for (int j = 0; j < 6; ++j) ASSERT_TRUE(std::isfinite(pg.weights[i][j]) && pg.weights[i][j] > 0) << i << " " << j;
+}
+
+// --polycube auto:N: the cells inside the mesh. The rounded bunny at N = 11 (its box is 11 x 7
+// x 10 cubes of the bunny's polycube) gives back the 253 cubes it was rounded from.
+TEST(Polygrid, VoxelPolycubeOfTheRoundedBunnyIsItsPolycube) {
+  std::string note;
+  Polycube pc = VoxelPolycube(*RoundedBunny(), 11, &note);
+  EXPECT_TRUE(note.empty()) << note;
+  Polycube want = BuiltinPolycube("bunny");
+  std::sort(pc.cubes.begin(), pc.cubes.end());
+  std::sort(want.cubes.begin(), want.cubes.end());
+  EXPECT_EQ(pc.cubes, want.cubes);
+  // A torus has no cell inside at N = 1 (its centre is the hole): a clear error.
+  const auto torus = MakeMeshShape(MakeBuiltinShape("torus", 20, 24)->mesh(), "torus.obj", 20);
+  try {
+    VoxelPolycube(*torus, 1, &note);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("raise N in --polycube auto:N"), std::string::npos) << e.what();
+  }
+}
+
+// --polycube auto: the smallest N whose voxel polycube has the mesh's genus and does not fold:
+// one cube for a sphere mesh, the ring of 8 for a torus mesh (N = 2 gives 4 cubes without the
+// hole), and the bunny's 253 cubes for the rounded bunny (N = 1 to 10 fold 1.5-11 % of their
+// 5^3 cells).
+TEST(Polygrid, AutoPolycubeFollowsTheShape) {
+  std::string report;
+  const auto sphere = MakeMeshShape(MakeBuiltinShape("sphere", 20, 24)->mesh(), "sphere.obj", 20);
+  EXPECT_EQ(AutoPolycube(*sphere, AutoPolycubeOptions(), &report).cubes.size(), 1u) << report;
+  const auto torus = MakeMeshShape(MakeBuiltinShape("torus", 20, 24)->mesh(), "torus.obj", 20);
+  Polycube ring = AutoPolycube(*torus, AutoPolycubeOptions(), &report), want = BuiltinPolycube("torus");
+  std::sort(ring.cubes.begin(), ring.cubes.end());
+  std::sort(want.cubes.begin(), want.cubes.end());
+  EXPECT_EQ(ring.cubes, want.cubes) << report;
+  const Polycube bunny = AutoPolycube(*RoundedBunny(), AutoPolycubeOptions(), &report);
+  std::printf("[polygrid] --polycube auto on the rounded bunny:\n%s", report.c_str());
+  EXPECT_EQ(bunny.cubes.size(), 253u) << report;
+}
+
 // A homogeneous torus under uniform light is symmetric about its axis, so the boundary radiance
 // depends on the angle around the tube only. Within bins of that angle it varies around the axis
 // by sd 1.1 % of the bin's mean at 13^3 (2.2 % with the paper's variance steps, 3.4 % while the

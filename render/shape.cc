@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <fmt/format.h>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -569,6 +570,76 @@ std::string TriangleMesh::Validate() const {
              std::to_string(e.second);
   }
   return "";
+}
+
+Polycube VoxelPolycube(const Shape& shape, int cubes, std::string* note) {
+  if (cubes < 1 || cubes > 1024) throw InputError("polycube: auto:N needs 1 <= N <= 1024, got " + std::to_string(cubes));
+  const TriangleMesh& mesh = shape.mesh();
+  const Vec3 extent = shape.hi - shape.lo;
+  std::array<int, 3> n;
+  for (int a = 0; a < 3; ++a) n[a] = std::clamp(int(std::lround(cubes * extent[a] / extent.maxCoeff())), 1, 1024);
+  const int64_t cells = int64_t(n[0]) * n[1] * n[2];
+  std::vector<char> inside(cells, 0);
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int64_t c = 0; c < cells; ++c) {
+    const int x = int(c % n[0]), y = int(c / n[0] % n[1]), z = int(c / (int64_t(n[0]) * n[1]));
+    Vec3 p;
+    for (int a = 0; a < 3; ++a) p[a] = shape.lo[a] + extent[a] * ((a == 0 ? x : a == 1 ? y : z) + 0.5) / n[a];
+    double omega = 0;
+    for (const auto& t : mesh.triangles) {
+      const Vec3 a = mesh.vertices[t[0]] - p, b = mesh.vertices[t[1]] - p, d = mesh.vertices[t[2]] - p;
+      const double la = a.norm(), lb = b.norm(), ld = d.norm();
+      omega += 2 * std::atan2(a.dot(b.cross(d)), la * lb * ld + a.dot(b) * ld + a.dot(d) * lb + b.dot(d) * la);
+    }
+    inside[c] = std::abs(omega) > 2 * kPi;  // |winding number| > 1/2
+  }
+  // The face-connected pieces, the largest kept.
+  std::vector<int> piece(cells, -1);
+  std::vector<int64_t> size;
+  for (int64_t c0 = 0; c0 < cells; ++c0) {
+    if (!inside[c0] || piece[c0] >= 0) continue;
+    const int id = int(size.size());
+    size.push_back(0);
+    std::vector<int64_t> stack = {c0};
+    piece[c0] = id;
+    while (!stack.empty()) {
+      const int64_t c = stack.back();
+      stack.pop_back();
+      ++size[id];
+      const std::array<int64_t, 3> g = {c % n[0], c / n[0] % n[1], c / (int64_t(n[0]) * n[1])};
+      for (int dir = 0; dir < 6; ++dir) {
+        auto h = g;
+        h[dir / 2] += dir % 2 ? 1 : -1;
+        if (h[dir / 2] < 0 || h[dir / 2] >= n[dir / 2]) continue;
+        const int64_t k = h[0] + n[0] * (h[1] + int64_t(n[1]) * h[2]);
+        if (inside[k] && piece[k] < 0) {
+          piece[k] = id;
+          stack.push_back(k);
+        }
+      }
+    }
+  }
+  if (size.empty())
+    throw InputError(shape.name() + ": no cell of a " + std::to_string(n[0]) + " x " + std::to_string(n[1]) + " x " +
+                     std::to_string(n[2]) + " grid over its bounding box has its centre inside the mesh; raise N in "
+                     "--polycube auto:N");
+  const int keep = int(std::max_element(size.begin(), size.end()) - size.begin());
+  // From 0 on every axis (the polycube is stretched onto the shape's box from its own extent).
+  Polycube pc;
+  std::array<int, 3> first = n;
+  for (int64_t c = 0; c < cells; ++c)
+    if (piece[c] == keep) {
+      pc.cubes.push_back({int(c % n[0]), int(c / n[0] % n[1]), int(c / (int64_t(n[0]) * n[1]))});
+      for (int a = 0; a < 3; ++a) first[a] = std::min(first[a], pc.cubes.back()[a]);
+    }
+  for (auto& cube : pc.cubes)
+    for (int a = 0; a < 3; ++a) cube[a] -= first[a];
+  note->clear();
+  const int64_t dropped = std::count(inside.begin(), inside.end(), char(1)) - size[keep];
+  if (dropped > 0)
+    *note = fmt::format("{} of the {} cubes inside {} were apart from the largest face-connected piece and are "
+                        "left out", dropped, dropped + size[keep], shape.name());
+  return pc;
 }
 
 int TriangleMesh::Genus() const {

@@ -107,6 +107,15 @@ std::unique_ptr<Shape> MakePolycubeSolidShape(const Polycube& polycube, double s
 std::unique_ptr<Shape> MakeMeshShape(TriangleMesh mesh, const std::string& name,
                                      double size_mm);
 
+// A polycube for a mesh shape (`--polycube auto:N`): the shape's bounding box (lo, hi) cut into
+// cells, `cubes` along its longest axis and proportionally many (at least 1) along the others;
+// a cell is a cube where its centre lies inside the mesh (generalised winding number
+// sum_t Omega_t / 4 pi above 1/2, Omega_t the solid angle of triangle t, Van Oosterom and
+// Strackee 1983; O(cells x triangles)). Where the cubes fall apart, the face-connected piece
+// with the most cubes is kept and *note says how many were dropped (else it is emptied).
+// Throws InputError where no cell's centre is inside (a part thinner than a cell everywhere).
+Polycube VoxelPolycube(const Shape& shape, int cubes, std::string* note);
+
 // Calls visit(x, y, z) for every cell of a dims[0] x dims[1] x dims[2] grid at Chebyshev
 // distance exactly r from cell c (ring r: the cell itself for r = 0). Nearest-neighbour
 // searches visit rings of growing r until no unvisited cell can hold a nearer item.

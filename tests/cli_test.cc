@@ -346,19 +346,20 @@ TEST_F(Cli, SamplesReadmeCommandsRun) {
         args.replace(at, 8, samples);
       commands.push_back(args);
     }
-  ASSERT_EQ(commands.size(), 7u);
+  ASSERT_EQ(commands.size(), 8u);
   for (const std::string& args : commands) {
     const CommandRun r = testing_cli::Run("cd " + dir_.string() + " && " + TRANSLUME_BINARY + " " + args);
     ASSERT_EQ(r.status, 0) << args << "\n" << r.output;
   }
   // The mesh renders are lit (a projection that merged nodes once rendered meshes black).
-  for (const char* f : {"bar.png", "striped_bar.png"}) {
+  for (const char* f : {"bar.png", "striped_bar.png", "bar_auto.png"}) {
     const Image img = ReadImage(P(f));
     double sum = 0;
     for (float v : img.data) sum += v;
     EXPECT_GT(sum / img.data.size(), 0.05) << f;
   }
   EXPECT_EQ(ReadMaterial(P("acquired.vdb")).shape, (GridShape{32, 24, 8}));
+  EXPECT_TRUE(fs::exists(P("bar_auto.cubes")));
 }
 
 // Ctrl-C in acquire: before the solve it stops at the next stage (the finished ones stay in
@@ -425,10 +426,28 @@ TEST_F(Cli, RenderAndEdit) {
                 " --resolution 9 --image 16x16 -o " + P("one.png"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("interior cells are folded (inverted): the polycube " + P("one.cubes") +
-                          " does not follow the shape of bunny"), std::string::npos) << r.output;
+                          " may not follow the shape of bunny"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("mean 0,"), std::string::npos) << r.output;  // no zero (NaN) diffusion
   r = Translume("render homogeneous:0.2,0.02 --shape bunny --resolution 9 --levels 1 --image 16x16 -o " + P("own.png"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(r.output.find("folded"), std::string::npos) << r.output;
+  // --polycube auto on the torus: the ring of 8 cubes, saved with --save-polycube.
+  r = Translume("render homogeneous:0.2,0.02 --shape torus --polycube auto --save-polycube " + P("auto.cubes") +
+                " --resolution 5 --image 16x16 -o " + P("auto.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("chose N = 3"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("has genus"), std::string::npos) << r.output;
+  {
+    std::ifstream f(P("auto.cubes"));
+    std::string line;
+    int cubes = 0;
+    while (std::getline(f, line)) cubes += !line.empty() && line[0] != '#';
+    EXPECT_EQ(cubes, 8);
+  }
+  ExpectOneLineError(Translume("render homogeneous:0.2,0.02 --shape torus --polycube auto:x -o " + P("x.png")),
+                     "auto:");
+  ExpectOneLineError(Translume("render homogeneous:0.2,0.02 --shape torus --polycube auto:1 -o " + P("x.png")),
+                     "raise N");
   r = Translume("edit " + P("m.vdb") + " --scale kappa=2 --add mu=0.01 --depth 0:2 -o " + P("e.vdb"));
   ASSERT_EQ(r.status, 0) << r.output;
   const Material a = ReadMaterial(P("m.vdb")), b = ReadMaterial(P("e.vdb"));

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fmt/format.h>
+#include <fstream>
 #include <memory>
 #include <optional>
 
@@ -13,6 +14,8 @@
 #include "render/material_map.h"
 #include "render/polygrid.h"
 #include "render/renderer.h"
+#include "render/shape.h"
+#include "solver/atomic_file.h"
 #include "solver/image_io.h"
 #include "solver/material_io.h"
 #include "solver/status.h"
@@ -78,9 +81,9 @@ int RunRender(int argc, char** argv) {
                "2008, Section 5). MATERIAL: a .vdb file (mapped as a shell), procedural:marble,\n"
                "procedural:layers, or homogeneous:KAPPA,MU. Shapes: slab, sphere, torus, blob, bunny\n"
                "(253 cubes), or"
-               " a closed mesh (.obj, .ply) with an optional --polycube file.",
+               " a closed mesh (.obj, .ply) with an optional --polycube (a file, or auto).",
                "translume render"};
-  std::string material, shape_name = "sphere", polycube_path, light = "dir:1,0.3,0.6", out,
+  std::string material, shape_name = "sphere", polycube_path, save_polycube, light = "dir:1,0.3,0.6", out,
               camera, image = "256x256", iterations = "200,100,100", depth, backend = "cpu", placement = "winslow";
   double size_mm = 20, map_scale = 1, first_layer = 0.1;
   int resolution = 17, levels = 3, turntable = 1, variance_steps = PolygridOptions().variance_iterations;
@@ -89,7 +92,11 @@ int RunRender(int argc, char** argv) {
   RenderOptions ro;
   app.add_option("material", material, "Material")->required();
   app.add_option("--shape", shape_name, "slab|sphere|torus|blob|bunny|MESH.obj|MESH.ply")->capture_default_str();
-  app.add_option("--polycube", polycube_path, "Polycube file (docs/render.md); default: the shape's");
+  app.add_option("--polycube", polycube_path,
+                 "Polycube file (docs/render.md); auto:N: the cells of an N-cell grid along the shape's longest "
+                 "axis whose centres lie inside it; auto: the first N of 1..12 whose polycube has the mesh's genus "
+                 "and a grid that does not fold; default: the shape's (meshes: one cube)");
+  app.add_option("--save-polycube", save_polycube, "Write the polycube used (e.g. auto's) to this file");
   app.add_option("--size", size_mm, "Largest extent of the object, mm")->capture_default_str();
   app.add_option("--resolution", resolution, "Polygrid nodes per cube edge")->capture_default_str();
   app.add_option("--levels", levels, "Hierarchy levels (Section 5.3)")->capture_default_str();
@@ -141,17 +148,47 @@ int RunRender(int argc, char** argv) {
   RequireNotInput("-o", out, {material, L.kind == RenderLight::Kind::kEnvironment ? L.path : "",
                               mesh ? shape_name : "", polycube_path});
   RequireFilePath("-o", out);
+  if (!save_polycube.empty()) {
+    RequireNotInput("--save-polycube", save_polycube, {material, mesh ? shape_name : "", polycube_path, out});
+    RequireFilePath("--save-polycube", save_polycube);
+  }
   if (L.kind == RenderLight::Kind::kEnvironment) L.environment = std::make_shared<Image>(ReadImage(L.path));
 
-  std::unique_ptr<Shape> shape;
+  std::unique_ptr<Shape> shape = mesh ? MakeMeshShape(ReadMesh(shape_name), shape_name, size_mm)
+                                      : MakeBuiltinShape(shape_name, size_mm);
   Polycube pc;
-  const std::string polycube_label = !polycube_path.empty() ? polycube_path : mesh ? "(one cube)" : "(the shape's own)";
-  if (mesh) {
-    shape = MakeMeshShape(ReadMesh(shape_name), shape_name, size_mm);
-    pc = polycube_path.empty() ? BuiltinPolycube("box") : ReadPolycube(polycube_path);
+  std::string polycube_label = polycube_path;
+  if (polycube_path.empty()) {
+    pc = BuiltinPolycube(mesh ? "box" : shape_name);
+    polycube_label = mesh ? "(one cube)" : "(the shape's own)";
+  } else if (polycube_path == "auto") {
+    std::string report;
+    std::printf("render: choosing a polycube for %s (--polycube auto) ...\n", shape->name().c_str());
+    std::fflush(stdout);
+    pc = AutoPolycube(*shape, AutoPolycubeOptions(), &report);
+    std::printf("%s", report.c_str());
+    const std::array<int, 3> e = pc.Extent();
+    polycube_label = fmt::format("auto ({} cubes, {} x {} x {})", pc.cubes.size(), e[0], e[1], e[2]);
+  } else if (polycube_path.rfind("auto:", 0) == 0) {
+    const std::vector<int> n = ParseIntList(polycube_path.substr(5), "--polycube auto:");
+    if (n.size() != 1) throw InputError("--polycube " + polycube_path + ": expected auto:N");
+    std::string note;
+    pc = VoxelPolycube(*shape, n[0], &note);
+    const std::array<int, 3> e = pc.Extent();
+    polycube_label = fmt::format("{} ({} cubes, {} x {} x {})", polycube_path, pc.cubes.size(), e[0], e[1], e[2]);
+    std::printf("render: polycube %s from the cells inside %s\n", polycube_label.c_str(), shape->name().c_str());
+    if (!note.empty()) std::printf("render: note: %s\n", note.c_str());
   } else {
-    shape = MakeBuiltinShape(shape_name, size_mm);
-    pc = polycube_path.empty() ? BuiltinPolycube(shape_name) : ReadPolycube(polycube_path);
+    pc = ReadPolycube(polycube_path);
+  }
+  if (!save_polycube.empty()) {
+    WriteAtomically(save_polycube, [&](const std::string& tmp) {
+      std::ofstream f(tmp);
+      f << "# " << pc.cubes.size() << " cubes for " << shape->name() << " (translume render --polycube "
+        << (polycube_path.empty() ? "default" : polycube_path) << ")\n" << FormatPolycube(pc);
+      if (!f.flush()) throw InputError(save_polycube + ": cannot write");
+    });
+    std::printf("render: wrote the polycube to %s\n", save_polycube.c_str());
   }
   if (const int mesh_genus = shape->mesh().Genus(), pc_genus = pc.Genus(); pc_genus >= 0 && pc_genus != mesh_genus)
     std::printf("render: note: %s has genus %d but the polycube %s has genus %d: the polygrid's holes are not the "
@@ -192,8 +229,9 @@ int RunRender(int argc, char** argv) {
       std::printf("render: note: level %zu (%d^3): %s\n", l, grids[l].resolution, grids[l].placement_note.c_str());
   if (grids[0].inverted_cells > grids[0].num_interior / 200)
     std::printf("render: note: %lld of the polygrid's %lld interior cells are folded (inverted): the polycube %s "
-                "does not follow the shape of %s well; give one whose cubes follow its parts (--polycube, "
-                "docs/render.md \"Polycube files\")\n", (long long)grids[0].inverted_cells,
+                "may not follow the shape of %s well (give one whose cubes follow its parts: --polycube FILE or "
+                "auto, docs/render.md \"Polycube files\"), or the resolution is too coarse for its curvature "
+                "(raise --resolution)\n", (long long)grids[0].inverted_cells,
                 (long long)grids[0].num_interior, polycube_label.c_str(), shape->name().c_str());
   if (ro.model == "dipole") {
     bool homogeneous = true;
