@@ -303,9 +303,10 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   // Whether boundary nodes b1 and b2 of one interior node (at a convex edge or corner of the
   // polycube) lie on either side of a crease of the surface: their normals more than 30
   // degrees apart, and each turning less than half as much to its face neighbour one step
-  // further from the edge (unless that one sits on a concave edge). A rounded edge turns its normals gradually and is no crease, however
-  // far apart the nodes beside it are (the bunny's polycube under a rounded mesh: 35 degrees
-  // at 9^3 across edges rounded over ~1 mm; there the crease rules merged nodes of two faces).
+  // further from the edge (unless that one sits on a concave edge). A rounded edge turns its
+  // normals gradually and is no crease, however far apart the nodes beside it are (the bunny's
+  // polycube under a rounded mesh: mostly more than 30 degrees at 9^3, where the crease rules
+  // merged nodes of two faces).
   auto crease_between = [&](int32_t b1, int32_t b2) {
     auto normal_of = [&](int32_t b) -> const Vec3& { return pg.normal[b - pg.num_interior]; };
     const double across = std::acos(std::clamp(normal_of(b1).dot(normal_of(b2)), -1.0, 1.0));
@@ -798,19 +799,26 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, st
   po.resolution = options.resolution;
   report->clear();
   Polycube best;
-  std::pair<bool, double> best_key = {false, 2.0};  // (genus matches, inverted fraction)
+  bool best_genus_ok = false;
+  double best_inverted = 2;
   int best_n = 0;
   for (int n = 1; n <= options.max_cells; ++n) {
     std::string note;
     Polycube pc;
+    Polygrid pg;
     try {
       pc = VoxelPolycube(shape, n, &note);
     } catch (const InputError&) {
-      *report += fmt::format("  N = {}: no cell inside\n", n);
+      *report += fmt::format("  N = {}: no cell's centre inside\n", n);
+      continue;
+    }
+    try {
+      pg = BuildPolygrid(pc, shape, po);
+    } catch (const InputError& e) {
+      *report += fmt::format("  N = {}: {}\n", n, e.what());
       continue;
     }
     const int genus = pc.Genus();
-    const Polygrid pg = BuildPolygrid(pc, shape, po);
     const double inverted = double(pg.inverted_cells) / double(pg.num_interior);
     *report += fmt::format("  N = {}: {} cubes, genus {}, {:.1f} % of the cells inverted at {}^3{}\n", n,
                            pc.cubes.size(), genus, 100 * inverted, po.resolution, note.empty() ? "" : " (" + note + ")");
@@ -819,9 +827,10 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, st
       *report += fmt::format("  chose N = {}\n", n);
       return pc;
     }
-    if (best_n == 0 || std::pair(genus_ok, -inverted) > std::pair(best_key.first, -best_key.second)) {
+    if (best_n == 0 || (genus_ok && !best_genus_ok) || (genus_ok == best_genus_ok && inverted < best_inverted)) {
       best = pc;
-      best_key = {genus_ok, inverted};
+      best_genus_ok = genus_ok;
+      best_inverted = inverted;
       best_n = n;
     }
   }
@@ -829,6 +838,35 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, st
   *report += fmt::format("  none of genus {} with at most {:.1f} % inverted; chose N = {}\n", mesh_genus,
                          100 * options.max_inverted, best_n);
   return best;
+}
+
+Polycube ResolvePolycube(const std::string& spec, const Shape& shape, const std::string& builtin,
+                         std::string* label, std::string* log) {
+  log->clear();
+  *label = spec;
+  if (spec.empty()) {
+    *label = builtin.empty() ? "(one cube)" : "(the shape's own)";
+    return BuiltinPolycube(builtin.empty() ? "box" : builtin);
+  }
+  if (spec != "auto" && spec.rfind("auto:", 0) != 0) return ReadPolycube(spec);
+  Polycube pc;
+  if (spec == "auto") {
+    pc = AutoPolycube(shape, AutoPolycubeOptions(), log);
+  } else {
+    size_t used = 0;
+    int n = 0;
+    try {
+      n = std::stoi(spec.substr(5), &used);
+    } catch (const std::exception&) {
+    }
+    if (used == 0 || used != spec.size() - 5) throw InputError("--polycube " + spec + ": expected auto:N, N an integer");
+    std::string note;
+    pc = VoxelPolycube(shape, n, &note);
+    if (!note.empty()) *log = "note: " + note + "\n";
+  }
+  const std::array<int, 3> e = pc.Extent();
+  *label = fmt::format("{} ({} cubes, {} x {} x {})", spec, pc.cubes.size(), e[0], e[1], e[2]);
+  return pc;
 }
 
 std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Shape& shape,

@@ -153,6 +153,14 @@ struct AutoPolycubeOptions {
 };
 Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, std::string* report);
 
+// The polycube of `translume render --polycube SPEC` for `shape`: "" the built-in shape's own
+// (builtin: its name) or one cube for a mesh (builtin empty); "auto" AutoPolycube; "auto:N"
+// VoxelPolycube(N); else a polycube file (ReadPolycube). *label names it in messages ("FILE",
+// "auto (253 cubes, 11 x 7 x 10)", "(one cube)"); *log gets auto's tries or auto:N's note.
+// Throws InputError on a bad SPEC or file.
+Polycube ResolvePolycube(const std::string& spec, const Shape& shape, const std::string& builtin,
+                         std::string* label, std::string* log);
+
 // Levels for the hierarchical scheme (Section 5.3), finest first: resolution n, (n-1)/2+1, ...
 // while (n-1) is even and the coarser resolution is >= 3, at most max_levels.
 std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Shape& shape,

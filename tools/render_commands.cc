@@ -156,31 +156,15 @@ int RunRender(int argc, char** argv) {
 
   std::unique_ptr<Shape> shape = mesh ? MakeMeshShape(ReadMesh(shape_name), shape_name, size_mm)
                                       : MakeBuiltinShape(shape_name, size_mm);
-  Polycube pc;
-  std::string polycube_label = polycube_path;
-  if (polycube_path.empty()) {
-    pc = BuiltinPolycube(mesh ? "box" : shape_name);
-    polycube_label = mesh ? "(one cube)" : "(the shape's own)";
-  } else if (polycube_path == "auto") {
-    std::string report;
+  if (polycube_path == "auto") {
     std::printf("render: choosing a polycube for %s (--polycube auto) ...\n", shape->name().c_str());
     std::fflush(stdout);
-    pc = AutoPolycube(*shape, AutoPolycubeOptions(), &report);
-    std::printf("%s", report.c_str());
-    const std::array<int, 3> e = pc.Extent();
-    polycube_label = fmt::format("auto ({} cubes, {} x {} x {})", pc.cubes.size(), e[0], e[1], e[2]);
-  } else if (polycube_path.rfind("auto:", 0) == 0) {
-    const std::vector<int> n = ParseIntList(polycube_path.substr(5), "--polycube auto:");
-    if (n.size() != 1) throw InputError("--polycube " + polycube_path + ": expected auto:N");
-    std::string note;
-    pc = VoxelPolycube(*shape, n[0], &note);
-    const std::array<int, 3> e = pc.Extent();
-    polycube_label = fmt::format("{} ({} cubes, {} x {} x {})", polycube_path, pc.cubes.size(), e[0], e[1], e[2]);
-    std::printf("render: polycube %s from the cells inside %s\n", polycube_label.c_str(), shape->name().c_str());
-    if (!note.empty()) std::printf("render: note: %s\n", note.c_str());
-  } else {
-    pc = ReadPolycube(polycube_path);
   }
+  std::string polycube_label, polycube_log;
+  const Polycube pc = ResolvePolycube(polycube_path, *shape, mesh ? "" : shape_name, &polycube_label, &polycube_log);
+  if (polycube_path.rfind("auto", 0) == 0)
+    std::printf("%srender: polycube %s from the cells inside %s\n", polycube_log.c_str(), polycube_label.c_str(),
+                shape->name().c_str());
   if (!save_polycube.empty()) {
     WriteAtomically(save_polycube, [&](const std::string& tmp) {
       std::ofstream f(tmp);
