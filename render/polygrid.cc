@@ -844,13 +844,13 @@ Polycube ResolvePolycube(const std::string& spec, const Shape& shape, const std:
                          std::string* label, std::string* log) {
   log->clear();
   *label = spec;
-  if (spec.empty()) {
-    *label = builtin.empty() ? "(one cube)" : "(the shape's own)";
-    return BuiltinPolycube(builtin.empty() ? "box" : builtin);
+  if (spec.empty() && !builtin.empty()) {
+    *label = "(the shape's own)";
+    return BuiltinPolycube(builtin);
   }
-  if (spec != "auto" && spec.rfind("auto:", 0) != 0) return ReadPolycube(spec);
+  if (!spec.empty() && spec != "auto" && spec.rfind("auto:", 0) != 0) return ReadPolycube(spec);
   Polycube pc;
-  if (spec == "auto") {
+  if (spec.empty() || spec == "auto") {
     pc = AutoPolycube(shape, AutoPolycubeOptions(), log);
   } else {
     size_t used = 0;
@@ -865,7 +865,7 @@ Polycube ResolvePolycube(const std::string& spec, const Shape& shape, const std:
     if (!note.empty()) *log = "note: " + note + "\n";
   }
   const std::array<int, 3> e = pc.Extent();
-  *label = fmt::format("{} ({} cubes, {} x {} x {})", spec, pc.cubes.size(), e[0], e[1], e[2]);
+  *label = fmt::format("{} ({} cubes, {} x {} x {})", spec.empty() ? "auto" : spec, pc.cubes.size(), e[0], e[1], e[2]);
   return pc;
 }
 

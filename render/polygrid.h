@@ -154,9 +154,10 @@ struct AutoPolycubeOptions {
 Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, std::string* report);
 
 // The polycube of `translume render --polycube SPEC` for `shape`: "" the built-in shape's own
-// (builtin: its name) or one cube for a mesh (builtin empty); "auto" AutoPolycube; "auto:N"
-// VoxelPolycube(N); else a polycube file (ReadPolycube). *label names it in messages ("FILE",
-// "auto (253 cubes, 11 x 7 x 10)", "(one cube)"); *log gets auto's tries or auto:N's note.
+// (builtin: its name), or for a mesh (builtin empty) as "auto"; "auto" AutoPolycube; "auto:N"
+// VoxelPolycube(N) (auto:1 is one cube); else a polycube file (ReadPolycube). *label names it
+// in messages ("FILE", "auto (253 cubes, 11 x 7 x 10)", "(the shape's own)"); *log gets
+// auto's tries or auto:N's note.
 // Throws InputError on a bad SPEC or file.
 Polycube ResolvePolycube(const std::string& spec, const Shape& shape, const std::string& builtin,
                          std::string* label, std::string* log);

@@ -444,6 +444,11 @@ TEST_F(Cli, RenderAndEdit) {
     while (std::getline(f, line)) cubes += !line.empty() && line[0] != '#';
     EXPECT_EQ(cubes, 8);
   }
+  // A mesh without --polycube: auto's choice (the sample bar: 2 cubes).
+  r = Translume("render homogeneous:0.2,0.02 --shape " + std::string(TRANSLUME_SOURCE_DIR) +
+                "/samples/bar.obj --resolution 5 --image 16x16 -o " + P("bar.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("polycube auto (2 cubes, 2 x 1 x 1)"), std::string::npos) << r.output;
   ExpectOneLineError(Translume("render homogeneous:0.2,0.02 --shape torus --polycube auto:x -o " + P("x.png")),
                      "auto:");
   ExpectOneLineError(Translume("render homogeneous:0.2,0.02 --shape torus --polycube auto:1 -o " + P("x.png")),

@@ -95,7 +95,7 @@ int RunRender(int argc, char** argv) {
   app.add_option("--polycube", polycube_path,
                  "Polycube file (docs/render.md); auto:N: the cells of an N-cell grid along the shape's longest "
                  "axis whose centres lie inside it; auto: the first N of 1..12 whose polycube has the mesh's genus "
-                 "and a grid that does not fold; default: the shape's (meshes: one cube)");
+                 "and a grid that does not fold; default: the shape's own (meshes: auto)");
   app.add_option("--save-polycube", save_polycube, "Write the polycube used (e.g. auto's) to this file");
   app.add_option("--size", size_mm, "Largest extent of the object, mm")->capture_default_str();
   app.add_option("--resolution", resolution, "Polygrid nodes per cube edge")->capture_default_str();
@@ -156,13 +156,14 @@ int RunRender(int argc, char** argv) {
 
   std::unique_ptr<Shape> shape = mesh ? MakeMeshShape(ReadMesh(shape_name), shape_name, size_mm)
                                       : MakeBuiltinShape(shape_name, size_mm);
-  if (polycube_path == "auto") {
+  const bool auto_polycube = polycube_path.rfind("auto", 0) == 0 || (mesh && polycube_path.empty());
+  if (polycube_path == "auto" || (mesh && polycube_path.empty())) {
     std::printf("render: choosing a polycube for %s (--polycube auto) ...\n", shape->name().c_str());
     std::fflush(stdout);
   }
   std::string polycube_label, polycube_log;
   const Polycube pc = ResolvePolycube(polycube_path, *shape, mesh ? "" : shape_name, &polycube_label, &polycube_log);
-  if (polycube_path.rfind("auto", 0) == 0)
+  if (auto_polycube)
     std::printf("%srender: polycube %s from the cells inside %s\n", polycube_log.c_str(), polycube_label.c_str(),
                 shape->name().c_str());
   if (!save_polycube.empty()) {
