@@ -820,8 +820,8 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, st
     }
     const int genus = pc.Genus();
     const double inverted = double(pg.inverted_cells) / double(pg.num_interior);
-    *report += fmt::format("  N = {}: {} cubes, genus {}, {:.1f} % of the cells inverted at {}^3{}\n", n,
-                           pc.cubes.size(), genus, 100 * inverted, po.resolution, note.empty() ? "" : " (" + note + ")");
+    *report += fmt::format("  N = {}: {} cube{}, genus {}, {:.1f} % of the cells inverted at {}^3{}\n", n,
+                           pc.cubes.size(), pc.cubes.size() == 1 ? "" : "s", genus, 100 * inverted, po.resolution, note.empty() ? "" : " (" + note + ")");
     const bool genus_ok = genus == mesh_genus;
     if (genus_ok && inverted <= options.max_inverted) {
       *report += fmt::format("  chose N = {}\n", n);
@@ -865,7 +865,8 @@ Polycube ResolvePolycube(const std::string& spec, const Shape& shape, const std:
     if (!note.empty()) *log = "note: " + note + "\n";
   }
   const std::array<int, 3> e = pc.Extent();
-  *label = fmt::format("{} ({} cubes, {} x {} x {})", spec.empty() ? "auto" : spec, pc.cubes.size(), e[0], e[1], e[2]);
+  *label = fmt::format("{} ({} cube{}, {} x {} x {})", spec.empty() ? "auto" : spec, pc.cubes.size(),
+                       pc.cubes.size() == 1 ? "" : "s", e[0], e[1], e[2]);
   return pc;
 }
 
