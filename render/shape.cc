@@ -579,20 +579,49 @@ Polycube VoxelPolycube(const Shape& shape, int cubes, std::string* note) {
   std::array<int, 3> n;
   for (int a = 0; a < 3; ++a) n[a] = std::clamp(int(std::lround(cubes * extent[a] / extent.maxCoeff())), 1, 1024);
   const int64_t cells = int64_t(n[0]) * n[1] * n[2];
-  std::vector<char> inside(cells, 0);
-#pragma omp parallel for schedule(dynamic, 1)
-  for (int64_t c = 0; c < cells; ++c) {
-    const int x = int(c % n[0]), y = int(c / n[0] % n[1]), z = int(c / (int64_t(n[0]) * n[1]));
-    Vec3 p;
-    for (int a = 0; a < 3; ++a) p[a] = shape.lo[a] + extent[a] * ((a == 0 ? x : a == 1 ? y : z) + 0.5) / n[a];
-    double omega = 0;
-    for (const auto& t : mesh.triangles) {
-      const Vec3 a = mesh.vertices[t[0]] - p, b = mesh.vertices[t[1]] - p, d = mesh.vertices[t[2]] - p;
-      const double la = a.norm(), lb = b.norm(), ld = d.norm();
-      omega += 2 * std::atan2(a.dot(b.cross(d)), la * lb * ld + a.dot(b) * ld + a.dot(d) * lb + b.dot(d) * la);
-    }
-    inside[c] = std::abs(omega) > 2 * kPi;  // |winding number| > 1/2
+  // The winding number of each cell's centre: the signed crossings of the mesh by the ray from
+  // it along +x (a triangle counts +1 or -1 by the side it faces). A row of cells along x shares
+  // its ray's line, so each triangle is met once per row whose line passes through it: O(cells
+  // + triangles + crossings). The lines are moved off the cell centres by 1e-5 cells in y and z
+  // (irrational fractions), so that they miss the vertices and edges of meshes built on the same
+  // grid (a polycube solid's).
+  const Vec3 h = extent.cwiseQuotient(Vec3(n[0], n[1], n[2]));
+  const double off_y = 0.6180339887e-5 * h.y(), off_z = 0.4142135624e-5 * h.z();
+  std::vector<std::vector<std::pair<double, int>>> crossings(int64_t(n[1]) * n[2]);  // (x, +-1) per row
+  for (const auto& t : mesh.triangles) {
+    const Vec3 &A = mesh.vertices[t[0]], &B = mesh.vertices[t[1]], &C = mesh.vertices[t[2]];
+    const double den = (B.y() - A.y()) * (C.z() - A.z()) - (C.y() - A.y()) * (B.z() - A.z());
+    if (den == 0) continue;  // parallel to x
+    auto rows = [&](int a, double off, int* first, int* last) {
+      const double lo = std::min({A[a], B[a], C[a]}), hi = std::max({A[a], B[a], C[a]});
+      *first = std::max(0, int(std::ceil((lo - shape.lo[a] - off) / h[a] - 0.5)));
+      *last = std::min(n[a] - 1, int(std::floor((hi - shape.lo[a] - off) / h[a] - 0.5)));
+    };
+    int j0, j1, k0, k1;
+    rows(1, off_y, &j0, &j1);
+    rows(2, off_z, &k0, &k1);
+    for (int k = k0; k <= k1; ++k)
+      for (int j = j0; j <= j1; ++j) {
+        const double y = shape.lo.y() + (j + 0.5) * h.y() + off_y, z = shape.lo.z() + (k + 0.5) * h.z() + off_z;
+        const double u = ((y - A.y()) * (C.z() - A.z()) - (C.y() - A.y()) * (z - A.z())) / den;
+        const double v = ((B.y() - A.y()) * (z - A.z()) - (y - A.y()) * (B.z() - A.z())) / den;
+        if (u < 0 || v < 0 || u + v > 1) continue;
+        crossings[j + int64_t(n[1]) * k].emplace_back(A.x() + u * (B.x() - A.x()) + v * (C.x() - A.x()), den > 0 ? 1 : -1);
+      }
   }
+  std::vector<char> inside(cells, 0);
+  for (int k = 0; k < n[2]; ++k)
+    for (int j = 0; j < n[1]; ++j) {
+      auto& row = crossings[j + int64_t(n[1]) * k];
+      std::sort(row.begin(), row.end());
+      int winding = 0;  // of the crossings beyond the cell's centre
+      size_t next = row.size();
+      for (int i = n[0] - 1; i >= 0; --i) {
+        const double x = shape.lo.x() + (i + 0.5) * h.x();
+        while (next > 0 && row[next - 1].first > x) winding += row[--next].second;
+        inside[i + n[0] * (j + int64_t(n[1]) * k)] = winding != 0;
+      }
+    }
   // The face-connected pieces, the largest kept.
   std::vector<int> piece(cells, -1);
   std::vector<int64_t> size;

@@ -109,10 +109,10 @@ std::unique_ptr<Shape> MakeMeshShape(TriangleMesh mesh, const std::string& name,
 
 // A polycube for a mesh shape (`--polycube auto:N`): the shape's bounding box (lo, hi) cut into
 // cells, `cubes` along its longest axis and proportionally many (at least 1) along the others;
-// a cell is a cube where its centre lies inside the mesh (generalised winding number
-// sum_t Omega_t / 4 pi above 1/2, Omega_t the solid angle of triangle t, Van Oosterom and
-// Strackee 1983; O(cells x triangles)). Where the cubes fall apart, the face-connected piece
-// with the most cubes is kept and *note says how many were dropped (else it is emptied).
+// a cell is a cube where its centre lies inside the mesh (its winding number, from the signed
+// crossings of a ray along +x, is not 0; O(cells + triangles + crossings)). Where the cubes
+// fall apart, the face-connected piece with the most cubes is kept and *note says how many
+// were dropped (else it is emptied).
 // Throws InputError where no cell's centre is inside (a part thinner than a cell everywhere).
 Polycube VoxelPolycube(const Shape& shape, int cubes, std::string* note);
 
