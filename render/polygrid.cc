@@ -534,10 +534,22 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       const int32_t f = pg.neighbours[i][pg.link_dir[b - pg.num_interior] ^ 1];
       if (f >= pg.num_interior || !free_node[f]) continue;
       // Onto b's tangent plane first, so the projection stays on b's side of the surface.
-      Vec3& n = pg.normal[b - pg.num_interior];
+      const Vec3& n = pg.normal[b - pg.num_interior];
       const Vec3 on_plane = pg.position[f] + n.dot(pg.position[b] - pg.position[f]) * n;
-      shape.ProjectAlong(on_plane, pg.position[f], &pg.position[b], &n);
-      pg.position[i] = pg.position[b] - d * n;
+      Vec3 moved, moved_normal;
+      shape.ProjectAlong(on_plane, pg.position[f], &moved, &moved_normal);
+      // Not past half-way to a neighbour of its face: where a crease side runs onto a rounded
+      // part (the sample bar's ends at 9^3), the grid lines converge and following them put
+      // nodes out of order (44 of 1127 cells folded).
+      bool in_order = true;
+      for (int32_t k : face_nbrs[b - pg.num_interior]) {
+        const Vec3 to_k = pg.position[k] - pg.position[b];
+        in_order &= (moved - pg.position[b]).dot(to_k) <= 0.5 * to_k.squaredNorm();
+      }
+      if (!in_order) continue;
+      pg.position[b] = moved;
+      pg.normal[b - pg.num_interior] = moved_normal;
+      pg.position[i] = moved - d * moved_normal;
     }
   };
   // Only the last smoothing (before the variance steps) runs to 1e-6 spacings. The ones before
@@ -820,10 +832,15 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, st
     }
     const int genus = pc.Genus();
     const double inverted = double(pg.inverted_cells) / double(pg.num_interior);
-    *report += fmt::format("  N = {}: {} cube{}, genus {}, {:.1f} % of the cells inverted at {}^3{}\n", n,
-                           pc.cubes.size(), pc.cubes.size() == 1 ? "" : "s", genus, 100 * inverted, po.resolution, note.empty() ? "" : " (" + note + ")");
+    // The cubes' shape once stretched onto the shape's box (the polycube from its own extent).
+    const std::array<int, 3> e = pc.Extent();
+    const Vec3 cube = (shape.hi - shape.lo).cwiseQuotient(Vec3(e[0], e[1], e[2]));
+    const double aspect = cube.maxCoeff() / cube.minCoeff();
+    *report += fmt::format("  N = {}: {} cube{}, genus {}, {:.1f} % of the cells inverted at {}^3, cubes stretched "
+                           "{:.1f}:1{}\n", n, pc.cubes.size(), pc.cubes.size() == 1 ? "" : "s", genus, 100 * inverted,
+                           po.resolution, aspect, note.empty() ? "" : " (" + note + ")");
     const bool genus_ok = genus == mesh_genus;
-    if (genus_ok && inverted <= options.max_inverted) {
+    if (genus_ok && inverted <= options.max_inverted && aspect <= options.max_aspect) {
       *report += fmt::format("  chose N = {}\n", n);
       return pc;
     }

@@ -141,15 +141,17 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
 
 // `--polycube auto`: the voxel polycubes of the shape (VoxelPolycube) for N = 1, 2, ...,
 // max_cells, each tried as a polygrid of `resolution` nodes per cube edge (default options
-// otherwise): the first whose genus is the mesh's and whose grid has at most max_inverted of
-// its interior cells inverted (Polygrid::inverted_cells); where none passes, the one of the
-// mesh's genus with the fewest inverted (else the fewest of all). Small N first: a smooth
-// shape is best served by few cubes (the sphere by one, the torus by a ring of 8). report: one
-// line per N tried and the choice.
+// otherwise): the first whose genus is the mesh's, whose grid has at most max_inverted of its
+// interior cells inverted (Polygrid::inverted_cells) and whose cubes, stretched onto the
+// shape's box, are at most max_aspect times longer than wide (one cube for a 3:1:1 bar is
+// not); where none passes, the one of the mesh's genus with the fewest inverted (else the
+// fewest of all). Small N first: a smooth shape is best served by few cubes (the sphere by
+// one, the torus by a ring of 8). report: one line per N tried and the choice.
 struct AutoPolycubeOptions {
   int max_cells = 12;
   int resolution = 5;
   double max_inverted = 0.005;
+  double max_aspect = 2;
 };
 Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, std::string* report);
 

@@ -380,8 +380,9 @@ TriangleMesh TaubinSmoothed(TriangleMesh mesh, int iterations) {
 
 // The bunny's polycube under a rounded mesh of its solid (Taubin-smoothed: a user's mesh with
 // its polycube).
-std::unique_ptr<Shape> RoundedBunny() {
-  const auto blocky = MakePolycubeSolidShape(BuiltinPolycube("bunny"), 20, 4, "bunny");
+// tessellation: quads per cube face side before the rounding.
+std::unique_ptr<Shape> RoundedBunny(int tessellation = 4) {
+  const auto blocky = MakePolycubeSolidShape(BuiltinPolycube("bunny"), 20, tessellation, "bunny");
   return MakeMeshShape(TaubinSmoothed(blocky->mesh(), 30), "rounded_bunny.obj", 20);
 }
 
@@ -447,23 +448,24 @@ TEST(Polygrid, RoundedEdgesAreNoCreases) {
   EXPECT_EQ(merged, 0);
 }
 
-// Winslow's sweeps need not converge (its equations are nonlinear). On the rounded bunny they
-// stall at 7^3, and on its 13^3 grid before the fixes above, run on to their cap of 2000, they
-// diverged: 401654 of 460553 nodes on fallback weights in a 53 s build, where the Laplacian
-// smoothing they start from had 21252. Stopped where their steps stall, the grid keeps to the
-// smoothed one's quality.
+// Winslow's sweeps need not converge (its equations are nonlinear). On the rounded bunny's 13^3
+// grid, before the fixes above, run on to their cap of 2000, they diverged: 401654 of 460553
+// nodes on fallback weights in a 53 s build, where the Laplacian smoothing they start from had
+// 21252. With those fixes they converge on it (tried: 5^3 to 10^3, 13^3, 17^3); they still
+// stall on a low-poly rounded bunny (one quad per cube face before the rounding) at 9^3. Stopped where their steps
+// stall, the grid keeps to the smoothed one's quality.
 TEST(Polygrid, WinslowPlacementStopsWhereItsSweepsStall) {
   const Polycube pc = BuiltinPolycube("bunny");
-  const auto rounded = RoundedBunny();
+  const auto rounded = RoundedBunny(1);
   PolygridOptions o;
-  o.resolution = 7;
+  o.resolution = 9;
   o.placement = InteriorPlacement::kVariance;
   o.variance_iterations = 0;  // the Laplacian smoothing alone
   const Polygrid smoothed = BuildPolygrid(pc, *rounded, o);
   o.placement = InteriorPlacement::kWinslow;
   const Polygrid winslow = BuildPolygrid(pc, *rounded, o);
   ExpectWellFormed(winslow);
-  std::printf("[polygrid] rounded bunny, 7^3: %lld of %lld nodes on fallback weights after smoothing, %lld "
+  std::printf("[polygrid] low-poly rounded bunny, 9^3: %lld of %lld nodes on fallback weights after smoothing, %lld "
               "with winslow placement (%s)\n", (long long)smoothed.fallback_weights, (long long)smoothed.num_interior,
               (long long)winslow.fallback_weights, winslow.placement_note.c_str());
   EXPECT_NE(winslow.placement_note.find("stalled"), std::string::npos) << winslow.placement_note;
@@ -484,6 +486,23 @@ TEST(Polygrid, FoldedGridKeepsFiniteWeights) {
   EXPECT_GT(pg.inverted_cells, 0);
   for (int64_t i = 0; i < pg.num_interior; ++i)
     for (int j = 0; j < 6; ++j) ASSERT_TRUE(std::isfinite(pg.weights[i][j]) && pg.weights[i][j] > 0) << i << " " << j;
+}
+
+// The sample bar (samples/bar.obj, a superellipsoid, with its 3 cubes) at 9^3: its sides count
+// as crease sides there, and the alignment passes took the bottom's nodes near the rounded
+// ends along grid lines that converge onto the end caps, past their neighbours (44 of 1127
+// cells folded; 8 of 99 at 5^3). An alignment move now stops short of half-way to a face
+// neighbour: none folded.
+TEST(Polygrid, AlignmentKeepsTheSampleBarUnfolded) {
+  const std::string samples = std::string(TRANSLUME_SOURCE_DIR) + "/samples/";
+  const auto bar = MakeMeshShape(ReadMesh(samples + "bar.obj"), "bar.obj", 20);
+  for (int resolution : {5, 9}) {
+    PolygridOptions o;
+    o.resolution = resolution;
+    const Polygrid pg = BuildPolygrid(ReadPolycube(samples + "bar.cubes"), *bar, o);
+    ExpectWellFormed(pg);
+    EXPECT_EQ(pg.inverted_cells, 0) << resolution;
+  }
 }
 
 // --polycube auto:N: the cells inside the mesh. The rounded bunny at N = 11 (its box is 11 x 7
