@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <map>
 #include <set>
 #include <sstream>
 #include <tuple>
@@ -33,23 +34,40 @@ std::string Polycube::Validate() const {
       return "duplicate cube " + std::to_string(c[0]) + " " + std::to_string(c[1]) + " " +
              std::to_string(c[2]);
   }
-  // Face-connectivity by flood fill.
-  std::set<std::array<int, 3>> reached = {cubes[0]};
-  std::vector<std::array<int, 3>> stack = {cubes[0]};
-  while (!stack.empty()) {
-    const auto c = stack.back();
-    stack.pop_back();
-    for (int a = 0; a < 3; ++a)
-      for (int s : {-1, 1}) {
-        auto n = c;
-        n[a] += s;
-        if (seen.count(n) && reached.insert(n).second) stack.push_back(n);
-      }
-  }
-  if (reached.size() != seen.size())
-    return "the cubes are not face-connected (" + std::to_string(seen.size() - reached.size()) +
+  const size_t first_piece = Pieces()[0].cubes.size();
+  if (first_piece != cubes.size())
+    return "the cubes are not face-connected (" + std::to_string(cubes.size() - first_piece) +
            " cube(s) not reachable from the first)";
   return "";
+}
+
+std::vector<Polycube> Polycube::Pieces() const {
+  std::map<std::array<int, 3>, int> piece;  // cube -> piece, -1 before the flood fill reaches it
+  for (const auto& c : cubes) piece.emplace(c, -1);
+  int count = 0;
+  for (const auto& c0 : cubes) {
+    if (piece[c0] >= 0) continue;
+    piece[c0] = count;
+    std::vector<std::array<int, 3>> stack = {c0};
+    while (!stack.empty()) {
+      const auto c = stack.back();
+      stack.pop_back();
+      for (int a = 0; a < 3; ++a)
+        for (int s : {-1, 1}) {
+          auto n = c;
+          n[a] += s;
+          const auto it = piece.find(n);
+          if (it != piece.end() && it->second < 0) {
+            it->second = count;
+            stack.push_back(n);
+          }
+        }
+    }
+    ++count;
+  }
+  std::vector<Polycube> out(static_cast<size_t>(count));
+  for (const auto& c : cubes) out[size_t(piece[c])].cubes.push_back(c);
+  return out;
 }
 
 int Polycube::Genus() const {

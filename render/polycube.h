@@ -24,6 +24,8 @@ struct Polycube {
   // V - E + F = 2 - 2 genus over the exposed unit faces; -1 where the surface is not a
   // 2-manifold (cubes that meet along an edge or at a corner only).
   int Genus() const;
+  // The face-connected pieces, the one holding cubes[0] first; each keeps the cubes' order.
+  std::vector<Polycube> Pieces() const;
 };
 
 // Parses the text format; throws InputError naming `what` (a file name) and the line.

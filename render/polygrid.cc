@@ -199,6 +199,9 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   // the edge, the same for every copy, so the copies stay together; none on the rims of faces
   // at convex edges and at concave corners, which stay where they were projected. (Along
   // concave edges that a rounded mesh fills in, nodes landed out of order near the edge's ends.)
+  // Split (concave) boundary nodes: their lattice point has 2 (edge) or 3 (corner) copies.
+  std::vector<char> split(N, 0);
+  for (int64_t b = pg.num_interior; b < N; ++b) split[b] = surface_count[Key(pg.lattice[b], 0)] > 1;
   std::vector<std::vector<int32_t>> relax_nbrs(N - pg.num_interior);
   for (int64_t b = pg.num_interior; b < N; ++b) {
     const auto& nb = face_nbrs[b - pg.num_interior];
@@ -207,7 +210,7 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       out = nb;
     } else if (surface_count[Key(pg.lattice[b], 0)] == 2) {
       for (int32_t k : nb)
-        if (surface_count[Key(pg.lattice[k], 0)] > 1) out.push_back(k);
+        if (split[k]) out.push_back(k);
       int gap = 0;
       if (out.size() == 2)
         for (int a = 0; a < 3; ++a) gap += std::abs(pg.lattice[out[0]][a] - pg.lattice[out[1]][a]);
@@ -316,7 +319,7 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
       const auto step = LatticeStep(pg.link_dir[other - pg.num_interior]);
       for (int a = 0; a < 3; ++a) g[a] -= step[a];
       const auto it = boundary_at.find(Key(g, pg.link_dir[b - pg.num_interior]));
-      if (it != boundary_at.end() && surface_count[Key(g, 0)] == 1 &&  // not a concave edge's
+      if (it != boundary_at.end() && !split[it->second] &&  // not a concave edge's
           std::acos(std::clamp(normal_of(b).dot(normal_of(it->second)), -1.0, 1.0)) > 0.5 * across)
         return false;
     }
@@ -354,8 +357,6 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   std::vector<char> free_node(pg.num_interior, 1);
   std::vector<std::vector<int32_t>> blinks(pg.num_interior);
   for (int64_t b = pg.num_interior; b < N; ++b) blinks[pg.neighbours[b][0]].push_back(int32_t(b));
-  std::vector<char> split(N, 0);
-  for (int64_t b = pg.num_interior; b < N; ++b) split[b] = surface_count[Key(pg.lattice[b], 0)] > 1;
   for (int64_t i = 0; i < pg.num_interior; ++i) {
     if (blinks[i].empty()) continue;
     free_node[i] = 0;

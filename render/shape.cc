@@ -578,7 +578,6 @@ Polycube VoxelPolycube(const Shape& shape, int cubes, std::string* note) {
   const Vec3 extent = shape.hi - shape.lo;
   std::array<int, 3> n;
   for (int a = 0; a < 3; ++a) n[a] = std::clamp(int(std::lround(cubes * extent[a] / extent.maxCoeff())), 1, 1024);
-  const int64_t cells = int64_t(n[0]) * n[1] * n[2];
   // The winding number of each cell's centre: the signed crossings of the mesh by the ray from
   // it along +x (a triangle counts +1 or -1 by the side it faces). A row of cells along x shares
   // its ray's line, so each triangle is met once per row whose line passes through it: O(cells
@@ -609,65 +608,40 @@ Polycube VoxelPolycube(const Shape& shape, int cubes, std::string* note) {
         crossings[j + int64_t(n[1]) * k].emplace_back(A.x() + u * (B.x() - A.x()) + v * (C.x() - A.x()), den > 0 ? 1 : -1);
       }
   }
-  std::vector<char> inside(cells, 0);
+  Polycube all;  // the cells inside, in cell order
   for (int k = 0; k < n[2]; ++k)
     for (int j = 0; j < n[1]; ++j) {
       auto& row = crossings[j + int64_t(n[1]) * k];
       std::sort(row.begin(), row.end());
+      std::vector<char> inside(size_t(n[0]), 0);
       int winding = 0;  // of the crossings beyond the cell's centre
       size_t next = row.size();
       for (int i = n[0] - 1; i >= 0; --i) {
         const double x = shape.lo.x() + (i + 0.5) * h.x();
         while (next > 0 && row[next - 1].first > x) winding += row[--next].second;
-        inside[i + n[0] * (j + int64_t(n[1]) * k)] = winding != 0;
+        inside[size_t(i)] = winding != 0;
       }
+      for (int i = 0; i < n[0]; ++i)
+        if (inside[size_t(i)]) all.cubes.push_back({i, j, k});
     }
-  // The face-connected pieces, the largest kept.
-  std::vector<int> piece(cells, -1);
-  std::vector<int64_t> size;
-  for (int64_t c0 = 0; c0 < cells; ++c0) {
-    if (!inside[c0] || piece[c0] >= 0) continue;
-    const int id = int(size.size());
-    size.push_back(0);
-    std::vector<int64_t> stack = {c0};
-    piece[c0] = id;
-    while (!stack.empty()) {
-      const int64_t c = stack.back();
-      stack.pop_back();
-      ++size[id];
-      const std::array<int64_t, 3> g = {c % n[0], c / n[0] % n[1], c / (int64_t(n[0]) * n[1])};
-      for (int dir = 0; dir < 6; ++dir) {
-        auto h = g;
-        h[dir / 2] += dir % 2 ? 1 : -1;
-        if (h[dir / 2] < 0 || h[dir / 2] >= n[dir / 2]) continue;
-        const int64_t k = h[0] + n[0] * (h[1] + int64_t(n[1]) * h[2]);
-        if (inside[k] && piece[k] < 0) {
-          piece[k] = id;
-          stack.push_back(k);
-        }
-      }
-    }
-  }
-  if (size.empty())
+  if (all.cubes.empty())
     throw InputError(shape.name() + ": no cell of a " + std::to_string(n[0]) + " x " + std::to_string(n[1]) + " x " +
                      std::to_string(n[2]) + " grid over its bounding box has its centre inside the mesh; raise N in "
                      "--polycube auto:N");
-  const int keep = int(std::max_element(size.begin(), size.end()) - size.begin());
-  // From 0 on every axis (the polycube is stretched onto the shape's box from its own extent).
-  Polycube pc;
+  // The largest face-connected piece, from 0 on every axis (the polycube is stretched onto the
+  // shape's box from its own extent).
+  const std::vector<Polycube> pieces = all.Pieces();
+  Polycube pc = *std::max_element(pieces.begin(), pieces.end(),
+                                  [](const Polycube& a, const Polycube& b) { return a.cubes.size() < b.cubes.size(); });
   std::array<int, 3> first = n;
-  for (int64_t c = 0; c < cells; ++c)
-    if (piece[c] == keep) {
-      pc.cubes.push_back({int(c % n[0]), int(c / n[0] % n[1]), int(c / (int64_t(n[0]) * n[1]))});
-      for (int a = 0; a < 3; ++a) first[a] = std::min(first[a], pc.cubes.back()[a]);
-    }
+  for (const auto& cube : pc.cubes)
+    for (int a = 0; a < 3; ++a) first[a] = std::min(first[a], cube[a]);
   for (auto& cube : pc.cubes)
     for (int a = 0; a < 3; ++a) cube[a] -= first[a];
   note->clear();
-  const int64_t dropped = std::count(inside.begin(), inside.end(), char(1)) - size[keep];
-  if (dropped > 0)
+  if (const size_t dropped = all.cubes.size() - pc.cubes.size(); dropped > 0)
     *note = fmt::format("{} of the {} cubes inside {} were apart from the largest face-connected piece and are "
-                        "left out", dropped, dropped + size[keep], shape.name());
+                        "left out", dropped, all.cubes.size(), shape.name());
   return pc;
 }
 
