@@ -241,7 +241,7 @@ class GlRenderPasses : public RenderPasses {
   void UploadSamples(const std::vector<LightSample>& samples, const PassView* camera) {
     std::vector<float> f((samples.size() + (camera ? 1 : 0)) * kSampleFloats, 0.f);
     auto put_view = [](float* out, const PassView& v) {
-      PutVec(out, v.eye, 0);
+      PutVec(out, v.eye, v.near);
       PutVec(out + 4, v.right, 0);
       PutVec(out + 8, v.up, 0);
       PutVec(out + 12, v.forward, 0);

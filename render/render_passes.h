@@ -25,6 +25,9 @@ struct PassView {
   bool ortho = false;
   double scale = 1;  // perspective: 1 / tan(fov / 2); ortho: 1 / half-width (mm)
   int width = 0, height = 0;
+  // The near plane (mm): rasters draw the parts of triangles deeper than this (a triangle that
+  // crosses it is clipped, not dropped). LookAt sets 10^-6 of the distance to the target.
+  double near = 0;
 
   static PassView LookAt(const Vec3& eye, const Vec3& target, int w, int h, bool ortho, double scale);
   // Screen position of p: x, y in pixels (pixel (i, j) covers [i, i+1] x [j, j+1], y down) and
@@ -32,6 +35,43 @@ struct PassView {
   //   x = w/2 (1 + X k / aspect), y = h/2 (1 - Y k), k = scale (ortho) or scale / Z,
   // with (X, Y, Z) = p - eye in camera axes and aspect = w / h.
   Vec3 Project(const Vec3& p) const;
+  // The same in homogeneous form, (x w, y w, w, Z) with w = 1 (ortho) or Z (perspective):
+  //   (w/2 (w + X scale / aspect), h/2 (w - Y scale), w, Z),
+  // affine (ortho) or linear (perspective) in p, and defined behind the eye too, so that a
+  // raster can find the point of a triangle under a pixel exactly (RasterTriangle).
+  Eigen::Vector4d Homogeneous(const Vec3& p) const;
+};
+
+// A triangle set up for a raster: its homogeneous vertices h[0..2] (PassView::Homogeneous).
+class RasterTriangle {
+ public:
+  explicit RasterTriangle(const std::array<Eigen::Vector4d, 3>& h);
+  // The point of the triangle on the line of sight through screen position (px, py): its
+  // barycentrics l (sum 1) and depth l . (h[0][3], h[1][3], h[2][3]). With H_i = (X_i, Y_i, w_i),
+  // e_0 = det(H_1, H_2, (px, py, 1)) (and cyclically) = (H_1 x H_2) . (px, py, 1), so by
+  // Cramer's rule l = e / (e_0 + e_1 + e_2): perspective-correct, and the same for a triangle
+  // partly behind the eye. True where the line meets the triangle (every l >= 0) deeper than
+  // `near`. raster.comp's hit() and covered() are the same in float, with e_0 evaluated as
+  // a_1 b_2 - a_2 b_1, a_i = X_i - w_i px, b_i = Y_i - w_i py (the expanded planes lose its
+  // digits in float).
+  bool Hit(double px, double py, double near, Vec3* l, double* depth) const {
+    const Vec3 e = planes_ * Vec3(px, py, 1);
+    if (!(e.minCoeff() >= 0 || e.maxCoeff() <= 0)) return false;
+    const double sum = e.sum();
+    if (sum == 0) return false;
+    *l = e / sum;
+    *depth = l->dot(depth_);
+    return *depth > near;
+  }
+  // The pixel bounds (x0, y0, x1, y1, inclusive, clipped to a width x height raster) of the part
+  // of the triangle deeper than `near` (clipped by the near plane, projected); false where none
+  // of it is, or the bounds lie off the raster.
+  bool Bounds(double near, int width, int height, std::array<int, 4>* box) const;
+
+ private:
+  std::array<Eigen::Vector4d, 3> h_;
+  Eigen::Matrix3d planes_;  // row i: H_j x H_k, (i, j, k) cyclic
+  Vec3 depth_;
 };
 
 // One light sample of pass 1: a directional light (v: unit direction towards the light) or a

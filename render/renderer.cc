@@ -23,21 +23,9 @@ double Seconds(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// Z-buffer rasterisation: per pixel the nearest triangle and its screen-space barycentrics.
-// Depth (along the view's forward axis) is interpolated linearly in screen space, as in
-// raster.comp. Exact for orthographic views; for perspective ones (point lights' maps, the
-// camera) 1/z is what is affine in screen space, so the linear value is the weighted mean of
-// the vertex depths against the true weighted harmonic mean: never nearer than the surface
-// (so no self-shadowing from it), and at most (sqrt(z_max) - sqrt(z_min))^2 deeper for a
-// triangle whose vertex depths span [z_min, z_max]. Kept because that is far below the shadow
-// bias (0.03 bounding radii): the shading mesh's triangles are no longer than the boundary
-// spacing, and measured over every covered texel the excess was at most 0.004 mm for the
-// torus and sphere under point:30,.. (bias 0.3 mm), 0.03 mm for cube maps 1-2 mm from the
-// torus and bunny, 0.06 mm with a light 1 mm above the slab (bias 0.44 mm), 0.005 mm in the
-// camera's raster. It can only let light past an occluder closer than that in front of a
-// surface facing the light, which the bias allows anyway. A mesh left with large triangles
-// (ShadingMesh's vertex budget) under a near point light could exceed the bias; then
-// interpolate 1/z (z = 1 / sum_i w_i / z_i) here and in raster.comp.
+// Z-buffer rasterisation: per pixel (sample at its centre) the nearest triangle, the
+// barycentrics of the point under the pixel (perspective-correct) and its depth
+// (RasterTriangle). raster.comp is the same in float.
 struct Raster {
   int width = 0, height = 0;
   std::vector<float> depth;
@@ -51,31 +39,23 @@ struct Raster {
     tri.assign(depth.size(), -1);
     b1.assign(depth.size(), 0.f);
     b2.assign(depth.size(), 0.f);
-    std::vector<Vec3> s(mesh.vertices.size());
-    for (size_t i = 0; i < s.size(); ++i) s[i] = view.Project(mesh.vertices[i]);
+    std::vector<Eigen::Vector4d> s(mesh.vertices.size());
+    for (size_t i = 0; i < s.size(); ++i) s[i] = view.Homogeneous(mesh.vertices[i]);
     for (size_t t = 0; t < mesh.triangles.size(); ++t) {
-      const Vec3 &a = s[mesh.triangles[t][0]], &b = s[mesh.triangles[t][1]], &c = s[mesh.triangles[t][2]];
-      if (a.z() <= 0 || b.z() <= 0 || c.z() <= 0) continue;
-      const double area = (b.x() - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (b.y() - a.y());
-      if (std::abs(area) < 1e-12) continue;
-      const int x0 = std::max(0, int(std::floor(std::min({a.x(), b.x(), c.x()}))));
-      const int x1 = std::min(width - 1, int(std::ceil(std::max({a.x(), b.x(), c.x()}))));
-      const int y0 = std::max(0, int(std::floor(std::min({a.y(), b.y(), c.y()}))));
-      const int y1 = std::min(height - 1, int(std::ceil(std::max({a.y(), b.y(), c.y()}))));
-      for (int y = y0; y <= y1; ++y)
-        for (int x = x0; x <= x1; ++x) {
-          const double px = x + 0.5, py = y + 0.5;
-          const double w1 = ((px - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (py - a.y())) / area;
-          const double w2 = ((b.x() - a.x()) * (py - a.y()) - (px - a.x()) * (b.y() - a.y())) / area;
-          const double w0 = 1 - w1 - w2;
-          if (w0 < 0 || w1 < 0 || w2 < 0) continue;
-          const double z = w0 * a.z() + w1 * b.z() + w2 * c.z();
+      const RasterTriangle tr({s[mesh.triangles[t][0]], s[mesh.triangles[t][1]], s[mesh.triangles[t][2]]});
+      std::array<int, 4> box;
+      if (!tr.Bounds(view.near, width, height, &box)) continue;
+      for (int y = box[1]; y <= box[3]; ++y)
+        for (int x = box[0]; x <= box[2]; ++x) {
+          Vec3 l;
+          double z;
+          if (!tr.Hit(x + 0.5, y + 0.5, view.near, &l, &z)) continue;
           const size_t i = size_t(y) * width + x;
           if (z < depth[i]) {
             depth[i] = float(z);
             tri[i] = int32_t(t);
-            b1[i] = float(w1);
-            b2[i] = float(w2);
+            b1[i] = float(l[1]);
+            b2[i] = float(l[2]);
           }
         }
     }
@@ -101,7 +81,48 @@ PassView PassView::LookAt(const Vec3& eye, const Vec3& target, int w, int h, boo
   v.scale = scale;
   v.width = w;
   v.height = h;
+  v.near = 1e-6 * (target - eye).norm();
   return v;
+}
+
+Eigen::Vector4d PassView::Homogeneous(const Vec3& p) const {
+  const Vec3 d = p - eye;
+  const double x = d.dot(right), y = d.dot(up), z = d.dot(forward);
+  const double w = ortho ? 1 : z, aspect = double(width) / height;
+  return {0.5 * width * (w + x * scale / aspect), 0.5 * height * (w - y * scale), w, z};
+}
+
+RasterTriangle::RasterTriangle(const std::array<Eigen::Vector4d, 3>& h) : h_(h) {
+  for (int i = 0; i < 3; ++i) {
+    const Vec3 a = h[(i + 1) % 3].head<3>(), b = h[(i + 2) % 3].head<3>();
+    planes_.row(i) = a.cross(b).transpose();
+    depth_[i] = h[i][3];
+  }
+}
+
+bool RasterTriangle::Bounds(double near, int width, int height, std::array<int, 4>* box) const {
+  const auto& h = h_;
+  double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
+  const auto add = [&](const Eigen::Vector4d& p) {
+    for (int k = 0; k < 2; ++k) {
+      lo[k] = std::min(lo[k], p[k] / p[2]);
+      hi[k] = std::max(hi[k], p[k] / p[2]);
+    }
+  };
+  for (int i = 0; i < 3; ++i) {
+    const Eigen::Vector4d& p = h[i];
+    const Eigen::Vector4d& q = h[(i + 1) % 3];
+    const double dp = p[3] - near, dq = q[3] - near;
+    if (dp >= 0) add(p);
+    if ((dp < 0) != (dq < 0)) add(p + dp / (dp - dq) * (q - p));  // on the near plane (w > 0)
+  }
+  if (!(lo[0] <= hi[0] && lo[1] <= hi[1])) return false;
+  // Clamped before the conversion: the clipped part of a triangle next to the eye projects far
+  // off the raster.
+  const auto pixel = [](double v, int n) { return int(std::clamp(v, -1.0, double(n))); };
+  *box = {std::max(0, pixel(std::floor(lo[0]), width)), std::max(0, pixel(std::floor(lo[1]), height)),
+          std::min(width - 1, pixel(std::ceil(hi[0]), width)), std::min(height - 1, pixel(std::ceil(hi[1]), height))};
+  return (*box)[0] <= (*box)[2] && (*box)[1] <= (*box)[3];
 }
 
 Vec3 PassView::Project(const Vec3& p) const {

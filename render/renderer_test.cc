@@ -12,6 +12,7 @@
 #include <string>
 
 #include "render/material_map.h"
+#include "render/render_passes.h"
 #include "render/test_metrics.h"
 #include "solver/image_io.h"
 #include "solver/status.h"
@@ -692,6 +693,123 @@ TEST(Render, PointLightNearTheObjectCastsShadowsEverywhere) {
                 "unoccluded\n", Name(backend), behind, seen);
     EXPECT_GT(behind, 20);
     EXPECT_GT(seen, 20);
+  }
+}
+
+// RenderPasses on their own (either backend): `mesh` is what the rasters draw (shadow maps,
+// camera), the boundary nodes of a 4 mm box's polygrid centred at `box_centre` are what
+// Incident lights, and every mesh vertex carries radiance 1 to Shade (L_ms = 1, no surface
+// terms), so a pixel is F_t(cos_o) where the camera sees the mesh and 0 elsewhere.
+struct PassesOnly {
+  std::unique_ptr<Shape> box = MakeBoxShape(Vec3(4, 4, 4), 2);
+  std::vector<Polygrid> levels;
+  TriangleMesh mesh;
+  PassScene scene;
+  std::unique_ptr<RenderPasses> passes;
+
+  PassesOnly(DiffusionBackend backend, TriangleMesh m, const Vec3& box_centre) : mesh(std::move(m)) {
+    PolygridOptions po;
+    po.resolution = 5;
+    levels = BuildPolygridHierarchy(BuiltinPolycube("box"), *box, po, 1);
+    for (Vec3& x : levels[0].position) x += box_centre;
+    scene.mesh = &mesh;
+    scene.levels = &levels;
+    scene.vertex_normals.assign(mesh.vertices.size(), Vec3::UnitZ());
+    scene.near_idx.assign(mesh.vertices.size(), {0, 0, 0, 0});
+    scene.near_w.assign(mesh.vertices.size(), {1, 0, 0, 0});
+    scene.centre = box_centre;
+    scene.radius = 4;
+    scene.shadow_bias = 0.01;
+    scene.options.specular = 0;
+    scene.options.surface_reflectance = 0;
+    scene.options.supersample = 1;
+    passes = RenderPasses::Create(backend, &scene);
+  }
+};
+
+// A square of two triangles in the plane z = z0, |x|, |y| <= 50 mm, normal +z.
+TriangleMesh Floor(double z0) {
+  TriangleMesh m;
+  m.vertices = {Vec3(-50, -50, z0), Vec3(50, -50, z0), Vec3(50, 50, z0), Vec3(-50, 50, z0)};
+  m.triangles = {{0, 1, 2}, {0, 2, 3}};
+  return m;
+}
+
+// The camera 1 mm above a 100 mm floor of two triangles, looking along it (+x, a 90-degree
+// vertical field of view): both triangles reach behind the eye. Every pixel whose line of sight
+// meets the floor (inside, 1 mm from its edges) shows F_t(cos_o) at that point, cos_o = 1 / its
+// distance from the eye; every other pixel (sky, or past the floor's far edge) is 0. Catches
+// triangles that cross the eye plane dropped (no near-plane clipping: the image was all 0) and
+// points interpolated linearly in screen space (the floor spans depths from the eye to 50 mm).
+TEST(Render, CameraRasterIsPerspectiveCorrectAndClipsAtTheEyePlane) {
+  for (DiffusionBackend backend : {DiffusionBackend::kCpu, DiffusionBackend::kGl}) {
+    SCOPED_TRACE(Name(backend));
+    PassesOnly s(backend, Floor(0), Vec3(0, 0, -10));
+    LightSample dark;  // Shade needs Incident's maps; this light adds nothing (E = 0)
+    dark.view = PassView::LookAt(Vec3(0, 0, 20), Vec3(0, 0, -10), 16, 16, true, 0.25);
+    s.passes->Incident({dark});
+    BoundaryLight radiance;
+    for (int c = 0; c < 3; ++c) radiance[c].assign(s.levels[0].num_boundary(), 1.f);
+    const Vec3 eye(0, 0, 1);
+    const PassView cam = PassView::LookAt(eye, Vec3(10, 0, 1), 64, 48, false, 1.0);
+    const Image img = s.passes->Shade(cam, radiance, {dark});
+    ASSERT_EQ(img.width, 64);
+    int floor = 0, empty = 0;
+    double worst = 0;
+    for (int y = 0; y < 48; ++y)
+      for (int x = 0; x < 64; ++x) {
+        const double X = ((x + 0.5) / 32 - 1) * 64.0 / 48, Y = 1 - (y + 0.5) / 24;
+        const Vec3 d = cam.forward + X * cam.right + Y * cam.up;
+        const Vec3 p = eye + (d.z() < 0 ? -1 / d.z() : 1e9) * d;
+        const float v = img.data[(size_t(y) * 64 + x) * 3];
+        if (d.z() < 0 && std::abs(p.x()) < 49 && std::abs(p.y()) < 49) {
+          const double want = FresnelTransmittance(1 / (eye - p).norm(), 1.3);
+          worst = std::max(worst, std::abs(v - want));
+          ++floor;
+        } else if (d.z() >= 0 || std::abs(p.x()) > 51 || std::abs(p.y()) > 51) {
+          EXPECT_EQ(v, 0.f) << "pixel " << x << ", " << y;
+          ++empty;
+        }
+      }
+    std::printf("[render] %s, camera over a floor of two triangles: %d floor pixels, F_t off by at "
+                "most %.1e; %d empty\n", Name(backend), floor, worst, empty);
+    EXPECT_GT(floor, 64 * 20);
+    EXPECT_GT(empty, 64 * 20);
+    EXPECT_LT(worst, 1e-4);
+  }
+}
+
+// A point light 1 mm above a 100 mm square of two triangles (z = 0), its one map looking past
+// the square's edge at a 4 mm box (top face z = -1, 10 mm away): the square's triangles cross
+// the map's eye plane. It shadows the box's top face (q = 0). Moved to z = -20, below the box,
+// it is drawn as deeper than the box and the top is lit, q = f cos F_t(cos). Before near-plane
+// clipping the square was not drawn at all: the top lit through it.
+TEST(Render, ShadowMapsClipTrianglesAtTheEyePlane) {
+  const Vec3 v(0, 0, 1), centre(10, 0, -3);
+  LightSample smp;
+  smp.point = true;
+  smp.v = v;
+  smp.E = {1, 1, 1};
+  smp.view = PassView::LookAt(v, v + Vec3(1, 0, -0.3), 128, 128, false, 1.0);
+  for (DiffusionBackend backend : {DiffusionBackend::kCpu, DiffusionBackend::kGl}) {
+    SCOPED_TRACE(Name(backend));
+    for (double z0 : {0.0, -20.0}) {
+      PassesOnly s(backend, Floor(z0), centre);
+      const std::vector<BoundaryLight> q = s.passes->Incident({smp});
+      const Polygrid& pg = s.levels[0];
+      int top = 0;
+      for (int64_t b = 0; b < pg.num_boundary(); ++b) {
+        const Vec3& p = pg.position[pg.num_interior + b];
+        if (pg.normal[b].z() < 0.9) continue;
+        const double c = pg.normal[b].dot((v - p).normalized());
+        ASSERT_GT(c, 0.1);
+        const double want = z0 == 0 ? 0.0 : (v - centre).squaredNorm() / (v - p).squaredNorm() * c *
+                                                 FresnelTransmittance(c, 1.3);
+        EXPECT_NEAR(q[0][0][b], want, 1e-5 * (1 + want)) << "square at z = " << z0 << ", node at " << p.transpose();
+        ++top;
+      }
+      EXPECT_GE(top, 9);
+    }
   }
 }
 

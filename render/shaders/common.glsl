@@ -3,7 +3,7 @@
 // "#version 430" and before the shader's own text. The formulas are those of
 // render/render_passes.h (PassView::Project, FresnelTransmittance, RenderPasses::Incident).
 
-// A view: p = (ortho ? 1 : 0, scale, width, height); see PassView.
+// A view: eye.w its near plane, p = (ortho ? 1 : 0, scale, width, height); see PassView.
 struct View { vec4 eye; vec4 right; vec4 up; vec4 forward; vec4 p; };
 // A light sample: v.xyz the direction towards a directional light or a point light's position
 // (mm), v.w 0 for a directional light, 1 for a point light with one map, 2 + f for face f of a
@@ -32,6 +32,28 @@ vec3 project(View vw, vec3 p) {
   float k = vw.p.x != 0.0 ? vw.p.y : vw.p.y / max(z, 1e-9);
   return vec3(0.5 * vw.p.z * (1.0 + x * k / aspect), 0.5 * vw.p.w * (1.0 - y * k), z);
 }
+
+// PassView::Homogeneous: (x w, y w, w, depth) with w = 1 (ortho) or the depth (perspective).
+vec4 homogeneous(View vw, vec3 p) {
+  vec3 d = p - vw.eye.xyz;
+  float x = dot(d, vw.right.xyz), y = dot(d, vw.up.xyz), z = dot(d, vw.forward.xyz);
+  float w = vw.p.x != 0.0 ? 1.0 : z;
+  float aspect = vw.p.z / vw.p.w;
+  return vec4(0.5 * vw.p.z * (w + x * vw.p.y / aspect), 0.5 * vw.p.w * (w - y * vw.p.y), w, z);
+}
+
+// RasterTriangle::Hit (render_passes.h): the barycentrics (xyz) and depth (w) of the point of the
+// triangle with homogeneous vertices a, b, c on the line of sight through screen position q;
+// covered(): the line meets the triangle deeper than the view's near plane.
+vec4 hit(vec4 a, vec4 b, vec4 c, vec2 q) {
+  vec2 da = a.xy - a.z * q, db = b.xy - b.z * q, dc = c.xy - c.z * q;
+  vec3 e = vec3(db.x * dc.y - dc.x * db.y, dc.x * da.y - da.x * dc.y, da.x * db.y - db.x * da.y);
+  float sum = e.x + e.y + e.z;
+  if (sum == 0.0) return vec4(-1.0);
+  vec3 l = e / sum;
+  return vec4(l, l.x * a.w + l.y * b.w + l.z * c.w);
+}
+bool covered(vec4 h, float near) { return min(h.x, min(h.y, h.z)) >= 0.0 && h.w > near; }
 
 // 1 - F_r for unpolarised light entering a dielectric of relative index eta at cosine cos_i.
 float fresnel_t(float cos_i, float eta) {

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: MIT
 // Z-buffer rasterisation of a triangle mesh, one invocation per triangle (after common.glsl).
-// A pixel (x, y) is covered when its centre (x + 0.5, y + 0.5) has barycentrics >= 0; its
-// depth is interpolated linearly in screen space (not perspective-correct; why that is kept:
-// the comment on Raster in render/renderer.cc). mode 0: depth[base + pixel] = min over the
+// A pixel (x, y) is covered when the line of sight through its centre (x + 0.5, y + 0.5) meets
+// the triangle deeper than the view's near plane (hit() and covered() in common.glsl, exact for
+// perspective views and for triangles partly behind the eye; RasterTriangle in
+// render/render_passes.h is the cpu's). mode 0: depth[base + pixel] = min over the
 // covering triangles (atomicMin on the float bits); mode 1 (after mode 0): ids[pixel] = the
 // lowest index among the triangles at that depth (the cpu raster keeps the first one drawn).
 // Both are order-independent, so a triangle may be drawn in parts and a pass may be repeated.
@@ -28,34 +29,47 @@ layout(location = 4) uniform int tile;        // pixels per tile side; 0: no til
 layout(location = 5) uniform int pass;        // 0: one invocation per triangle; 1: per tile
 layout(location = 6) uniform int capacity;    // length of tiles[]
 
-// Triangle t in view vw: its screen vertices (x, y pixels, depth), twice its signed area and its
-// pixel bounds (x0, y0, x1, y1, inclusive, clipped to the raster); false where it is not drawn
-// (a vertex behind the eye plane, or no area).
-bool setup(int t, View vw, out vec3 a, out vec3 b, out vec3 c, out float area, out ivec4 box) {
-  a = project(vw, verts[tris[3 * t]].p.xyz);
-  b = project(vw, verts[tris[3 * t + 1]].p.xyz);
-  c = project(vw, verts[tris[3 * t + 2]].p.xyz);
-  area = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
+// Triangle t in view vw: its homogeneous vertices (homogeneous() in common.glsl) and the pixel
+// bounds (x0, y0, x1, y1, inclusive, clipped to the raster) of its part deeper than the near
+// plane (RasterTriangle::Bounds); false where none of it is drawn.
+bool setup(int t, View vw, out vec4 a, out vec4 b, out vec4 c, out ivec4 box) {
+  a = homogeneous(vw, verts[tris[3 * t]].p.xyz);
+  b = homogeneous(vw, verts[tris[3 * t + 1]].p.xyz);
+  c = homogeneous(vw, verts[tris[3 * t + 2]].p.xyz);
   box = ivec4(0);
-  if (a.z <= 0.0 || b.z <= 0.0 || c.z <= 0.0 || abs(area) < 1e-12) return false;
-  int W = int(vw.p.z), H = int(vw.p.w);
-  box = ivec4(max(0, int(floor(min(a.x, min(b.x, c.x))))), max(0, int(floor(min(a.y, min(b.y, c.y))))),
-              min(W - 1, int(ceil(max(a.x, max(b.x, c.x))))), min(H - 1, int(ceil(max(a.y, max(b.y, c.y))))));
-  return true;
+  float near = vw.eye.w;
+  vec2 lo = vec2(3.0e38), hi = vec2(-3.0e38);
+  vec4 h[3] = vec4[3](a, b, c);
+  for (int i = 0; i < 3; ++i) {
+    vec4 p = h[i], q = h[(i + 1) % 3];
+    float dp = p.w - near, dq = q.w - near;
+    if (dp >= 0.0) {
+      lo = min(lo, p.xy / p.z);
+      hi = max(hi, p.xy / p.z);
+    }
+    if ((dp < 0.0) != (dq < 0.0)) {  // the crossing of the near plane (w > 0)
+      vec4 x = p + dp / (dp - dq) * (q - p);
+      lo = min(lo, x.xy / x.z);
+      hi = max(hi, x.xy / x.z);
+    }
+  }
+  if (!(lo.x <= hi.x && lo.y <= hi.y)) return false;
+  vec2 size = vw.p.zw;  // clamped before the conversion: a part next to the eye projects far off
+  ivec2 l = max(ivec2(0), ivec2(floor(clamp(lo, vec2(-1.0), size))));
+  ivec2 u = min(ivec2(size) - 1, ivec2(ceil(clamp(hi, vec2(-1.0), size))));
+  box = ivec4(l, u);
+  return l.x <= u.x && l.y <= u.y;
 }
 
 // Draws triangle t over the pixels of r (inclusive bounds) of a raster W pixels wide at texel
 // base: one loop of (r.z - r.x + 1)(r.w - r.y + 1) iterations (a single loop, so that an 8-lane
 // chunk counts its largest rectangle, not a product of its lanes' widths and heights).
-void draw(int t, vec3 a, vec3 b, vec3 c, float area, ivec4 r, int W, int rbase) {
+void draw(int t, vec4 a, vec4 b, vec4 c, float near, ivec4 r, int W, int rbase) {
   int x = r.x, y = r.y;
   for (int n = max(0, r.z - r.x + 1) * max(0, r.w - r.y + 1); n > 0; --n) {
-    float px = float(x) + 0.5, py = float(y) + 0.5;
-    float w1 = ((px - a.x) * (c.y - a.y) - (c.x - a.x) * (py - a.y)) / area;
-    float w2 = ((b.x - a.x) * (py - a.y) - (px - a.x) * (b.y - a.y)) / area;
-    float w0 = 1.0 - w1 - w2;
-    if (w0 >= 0.0 && w1 >= 0.0 && w2 >= 0.0) {
-      uint z = floatBitsToUint(w0 * a.z + w1 * b.z + w2 * c.z);
+    vec4 h = hit(a, b, c, vec2(float(x) + 0.5, float(y) + 0.5));
+    if (covered(h, near)) {
+      uint z = floatBitsToUint(h.w);
       int i = y * W + x;
       if (mode == 0)
         atomicMin(depth[rbase + i], z);
@@ -74,16 +88,15 @@ void main() {
   if (i >= count) return;
   ivec4 item = pass == 0 ? ivec4(i, 0, view_index, base) : tiles[i];
   View vw = samples[item.z].view;
-  vec3 a, b, c;
-  float area;
+  vec4 a, b, c;
   ivec4 box;
-  if (!setup(item.x, vw, a, b, c, area, box)) return;
+  if (!setup(item.x, vw, a, b, c, box)) return;
   int W = int(vw.p.z);
   ivec2 size = max(box.zw - box.xy + 1, 0);  // 0 where it lies off the raster
   if (pass == 1) {
     int cols = (size.x + tile - 1) / tile;
     ivec2 o = box.xy + tile * ivec2(item.y % cols, item.y / cols);
-    draw(item.x, a, b, c, area, ivec4(o, min(box.zw, o + tile - 1)), W, item.w);
+    draw(item.x, a, b, c, vw.eye.w, ivec4(o, min(box.zw, o + tile - 1)), W, item.w);
   } else if (tile > 0 && float(size.x) * float(size.y) > float(tile * tile)) {
     if (mode != 0) return;  // listed by mode 0
     int n = ((size.x + tile - 1) / tile) * ((size.y + tile - 1) / tile);
@@ -91,6 +104,6 @@ void main() {
     for (int k = 0; k < n; ++k)
       if (first + uint(k) < uint(capacity)) tiles[first + uint(k)] = ivec4(item.x, k, view_index, base);
   } else {
-    draw(item.x, a, b, c, area, box, W, base);
+    draw(item.x, a, b, c, vw.eye.w, box, W, base);
   }
 }

@@ -51,12 +51,9 @@ void main() {
       int t = ids[y * W + x];
       if (t == 0x7fffffff) continue;
       int i0 = tris[3 * t], i1 = tris[3 * t + 1], i2 = tris[3 * t + 2];
-      vec3 a = project(cam, verts[i0].p.xyz), b = project(cam, verts[i1].p.xyz), c = project(cam, verts[i2].p.xyz);
-      float area = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
-      float fx = float(x) + 0.5, fy = float(y) + 0.5;
-      float w1 = ((fx - a.x) * (c.y - a.y) - (c.x - a.x) * (fy - a.y)) / area;
-      float w2 = ((b.x - a.x) * (fy - a.y) - (fx - a.x) * (b.y - a.y)) / area;
-      float w0 = 1.0 - w1 - w2;
+      vec4 h = hit(homogeneous(cam, verts[i0].p.xyz), homogeneous(cam, verts[i1].p.xyz),
+                   homogeneous(cam, verts[i2].p.xyz), vec2(float(x) + 0.5, float(y) + 0.5));
+      float w0 = h.x, w1 = h.y, w2 = h.z;
       vec3 p = w0 * verts[i0].p.xyz + w1 * verts[i1].p.xyz + w2 * verts[i2].p.xyz;
       vec3 n = normalize(w0 * verts[i0].n.xyz + w1 * verts[i1].n.xyz + w2 * verts[i2].n.xyz);
       vec3 view = normalize(cam.eye.xyz - p);
