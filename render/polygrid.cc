@@ -806,11 +806,10 @@ std::vector<double> BoundaryNodeAreas(const Polygrid& pg, double total_mm2) {
   return area;
 }
 
-Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, std::string* report) {
+Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, const ReportLine& report) {
   const int mesh_genus = shape.mesh().Genus();
   PolygridOptions po;
   po.resolution = options.resolution;
-  report->clear();
   Polycube best;
   bool best_genus_ok = false;
   double best_inverted = 2;
@@ -822,13 +821,13 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, st
     try {
       pc = VoxelPolycube(shape, n, &note);
     } catch (const InputError&) {
-      *report += fmt::format("  N = {}: no cell's centre inside\n", n);
+      report(fmt::format("  N = {}: no cell's centre inside\n", n));
       continue;
     }
     try {
       pg = BuildPolygrid(pc, shape, po);
     } catch (const InputError& e) {
-      *report += fmt::format("  N = {}: {}\n", n, e.what());
+      report(fmt::format("  N = {}: {}\n", n, e.what()));
       continue;
     }
     const int genus = pc.Genus();
@@ -837,12 +836,12 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, st
     const std::array<int, 3> e = pc.Extent();
     const Vec3 cube = (shape.hi - shape.lo).cwiseQuotient(Vec3(e[0], e[1], e[2]));
     const double aspect = cube.maxCoeff() / cube.minCoeff();
-    *report += fmt::format("  N = {}: {} cube{}, genus {}, {:.1f} % of the cells inverted at {}^3, cubes stretched "
-                           "{:.1f}:1{}\n", n, pc.cubes.size(), pc.cubes.size() == 1 ? "" : "s", genus, 100 * inverted,
-                           po.resolution, aspect, note.empty() ? "" : " (" + note + ")");
+    report(fmt::format("  N = {}: {} cube{}, genus {}, {:.1f} % of the cells inverted at {}^3, cubes stretched "
+                       "{:.1f}:1{}\n", n, pc.cubes.size(), pc.cubes.size() == 1 ? "" : "s", genus, 100 * inverted,
+                       po.resolution, aspect, note.empty() ? "" : " (" + note + ")"));
     const bool genus_ok = genus == mesh_genus;
     if (genus_ok && inverted <= options.max_inverted && aspect <= options.max_aspect) {
-      *report += fmt::format("  chose N = {}\n", n);
+      report(fmt::format("  chose N = {}\n", n));
       return pc;
     }
     if (best_n == 0 || (genus_ok && !best_genus_ok) || (genus_ok == best_genus_ok && inverted < best_inverted)) {
@@ -853,14 +852,13 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, st
     }
   }
   if (best_n == 0) throw InputError(shape.name() + ": no voxel polycube up to N = " + std::to_string(options.max_cells));
-  *report += fmt::format("  none of genus {} with at most {:.1f} % inverted; chose N = {}\n", mesh_genus,
-                         100 * options.max_inverted, best_n);
+  report(fmt::format("  none of genus {} with at most {:.1f} % inverted; chose N = {}\n", mesh_genus,
+                     100 * options.max_inverted, best_n));
   return best;
 }
 
 Polycube ResolvePolycube(const std::string& spec, const Shape& shape, const std::string& builtin,
-                         std::string* label, std::string* log) {
-  log->clear();
+                         std::string* label, const ReportLine& log) {
   *label = spec;
   if (spec.empty() && !builtin.empty()) {
     *label = "(the shape's own)";
@@ -880,7 +878,7 @@ Polycube ResolvePolycube(const std::string& spec, const Shape& shape, const std:
     if (used == 0 || used != spec.size() - 5) throw InputError("--polycube " + spec + ": expected auto:N, N an integer");
     std::string note;
     pc = VoxelPolycube(shape, n, &note);
-    if (!note.empty()) *log = "note: " + note + "\n";
+    if (!note.empty()) log("note: " + note + "\n");
   }
   const std::array<int, 3> e = pc.Extent();
   *label = fmt::format("{} ({} cube{}, {} x {} x {})", spec.empty() ? "auto" : spec, pc.cubes.size(),

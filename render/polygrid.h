@@ -3,6 +3,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -146,23 +147,25 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
 // shape's box, are at most max_aspect times longer than wide (one cube for a 3:1:1 bar is
 // not); where none passes, the one of the mesh's genus with the fewest inverted (else the
 // fewest of all). Small N first: a smooth shape is best served by few cubes (the sphere by
-// one, the torus by a ring of 8). report: one line per N tried and the choice.
+// one, the torus by a ring of 8). report: called with one line (ending in a newline) per N
+// as it is tried, then one with the choice.
 struct AutoPolycubeOptions {
   int max_cells = 12;
   int resolution = 5;
   double max_inverted = 0.005;
   double max_aspect = 2;
 };
-Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, std::string* report);
+using ReportLine = std::function<void(const std::string& line)>;
+Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, const ReportLine& report);
 
 // The polycube of `translume render --polycube SPEC` for `shape`: "" the built-in shape's own
 // (builtin: its name), or for a mesh (builtin empty) as "auto"; "auto" AutoPolycube; "auto:N"
 // VoxelPolycube(N) (auto:1 is one cube); else a polycube file (ReadPolycube). *label names it
-// in messages ("FILE", "auto (253 cubes, 11 x 7 x 10)", "(the shape's own)"); *log gets
-// auto's tries or auto:N's note.
+// in messages ("FILE", "auto (253 cubes, 11 x 7 x 10)", "(the shape's own)"); log gets
+// auto's tries as they are made, or auto:N's note.
 // Throws InputError on a bad SPEC or file.
 Polycube ResolvePolycube(const std::string& spec, const Shape& shape, const std::string& builtin,
-                         std::string* label, std::string* log);
+                         std::string* label, const ReportLine& log);
 
 // Levels for the hierarchical scheme (Section 5.3), finest first: resolution n, (n-1)/2+1, ...
 // while (n-1) is even and the coarser resolution is >= 3, at most max_levels.

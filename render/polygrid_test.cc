@@ -535,14 +535,17 @@ TEST(Polygrid, VoxelPolycubeOfTheRoundedBunnyIsItsPolycube) {
 // 5^3 cells).
 TEST(Polygrid, AutoPolycubeFollowsTheShape) {
   std::string report;
+  const ReportLine add = [&](const std::string& line) { report += line; };
   const auto sphere = MakeMeshShape(MakeBuiltinShape("sphere", 20, 24)->mesh(), "sphere.obj", 20);
-  EXPECT_EQ(AutoPolycube(*sphere, AutoPolycubeOptions(), &report).cubes.size(), 1u) << report;
+  EXPECT_EQ(AutoPolycube(*sphere, AutoPolycubeOptions(), add).cubes.size(), 1u) << report;
+  report.clear();
   const auto torus = MakeMeshShape(MakeBuiltinShape("torus", 20, 24)->mesh(), "torus.obj", 20);
-  Polycube ring = AutoPolycube(*torus, AutoPolycubeOptions(), &report), want = BuiltinPolycube("torus");
+  Polycube ring = AutoPolycube(*torus, AutoPolycubeOptions(), add), want = BuiltinPolycube("torus");
   std::sort(ring.cubes.begin(), ring.cubes.end());
   std::sort(want.cubes.begin(), want.cubes.end());
   EXPECT_EQ(ring.cubes, want.cubes) << report;
-  const Polycube bunny = AutoPolycube(*RoundedBunny(), AutoPolycubeOptions(), &report);
+  report.clear();
+  const Polycube bunny = AutoPolycube(*RoundedBunny(), AutoPolycubeOptions(), add);
   std::printf("[polygrid] --polycube auto on the rounded bunny:\n%s", report.c_str());
   EXPECT_EQ(bunny.cubes.size(), 253u) << report;
 }

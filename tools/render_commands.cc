@@ -161,11 +161,14 @@ int RunRender(int argc, char** argv) {
     std::printf("render: choosing a polycube for %s (--polycube auto) ...\n", shape->name().c_str());
     std::fflush(stdout);
   }
-  std::string polycube_label, polycube_log;
-  const Polycube pc = ResolvePolycube(polycube_path, *shape, mesh ? "" : shape_name, &polycube_label, &polycube_log);
+  std::string polycube_label;
+  const Polycube pc = ResolvePolycube(polycube_path, *shape, mesh ? "" : shape_name, &polycube_label,
+                                      [](const std::string& line) {
+                                        std::printf("%s", line.c_str());
+                                        std::fflush(stdout);
+                                      });
   if (auto_polycube)
-    std::printf("%srender: polycube %s from the cells inside %s\n", polycube_log.c_str(), polycube_label.c_str(),
-                shape->name().c_str());
+    std::printf("render: polycube %s from the cells inside %s\n", polycube_label.c_str(), shape->name().c_str());
   if (!save_polycube.empty()) {
     WriteAtomically(save_polycube, [&](const std::string& tmp) {
       std::ofstream f(tmp);
