@@ -1,11 +1,15 @@
 // SPDX-License-Identifier: MIT
 #include "render/polycube.h"
 
+#include <Eigen/LU>
+#include <Eigen/SVD>
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <map>
 #include <set>
 #include <sstream>
+#include <fmt/format.h>
 #include <tuple>
 
 #include "solver/status.h"
@@ -25,6 +29,9 @@ bool Polycube::Has(int x, int y, int z) const {
 
 std::string Polycube::Validate() const {
   if (cubes.empty()) return "a polycube needs at least one cube";
+  if (!axes.allFinite() || (axes * axes.transpose() - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-6 ||
+      axes.determinant() < 0)
+    return "the axes must be a rotation (orthonormal rows, right-handed)";
   std::set<std::array<int, 3>> seen;
   for (const auto& c : cubes) {
     for (int a = 0; a < 3; ++a)
@@ -134,7 +141,7 @@ Polycube ParsePolycube(const std::string& text, const std::string& what) {
   Polycube p;
   std::istringstream in(text);
   std::string line;
-  int line_no = 0;
+  int line_no = 0, axes_line = 0;
   while (std::getline(in, line)) {
     ++line_no;
     if (auto hash = line.find('#'); hash != std::string::npos) line.resize(hash);
@@ -142,6 +149,32 @@ Polycube ParsePolycube(const std::string& text, const std::string& what) {
     std::array<int, 3> c;
     std::string rest;
     if (!(ls >> std::ws) || ls.eof()) continue;
+    std::string first;
+    std::istringstream(line) >> first;
+    if (first == "axes") {
+      const std::string at = what + ":" + std::to_string(line_no) + ": ";
+      if (axes_line) throw InputError(at + "a second axes line (the first is line " + std::to_string(axes_line) + ")");
+      axes_line = line_no;
+      ls >> first;
+      for (int k = 0; k < 9; ++k)
+        if (!(ls >> p.axes(k / 3, k % 3)) || !std::isfinite(p.axes(k / 3, k % 3)))
+          throw InputError(at + "expected \"axes\" and nine numbers (the lattice's x, y and z axes), got '" + line + "'");
+      if (ls >> rest) throw InputError(at + "expected nine numbers after \"axes\", got more: '" + line + "'");
+      // Three unit vectors, perpendicular and right-handed, to three digits (hand-written
+      // cosines); then made orthonormal (the nearest rotation) unless they are to round-off
+      // (FormatPolycube's 17 digits read back as written).
+      const double off = (p.axes * p.axes.transpose() - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+      if (off > 1e-3)
+        throw InputError(at + "the axes must be unit vectors at right angles, to three digits (their dot "
+                         "products are off by " + fmt::format("{:.3g}", off) + ")");
+      if (p.axes.determinant() < 0)
+        throw InputError(at + "the axes must be right-handed (x cross y = z); reverse one of them");
+      if (off > 1e-12) {
+        const Eigen::JacobiSVD<Eigen::Matrix3d> svd(p.axes, Eigen::ComputeFullU | Eigen::ComputeFullV);
+        p.axes = svd.matrixU() * svd.matrixV().transpose();
+      }
+      continue;
+    }
     if (!(ls >> c[0] >> c[1] >> c[2]) || (ls >> rest))
       throw InputError(what + ":" + std::to_string(line_no) +
                        ": expected three integers \"x y z\" per cube, got '" + line + "'");
@@ -160,7 +193,13 @@ Polycube ReadPolycube(const std::string& path) {
 }
 
 std::string FormatPolycube(const Polycube& polycube) {
-  std::string s = "# polycube: one unit cube per line, x y z\n";
+  std::string s;
+  if (polycube.axes != Eigen::Matrix3d::Identity()) {
+    s = "# the lattice's x, y and z axes in the shape's coordinates\naxes";
+    for (int k = 0; k < 9; ++k) s += fmt::format(" {:.17g}", polycube.axes(k / 3, k % 3));
+    s += "\n";
+  }
+  s += "# polycube: one unit cube per line, x y z\n";
   for (const auto& c : polycube.cubes)
     s += std::to_string(c[0]) + " " + std::to_string(c[1]) + " " + std::to_string(c[2]) + "\n";
   return s;

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 
+#include <Eigen/Core>
 #include <array>
 #include <string>
 #include <vector>
@@ -10,10 +11,15 @@ namespace translume {
 // A polycube (Tarini et al. 2004; Wang et al. 2008, Section 5.1): unit cubes on an integer
 // lattice, cube (x, y, z) covering [x, x+1] x [y, y+1] x [z, z+1] in polycube units. Text file
 // format (docs/render.md): one cube per line as three integers "x y z"; '#' starts a comment;
-// blank lines are ignored. At least one cube, no duplicates, coordinates in [0, 1023], and the
-// cubes must form one face-connected piece.
+// blank lines are ignored; optionally one line "axes" and nine numbers, the rows of `axes`.
+// At least one cube, no duplicates, coordinates in [0, 1023], and the cubes must form one
+// face-connected piece.
 struct Polycube {
   std::vector<std::array<int, 3>> cubes;
+  // The lattice's x, y and z axes in the shape's coordinates (rows; a rotation): the polycube
+  // is laid over the shape in the frame whose coordinates are axes * p (mm), stretched onto the
+  // shape's bounding box in that frame. Identity: the shape's own axes.
+  Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();
 
   // Largest cube coordinate + 1 per axis (the lattice extent in cube units).
   std::array<int, 3> Extent() const;

@@ -3,6 +3,9 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+#include <cmath>
+
 #include "solver/status.h"
 
 namespace translume {
@@ -17,6 +20,42 @@ TEST(Polycube, ParsesAndRoundTrips) {
   EXPECT_EQ(ParsePolycube(FormatPolycube(p), "again").cubes, p.cubes);
   EXPECT_EQ(BuiltinPolycube("torus").cubes.size(), 8u);
   EXPECT_EQ(BuiltinPolycube("slab").cubes.size(), 9u);
+}
+
+// The optional axes line: read as written (17 digits round-trip), hand-written cosines made
+// orthonormal, and every malformed one refused with the file and line.
+TEST(Polycube, AxesLine) {
+  Polycube p = ParsePolycube("0 0 0\n", "cube");
+  EXPECT_EQ(p.axes, Eigen::Matrix3d::Identity());
+  EXPECT_EQ(FormatPolycube(p).find("axes"), std::string::npos);  // the default is not written
+  const double c = std::cos(0.3), s = std::sin(0.3);
+  p.axes << c, s, 0, -s, c, 0, 0, 0, 1;
+  p.axes = Eigen::Matrix3d(Eigen::AngleAxisd(0.2, Eigen::Vector3d(1, 2, 3).normalized())) * p.axes;
+  const Polycube back = ParsePolycube(FormatPolycube(p), "again");
+  EXPECT_EQ(back.axes, p.axes);
+  EXPECT_EQ(back.cubes, p.cubes);
+  // 45 degrees about x to four digits: accepted, then exactly orthonormal.
+  const Polycube hand = ParsePolycube("axes 1 0 0  0 0.7071 0.7071  0 -0.7071 0.7071\n0 0 0\n", "hand");
+  EXPECT_LT((hand.axes * hand.axes.transpose() - Eigen::Matrix3d::Identity()).norm(), 1e-12);
+  EXPECT_NEAR(hand.axes(1, 1), std::sqrt(0.5), 1e-4);
+  EXPECT_EQ(hand.Validate(), "");
+  const auto error = [](const std::string& text) {
+    try {
+      ParsePolycube(text, "f.cubes");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error("0 0 0\naxes 1 0 0 0 1 0\n").find("f.cubes:2: expected \"axes\" and nine numbers"), std::string::npos);
+  EXPECT_NE(error("axes 1 0 0 0 1 0 0 0 1 0\n0 0 0\n").find("f.cubes:1: expected nine numbers"), std::string::npos);
+  EXPECT_NE(error("axes 1 0 0 0 1 0 0 0 -1\n0 0 0\n").find("f.cubes:1: the axes must be right-handed"), std::string::npos);
+  EXPECT_NE(error("axes 1 0 0 0 0.7 0.7 0 -0.7 0.7\n0 0 0\n").find("f.cubes:1: the axes must be unit vectors"),
+            std::string::npos);
+  EXPECT_NE(error("axes 1 0 0 0 1 0 0 0 1\naxes 1 0 0 0 1 0 0 0 1\n0 0 0\n").find("f.cubes:2: a second axes line"),
+            std::string::npos);
+  p.axes(0, 0) = 2;
+  EXPECT_NE(p.Validate().find("rotation"), std::string::npos);
 }
 
 TEST(Polycube, Genus) {

@@ -106,6 +106,14 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
                        const PolygridOptions& options) {
   if (std::string err = options.Validate(); !err.empty()) throw InputError("polygrid: " + err);
   if (std::string err = polycube.Validate(); !err.empty()) throw InputError("polycube: " + err);
+  if (polycube.axes != Eigen::Matrix3d::Identity()) {  // built in the polycube's frame, turned back
+    Polycube plain = polycube;
+    plain.axes.setIdentity();
+    Polygrid pg = BuildPolygrid(plain, *MakeRotatedShape(shape, polycube.axes), options);
+    for (Vec3& x : pg.position) x = polycube.axes.transpose() * x;
+    for (Vec3& n : pg.normal) n = polycube.axes.transpose() * n;
+    return pg;
+  }
   Polygrid pg;
   const int m = options.resolution - 1;
   const std::array<int, 3> cubes = polycube.Extent();
@@ -806,10 +814,31 @@ std::vector<double> BoundaryNodeAreas(const Polygrid& pg, double total_mm2) {
   return area;
 }
 
+namespace {
+
+// `shape` in the frame its mesh's faces follow (FitPolycubeFrame; *axes): itself where that is
+// its own, else a turned shape kept in *turned (the frame reported).
+const Shape& FramedShape(const Shape& shape, const ReportLine& report, Eigen::Matrix3d* axes,
+                         std::unique_ptr<Shape>* turned) {
+  const PolycubeFrameFit fit = FitPolycubeFrame(shape.mesh());
+  *axes = fit.axes;
+  if (fit.axes == Eigen::Matrix3d::Identity()) return shape;
+  report(fmt::format("  the mesh's faces lie along axes turned by {:.1f} degrees from its own (alignment {:.3f} "
+                     "against {:.3f}; 1 is every face along an axis): the cubes follow those axes\n",
+                     fit.turn_deg, fit.alignment, fit.identity_alignment));
+  *turned = MakeRotatedShape(shape, fit.axes);
+  return **turned;
+}
+
+}  // namespace
+
 Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, const ReportLine& report) {
   const int mesh_genus = shape.mesh().Genus();
   PolygridOptions po;
   po.resolution = options.resolution;
+  Eigen::Matrix3d axes;
+  std::unique_ptr<Shape> turned;
+  const Shape& framed = FramedShape(shape, report, &axes, &turned);
   Polycube best;
   bool best_genus_ok = false;
   double best_inverted = 2;
@@ -819,7 +848,8 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, co
     Polycube pc;
     Polygrid pg;
     try {
-      pc = VoxelPolycube(shape, n, &note);
+      pc = VoxelPolycube(framed, n, &note);
+      pc.axes = axes;
     } catch (const InputError&) {
       report(fmt::format("  N = {}: no cell's centre inside\n", n));
       continue;
@@ -834,7 +864,7 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, co
     const double inverted = double(pg.inverted_cells) / double(pg.num_interior);
     // The cubes' shape once stretched onto the shape's box (the polycube from its own extent).
     const std::array<int, 3> e = pc.Extent();
-    const Vec3 cube = (shape.hi - shape.lo).cwiseQuotient(Vec3(e[0], e[1], e[2]));
+    const Vec3 cube = (framed.hi - framed.lo).cwiseQuotient(Vec3(e[0], e[1], e[2]));
     const double aspect = cube.maxCoeff() / cube.minCoeff();
     report(fmt::format("  N = {}: {} cube{}, genus {}, {:.1f} % of the cells inverted at {}^3, cubes stretched "
                        "{:.1f}:1{}\n", n, pc.cubes.size(), pc.cubes.size() == 1 ? "" : "s", genus, 100 * inverted,
@@ -877,7 +907,10 @@ Polycube ResolvePolycube(const std::string& spec, const Shape& shape, const std:
     }
     if (used == 0 || used != spec.size() - 5) throw InputError("--polycube " + spec + ": expected auto:N, N an integer");
     std::string note;
-    pc = VoxelPolycube(shape, n, &note);
+    Eigen::Matrix3d axes;
+    std::unique_ptr<Shape> turned;
+    pc = VoxelPolycube(FramedShape(shape, log, &axes, &turned), n, &note);
+    pc.axes = axes;
     if (!note.empty()) log("note: " + note + "\n");
   }
   const std::array<int, 3> e = pc.Extent();

@@ -140,15 +140,16 @@ std::vector<double> BoundaryNodeAreas(const Polygrid& pg, double total_mm2 = 0);
 Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
                        const PolygridOptions& options);
 
-// `--polycube auto`: the voxel polycubes of the shape (VoxelPolycube) for N = 1, 2, ...,
-// max_cells, each tried as a polygrid of `resolution` nodes per cube edge (default options
-// otherwise): the first whose genus is the mesh's, whose grid has at most max_inverted of its
-// interior cells inverted (Polygrid::inverted_cells) and whose cubes, stretched onto the
-// shape's box, are at most max_aspect times longer than wide (one cube for a 3:1:1 bar is
-// not); where none passes, the one of the mesh's genus with the fewest inverted (else the
-// fewest of all). Small N first: a smooth shape is best served by few cubes (the sphere by
-// one, the torus by a ring of 8). report: called with one line (ending in a newline) per N
-// as it is tried, then one with the choice.
+// `--polycube auto`: the voxel polycubes of the shape (VoxelPolycube) in the frame its mesh's
+// faces follow (FitPolycubeFrame; the polycubes' axes) for N = 1, 2, ..., max_cells, each
+// tried as a polygrid of `resolution` nodes per cube edge (default options otherwise): the
+// first whose genus is the mesh's, whose grid has at most max_inverted of its interior cells
+// inverted (Polygrid::inverted_cells) and whose cubes, stretched onto the shape's box in that
+// frame, are at most max_aspect times longer than wide (one cube for a 3:1:1 bar is not);
+// where none passes, the one of the mesh's genus with the fewest inverted (else the fewest of
+// all). Small N first: a smooth shape is best served by few cubes (the sphere by one, the
+// torus by a ring of 8). report: called with one line (ending in a newline) for a turned
+// frame, per N as it is tried, then one with the choice.
 struct AutoPolycubeOptions {
   int max_cells = 12;
   int resolution = 5;
@@ -160,7 +161,8 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, co
 
 // The polycube of `translume render --polycube SPEC` for `shape`: "" the built-in shape's own
 // (builtin: its name), or for a mesh (builtin empty) as "auto"; "auto" AutoPolycube; "auto:N"
-// VoxelPolycube(N) (auto:1 is one cube); else a polycube file (ReadPolycube). *label names it
+// VoxelPolycube(N) in AutoPolycube's frame (auto:1 is one cube); else a polycube file
+// (ReadPolycube). *label names it
 // in messages ("FILE", "auto (253 cubes, 11 x 7 x 10)", "(the shape's own)"); log gets
 // auto's tries as they are made, or auto:N's note.
 // Throws InputError on a bad SPEC or file.

@@ -572,6 +572,147 @@ std::string TriangleMesh::Validate() const {
   return "";
 }
 
+namespace {
+
+class RotatedShape : public Shape {
+ public:
+  RotatedShape(const Shape& base, const Eigen::Matrix3d& r) : base_(base), r_(r) {
+    mesh_ = base.mesh();
+    for (Vec3& v : mesh_.vertices) v = r * v;
+    name_ = base.name();
+    mesh_.Bounds(&lo, &hi);
+  }
+  void Project(const Vec3& p, Vec3* surface, Vec3* normal) const override {
+    base_.Project(r_.transpose() * p, surface, normal);
+    *surface = r_ * *surface;
+    *normal = r_ * *normal;
+  }
+  void ProjectAlong(const Vec3& p, const Vec3& centre, Vec3* surface, Vec3* normal) const override {
+    base_.ProjectAlong(r_.transpose() * p, r_.transpose() * centre, surface, normal);
+    *surface = r_ * *surface;
+    *normal = r_ * *normal;
+  }
+
+ private:
+  const Shape& base_;
+  Eigen::Matrix3d r_;
+};
+
+// Element k of the Halton sequence in base b, in [0, 1).
+double Halton(int k, int b) {
+  double f = 1, r = 0;
+  for (; k > 0; k /= b) {
+    f /= b;
+    r += f * (k % b);
+  }
+  return r;
+}
+
+}  // namespace
+
+std::unique_ptr<Shape> MakeRotatedShape(const Shape& base, const Eigen::Matrix3d& frame_from_shape) {
+  return std::make_unique<RotatedShape>(base, frame_from_shape);
+}
+
+PolycubeFrameFit FitPolycubeFrame(const TriangleMesh& mesh) {
+  constexpr int kBins = 16;
+  std::vector<Vec3> sums(6 * kBins * kBins, Vec3::Zero());
+  for (const auto& t : mesh.triangles) {
+    const Vec3 an = 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]);
+    const Vec3 size = an.cwiseAbs();
+    if (size.maxCoeff() == 0) continue;
+    const int a = size.x() >= size.y() && size.x() >= size.z() ? 0 : size.y() >= size.z() ? 1 : 2;
+    const int b = (a + 1) % 3, c = (a + 2) % 3;
+    const auto cell = [&](double u) { return std::clamp(int((u / size[a] + 1) / 2 * kBins), 0, kBins - 1); };
+    sums[((2 * a + (an[a] < 0)) * kBins + cell(an[b])) * kBins + cell(an[c])] += an;
+  }
+  std::vector<Vec3> m;
+  double total = 0;
+  for (const Vec3& v : sums)
+    if (v.squaredNorm() > 0) {
+      m.push_back(v);
+      total += v.norm();
+    }
+  PolycubeFrameFit fit;
+  if (m.empty()) return fit;
+  // a(R) over the bins' sums, or over every face (exact; the bins lean towards frames whose
+  // axis planes cut through them, ~1 degree).
+  const auto alignment = [](const std::vector<Vec3>& normals, double sum, const Eigen::Matrix3d& r) {
+    double c = 0;
+    for (const Vec3& v : normals) c += (r * v).lpNorm<1>();
+    return c / sum;
+  };
+  const auto cost = [&](const Eigen::Matrix3d& r) { return alignment(m, total, r); };
+  std::vector<Vec3> faces;
+  double area = 0;
+  for (const auto& t : mesh.triangles) {
+    faces.push_back(0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]));
+    area += faces.back().norm();
+  }
+  const auto exact = [&](const Eigen::Matrix3d& r) { return alignment(faces, area, r); };
+  // Halving-step rotations about the axes from r (cost c) while a step of `least` still helps.
+  const auto refine = [](const auto& f, Eigen::Matrix3d* r, double* c, double step, double least) {
+    while (step > least) {
+      bool moved = false;
+      for (int a = 0; a < 3; ++a)
+        for (double sign : {-1.0, 1.0}) {
+          const Eigen::Matrix3d tried = Eigen::AngleAxisd(sign * step, Vec3::Unit(a)).toRotationMatrix() * *r;
+          const double ct = f(tried);
+          if (ct < *c) {
+            *c = ct;
+            *r = tried;
+            moved = true;
+          }
+        }
+      if (!moved) step /= 2;
+    }
+  };
+  fit.identity_alignment = fit.alignment = exact(Eigen::Matrix3d::Identity());
+  // Starts: rotations spread over SO(3) (Shoemake's uniform quaternions from Halton points).
+  std::vector<std::pair<double, Eigen::Matrix3d>> starts;
+  for (int k = 1; k <= 512; ++k) {
+    const double u1 = Halton(k, 2), u2 = 2 * kPi * Halton(k, 3), u3 = 2 * kPi * Halton(k, 5);
+    const Eigen::Quaterniond q(std::sqrt(u1) * std::cos(u3), std::sqrt(1 - u1) * std::sin(u2),
+                               std::sqrt(1 - u1) * std::cos(u2), std::sqrt(u1) * std::sin(u3));
+    const Eigen::Matrix3d r = q.normalized().toRotationMatrix();
+    starts.emplace_back(cost(r), r);
+  }
+  std::sort(starts.begin(), starts.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+  double best = 1e300;
+  Eigen::Matrix3d best_r = Eigen::Matrix3d::Identity();
+  for (int s = 0; s < 8; ++s) {
+    auto [c, r] = starts[size_t(s)];
+    refine(cost, &r, &c, 10 * kPi / 180, 0.01 * kPi / 180);
+    if (c < best) {
+      best = c;
+      best_r = r;
+    }
+  }
+  best = exact(best_r);
+  refine(exact, &best_r, &best, 2 * kPi / 180, 1e-3 * kPi / 180);
+  // The cube's 24 rotations (signed permutations, determinant 1) leave a(R) as it is: take the
+  // frame nearest the mesh's axes (largest trace).
+  Eigen::Matrix3d nearest = best_r;
+  double trace = -4;
+  const int perms[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+  for (const auto& p : perms)
+    for (int signs = 0; signs < 8; ++signs) {
+      Eigen::Matrix3d P = Eigen::Matrix3d::Zero();
+      for (int i = 0; i < 3; ++i) P(i, p[i]) = signs >> i & 1 ? -1 : 1;
+      if (P.determinant() < 0) continue;
+      const Eigen::Matrix3d r = P * best_r;
+      if (r.trace() > trace) {
+        trace = r.trace();
+        nearest = r;
+      }
+    }
+  if (fit.identity_alignment - best <= std::max(0.01, 0.1 * (fit.identity_alignment - 1))) return fit;
+  fit.axes = nearest;
+  fit.alignment = best;
+  fit.turn_deg = std::acos(std::clamp((trace - 1) / 2, -1.0, 1.0)) * 180 / kPi;
+  return fit;
+}
+
 Polycube VoxelPolycube(const Shape& shape, int cubes, std::string* note) {
   if (cubes < 1 || cubes > 1024) throw InputError("polycube: auto:N needs 1 <= N <= 1024, got " + std::to_string(cubes));
   const TriangleMesh& mesh = shape.mesh();

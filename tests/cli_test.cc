@@ -2,6 +2,7 @@
 // Runs the `translume` binary as a user would.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -449,6 +450,38 @@ TEST_F(Cli, RenderAndEdit) {
                 "/samples/bar.obj --resolution 5 --image 16x16 -o " + P("bar.png"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("polycube auto (2 cubes, 2 x 1 x 1)"), std::string::npos) << r.output;
+  // The bar turned by 35 degrees about z, then 20 about x: auto lays its cubes along the bar's
+  // own axes again (2 cubes, as unturned) and --save-polycube writes them with an axes line,
+  // which --polycube reads back.
+  {
+    std::ifstream in(std::string(TRANSLUME_SOURCE_DIR) + "/samples/bar.obj");
+    std::ofstream out(P("turned_bar.obj"));
+    const double a = 35 * M_PI / 180, b = 20 * M_PI / 180;
+    std::string line;
+    while (std::getline(in, line)) {
+      double x, y, z;
+      if (std::sscanf(line.c_str(), "v %lf %lf %lf", &x, &y, &z) != 3) {
+        out << line << "\n";
+        continue;
+      }
+      const double x1 = std::cos(a) * x - std::sin(a) * y, y1 = std::sin(a) * x + std::cos(a) * y;
+      out << "v " << x1 << " " << std::cos(b) * y1 - std::sin(b) * z << " " << std::sin(b) * y1 + std::cos(b) * z << "\n";
+    }
+  }
+  r = Translume("render homogeneous:0.2,0.02 --shape " + P("turned_bar.obj") + " --save-polycube " +
+                P("turned.cubes") + " --resolution 5 --image 16x16 -o " + P("turned.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("lie along axes turned by 40."), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("polycube auto (2 cubes, 2 x 1 x 1)"), std::string::npos) << r.output;
+  {
+    std::ifstream f(P("turned.cubes"));
+    const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    EXPECT_NE(text.find("\naxes "), std::string::npos) << text;
+  }
+  r = Translume("render homogeneous:0.2,0.02 --shape " + P("turned_bar.obj") + " --polycube " + P("turned.cubes") +
+                " --resolution 5 --image 16x16 -o " + P("turned2.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(r.output.find("folded"), std::string::npos) << r.output;
   ExpectOneLineError(Translume("render homogeneous:0.2,0.02 --shape torus --polycube auto:x -o " + P("x.png")),
                      "auto:");
   ExpectOneLineError(Translume("render homogeneous:0.2,0.02 --shape torus --polycube auto:1 -o " + P("x.png")),

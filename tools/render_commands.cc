@@ -94,8 +94,9 @@ int RunRender(int argc, char** argv) {
   app.add_option("--shape", shape_name, "slab|sphere|torus|blob|bunny|MESH.obj|MESH.ply")->capture_default_str();
   app.add_option("--polycube", polycube_path,
                  "Polycube file (docs/render.md); auto:N: the cells of an N-cell grid along the shape's longest "
-                 "axis whose centres lie inside it; auto: the first N of 1..12 whose polycube has the mesh's genus, "
-                 "a grid that does not fold and cubes at most 2:1; default: the shape's own (meshes: auto)");
+                 "axis whose centres lie inside it, in the frame the mesh's faces follow; auto: the first N of "
+                 "1..12 whose polycube has the mesh's genus, a grid that does not fold and cubes at most 2:1; "
+                 "default: the shape's own (meshes: auto)");
   app.add_option("--save-polycube", save_polycube, "Write the polycube used (e.g. auto's) to this file");
   app.add_option("--size", size_mm, "Largest extent of the object, mm")->capture_default_str();
   app.add_option("--resolution", resolution, "Polygrid nodes per cube edge")->capture_default_str();
