@@ -172,6 +172,8 @@ std::string RenderOptions::Validate() const {
                        samples * 16 / 1000000000);
   if (!(fov_deg > 1 && fov_deg < 170)) return "the field of view must be in (1, 170) degrees";
   if (!std::isfinite(azimuth_deg) || !std::isfinite(elevation_deg)) return "the camera angles must be finite";
+  if (!(camera_distance_mm >= 0 && std::isfinite(camera_distance_mm)))
+    return "the camera distance must be >= 0 mm (0: fit the object)";
   if (!(eta >= 1)) return "eta must be >= 1";
   if (specular < 0 || !(roughness > 0) || surface_reflectance < 0)
     return "specular and surface reflectance must be >= 0, roughness > 0";
@@ -700,7 +702,7 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
   const int ss = o.supersample;
   const double az = (o.azimuth_deg + turn_deg) * kPi / 180, el = o.elevation_deg * kPi / 180;
   const double t = std::tan(o.fov_deg * kPi / 360);
-  const double dist = radius / std::sin(o.fov_deg * kPi / 360) * 1.15;
+  const double dist = o.camera_distance_mm > 0 ? o.camera_distance_mm : radius / std::sin(o.fov_deg * kPi / 360) * 1.15;
   const Vec3 eye = centre + dist * Vec3(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
   const PassView cam = PassView::LookAt(eye, centre, o.width * ss, o.height * ss, false, 1 / t);
   Image img = I.passes->Shade(cam, radiance_, samples);

@@ -40,6 +40,10 @@ struct RenderOptions {
   int width = 256, height = 256;
   int supersample = 2;           // s x s samples per pixel, box-filtered (antialiasing)
   double azimuth_deg = 30, elevation_deg = 25, fov_deg = 30;  // orbit camera around the centre
+  // The eye's distance from the centre (mm); 0: as far as puts the whole bounding sphere in view
+  // (1.15 R / sin(fov / 2)). Nearer is a close-up; an eye inside the bounding sphere is fine
+  // (triangles reaching behind it are clipped), one inside the solid sees its inner faces.
+  double camera_distance_mm = 0;
   double eta = 1.3;              // for the Fresnel transmittance F_t
   double specular = 0.04, roughness = 0.3;  // Ward isotropic rho_s, alpha
   double surface_reflectance = 0.0;         // optional Lambertian rho_d

@@ -22,8 +22,8 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-// A small, fast scene: the marble sphere, 2 levels, cpu diffusion.
-Image RenderSmallSphere(int width, int height) {
+// A small, fast scene: the marble sphere (20 mm, 9^3, 2 levels), cpu diffusion.
+Image RenderSmallSphere(const RenderOptions& ro) {
   const auto shape = MakeBuiltinShape("sphere", 20, 24);
   PolygridOptions po;
   po.resolution = 9;
@@ -32,11 +32,15 @@ Image RenderSmallSphere(int width, int height) {
   for (const Polygrid& pg : levels) mats.push_back(ProceduralNodeMaterial(pg, "marble"));
   DiffusionOptions d;
   d.iterations = {200, 200};
+  Renderer r(shape.get(), &levels, mats, ReflectionParameterC(1.3), d, ro);
+  return r.Render(RenderLight::Parse("dir:1,0.3,0.6"));
+}
+
+Image RenderSmallSphere(int width, int height) {
   RenderOptions ro;
   ro.width = width;
   ro.height = height;
-  Renderer r(shape.get(), &levels, mats, ReflectionParameterC(1.3), d, ro);
-  return r.Render(RenderLight::Parse("dir:1,0.3,0.6"));
+  return RenderSmallSphere(ro);
 }
 
 TEST(Render, ImageHasRequestedSizeAndIsNotEmpty) {
@@ -108,13 +112,14 @@ RenderLight TestSky() {
 
 // The gl passes (compute shaders: shadow maps, incident light, rasterisation, shading) against
 // the cpu passes, the same scene and light (point:2,1,4 is above the torus's hole, inside its
-// bounding sphere: a cube shadow map).
+// bounding sphere: a cube shadow map; the last case a close-up camera 2 mm above the sphere).
 TEST(Render, GlPassesMatchCpu) {
   struct Case {
     std::string shape, light;
+    double camera_distance_mm = 0;
   };
   for (const Case& k : {Case{"sphere", "dir:1,0.3,0.6"}, Case{"torus", "point:30,10,20"},
-                        Case{"torus", "point:2,1,4"}, Case{"torus", "env"}}) {
+                        Case{"torus", "point:2,1,4"}, Case{"torus", "env"}, Case{"sphere", "dir:1,0.3,0.6", 12}}) {
     SCOPED_TRACE(k.shape + " " + k.light);
     const auto shape = MakeBuiltinShape(k.shape, 20, 24);
     PolygridOptions po;
@@ -125,9 +130,31 @@ TEST(Render, GlPassesMatchCpu) {
     ro.height = 32;
     ro.surface_reflectance = 0.1;
     ro.environment_directions = 16;
+    ro.camera_distance_mm = k.camera_distance_mm;
     ExpectGlPassesMatchCpu(*shape, levels, ro, k.light == "env" ? TestSky() : RenderLight::Parse(k.light),
-                           k.shape + " " + k.light);
+                           k.shape + " " + k.light + (k.camera_distance_mm > 0 ? ", close-up" : ""));
   }
+}
+
+// A close-up: the eye 2 mm above the 20 mm sphere (camera distance 12 mm from the centre)
+// sees the sphere in every pixel (asin(10 / 12) = 56 degrees against a 15-degree half field of
+// view), where the default distance shows it whole with background around (the gl passes
+// match the cpu's there too: GlPassesMatchCpu).
+TEST(Render, CloseUpCameraFillsTheImage) {
+  RenderOptions ro;
+  ro.width = ro.height = 24;
+  const auto empty = [&] {
+    const Image img = RenderSmallSphere(ro);
+    int n = 0;
+    for (int p = 0; p < img.width * img.height; ++p)
+      n += img.data[3 * p] == 0 && img.data[3 * p + 1] == 0 && img.data[3 * p + 2] == 0;
+    return n;
+  };
+  EXPECT_GT(empty(), 24 * 24 / 10);
+  ro.camera_distance_mm = 12;
+  EXPECT_EQ(empty(), 0);
+  ro.camera_distance_mm = -1;
+  EXPECT_NE(ro.Validate().find("camera distance"), std::string::npos);
 }
 
 // Inputs that take one shader invocation past llvmpipe's loop budget (GlInfo::loop_budget: 65535

@@ -479,7 +479,7 @@ TEST_F(Cli, RenderAndEdit) {
     EXPECT_NE(text.find("\naxes "), std::string::npos) << text;
   }
   r = Translume("render homogeneous:0.2,0.02 --shape " + P("turned_bar.obj") + " --polycube " + P("turned.cubes") +
-                " --resolution 5 --image 16x16 -o " + P("turned2.png"));
+                " --resolution 5 --image 16x16 --camera 30,25,12 -o " + P("turned2.png"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(r.output.find("folded"), std::string::npos) << r.output;
   ExpectOneLineError(Translume("render homogeneous:0.2,0.02 --shape torus --polycube auto:x -o " + P("x.png")),
@@ -494,6 +494,9 @@ TEST_F(Cli, RenderAndEdit) {
 
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --shape cone -o " + P("x.png")), "cone");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --light sun:1 -o " + P("x.png")), "--light");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --camera 30,25x -o " + P("x.png")), "--camera");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --camera 30,25,0 -o " + P("x.png")), "must be > 0");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --camera 30 -o " + P("x.png")), "2 or 3");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --placement variance --variance-steps -1 -o " + P("x.png")),
                      "--variance-steps");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --variance-steps 10 -o " + P("x.png")), "--variance-steps");

@@ -154,25 +154,6 @@ int RunCalibrateResponse(int argc, char** argv) {
 
 // A linear HDR image: an .exr file, or an exposure stack folder merged here.
 
-std::vector<double> ParseNumbers(const std::string& text, const char* flag, size_t n1, size_t n2) {
-  std::vector<double> v;
-  std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    try {
-      size_t used = 0;
-      v.push_back(std::stod(item, &used));
-      if (used != item.size() || !std::isfinite(v.back())) throw std::invalid_argument(item);
-    } catch (const std::exception&) {
-      throw calib::CalibError(fmt::format("{} {}: '{}' is not a number", flag, text, item));
-    }
-  }
-  if (v.size() != n1 && v.size() != n2)
-    throw calib::CalibError(fmt::format("{} {}: expected {} comma-separated numbers", flag, text,
-                                        n1 == n2 ? std::to_string(n1) : fmt::format("{} or {}", n1, n2)));
-  return v;
-}
-
 int RunCalibrateWhite(int argc, char** argv) {
   CLI::App app{"White balance gains (camera HDR -> radiance in the projector's units of incoming\n"
                "light) from the HDR of a reference target under projector full white, minus the\n"

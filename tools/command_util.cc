@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fmt/format.h>
+#include <sstream>
 
 #include "solver/status.h"
 #include "solver/threads.h"
@@ -107,6 +108,25 @@ bool ParseOrHelp(CLI::App& app, int argc, char** argv) {
     return true;
   }
   return false;
+}
+
+std::vector<double> ParseNumbers(const std::string& text, const char* flag, size_t n1, size_t n2) {
+  std::vector<double> v;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    try {
+      size_t used = 0;
+      v.push_back(std::stod(item, &used));
+      if (used != item.size() || !std::isfinite(v.back())) throw std::invalid_argument(item);
+    } catch (const std::exception&) {
+      throw InputError(fmt::format("{} {}: '{}' is not a number", flag, text, item));
+    }
+  }
+  if (v.size() != n1 && v.size() != n2)
+    throw InputError(fmt::format("{} {}: expected {} comma-separated numbers", flag, text,
+                                 n1 == n2 ? std::to_string(n1) : fmt::format("{} or {}", n1, n2)));
+  return v;
 }
 
 }  // namespace translume

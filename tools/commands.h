@@ -70,6 +70,10 @@ class SigintGuard {
 };
 constexpr int kInterruptedExit = 130;
 
+// The comma-separated numbers of a flag's value, n1 or n2 of them, each finite; throws
+// InputError "FLAG TEXT: ..." naming the item that is not a number, or the count expected.
+std::vector<double> ParseNumbers(const std::string& text, const char* flag, size_t n1, size_t n2);
+
 // Parses argv into app; on --help prints and returns true (caller exits 0).
 bool ParseOrHelp(CLI::App& app, int argc, char** argv);
 

@@ -115,7 +115,9 @@ int RunRender(int argc, char** argv) {
   app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all)");
   app.add_option("--backend", backend, "All three passes on cpu or gl (compute shaders)")->capture_default_str();
   app.add_option("--light", light, "dir:X,Y,Z | point:X,Y,Z (mm; shadows in every direction: a cube shadow map when near or inside the object's bounding sphere) | env:FILE.exr (lat-long)")->capture_default_str();
-  app.add_option("--camera", camera, "AZIMUTH,ELEVATION in degrees (default 30,25)");
+  app.add_option("--camera", camera,
+                 "AZIMUTH,ELEVATION in degrees (default 30,25), and optionally ,DISTANCE of the eye from the "
+                 "object's centre in mm (default: the whole object in view; nearer for a close-up)");
   app.add_option("--image", image, "Output size WxH")->capture_default_str();
   app.add_option("--supersample", ro.supersample, "Samples per pixel per axis")->capture_default_str();
   app.add_option("--turntable", turntable, "Frames of a turntable (object rotating under fixed light)")->capture_default_str();
@@ -135,8 +137,13 @@ int RunRender(int argc, char** argv) {
   char rest = 0;
   if (std::sscanf(image.c_str(), "%dx%d%c", &ro.width, &ro.height, &rest) != 2)
     throw InputError("--image " + image + ": expected WxH");
-  if (!camera.empty() && std::sscanf(camera.c_str(), "%lf,%lf%c", &ro.azimuth_deg, &ro.elevation_deg, &rest) != 2)
-    throw InputError("--camera " + camera + ": expected AZIMUTH,ELEVATION");
+  if (!camera.empty()) {
+    const std::vector<double> v = ParseNumbers(camera, "--camera", 2, 3);
+    ro.azimuth_deg = v[0];
+    ro.elevation_deg = v[1];
+    if (v.size() == 3 && !((ro.camera_distance_mm = v[2]) > 0))
+      throw InputError("--camera " + camera + ": the distance (mm, from the object's centre) must be > 0");
+  }
   if (exposure && !std::isfinite(*exposure)) throw InputError("--exposure: must be a finite number of stops");
   if (turntable < 1) throw InputError("--turntable: must be >= 1");
   if (levels < 1) throw InputError("--levels: must be >= 1");
