@@ -134,7 +134,11 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
         const int32_t j = pg.neighbours[n][0];
         const int axis = pg.link_dir[b] / 2;
         const double kj = m.kappa[c][j], d = pg.link_length[b];
-        const double lateral = C * d * d * kn * kj;
+        double lateral_sum = 0;
+        for (int k = 0; k < 6; ++k)
+          if (k / 2 != axis) lateral_sum += pg.weights[j][k];
+        // Capped where it would outweigh the link (w_0 < 0; see the header).
+        const double lateral = C * d * d * kn * kj * std::min(1.0, 2 * kn / (kj * d * d * lateral_sum));
         double w_link = 2 * C * kn * kn;
         for (int k = 0, slot = 1; k < 6; ++k) {
           if (k / 2 == axis) continue;

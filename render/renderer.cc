@@ -329,7 +329,7 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
         }
         const double before = disc(area / kPi);
         area += group_area;
-        acc += group_qa / group_area * (disc(area / kPi) - before);
+        if (group_area > 0) acc += group_qa / group_area * (disc(area / kPi) - before);  // else no ring
         i = j;
       }
       L[c][b] = float(acc / kPi);
