@@ -386,7 +386,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
                                      grey.rows, projector->projector_size.width, projector->projector_size.height));
       dc.q = GreyPattern(ProjectPatternOnFace(grey, proj, projector_from_camera, camera_from_sample, g, h, cap.setup));
     } else {
-      dc.q = GreyPattern(RasterizeLightFile(LightSpec::Parse(c.light), g, h));
+      dc.q = GreyPattern(RasterizeLightFile(c.Light(cap.dir), g, h));
     }
     dc.mask = MeasurementMask(g, cap.setup, dc.q, o.mask_margin);
     AcquireConditionReport cr;

@@ -79,6 +79,13 @@ class Reader {
 
 }  // namespace
 
+LightSpec CaptureSpec::Condition::Light(const std::string& dir) const {
+  LightSpec l = LightSpec::Parse(light);
+  if (l.kind == LightSpec::Kind::kImage && fs::path(l.image_path).is_relative())
+    l.image_path = (fs::path(dir) / l.image_path).string();
+  return l;
+}
+
 CaptureSpec ReadCapture(const std::string& path) {
   CaptureSpec s;
   const bool is_dir = fs::is_directory(path);
@@ -232,6 +239,16 @@ CaptureSpec ReadCapture(const std::string& path) {
         r.Fail(where + ".pattern", "projector patterns need a projector calibration (field projector)");
     } else {
       cond.light = r.String(c["light"], where + ".light");
+      LightSpec light;
+      std::string bad;
+      try {
+        light = cond.Light(s.dir);
+      } catch (const InputError& e) {
+        bad = e.what();
+      }
+      if (!bad.empty()) r.Fail(where + ".light", bad);
+      if (light.kind == LightSpec::Kind::kImage && !fs::is_regular_file(light.image_path))
+        r.Fail(where + ".light", "file " + light.image_path + " not found");
     }
     s.conditions.push_back(cond);
   }

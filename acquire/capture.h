@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "solver/light.h"
 #include "solver/grid.h"
 
 namespace translume::acquire {
@@ -61,7 +62,10 @@ struct CaptureSpec {
     std::string name;
     std::string stack;     // exposure stack folder
     std::string pattern;   // projector image (q through the projector calibration), or
-    std::string light;     // a light spec on the lit face (solver/light.h), q taken as given
+    std::string light;     // a light spec on the lit face (solver/light.h), q taken as given;
+                           // an image: file relative to the capture folder (Light())
+    // The parsed light spec, its image: path resolved against the capture folder `dir`.
+    LightSpec Light(const std::string& dir) const;
   };
   std::vector<Condition> conditions;
 };

@@ -102,6 +102,20 @@ TEST_F(CaptureTest, EveryBrokenFieldIsNamed) {
   ExpectError([](auto& j) { j["conditions"][0]["pattern"] = "calib/response.yml"; j["conditions"][0].erase("light"); },
               "conditions[0].pattern: projector patterns need a projector calibration");
   ExpectError([](auto& j) { j["conditions"] = nlohmann::json::array(); }, "conditions: expected a non-empty list");
+  ExpectError([](auto& j) { j["conditions"][0]["light"] = "region:9,9/2"; }, "conditions[0].light: light 'region:9,9/2'");
+  ExpectError([](auto& j) { j["conditions"][1]["light"] = "spot:1,1"; }, "conditions[1].light: light 'spot:1,1'");
+  ExpectError([](auto& j) { j["conditions"][0]["light"] = "image:nope.png"; }, "conditions[0].light: file");
+}
+
+// An image: light's file, like every path in capture.json, is relative to the capture folder
+// (it was read relative to the current folder).
+TEST_F(CaptureTest, ImageLightsAreRelativeToTheFolder) {
+  std::ofstream(dir_ / "stripes.png") << "not read here";
+  nlohmann::json j = base_;
+  j["conditions"][0]["light"] = "image:stripes.png";
+  const CaptureSpec s = ReadCapture(Write(j));
+  EXPECT_EQ(fs::path(s.conditions[0].Light(s.dir).image_path), dir_ / "stripes.png");
+  EXPECT_EQ(s.conditions[0].light, "image:stripes.png");  // as given, for CaptureJson
 }
 
 TEST_F(CaptureTest, NotJsonIsNamed) {
