@@ -102,6 +102,10 @@ TEST_F(CaptureTest, EveryBrokenFieldIsNamed) {
   ExpectError([](auto& j) { j["conditions"][0]["pattern"] = "calib/response.yml"; j["conditions"][0].erase("light"); },
               "conditions[0].pattern: projector patterns need a projector calibration");
   ExpectError([](auto& j) { j["conditions"] = nlohmann::json::array(); }, "conditions: expected a non-empty list");
+  ExpectError([](auto& j) { j["face_corners_px"] = {{1, 1}, {2, 2}, {3, 3}, {4, 4}}; },
+              "face_corners_px: the 4 corners must enclose a convex quadrilateral");
+  ExpectError([](auto& j) { j["face_corners_px"] = {{0, 0}, {100, 100}, {100, 0}, {0, 100}}; },
+              "face_corners_px: the 4 corners must enclose a convex quadrilateral");
   ExpectError([](auto& j) { j["conditions"][0]["light"] = "region:9,9/2"; }, "conditions[0].light: light 'region:9,9/2'");
   ExpectError([](auto& j) { j["conditions"][1]["light"] = "spot:1,1"; }, "conditions[1].light: light 'spot:1,1'");
   ExpectError([](auto& j) { j["conditions"][0]["light"] = "image:nope.png"; }, "conditions[0].light: file");

@@ -144,7 +144,7 @@ RenderLight RenderLight::Parse(const std::string& text) {
     return l;
   }
   if (colon == std::string::npos || (kind != "dir" && kind != "point"))
-    throw InputError("--light " + text + ": expected dir:X,Y,Z or point:X,Y,Z");
+    throw InputError("--light " + text + ": expected dir:X,Y,Z, point:X,Y,Z or env:FILE");
   l.kind = kind == "dir" ? Kind::kDirectional : Kind::kPoint;
   std::istringstream in(text.substr(colon + 1));
   char c1 = 0, c2 = 0;

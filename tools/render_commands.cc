@@ -111,7 +111,9 @@ int RunRender(int argc, char** argv) {
                  "With --placement variance: gradient steps on the interior nodes' edge-length variance (0: "
                  "smoothing only)")
       ->capture_default_str();
-  app.add_option("--iterations", iterations, "Relaxation steps per level, coarsest first")->capture_default_str();
+  app.add_option("--iterations", iterations,
+                 "Relaxation steps per level, coarsest first (a longer list than the levels drops its first "
+                 "entries, a shorter one repeats its last)")->capture_default_str();
   app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all)");
   app.add_option("--backend", backend, "All three passes on cpu or gl (compute shaders)")->capture_default_str();
   app.add_option("--light", light, "dir:X,Y,Z | point:X,Y,Z (mm; shadows in every direction: a cube shadow map when near or inside the object's bounding sphere) | env:FILE.exr (lat-long)")->capture_default_str();
@@ -220,6 +222,10 @@ int RunRender(int argc, char** argv) {
               "Laplacian weights), %zu levels, built in %.2f s\n", material.c_str(), shape->name().c_str(),
               pc.cubes.size(), resolution, (long long)grids[0].size(), (long long)grids[0].num_boundary(),
               (long long)grids[0].fallback_weights, grids.size(), build_s);
+  if (int(grids.size()) < levels)
+    std::printf("render: note: --resolution %d allows %zu level%s, not the %d asked for (a coarser level needs "
+                "resolution - 1 even and at least 3 nodes per cube edge: 9, 17 and 33 allow 3 or more)\n",
+                resolution, grids.size(), grids.size() == 1 ? "" : "s", levels);
   for (size_t l = 0; l < grids.size(); ++l)
     if (!grids[l].placement_note.empty())
       std::printf("render: note: level %zu (%d^3): %s\n", l, grids[l].resolution, grids[l].placement_note.c_str());
