@@ -698,6 +698,12 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
   }
   pg.fallback_weights = fallback;
   pg.inverted_cells = inverted;
+  {
+    const std::vector<double> area = BoundaryNodeAreas(pg);
+    double mean = 0;
+    for (double a : area) mean += a / double(area.size());
+    for (double a : area) pg.crowded_boundary_nodes += a < 0.01 * mean;
+  }
   // A first interior node with two or three boundary links on a smooth part of the surface sits
   // between its boundary nodes (the mean of the d-offset points above), so its links lean up to
   // ~80 degrees off the normal (|link| up to 5 d). The Robin condition needs dphi/dn, so such a

@@ -170,6 +170,12 @@ TEST(Render, SharpEdgedMeshStaysBounded) {
   tet.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
   const auto shape = MakeMeshShape(tet, "tet.obj", 20);
   const Polycube pc = AutoPolycube(*shape, AutoPolycubeOptions(), [](const std::string&) {});
+  // Counted as crowded (translume render notes it), where a sphere's nodes are not.
+  PolygridOptions po9;
+  po9.resolution = 9;
+  const Polygrid tet9 = BuildPolygrid(pc, *shape, po9);
+  EXPECT_GT(tet9.crowded_boundary_nodes, tet9.num_boundary() / 1000);
+  EXPECT_EQ(BuildPolygrid(BuiltinPolycube("sphere"), *MakeBuiltinShape("sphere", 20), po9).crowded_boundary_nodes, 0);
   for (const char* model : {"polygrid", "dipole"}) {
     SCOPED_TRACE(model);
     PolygridOptions po;

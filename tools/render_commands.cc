@@ -235,6 +235,12 @@ int RunRender(int argc, char** argv) {
                 "auto, docs/render.md \"Polycube files\"), or the resolution is too coarse for its curvature "
                 "(raise --resolution)\n", (long long)grids[0].inverted_cells,
                 (long long)grids[0].num_interior, polycube_label.c_str(), shape->name().c_str());
+  if (grids[0].crowded_boundary_nodes > grids[0].num_boundary() / 1000)
+    std::printf("render: note: %lld of the polygrid's %lld boundary nodes crowd together (each stands for under 1 %% "
+                "of the mean node's share of the surface): the polycube does not follow sharp edges or corners of %s, "
+                "and the light there is approximate (a polycube whose cube edges lie along them does better; "
+                "docs/render.md \"Polycube files\")\n", (long long)grids[0].crowded_boundary_nodes,
+                (long long)grids[0].num_boundary(), shape->name().c_str());
   if (ro.model == "dipole") {
     bool homogeneous = true;
     for (int ch = 0; ch < 3; ++ch)
