@@ -31,9 +31,12 @@ void EditOptions::ParseTerm(const std::string& text, bool add) {
   } catch (const std::exception&) {
     throw InputError(flag + " " + text + ": '" + text.substr(eq + 1) + "' is not a number");
   }
-  if (name == "kappa") (add ? add_kappa : scale_kappa) = value;
-  else if (name == "mu") (add ? add_mu : scale_mu) = value;
-  else throw InputError(flag + " " + text + ": unknown parameter '" + name + "' (expected kappa or mu)");
+  if (name != "kappa" && name != "mu")
+    throw InputError(flag + " " + text + ": unknown parameter '" + name + "' (expected kappa or mu)");
+  if (add)
+    (name == "kappa" ? add_kappa : add_mu) += value;
+  else
+    (name == "kappa" ? scale_kappa : scale_mu) *= value;
 }
 
 void EditOptions::ParseDepth(const std::string& text) {

@@ -20,7 +20,8 @@ struct EditOptions {
   int depth_begin = 0, depth_end = -1;  // node layers, inclusive; -1: to the deepest layer
 
   std::string Validate() const;
-  // Parses "kappa=2" / "mu=0.5" into the scale (add = false) or add fields. Throws InputError.
+  // Parses "kappa=2" / "mu=0.5" into the scale (add = false) or add fields; repeated terms
+  // compose (scales multiply, additions add up). Throws InputError.
   void ParseTerm(const std::string& text, bool add);
   // Parses "A:B" (node layers, 0 <= A <= B, inclusive) into the depth range. Throws InputError.
   void ParseDepth(const std::string& text);

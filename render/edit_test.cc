@@ -29,6 +29,19 @@ TEST(Edit, ScaleAddMaskAndDepth) {
   EXPECT_FLOAT_EQ(e.kappa[0][m.shape.index(3, 0, 2)], 0.2f);
 }
 
+// Repeated terms compose (the last one used to replace the others).
+TEST(Edit, RepeatedTermsCompose) {
+  EditOptions o;
+  o.ParseTerm("kappa=2", false);
+  o.ParseTerm("kappa=3", false);
+  o.ParseTerm("mu=0.01", true);
+  o.ParseTerm("mu=0.02", true);
+  EXPECT_DOUBLE_EQ(o.scale_kappa, 6);
+  EXPECT_DOUBLE_EQ(o.add_mu, 0.03);
+  EXPECT_DOUBLE_EQ(o.scale_mu, 1);
+  EXPECT_DOUBLE_EQ(o.add_kappa, 0);
+}
+
 TEST(Edit, BadEditsAreRefused) {
   EditOptions o;
   EXPECT_THROW(o.ParseTerm("sigma=2", false), InputError);

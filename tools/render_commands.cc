@@ -278,8 +278,8 @@ int RunEdit(int argc, char** argv) {
   std::string material, mask, depth, out;
   std::vector<std::string> scales, adds;
   app.add_option("material", material, "Material file (.vdb)")->required();
-  app.add_option("--scale", scales, "kappa=S or mu=S (multiply)");
-  app.add_option("--add", adds, "kappa=A or mu=A (add, mm or 1/mm)");
+  app.add_option("--scale", scales, "kappa=S or mu=S (multiply; repeated ones multiply)");
+  app.add_option("--add", adds, "kappa=A or mu=A (add, mm or 1/mm; repeated ones add up)");
   app.add_option("--mask", mask, "Pattern mask image (luminance 0..1 weights the edit)");
   app.add_option("--depth", depth, "Node layers A:B (inclusive) to edit");
   app.add_option("-o,--output", out, "Output material (.vdb)")->required();
