@@ -786,14 +786,21 @@ Polycube VoxelPolycube(const Shape& shape, int cubes, std::string* note) {
   return pc;
 }
 
-int TriangleMesh::Genus() const {
-  std::vector<int> parent(vertices.size(), -1);  // union-find over the used vertices
+namespace {
+
+// Over the vertices that triangles use: how many, the distinct undirected edges, and the
+// connected pieces (union-find).
+struct MeshCounts {
+  int64_t used = 0, edges = 0, pieces = 0;
+};
+MeshCounts CountMesh(const TriangleMesh& m) {
+  std::vector<int> parent(m.vertices.size(), -1);
   auto find = [&](int v) {
     while (parent[v] != v) v = parent[v] = parent[parent[v]];
     return v;
   };
   std::set<std::pair<int, int>> edges;
-  for (const auto& t : triangles)
+  for (const auto& t : m.triangles)
     for (int c = 0; c < 3; ++c) {
       const int a = t[c], b = t[(c + 1) % 3];
       edges.insert({std::min(a, b), std::max(a, b)});
@@ -801,15 +808,25 @@ int TriangleMesh::Genus() const {
         if (parent[v] < 0) parent[v] = v;
       parent[find(a)] = find(b);
     }
-  int64_t used = 0, pieces = 0;
+  MeshCounts n;
+  n.edges = int64_t(edges.size());
   for (size_t v = 0; v < parent.size(); ++v)
     if (parent[v] >= 0) {
-      ++used;
-      pieces += find(int(v)) == int(v);
+      ++n.used;
+      n.pieces += find(int(v)) == int(v);
     }
-  const int64_t euler = used - int64_t(edges.size()) + int64_t(triangles.size());
-  return int((2 * pieces - euler) / 2);
+  return n;
 }
+
+}  // namespace
+
+int TriangleMesh::Genus() const {
+  const MeshCounts n = CountMesh(*this);
+  const int64_t euler = n.used - n.edges + int64_t(triangles.size());
+  return int((2 * n.pieces - euler) / 2);
+}
+
+int TriangleMesh::Pieces() const { return int(CountMesh(*this).pieces); }
 
 void TriangleMesh::Bounds(Vec3* lo, Vec3* hi) const {
   *lo = Vec3::Constant(1e300);

@@ -30,6 +30,8 @@ struct TriangleMesh {
   // For a closed 2-manifold (Validate() empty): the handles summed over the connected pieces,
   // from V - E + F = 2 (pieces - genus) over the vertices that triangles use.
   int Genus() const;
+  // The connected pieces (triangles joined through shared vertices).
+  int Pieces() const;
   // Area-weighted vertex normals (unit length).
   std::vector<Vec3> VertexNormals() const;
   // Per triangle corner: the area-weighted mean of the face normals of the triangles around

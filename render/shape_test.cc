@@ -55,6 +55,8 @@ TEST(Shape, MeshGenus) {
   for (const auto& t : one.triangles) two.triangles.push_back({t[0] + n, t[1] + n, t[2] + n});
   ASSERT_EQ(two.Validate(), "");
   EXPECT_EQ(two.Genus(), 2);
+  EXPECT_EQ(two.Pieces(), 2);
+  EXPECT_EQ(one.Pieces(), 1);
 }
 
 TEST(Shape, ObjAndPlyMeshes) {

@@ -482,6 +482,30 @@ TEST_F(Cli, RenderAndEdit) {
                 " --resolution 5 --image 16x16 --camera 30,25,12 -o " + P("turned2.png"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(r.output.find("folded"), std::string::npos) << r.output;
+  // Two separate bars in one mesh: rendered, with a note that the polygrid joins them.
+  {
+    std::ifstream in(std::string(TRANSLUME_SOURCE_DIR) + "/samples/bar.obj");
+    std::vector<std::string> v, f;
+    std::string line;
+    while (std::getline(in, line)) (line.rfind("v ", 0) == 0 ? v : f).push_back(line);
+    std::ofstream out(P("two_bars.obj"));
+    for (const auto& l : v) out << l << "\n";
+    for (const auto& l : v) {
+      double x, y, z;
+      std::sscanf(l.c_str(), "v %lf %lf %lf", &x, &y, &z);
+      out << "v " << x << " " << y + 20 << " " << z << "\n";
+    }
+    for (const auto& l : f) out << l << "\n";
+    for (const auto& l : f) {
+      int a, b, c;
+      if (std::sscanf(l.c_str(), "f %d %d %d", &a, &b, &c) == 3)
+        out << "f " << a + int(v.size()) << " " << b + int(v.size()) << " " << c + int(v.size()) << "\n";
+    }
+  }
+  r = Translume("render homogeneous:0.2,0.02 --shape " + P("two_bars.obj") + " --resolution 5 --image 16x16 -o " +
+                P("two.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("has 2 separate surface pieces"), std::string::npos) << r.output;
   ExpectOneLineError(Translume("render homogeneous:0.2,0.02 --shape torus --polycube auto:x -o " + P("x.png")),
                      "auto:");
   ExpectOneLineError(Translume("render homogeneous:0.2,0.02 --shape torus --polycube auto:1 -o " + P("x.png")),

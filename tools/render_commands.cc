@@ -188,6 +188,10 @@ int RunRender(int argc, char** argv) {
     });
     std::printf("render: wrote the polycube to %s\n", save_polycube.c_str());
   }
+  if (const int pieces = shape->mesh().Pieces(); pieces > 1)
+    std::printf("render: note: %s has %d separate surface pieces, but a polygrid is one connected solid: light "
+                "diffuses through it between them (across a gap, or through a cavity one encloses); render separate "
+                "objects one mesh at a time\n", shape->name().c_str(), pieces);
   if (const int mesh_genus = shape->mesh().Genus(), pc_genus = pc.Genus(); pc_genus >= 0 && pc_genus != mesh_genus)
     std::printf("render: note: %s has genus %d but the polycube %s has genus %d: the polygrid's holes are not the "
                 "shape's, so light diffuses across a hole or stops at one that is not there; give a polycube with "
