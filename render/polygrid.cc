@@ -925,6 +925,47 @@ Polycube ResolvePolycube(const std::string& spec, const Shape& shape, const std:
   return pc;
 }
 
+std::vector<std::string> PolycubeNotes(const Shape& shape, const Polycube& polycube, const std::string& label) {
+  std::vector<std::string> notes;
+  if (const int pieces = shape.mesh().Pieces(); pieces > 1)
+    notes.push_back(fmt::format("{} has {} separate surface pieces, but a polygrid is one connected solid: light "
+                                "diffuses through it between them (across a gap, or through a cavity one encloses); "
+                                "render separate objects one mesh at a time", shape.name(), pieces));
+  if (const int mesh_genus = shape.mesh().Genus(), pc_genus = polycube.Genus(); pc_genus >= 0 && pc_genus != mesh_genus)
+    notes.push_back(fmt::format("{} has genus {} but the polycube {} has genus {}: the polygrid's holes are not the "
+                                "shape's, so light diffuses across a hole or stops at one that is not there; give a "
+                                "polycube with as many holes (--polycube, docs/render.md \"Polycube files\")",
+                                shape.name(), mesh_genus, label, pc_genus));
+  return notes;
+}
+
+std::vector<std::string> PolygridNotes(const std::vector<Polygrid>& levels, int levels_asked,
+                                       const std::string& label, const std::string& shape_name) {
+  TL_CHECK(!levels.empty());
+  std::vector<std::string> notes;
+  const Polygrid& finest = levels[0];
+  if (int(levels.size()) < levels_asked)
+    notes.push_back(fmt::format("--resolution {} allows {} level{}, not the {} asked for (a coarser level needs "
+                                "resolution - 1 even and at least 3 nodes per cube edge: 9, 17 and 33 allow 3 or more)",
+                                finest.resolution, levels.size(), levels.size() == 1 ? "" : "s", levels_asked));
+  for (size_t l = 0; l < levels.size(); ++l)
+    if (!levels[l].placement_note.empty())
+      notes.push_back(fmt::format("level {} ({}^3): {}", l, levels[l].resolution, levels[l].placement_note));
+  if (finest.inverted_cells > finest.num_interior / 200)
+    notes.push_back(fmt::format("{} of the polygrid's {} interior cells are folded (inverted): the polycube {} may "
+                                "not follow the shape of {} well (give one whose cubes follow its parts: --polycube "
+                                "FILE or auto, docs/render.md \"Polycube files\"), or the resolution is too coarse "
+                                "for its curvature (raise --resolution)", finest.inverted_cells, finest.num_interior,
+                                label, shape_name));
+  if (finest.crowded_boundary_nodes > finest.num_boundary() / 1000)
+    notes.push_back(fmt::format("{} of the polygrid's {} boundary nodes crowd together (each stands for under 1 % of "
+                                "the mean node's share of the surface): the polycube does not follow sharp edges or "
+                                "corners of {}, and the light there is approximate (a polycube whose cube edges lie "
+                                "along them does better; docs/render.md \"Polycube files\")",
+                                finest.crowded_boundary_nodes, finest.num_boundary(), shape_name));
+  return notes;
+}
+
 std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Shape& shape,
                                              const PolygridOptions& options, int max_levels) {
   std::vector<Polygrid> levels;

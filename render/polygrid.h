@@ -174,6 +174,17 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, co
 Polycube ResolvePolycube(const std::string& spec, const Shape& shape, const std::string& builtin,
                          std::string* label, const ReportLine& log);
 
+// What a user should know about laying `polycube` (named `label` in messages) over `shape`,
+// one sentence each: a mesh of several separate pieces (one polygrid joins them), a genus
+// other than the mesh's.
+std::vector<std::string> PolycubeNotes(const Shape& shape, const Polycube& polycube, const std::string& label);
+// And about the hierarchy built from it (finest first; `levels_asked` levels were asked for):
+// fewer levels than asked, each level's placement note, more than 0.5 % of the finest level's
+// interior cells folded (Polygrid::inverted_cells), more than 0.1 % of its boundary nodes
+// crowded (Polygrid::crowded_boundary_nodes).
+std::vector<std::string> PolygridNotes(const std::vector<Polygrid>& levels, int levels_asked,
+                                       const std::string& label, const std::string& shape_name);
+
 // Levels for the hierarchical scheme (Section 5.3), finest first: resolution n, (n-1)/2+1, ...
 // while (n-1) is even and the coarser resolution is >= 3, at most max_levels.
 std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Shape& shape,

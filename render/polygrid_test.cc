@@ -529,6 +529,31 @@ TEST(Polygrid, VoxelPolycubeOfTheRoundedBunnyIsItsPolycube) {
   }
 }
 
+// The notes translume render prints: none for a sphere at 9^3 (3 levels); a resolution that
+// allows fewer levels than asked is named; a mesh of two separate pieces and a polycube of
+// another genus are named.
+TEST(Polygrid, NotesNameWhatTheUserShouldKnow) {
+  const auto sphere = MakeBuiltinShape("sphere", 20, 24);
+  PolygridOptions o;
+  o.resolution = 9;
+  EXPECT_TRUE(PolygridNotes(BuildPolygridHierarchy(BuiltinPolycube("sphere"), *sphere, o, 3), 3, "x", "s").empty());
+  EXPECT_TRUE(PolycubeNotes(*sphere, BuiltinPolycube("sphere"), "x").empty());
+  o.resolution = 6;
+  const auto notes = PolygridNotes(BuildPolygridHierarchy(BuiltinPolycube("sphere"), *sphere, o, 3), 3, "x", "s");
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_NE(notes[0].find("--resolution 6 allows 1 level, not the 3"), std::string::npos) << notes[0];
+  TriangleMesh two = sphere->mesh();
+  const int n = int(two.vertices.size());
+  for (int v = 0; v < n; ++v) two.vertices.push_back(two.vertices[size_t(v)] + Vec3(30, 0, 0));
+  for (int t = 0, m = int(two.triangles.size()); t < m; ++t)
+    two.triangles.push_back({two.triangles[size_t(t)][0] + n, two.triangles[size_t(t)][1] + n, two.triangles[size_t(t)][2] + n});
+  const auto pair = MakeMeshShape(two, "two.obj", 0);
+  const auto pn = PolycubeNotes(*pair, BuiltinPolycube("torus"), "ring");
+  ASSERT_EQ(pn.size(), 2u);
+  EXPECT_NE(pn[0].find("two.obj has 2 separate surface pieces"), std::string::npos) << pn[0];
+  EXPECT_NE(pn[1].find("two.obj has genus 0 but the polycube ring has genus 1"), std::string::npos) << pn[1];
+}
+
 // `shape`'s mesh turned by q (a shape of its own).
 std::unique_ptr<Shape> Turned(const Shape& shape, const Eigen::Matrix3d& q) {
   TriangleMesh mesh = shape.mesh();

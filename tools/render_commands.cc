@@ -188,15 +188,8 @@ int RunRender(int argc, char** argv) {
     });
     std::printf("render: wrote the polycube to %s\n", save_polycube.c_str());
   }
-  if (const int pieces = shape->mesh().Pieces(); pieces > 1)
-    std::printf("render: note: %s has %d separate surface pieces, but a polygrid is one connected solid: light "
-                "diffuses through it between them (across a gap, or through a cavity one encloses); render separate "
-                "objects one mesh at a time\n", shape->name().c_str(), pieces);
-  if (const int mesh_genus = shape->mesh().Genus(), pc_genus = pc.Genus(); pc_genus >= 0 && pc_genus != mesh_genus)
-    std::printf("render: note: %s has genus %d but the polycube %s has genus %d: the polygrid's holes are not the "
-                "shape's, so light diffuses across a hole or stops at one that is not there; give a polycube with "
-                "as many holes (--polycube, docs/render.md \"Polycube files\")\n", shape->name().c_str(), mesh_genus,
-                polycube_label.c_str(), pc_genus);
+  for (const std::string& note : PolycubeNotes(*shape, pc, polycube_label))
+    std::printf("render: note: %s\n", note.c_str());
   PolygridOptions po;
   po.resolution = resolution;
   po.first_layer_fraction = first_layer;
@@ -226,25 +219,8 @@ int RunRender(int argc, char** argv) {
               "Laplacian weights), %zu levels, built in %.2f s\n", material.c_str(), shape->name().c_str(),
               pc.cubes.size(), resolution, (long long)grids[0].size(), (long long)grids[0].num_boundary(),
               (long long)grids[0].fallback_weights, grids.size(), build_s);
-  if (int(grids.size()) < levels)
-    std::printf("render: note: --resolution %d allows %zu level%s, not the %d asked for (a coarser level needs "
-                "resolution - 1 even and at least 3 nodes per cube edge: 9, 17 and 33 allow 3 or more)\n",
-                resolution, grids.size(), grids.size() == 1 ? "" : "s", levels);
-  for (size_t l = 0; l < grids.size(); ++l)
-    if (!grids[l].placement_note.empty())
-      std::printf("render: note: level %zu (%d^3): %s\n", l, grids[l].resolution, grids[l].placement_note.c_str());
-  if (grids[0].inverted_cells > grids[0].num_interior / 200)
-    std::printf("render: note: %lld of the polygrid's %lld interior cells are folded (inverted): the polycube %s "
-                "may not follow the shape of %s well (give one whose cubes follow its parts: --polycube FILE or "
-                "auto, docs/render.md \"Polycube files\"), or the resolution is too coarse for its curvature "
-                "(raise --resolution)\n", (long long)grids[0].inverted_cells,
-                (long long)grids[0].num_interior, polycube_label.c_str(), shape->name().c_str());
-  if (grids[0].crowded_boundary_nodes > grids[0].num_boundary() / 1000)
-    std::printf("render: note: %lld of the polygrid's %lld boundary nodes crowd together (each stands for under 1 %% "
-                "of the mean node's share of the surface): the polycube does not follow sharp edges or corners of %s, "
-                "and the light there is approximate (a polycube whose cube edges lie along them does better; "
-                "docs/render.md \"Polycube files\")\n", (long long)grids[0].crowded_boundary_nodes,
-                (long long)grids[0].num_boundary(), shape->name().c_str());
+  for (const std::string& note : PolygridNotes(grids, levels, polycube_label, shape->name()))
+    std::printf("render: note: %s\n", note.c_str());
   if (ro.model == "dipole") {
     bool homogeneous = true;
     for (int ch = 0; ch < 3; ++ch)
