@@ -16,6 +16,15 @@
 
 namespace translume {
 
+namespace {
+
+// The largest deviation of axes * axes^T from the identity (0 for a rotation or a reflection).
+double OffOrthonormal(const Eigen::Matrix3d& axes) {
+  return (axes * axes.transpose() - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+}
+
+}  // namespace
+
 std::array<int, 3> Polycube::Extent() const {
   std::array<int, 3> e = {0, 0, 0};
   for (const auto& c : cubes)
@@ -29,8 +38,7 @@ bool Polycube::Has(int x, int y, int z) const {
 
 std::string Polycube::Validate() const {
   if (cubes.empty()) return "a polycube needs at least one cube";
-  if (!axes.allFinite() || (axes * axes.transpose() - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-6 ||
-      axes.determinant() < 0)
+  if (!axes.allFinite() || OffOrthonormal(axes) > 1e-6 || axes.determinant() < 0)
     return "the axes must be a rotation (orthonormal rows, right-handed)";
   std::set<std::array<int, 3>> seen;
   for (const auto& c : cubes) {
@@ -163,7 +171,7 @@ Polycube ParsePolycube(const std::string& text, const std::string& what) {
       // Three unit vectors, perpendicular and right-handed, to three digits (hand-written
       // cosines); then made orthonormal (the nearest rotation) unless they are to round-off
       // (FormatPolycube's 17 digits read back as written).
-      const double off = (p.axes * p.axes.transpose() - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+      const double off = OffOrthonormal(p.axes);
       if (off > 1e-3)
         throw InputError(at + "the axes must be unit vectors at right angles, to three digits (their dot "
                          "products are off by " + fmt::format("{:.3g}", off) + ")");

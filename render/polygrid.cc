@@ -102,16 +102,29 @@ std::array<double, 2> Polygrid::SurfaceUV(int64_t b) const {
   return {double(g[axis == 0 ? 1 : 0]), double(g[axis == 2 ? 1 : 2])};
 }
 
+namespace {
+
+Polycube WithoutAxes(Polycube polycube) {
+  polycube.axes.setIdentity();
+  return polycube;
+}
+
+// A polygrid built in the frame of a polycube with `axes` (coordinates axes * p), turned back
+// to the shape's coordinates: positions and normals by axes^T (the rest is invariant).
+void TurnBack(const Eigen::Matrix3d& axes, Polygrid* pg) {
+  for (Vec3& x : pg->position) x = axes.transpose() * x;
+  for (Vec3& n : pg->normal) n = axes.transpose() * n;
+}
+
+}  // namespace
+
 Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
                        const PolygridOptions& options) {
   if (std::string err = options.Validate(); !err.empty()) throw InputError("polygrid: " + err);
   if (std::string err = polycube.Validate(); !err.empty()) throw InputError("polycube: " + err);
   if (polycube.axes != Eigen::Matrix3d::Identity()) {  // built in the polycube's frame, turned back
-    Polycube plain = polycube;
-    plain.axes.setIdentity();
-    Polygrid pg = BuildPolygrid(plain, *MakeRotatedShape(shape, polycube.axes), options);
-    for (Vec3& x : pg.position) x = polycube.axes.transpose() * x;
-    for (Vec3& n : pg.normal) n = polycube.axes.transpose() * n;
+    Polygrid pg = BuildPolygrid(WithoutAxes(polycube), *MakeRotatedShape(shape, polycube.axes), options);
+    TurnBack(polycube.axes, &pg);
     return pg;
   }
   Polygrid pg;
@@ -855,17 +868,17 @@ Polycube AutoPolycube(const Shape& shape, const AutoPolycubeOptions& options, co
     Polygrid pg;
     try {
       pc = VoxelPolycube(framed, n, &note);
-      pc.axes = axes;
     } catch (const InputError&) {
       report(fmt::format("  N = {}: no cell's centre inside\n", n));
       continue;
     }
     try {
-      pg = BuildPolygrid(pc, shape, po);
+      pg = BuildPolygrid(pc, framed, po);  // in the frame: the counts below do not turn
     } catch (const InputError& e) {
       report(fmt::format("  N = {}: {}\n", n, e.what()));
       continue;
     }
+    pc.axes = axes;
     const int genus = pc.Genus();
     const double inverted = double(pg.inverted_cells) / double(pg.num_interior);
     // The cubes' shape once stretched onto the shape's box (the polycube from its own extent).
@@ -968,6 +981,12 @@ std::vector<std::string> PolygridNotes(const std::vector<Polygrid>& levels, int 
 
 std::vector<Polygrid> BuildPolygridHierarchy(const Polycube& polycube, const Shape& shape,
                                              const PolygridOptions& options, int max_levels) {
+  if (polycube.axes != Eigen::Matrix3d::Identity()) {  // one turned shape for every level
+    std::vector<Polygrid> levels =
+        BuildPolygridHierarchy(WithoutAxes(polycube), *MakeRotatedShape(shape, polycube.axes), options, max_levels);
+    for (Polygrid& pg : levels) TurnBack(polycube.axes, &pg);
+    return levels;
+  }
   std::vector<Polygrid> levels;
   PolygridOptions o = options;
   while (int(levels.size()) < std::max(1, max_levels)) {

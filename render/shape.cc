@@ -616,9 +616,14 @@ std::unique_ptr<Shape> MakeRotatedShape(const Shape& base, const Eigen::Matrix3d
 
 PolycubeFrameFit FitPolycubeFrame(const TriangleMesh& mesh) {
   constexpr int kBins = 16;
-  std::vector<Vec3> sums(6 * kBins * kBins, Vec3::Zero());
+  std::vector<Vec3> faces;  // area times unit normal
+  double area = 0;
   for (const auto& t : mesh.triangles) {
-    const Vec3 an = 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]);
+    faces.push_back(0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]));
+    area += faces.back().norm();
+  }
+  std::vector<Vec3> sums(6 * kBins * kBins, Vec3::Zero());
+  for (const Vec3& an : faces) {
     const Vec3 size = an.cwiseAbs();
     if (size.maxCoeff() == 0) continue;
     const int a = size.x() >= size.y() && size.x() >= size.z() ? 0 : size.y() >= size.z() ? 1 : 2;
@@ -643,12 +648,6 @@ PolycubeFrameFit FitPolycubeFrame(const TriangleMesh& mesh) {
     return c / sum;
   };
   const auto cost = [&](const Eigen::Matrix3d& r) { return alignment(m, total, r); };
-  std::vector<Vec3> faces;
-  double area = 0;
-  for (const auto& t : mesh.triangles) {
-    faces.push_back(0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]));
-    area += faces.back().norm();
-  }
   const auto exact = [&](const Eigen::Matrix3d& r) { return alignment(faces, area, r); };
   // Halving-step rotations about the axes from r (cost c) while a step of `least` still helps.
   const auto refine = [](const auto& f, Eigen::Matrix3d* r, double* c, double step, double least) {
