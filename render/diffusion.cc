@@ -19,21 +19,24 @@ class CpuHierarchy : public HierarchyRelaxer {
   void Load(std::vector<Level> levels) override {
     L_ = std::move(levels);
     phi_.assign(L_.size(), {});
-    for (size_t l = 0; l < L_.size(); ++l) phi_[l].assign(L_[l].system.size * 3, 0.f);
+    s_.assign(L_.size(), {});
+    for (size_t l = 0; l < L_.size(); ++l) {
+      phi_[l].assign(L_[l].size * 3, 0.f);
+      s_[l].assign((L_[l].size - L_[l].num_interior) * 3, 0.f);
+    }
   }
   void SetSource(int l, const BoundaryLight& q) override {
-    Level& v = L_[l];
-    const int64_t nb = v.system.size - v.num_interior;
-    for (int64_t b = 0; b < nb; ++b)
-      for (int c = 0; c < 3; ++c)
-        v.system.s[(v.num_interior + b) * 3 + c] = q[c][b] * v.source_coef[b * 3 + c];
+    const Level& v = L_[l];
+    std::vector<float>& s = s_[l];
+    for (int64_t b = 0; b < v.size - v.num_interior; ++b)
+      for (int c = 0; c < 3; ++c) s[b * 3 + c] = q[c][b] * v.source_coef[b * 3 + c];
   }
   void Zero(int l) override { std::fill(phi_[l].begin(), phi_[l].end(), 0.f); }
   void Prolong(int l) override {
     const Prolongation& P = L_[l].prolong;
     const std::vector<float>& coarse = phi_[l + 1];
     std::vector<float>& fine = phi_[l];
-    const int64_t n = L_[l].system.size;
+    const int64_t n = L_[l].size;
 #pragma omp parallel for schedule(static) if (n > 50000)
     for (int64_t f = 0; f < n; ++f)
       for (int c = 0; c < 3; ++c) {
@@ -43,22 +46,23 @@ class CpuHierarchy : public HierarchyRelaxer {
       }
   }
   void Relax(int l, bool adaptive, int iterations) override {
-    const JacobiSystem& S = L_[l].system;
+    const Level& v = L_[l];
     std::vector<float>& phi = phi_[l];
     std::vector<float> next = phi;
-    const int64_t na = adaptive ? int64_t(L_[l].active.size()) : S.size;
-    const int32_t* active = L_[l].active.data();
+    const int64_t na = adaptive ? int64_t(v.active.size()) : v.size, ni = v.num_interior;
+    const int32_t* active = v.active.data();
+    const float* s = s_[l].data();
     for (int it = 0; it < iterations; ++it) {
       const float* p = phi.data();
 #pragma omp parallel for schedule(static) if (na > 50000)
-      for (int64_t a = 0; a < na; ++a) {
-        const int64_t n = adaptive ? active[a] : a;
-        const int32_t* nb = &S.nb[n * 6];
+      for (int64_t i = 0; i < na; ++i) {
+        const int64_t n = adaptive ? active[i] : i;
+        const int32_t* nb = &v.nb[n * 6];
         for (int c = 0; c < 3; ++c) {
-          const float* w = &S.w[(n * 3 + c) * 6];
-          float acc = S.s[n * 3 + c];
-          for (int k = 0; k < 6; ++k) acc += w[k] * p[nb[k] * 3 + c];
-          next[n * 3 + c] = acc * S.inv_diag[n * 3 + c];
+          const float* a = &v.a[(n * 3 + c) * 6];
+          float acc = n < ni ? 0.f : s[(n - ni) * 3 + c];
+          for (int k = 0; k < 6; ++k) acc += a[k] * p[nb[k] * 3 + c];
+          next[n * 3 + c] = acc;
         }
       }
       phi.swap(next);  // both buffers agree outside the updated nodes
@@ -71,7 +75,7 @@ class CpuHierarchy : public HierarchyRelaxer {
 
  private:
   std::vector<Level> L_;
-  std::vector<std::vector<float>> phi_;
+  std::vector<std::vector<float>> phi_, s_;  // s_: the boundary rows' sources, [b * 3 + c]
 };
 
 }  // namespace
@@ -156,6 +160,25 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
   return S;
 }
 
+HierarchyRelaxer::Level RelaxationRows(const Polygrid& pg, const NodeMaterial& m, double C) {
+  BoundaryLight none;
+  for (int c = 0; c < 3; ++c) none[c].assign(pg.num_boundary(), 0.f);
+  JacobiSystem S = BuildJacobiSystem(pg, m, C, none);
+  const std::vector<double> coef = BoundarySourceCoefficients(pg, m);
+  HierarchyRelaxer::Level v;
+  v.size = S.size;
+  v.num_interior = pg.num_interior;
+  v.nb = std::move(S.nb);
+  v.a = std::move(S.w);
+  for (int64_t n = 0; n < v.size; ++n)
+    for (int c = 0; c < 3; ++c)
+      for (int k = 0; k < 6; ++k) v.a[(n * 3 + c) * 6 + k] *= S.inv_diag[n * 3 + c];
+  v.source_coef.resize(coef.size());
+  for (size_t i = 0; i < coef.size(); ++i)
+    v.source_coef[i] = float(coef[i] * S.inv_diag[v.num_interior * 3 + i]);
+  return v;
+}
+
 BoundaryLight BoundaryRadiance(const Polygrid& pg, const NodeMaterial& m, const BoundaryLight& q,
                                const std::vector<float>& phi) {
   BoundaryLight L;
@@ -227,7 +250,6 @@ PolygridDiffusion::PolygridDiffusion(const std::vector<Polygrid>* levels,
     return i < int(v.size()) ? v[i] : v.back();
   };
   std::vector<HierarchyRelaxer::Level> hl(nl);
-  BoundaryLight none;
   depth_.assign(nl, -1);
   iterations_.assign(nl, 0);
   for (int l = 0; l < nl; ++l) {
@@ -235,11 +257,7 @@ PolygridDiffusion::PolygridDiffusion(const std::vector<Polygrid>* levels,
     depth_[l] = step == 0 ? -1 : at(options_.depth, step, -1);
     iterations_[l] = at(options_.iterations, step, 100);
     const Polygrid& pg = L[l];
-    for (int c = 0; c < 3; ++c) none[c].assign(pg.num_boundary(), 0.f);
-    hl[l].system = BuildJacobiSystem(pg, materials_[l], C_, none);
-    hl[l].num_interior = pg.num_interior;
-    const std::vector<double> coef = BoundarySourceCoefficients(pg, materials_[l]);
-    hl[l].source_coef.assign(coef.begin(), coef.end());
+    hl[l] = RelaxationRows(pg, materials_[l], C_);
     for (int64_t n = 0; n < pg.size(); ++n)
       if (depth_[l] < 0 || pg.layer[n] <= depth_[l]) hl[l].active.push_back(int32_t(n));
     if (l + 1 < nl) hl[l].prolong = MakeProlongation(L[l + 1], pg);

@@ -74,17 +74,24 @@ enum class DiffusionBackend { kCpu, kGl };
 DiffusionBackend ParseDiffusionBackend(const std::string& text);
 
 // The relaxation of a whole hierarchy on one backend, with the same arithmetic (float): the
-// systems, prolongations and fluence stay where the backend keeps them (gl: GPU buffers), so
-// per frame only the boundary light goes in and the finest level's fluence comes out. Levels
-// are numbered finest first.
+// rows, prolongations and fluence stay where the backend keeps them (gl: GPU buffers), so per
+// frame only the boundary light goes in and the finest level's fluence comes out. Levels are
+// numbered finest first. Each step is JacobiSystem's update with its rows divided by their
+// diagonal beforehand (RelaxationRows), and the source kept for the boundary rows only (the
+// interior rows' is 0):
+//   phi'_n <- sum_k a[n][k] phi'_{nb[n][k]} + (n boundary ? q_b g_b : 0)
+// so a step reads 6 neighbour indices, 18 weights and 3 values per node (and the active list
+// only when adaptive): nothing per interior node beyond the stencil.
 class HierarchyRelaxer {
  public:
   struct Level {
-    JacobiSystem system;            // its s is replaced by SetSource
-    int64_t num_interior = 0;       // the boundary rows are [num_interior, system.size)
-    std::vector<float> source_coef;  // s[(num_interior + b) * 3 + c] = q[c][b] source_coef[b * 3 + c]
-    std::vector<int32_t> active;    // the nodes that adaptive relaxation updates
-    Prolongation prolong;           // from the next coarser level (empty on the coarsest)
+    int64_t size = 0;
+    int64_t num_interior = 0;        // the boundary rows are [num_interior, size)
+    std::vector<int32_t> nb;         // JacobiSystem::nb
+    std::vector<float> a;            // a[(n * 3 + c) * 6 + k] = w * inv_diag (JacobiSystem's)
+    std::vector<float> source_coef;  // g[b * 3 + c]: boundary row b's source per unit q, over its diagonal
+    std::vector<int32_t> active;     // the nodes that adaptive relaxation updates
+    Prolongation prolong;            // from the next coarser level (empty on the coarsest)
   };
   virtual ~HierarchyRelaxer() = default;
   virtual void Load(std::vector<Level> levels) = 0;
@@ -103,6 +110,10 @@ class HierarchyRelaxer {
 // The factor of q in the boundary rows' source (see JacobiSystem): kappa_b kappa_j d, per
 // boundary node and channel, [b * 3 + c].
 std::vector<double> BoundarySourceCoefficients(const Polygrid& pg, const NodeMaterial& m);
+
+// A level's relaxation rows (HierarchyRelaxer::Level: nb, a, source_coef; size and
+// num_interior) from the polygrid and its material.
+HierarchyRelaxer::Level RelaxationRows(const Polygrid& pg, const NodeMaterial& m, double C);
 
 // The hierarchical, adaptive scheme of Section 5.3.
 struct DiffusionOptions {

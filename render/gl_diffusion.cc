@@ -77,9 +77,9 @@ void Dispatch(std::initializer_list<const Ssbo*> buffers, int64_t threads) {
 
 namespace {
 
-// Per level: the system (neighbours, weights, inverse diagonal, source), the boundary rows'
-// source coefficients and q, the active and all-node lists, the prolongation from the coarser
-// level, and two fluence buffers (the current one is phi[cur]).
+// Per level: the rows (neighbours, weights over the diagonal), the boundary rows' source
+// coefficients, q and sources, the active list, the prolongation from the coarser level, and
+// two fluence buffers (the current one is phi[cur]).
 class GlHierarchy : public HierarchyRelaxer {
  public:
   GlHierarchy() {
@@ -93,19 +93,16 @@ class GlHierarchy : public HierarchyRelaxer {
     for (size_t l = 0; l < levels.size(); ++l) {
       const Level& v = levels[l];
       Device& d = dev_[l];
-      d.size = v.system.size;
+      d.size = v.size;
       d.num_interior = v.num_interior;
-      d.nb.Set(v.system.nb);
-      d.w.Set(v.system.w);
-      d.s.Set(v.system.s);
-      d.inv_diag.Set(v.system.inv_diag);
+      d.nb.Set(v.nb);
+      d.a.Set(v.a);
       d.coef.Set(v.source_coef);
       d.q.Set(nullptr, v.source_coef.size() * sizeof(float));
+      d.s.Set(nullptr, v.source_coef.size() * sizeof(float));
+      d.s.Zero();
       d.active.Set(v.active);
       d.num_active = int64_t(v.active.size());
-      std::vector<int32_t> all(d.size);
-      for (int64_t n = 0; n < d.size; ++n) all[n] = int32_t(n);
-      d.all.Set(all);
       d.p_start.Set(v.prolong.start);
       d.p_index.Set(v.prolong.index);
       d.p_weight.Set(v.prolong.weight);
@@ -121,7 +118,6 @@ class GlHierarchy : public HierarchyRelaxer {
     d.q.Set(host_q_);
     api.UseProgram(source_);
     api.Uniform1i(0, int(nb * 3));
-    api.Uniform1i(1, int(d.num_interior * 3));
     render_gl::Dispatch({&d.q, &d.coef, &d.s}, nb * 3);
   }
   void Zero(int l) override {
@@ -141,9 +137,12 @@ class GlHierarchy : public HierarchyRelaxer {
     if (count == 0) return;
     api.UseProgram(jacobi_);
     api.Uniform1i(0, int(count));
-    const Ssbo& list = adaptive ? d.active : d.all;
+    api.Uniform1i(1, int(d.num_interior));
+    api.Uniform1i(2, adaptive ? 1 : 0);
+    // Without the list the shader never reads binding 3; the rows stand in for it.
+    const Ssbo& list = adaptive ? d.active : d.nb;
     for (int it = 0; it < iterations; ++it) {
-      render_gl::Dispatch({&d.nb, &d.w, &d.s, &d.inv_diag, &list, &d.phi[d.cur], &d.phi[1 - d.cur]}, count);
+      render_gl::Dispatch({&d.nb, &d.a, &d.s, &list, &d.phi[d.cur], &d.phi[1 - d.cur]}, count);
       d.cur = 1 - d.cur;  // both buffers agree outside the updated nodes
     }
   }
@@ -158,7 +157,7 @@ class GlHierarchy : public HierarchyRelaxer {
   struct Device {
     int64_t size = 0, num_interior = 0, num_active = 0;
     int cur = 0;
-    Ssbo nb, w, s, inv_diag, coef, q, active, all, p_start, p_index, p_weight, phi[2];
+    Ssbo nb, a, coef, q, s, active, p_start, p_index, p_weight, phi[2];
   };
   GLuint jacobi_ = 0, source_ = 0, prolong_ = 0;
   std::vector<Device> dev_;

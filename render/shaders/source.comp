@@ -1,16 +1,15 @@
 // SPDX-License-Identifier: MIT
-// The boundary rows' source of the polygrid system (render/diffusion.h, JacobiSystem):
-//   s[first + i] = q[i] * coef[i],  i = b * 3 + c < count  (q, coef: per boundary node and channel)
+// The boundary rows' sources of the polygrid relaxation (render/diffusion.h, HierarchyRelaxer):
+//   s[i] = q[i] * coef[i],  i = b * 3 + c < count  (per boundary node and channel)
 #version 430
 layout(local_size_x = 256) in;
 layout(std430, binding = 0) readonly buffer Q { float q[]; };
 layout(std430, binding = 1) readonly buffer Coef { float coef[]; };
 layout(std430, binding = 2) writeonly buffer S { float s[]; };
 layout(location = 0) uniform int count;
-layout(location = 1) uniform int first;
 
 void main() {
   int i = int(gl_WorkGroupID.y * gl_NumWorkGroups.x * 256u + gl_GlobalInvocationID.x);
   if (i >= count) return;
-  s[first + i] = q[i] * coef[i];
+  s[i] = q[i] * coef[i];
 }
