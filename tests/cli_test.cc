@@ -412,6 +412,13 @@ TEST_F(Cli, RenderAndEdit) {
   r = Translume("render homogeneous:0.2,0.02 --shape torus --resolution 5 --model dipole --image 16x16 -o " + P("t.exr"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(r.output.find("genus"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("no light"), std::string::npos) << r.output;
+  // A point light at the sphere's centre lights no surface: said, not a silent black image.
+  r = Translume("render homogeneous:0.2,0.02 --shape sphere --resolution 5 --light point:0,0,0 --image 16x16 -o " +
+                P("dark.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("no light reaches the surface"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("inside the object"), std::string::npos) << r.output;
   // A polycube with a hole on a shape without one renders, with a note naming both genera.
   std::ofstream(P("ring.cubes")) << "0 0 0\n1 0 0\n2 0 0\n0 1 0\n2 1 0\n0 2 0\n1 2 0\n2 2 0\n";
   r = Translume("render homogeneous:0.2,0.02 --shape sphere --polycube " + P("ring.cubes") +

@@ -244,6 +244,14 @@ int RunRender(int argc, char** argv) {
       double sum = 0;
       for (float v : R) sum += v;
       std::printf("boundary radiance (red): min %.3g, mean %.3g, max %.3g\n", *lo, sum / R.size(), *hi);
+      float brightest = 0;
+      for (const auto& channel : renderer.boundary_radiance())
+        for (float v : channel) brightest = std::max(brightest, v);
+      if (brightest == 0)
+        std::printf("render: note: no light reaches the surface, so the object renders black%s\n",
+                    L.kind == RenderLight::Kind::kPoint         ? " (is the point light inside the object?)"
+                    : L.kind == RenderLight::Kind::kEnvironment ? " (is the environment map black?)"
+                                                                : "");
     }
     std::printf("frame %d: incident %.1f ms, diffusion %.1f ms, shading %.1f ms (%.2f fps) -> %s\n", f,
                 1e3 * t.incident, 1e3 * t.diffusion, 1e3 * t.shading, 1 / frame_s, path.c_str());
