@@ -80,6 +80,9 @@ cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds, bool* grey) 
     type = OIIO::TypeDesc::UINT16;
   }
   const int nch = spec.nchannels;
+  if (spec.depth > 1)
+    throw CalibError(fmt::format("{}: a volume ({}x{}x{} {}), not a photo", path, spec.width, spec.height,
+                                 spec.depth, in->format_name()));
   if (nch < 1 || spec.width <= 0 || spec.height <= 0)
     throw CalibError(path + ": image has no pixels");
   cv::Mat raw(spec.height, spec.width, CV_MAKETYPE(depth, std::min(nch, 4)));

@@ -2,6 +2,8 @@
 #include "solver/grid.h"
 
 #include <charconv>
+#include <cmath>
+#include <fmt/format.h>
 #include <vector>
 
 #include "solver/status.h"
@@ -29,6 +31,11 @@ GridShape ParseGridShape(const std::string& text, const std::string& what) {
     if (v < 2) throw InputError(what + ": every grid dimension must be at least 2 nodes, got '" + text + "'");
   }
   return {values[0], values[1], values[2]};
+}
+
+std::string SpacingProblem(double spacing_mm) {
+  if (std::isfinite(spacing_mm) && spacing_mm >= kMinSpacingMm && spacing_mm <= kMaxSpacingMm) return "";
+  return fmt::format("must be within {:g}..{:g} mm, got {:g}", kMinSpacingMm, kMaxSpacingMm, spacing_mm);
 }
 
 Setup ParseSetup(const std::string& text, const char* flag) {

@@ -22,6 +22,13 @@ struct GridShape {
   }
 };
 
+// The node spacings h accepted anywhere (mm): from a micrometre to a metre. Outside that range
+// a sample's grid, its memory estimate or the solver's matrices overflow or underflow.
+inline constexpr double kMinSpacingMm = 1e-3, kMaxSpacingMm = 1e3;
+// "" if spacing_mm is a finite spacing within [kMinSpacingMm, kMaxSpacingMm], else the problem
+// ("must be within 0.001..1000 mm, got 1e-50").
+std::string SpacingProblem(double spacing_mm);
+
 // Parses "NXxNYxNZ" (e.g. "130x53x37"); throws InputError naming `what` on bad input.
 GridShape ParseGridShape(const std::string& text, const std::string& what);
 

@@ -58,6 +58,11 @@ Image ReadImage(const std::string& path) {
     throw InputError(fmt::format("{}: cannot read image: {}", path, FirstLine(OIIO::geterror())));
   }
   const OIIO::ImageSpec& spec = in->spec();
+  if (spec.depth > 1)
+    throw InputError(fmt::format("{}: a volume ({}x{}x{} {}), not a 2-D image", path, spec.width, spec.height,
+                                 spec.depth, in->format_name()));
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
+    throw InputError(fmt::format("{}: the image has no pixels", path));
   Image img;
   img.width = spec.width;
   img.height = spec.height;
