@@ -31,10 +31,21 @@ std::vector<std::vector<float>> Masks(const Dataset& d) {
   return w;
 }
 
-void CheckGrid(const Material& m, const Dataset& d, const char* what) {
+bool Near(double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(std::abs(a), std::abs(b)); }
+
+// A material is rendered under a dataset's lights on the dataset's terms: the same grid,
+// spacing and boundary parameter C (a material of another spacing or C would be compared with
+// data it cannot reproduce, and its error would say nothing).
+void CheckMatches(const Material& m, const Dataset& d, const char* what) {
   if (!(m.shape == d.shape))
     throw InputError(fmt::format("{}: material grid {} differs from the dataset grid {}", what,
                                  m.shape.ToString(), d.shape.ToString()));
+  if (!Near(m.spacing_mm, d.spacing_mm))
+    throw InputError(fmt::format("{}: material spacing {:g} mm differs from the dataset's {:g} mm", what,
+                                 m.spacing_mm, d.spacing_mm));
+  if (!Near(m.C, d.C))
+    throw InputError(fmt::format("{}: material C = {:g} (eta {:g}) differs from the dataset's C = {:g}", what,
+                                 m.C, m.eta, d.C));
 }
 
 }  // namespace
@@ -78,13 +89,19 @@ void LayerErrors(const Material& rec, const Material& truth, std::vector<double>
 EvaluationReport EvaluateRecovery(const Material& rec, const Material* truth,
                                   const Dataset& training, const Dataset& holdout,
                                   const MultigridOptions& mg, Backend backend) {
-  CheckGrid(rec, training, "recovered");
+  CheckMatches(rec, training, "recovered");
+  if (!holdout.conditions.empty() &&
+      (!(holdout.shape == training.shape) || !Near(holdout.spacing_mm, training.spacing_mm) ||
+       !Near(holdout.C, training.C)))
+    throw InputError(fmt::format("holdout/: its grid {}, spacing {:g} mm and C {:g} differ from the training "
+                                 "dataset's {}, {:g} mm and {:g}", holdout.shape.ToString(), holdout.spacing_mm,
+                                 holdout.C, training.shape.ToString(), training.spacing_mm, training.C));
   EvaluationReport r;
   const std::vector<FacePattern> rec_train =
       RenderFrontFace(rec, training.setup, Lights(training), mg, backend);
   r.fit_error = RelightingError(rec_train, Measured(training), Masks(training));
   if (!truth) return r;
-  CheckGrid(*truth, training, "--truth");
+  CheckMatches(*truth, training, "--truth");
   LayerErrors(rec, *truth, &r.kappa_layer_error, &r.mu_layer_error);
   r.training_error = RelightingError(
       rec_train, RenderFrontFace(*truth, training.setup, Lights(training), mg, backend),

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <limits>
 
+#include "solver/material.h"
+#include "solver/multigrid.h"
 #include "solver/status.h"
 
 namespace translume {
@@ -122,6 +124,37 @@ TEST(CompareDatasets, MissingConditionIsNamed) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("condition b"), std::string::npos) << e.what();
   }
+}
+
+// A material is evaluated on the dataset's terms: another spacing or C (or a holdout of another
+// grid, which aborted on a CHECK) is refused with one line naming what differs.
+TEST(EvaluateRecovery, RefusesMaterialsAndHoldoutsOnOtherTerms) {
+  Dataset train = SmallDataset();
+  train.spacing_mm = 0.5;
+  const Material good = Material::Constant(train.shape, 0.5, {1, 1, 1}, {0.01f, 0.01f, 0.01f});
+  train.C = good.C;
+  MultigridOptions mg;
+  auto expect_refused = [&](const Material& rec, const Material* truth, const Dataset& holdout,
+                            const std::vector<std::string>& what) {
+    try {
+      EvaluateRecovery(rec, truth, train, holdout, mg);
+      ADD_FAILURE() << "no error";
+    } catch (const InputError& e) {
+      const std::string msg = e.what();
+      EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+      for (const auto& w : what) EXPECT_NE(msg.find(w), std::string::npos) << msg << " lacks " << w;
+    }
+  };
+  EXPECT_NO_THROW(EvaluateRecovery(good, &good, train, Dataset{}, mg));
+  Material coarse = good;
+  coarse.spacing_mm = 1.0;
+  expect_refused(good, &coarse, Dataset{}, {"--truth", "spacing 1 mm", "0.5 mm"});
+  expect_refused(coarse, nullptr, Dataset{}, {"recovered", "spacing"});
+  Material other_c = Material::Constant(train.shape, 0.5, {1, 1, 1}, {0.01f, 0.01f, 0.01f}, 1.6);
+  expect_refused(good, &other_c, Dataset{}, {"--truth", "C", "eta 1.6"});
+  Dataset holdout = train;
+  holdout.shape = {2, 3, 2};
+  expect_refused(good, &good, holdout, {"holdout", "2x3x2", "3x2x2"});
 }
 
 }  // namespace
