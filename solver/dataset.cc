@@ -91,11 +91,12 @@ Dataset ReadDataset(const std::string& path) {
     throw InputError(fmt::format("{}: field \"grid\" must be [nx, ny, nz], whole numbers >= 2", f));
   d.shape = {grid[0], grid[1], grid[2]};
   d.spacing_mm = Field<double>(j, "spacing_mm", f);
-  if (!(d.spacing_mm > 0) || !std::isfinite(d.spacing_mm))
-    throw InputError(fmt::format("{}: field \"spacing_mm\" must be positive", f));
+  if (const std::string p = SpacingProblem(d.spacing_mm); !p.empty())
+    throw InputError(fmt::format("{}: field \"spacing_mm\" {}", f, p));
   d.C = Field<double>(j, "C", f);
-  if (!(d.C >= 1) || !std::isfinite(d.C))
-    throw InputError(fmt::format("{}: field \"C\" must be a finite number >= 1", f));
+  if (!(d.C >= 1 && d.C <= Dataset::kMaxC))
+    throw InputError(fmt::format("{}: field \"C\" must be within 1..{:g}, got {:g}", f,
+                                 Dataset::kMaxC, d.C));
   const std::string setup = Field<std::string>(j, "setup", f);
   if (setup != "back" && setup != "front")
     throw InputError(fmt::format("{}: field \"setup\" is '{}', expected 'back' or 'front'", f, setup));
@@ -138,6 +139,7 @@ Dataset ReadDataset(const std::string& path) {
     }
     d.conditions.push_back(std::move(cond));
   }
+  if (const std::string err = d.Validate(); !err.empty()) throw InputError(fmt::format("{}: {}", f, err));
   return d;
 }
 

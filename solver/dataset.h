@@ -29,7 +29,11 @@ struct Dataset {
   Setup setup = Setup::kBack;
   std::vector<DatasetCondition> conditions;
 
-  // Empty if usable, else the broken constraint (sizes, finiteness, mask range, q >= 0).
+  // The largest boundary parameter C accepted (C is about 30 for a refractive index of 3).
+  static constexpr double kMaxC = 1000;
+  // Empty if usable, else the broken constraint (sizes, finiteness, mask range, q >= 0, spacing
+  // within SpacingProblem's range, 1 <= C <= kMaxC, light in some condition's q, measured
+  // light in every channel; a single dark condition is allowed).
   std::string Validate() const;
 };
 
@@ -39,9 +43,9 @@ bool IsSafeConditionName(const std::string& name);
 
 // Reads DIR/dataset.json (`path` may name the folder or the json file). Image paths are relative
 // to the folder. Throws InputError naming the file and the field on anything wrong: unknown
-// format, missing or mistyped fields, grid < 2 nodes per axis, non-positive spacing, C < 1, an
-// unknown setup, duplicate condition names, missing images, wrong image size or channel count
-// (q, L: 3 channels; mask: 1), non-finite values, negative q, mask outside [0, 1].
+// format, missing or mistyped fields, grid < 2 nodes per axis, an unknown setup, duplicate
+// condition names, missing images, wrong image size or channel count (q, L: 3 channels; mask:
+// 1), non-finite values, negative q, mask outside [0, 1], and whatever Dataset::Validate refuses.
 Dataset ReadDataset(const std::string& path);
 // The folder of a dataset named as ReadDataset takes it: `path` itself, or the json file's
 // folder ("." for a bare file name).

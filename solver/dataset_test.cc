@@ -91,6 +91,27 @@ TEST_F(DatasetFiles, RejectsBrokenFilesWithOneLineNamingFileAndField) {
   WriteDataset(dir_.string(), d_);
   Rewrite("\"spacing_mm\": 0.5", "\"spacing_mm\": -1");
   ExpectError({"spacing_mm"});
+  // Spacings far outside a sample's made the solver's matrices singular (a CHECK abort).
+  WriteDataset(dir_.string(), d_);
+  Rewrite("\"spacing_mm\": 0.5", "\"spacing_mm\": 1e-50");
+  ExpectError({"dataset.json", "spacing_mm", "0.001..1000 mm", "1e-50"});
+  WriteDataset(dir_.string(), d_);
+  Rewrite("\"C\": 2.6", "\"C\": 1e300");
+  ExpectError({"dataset.json", "\"C\"", "1..1000"});
+  // Data without any light, and a channel without measured light, are named with the file (a
+  // single dark condition is allowed: it adds nothing, but harms nothing).
+  Dataset dark = d_;
+  for (auto& plane : dark.conditions[1].q) std::fill(plane.begin(), plane.end(), 0.f);
+  EXPECT_EQ(dark.Validate(), "");
+  WriteDataset(dir_.string(), d_);
+  for (const char* f : {"q_c0.exr", "q_c1.exr"})
+    WriteImage((dir_ / f).string(), Image{8, 6, 3, std::vector<float>(144, 0.f)});
+  ExpectError({"dataset.json", "no condition has light"});
+  WriteDataset(dir_.string(), d_);
+  std::vector<float> no_green(144, 0.1f);
+  for (size_t p = 1; p < no_green.size(); p += 3) no_green[p] = 0;
+  for (const char* f : {"L_c0.exr", "L_c1.exr"}) WriteImage((dir_ / f).string(), Image{8, 6, 3, no_green});
+  ExpectError({"dataset.json", "channel G has no light"});
   WriteDataset(dir_.string(), d_);
   Rewrite("\"C\": 2.6", "\"C\": \"x\"");
   ExpectError({"\"C\"", "wrong type"});

@@ -7,6 +7,7 @@
 #include <set>
 
 #include "solver/dataset.h"
+#include "solver/grid.h"
 
 namespace translume {
 
@@ -20,8 +21,8 @@ bool IsSafeConditionName(const std::string& s) {
 std::string Dataset::Validate() const {
   if (shape.nx < 2 || shape.ny < 2 || shape.nz < 2)
     return fmt::format("grid {} needs at least 2 nodes per axis", shape.ToString());
-  if (!(spacing_mm > 0) || !std::isfinite(spacing_mm)) return "spacing_mm must be positive";
-  if (!(C >= 1) || !std::isfinite(C)) return "C must be a finite number >= 1";
+  if (const std::string p = SpacingProblem(spacing_mm); !p.empty()) return "spacing_mm " + p;
+  if (!(C >= 1 && C <= kMaxC)) return fmt::format("C must be within 1..{:g}, got {:g}", kMaxC, C);
   if (conditions.empty()) return "there are no conditions";
   std::set<std::string> names;
   for (const auto& c : conditions) {
@@ -42,6 +43,20 @@ std::string Dataset::Validate() const {
     if (c.mask.size() != n) return fmt::format("condition '{}': mask needs {} values", c.name, n);
     for (float m : c.mask)
       if (!(m >= 0 && m <= 1)) return fmt::format("condition '{}': mask outside [0, 1]", c.name);
+  }
+  bool lit = false;
+  for (const auto& c : conditions)
+    for (int ch = 0; ch < 3; ++ch)
+      for (float v : c.q[ch]) lit |= v > 0;
+  if (!lit) return "q is 0 at every node of every condition: no condition has light";
+  // The fit compares L with the model where the mask is > 0: each channel needs light there.
+  for (int ch = 0; ch < 3; ++ch) {
+    double sum = 0;
+    for (const auto& c : conditions)
+      for (size_t p = 0; p < c.mask.size(); ++p) sum += double(c.mask[p]) * std::abs(c.L[ch][p]);
+    if (!(sum > 0))
+      return fmt::format("channel {} has no light in any measured pixel (L is 0 wherever the mask is > 0)",
+                         "RGB"[ch]);
   }
   return "";
 }

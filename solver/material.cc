@@ -29,8 +29,7 @@ Material Material::Constant(const GridShape& shape, double spacing_mm,
 std::string Material::Validate() const {
   if (shape.nx < 2 || shape.ny < 2 || shape.nz < 2)
     return fmt::format("grid {} has fewer than 2 nodes along an axis", shape.ToString());
-  if (!(spacing_mm > 0) || !std::isfinite(spacing_mm))
-    return fmt::format("spacing {} mm is not a positive number", spacing_mm);
+  if (const std::string p = SpacingProblem(spacing_mm); !p.empty()) return "spacing " + p;
   if (!(C >= 1) || !std::isfinite(C)) return fmt::format("C = {} is not a finite number >= 1", C);
   if (!(eta > 0) || !std::isfinite(eta)) return fmt::format("eta = {} is not positive", eta);
   const char* names[3] = {"R", "G", "B"};

@@ -157,6 +157,11 @@ void WriteVdb(const std::string& path, const Material& m, const MaterialCorrupti
     fake->tree().setValue(openvdb::Coord(0, 0, 0), 1.0f);
     grids = {kappa, fake, density, albedo};
   }
+  if (bad == MC::kRotated || bad == MC::kMirrored)
+    for (const auto& grid : grids) {
+      if (bad == MC::kRotated) grid->transform().postRotate(0.3, openvdb::math::Z_AXIS);
+      else grid->transform().postScale(openvdb::Vec3d(1, -1, 1));
+    }
   WriteAtomically(path, [&](const std::string& tmp) {
     try {
       openvdb::io::File file(tmp);
@@ -259,10 +264,19 @@ Material ReadMaterialFile(const std::string& path, bool trailer) {
     const auto& xf = grids[g]->transform();
     const openvdb::Vec3d vs = xf.voxelSize();
     const openvdb::Vec3d origin = xf.indexToWorld(openvdb::Vec3d(0, 0, 0));
-    if (!xf.isLinear() || std::abs(vs[0] - vs[1]) > 1e-6 * vs[0] ||
-        std::abs(vs[0] - vs[2]) > 1e-6 * vs[0] || origin.length() > 1e-6 * vs[0])
-      throw InputError(fmt::format("{}: grid '{}' does not have a uniform linear transform "
-                                   "with voxel (0,0,0) at the origin", path, names[g]));
+    // Index axis a must map to world axis a, scaled by h: no rotation, no mirror.
+    bool axis_aligned = xf.isLinear();
+    for (int a = 0; a < 3 && axis_aligned; ++a) {
+      openvdb::Vec3d unit(0, 0, 0);
+      unit[a] = 1;
+      openvdb::Vec3d expected(0, 0, 0);
+      expected[a] = vs[0];
+      axis_aligned = ((xf.indexToWorld(unit) - origin) - expected).length() <= 1e-6 * vs[0];
+    }
+    if (!axis_aligned || origin.length() > 1e-6 * vs[0])
+      throw InputError(fmt::format("{}: grid '{}' does not have a uniform, axis-aligned linear transform "
+                                   "with voxel (0,0,0) at the origin (rotated, mirrored or shifted grids "
+                                   "are not read)", path, names[g]));
     if (g == 0) m.spacing_mm = vs[0];
     else if (std::abs(vs[0] - m.spacing_mm) > 1e-6 * m.spacing_mm)
       throw InputError(fmt::format("{}: grids 'kappa' and 'mu' have different voxel sizes "

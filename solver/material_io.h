@@ -27,7 +27,7 @@ Material ReadMaterial(const std::string& path);
 // other translation unit has to include OpenVDB.
 enum class MaterialCorruption {
   kMissingMu, kMissingC, kUnknownMetadata, kShapeMismatch, kNegativeKappa, kNanMu,
-  kWrongGridType, kMissingVoxel, kWrongFormat,
+  kWrongGridType, kMissingVoxel, kWrongFormat, kRotated, kMirrored,
   kNoChecksum  // not corrupt: a file as written before the checksum trailer (still read)
 };
 void WriteCorruptMaterialForTest(const std::string& path, const Material& material,

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "solver/image_io.h"
 #include "solver/status.h"
 #include "solver/synthetic.h"
 
@@ -127,12 +128,31 @@ TEST_F(MaterialIo, RejectsEveryBrokenFile) {
       {MaterialCorruption::kWrongGridType, "expected Vec3f"},
       {MaterialCorruption::kMissingVoxel, "active voxels"},
       {MaterialCorruption::kWrongFormat, "translume_format"},
+      {MaterialCorruption::kRotated, "axis-aligned"},
+      {MaterialCorruption::kMirrored, "axis-aligned"},
   };
   int n = 0;
   for (const auto& [corruption, what] : cases) {
     const std::string path = Path("bad" + std::to_string(n++) + ".vdb");
     WriteCorruptMaterialForTest(path, material_, corruption);
     ExpectRejected(path, what);
+  }
+}
+
+// A volume where an image is read (a light pattern, a mask, a dataset image): one line, no
+// crash (OpenImageIO reads the .vdb as a 3-D image, whatever its file name).
+TEST_F(MaterialIo, AVolumeIsNoImage) {
+  WriteMaterial(Path("m.vdb"), material_);
+  fs::copy_file(Path("m.vdb"), Path("m.exr"));
+  for (const std::string path : {Path("m.vdb"), Path("m.exr")}) {
+    try {
+      ReadImage(path);
+      ADD_FAILURE() << "no error for " << path;
+    } catch (const InputError& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(path), std::string::npos) << msg;
+      EXPECT_NE(msg.find("not a 2-D image"), std::string::npos) << msg;
+    }
   }
 }
 

@@ -150,6 +150,17 @@ Dataset Simulate(const Material& m, const Material& fine, const SimulateOptions&
   d.spacing_mm = m.spacing_mm;
   d.C = m.C;
   d.setup = o.setup;
+  // Front-lit data leave out the lit region: lights that cover the whole face leave nothing.
+  bool measured = false;
+  for (const auto& l : lights) {
+    const std::vector<float> mask =
+        MeasurementMask(m.shape, o.setup, GreyPattern(RasterizeLight(l, m.shape, m.spacing_mm)), o.mask_margin);
+    measured |= std::any_of(mask.begin(), mask.end(), [](float v) { return v > 0; });
+  }
+  if (!measured)
+    throw InputError(fmt::format("simulate: front-lit, every {} light covers the whole face, and the lit region is "
+                                 "left out of the data: nothing would be measured (use smaller regions, e.g. "
+                                 "--lights 2x2)", prefix == "h" ? "held-out" : "training"));
   std::vector<FacePattern> fine_q;
   for (const auto& l : lights) fine_q.push_back(GreyPattern(RasterizeLight(l, fine.shape, fine.spacing_mm)));
   MultigridOptions mg;

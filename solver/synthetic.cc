@@ -123,8 +123,7 @@ Material SynthesizeMaterial(const SynthOptions& o) {
   if (o.shape.size() > 0) shape = o.shape;
   if (shape.nx < 2 || shape.ny < 2 || shape.nz < 2)
     throw InputError("--grid: every dimension must be at least 2 nodes");
-  if (!(o.spacing_mm > 0) || !std::isfinite(o.spacing_mm))
-    throw InputError(fmt::format("--spacing: {} is not a positive length in mm", o.spacing_mm));
+  if (const std::string p = SpacingProblem(o.spacing_mm); !p.empty()) throw InputError("--spacing: " + p);
   // (Jensen's Fdr fit, which gives C, passes 1 near eta = 3.9.)
   if (!(o.eta > 1 && o.eta <= 3.5))
     throw InputError(fmt::format("--eta: {} is not a refractive index in (1, 3.5]", o.eta));
