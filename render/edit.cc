@@ -78,7 +78,7 @@ Material EditMaterial(const Material& material, const EditOptions& o, const Imag
           mv = float(mv + w * (o.scale_mu * mv + o.add_mu - mv));
           if (!(kv > 0) || !(mv > 0) || !std::isfinite(kv) || !std::isfinite(mv))
             throw InputError(fmt::format("edit: node ({}, {}, {}) channel {} would get kappa {} mm, "
-                                         "mu {} /mm; both must stay > 0", i, j, k, c, kv, mv));
+                                         "mu {} /mm; both must stay > 0", i, j, k, "RGB"[c], kv, mv));
         }
       }
   return m;

@@ -174,9 +174,11 @@ std::string RenderOptions::Validate() const {
   if (!std::isfinite(azimuth_deg) || !std::isfinite(elevation_deg)) return "the camera angles must be finite";
   if (!(camera_distance_mm >= 0 && std::isfinite(camera_distance_mm)))
     return "the camera distance must be >= 0 mm (0: fit the object)";
-  if (!(eta >= 1)) return "eta must be >= 1";
-  if (specular < 0 || !(roughness > 0) || surface_reflectance < 0)
-    return "specular and surface reflectance must be >= 0, roughness > 0";
+  if (!(eta >= 1 && std::isfinite(eta))) return "eta must be a finite number >= 1";
+  if (!(specular >= 0 && std::isfinite(specular))) return fmt::format("--specular must be a finite number >= 0, got {}", specular);
+  if (!(surface_reflectance >= 0 && surface_reflectance <= 1))
+    return fmt::format("--reflectance must be within 0..1, got {}", surface_reflectance);
+  if (!(roughness > 0 && std::isfinite(roughness))) return fmt::format("--roughness must be a finite number > 0, got {}", roughness);
   if (model != "polygrid" && model != "dipole") return "the model must be polygrid or dipole";
   if (shadow_map_size < 16) return "the shadow map must be >= 16 pixels";
   if (environment_directions < 1 || environment_directions > 4096)

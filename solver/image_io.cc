@@ -128,12 +128,29 @@ void WriteRadiancePreview(const std::string& path, const GridShape& s, const Fac
   WriteImage(path, ImageFromPlanes(int(s.nx), int(s.ny), {t[0].data(), t[1].data(), t[2].data()}));
 }
 
-std::vector<std::string> WriteMaterialSlices(const std::string& prefix, const Material& m) {
-  const GridShape& s = m.shape;
+namespace {
+
+std::vector<int64_t> SliceDepths(const GridShape& s) {
   std::vector<int64_t> depths = {0, s.nz / 4, s.nz / 2, 3 * s.nz / 4, s.nz - 1};
   depths.erase(std::unique(depths.begin(), depths.end()), depths.end());
-  std::vector<std::string> written;
-  for (auto [name, field] : {std::pair{"kappa", &m.kappa}, std::pair{"mu", &m.mu}}) {
+  return depths;
+}
+
+}  // namespace
+
+std::vector<std::string> MaterialSlicePaths(const std::string& prefix, const GridShape& shape) {
+  std::vector<std::string> paths;
+  for (const char* name : {"kappa", "mu"})
+    for (int64_t k : SliceDepths(shape)) paths.push_back(fmt::format("{}_{}_k{:02d}.png", prefix, name, k));
+  return paths;
+}
+
+std::vector<std::string> WriteMaterialSlices(const std::string& prefix, const Material& m) {
+  const GridShape& s = m.shape;
+  const std::vector<std::string> paths = MaterialSlicePaths(prefix, s);
+  const std::vector<int64_t> depths = SliceDepths(s);
+  size_t next = 0;
+  for (const auto* field : {&m.kappa, &m.mu}) {
     float top = 0;
     for (const auto& ch : *field) top = std::max(top, *std::max_element(ch.begin(), ch.end()));
     for (int64_t k : depths) {
@@ -143,13 +160,11 @@ std::vector<std::string> WriteMaterialSlices(const std::string& prefix, const Ma
         for (int64_t f = 0; f < s.face_size(); ++f)
           planes[c][f] = (*field)[c][f + s.face_size() * k] / top;
       }
-      const std::string path = fmt::format("{}_{}_k{:02d}.png", prefix, name, k);
-      WriteImage(path, ImageFromPlanes(int(s.nx), int(s.ny),
-                                       {planes[0].data(), planes[1].data(), planes[2].data()}));
-      written.push_back(path);
+      WriteImage(paths[next++], ImageFromPlanes(int(s.nx), int(s.ny),
+                                                {planes[0].data(), planes[1].data(), planes[2].data()}));
     }
   }
-  return written;
+  return paths;
 }
 
 }  // namespace translume

@@ -33,7 +33,9 @@ void WriteRadiancePreview(const std::string& path, const GridShape& shape, const
 
 // 8-bit PNG slices of kappa and mu at depths 0, nz/4, nz/2, 3nz/4 and nz-1, RGB = channels,
 // each quantity scaled by its maximum over the volume: PREFIX_kappa_kNN.png, PREFIX_mu_kNN.png.
-// Returns the paths written.
+// Returns the paths written, MaterialSlicePaths(prefix, material.shape).
 std::vector<std::string> WriteMaterialSlices(const std::string& prefix, const Material& material);
+// The paths WriteMaterialSlices writes for a material of this grid: kappa's, then mu's.
+std::vector<std::string> MaterialSlicePaths(const std::string& prefix, const GridShape& shape);
 
 }  // namespace translume

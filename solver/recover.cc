@@ -452,7 +452,7 @@ const char* TerminationName(RecoveryTermination t) {
 }
 
 std::string RecoveryOptions::Validate() const {
-  if (!(lambda >= 0) || !std::isfinite(lambda)) return fmt::format("lambda must be >= 0, got {}", lambda);
+  if (!(lambda >= 0) || !std::isfinite(lambda)) return fmt::format("lambda must be a finite number >= 0, got {}", lambda);
   if (max_iterations < 0) return "max_iterations must be >= 0";
   if (!(tolerance > 0 && tolerance < 1)) return fmt::format("tolerance must be in (0, 1), got {}", tolerance);
   if (homogeneous_iterations < 0) return "homogeneous_iterations must be >= 0";

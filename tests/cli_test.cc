@@ -186,6 +186,7 @@ TEST_F(Cli, SimulateSolveEvaluateAndResume) {
 }
 
 TEST_F(Cli, InverseCommandsRejectBadArguments) {
+  CommandRun r;
   ASSERT_EQ(Translume("synth --preset wax --grid 8x6x3 -o " + P("m.vdb")).status, 0);
   ASSERT_EQ(Translume("synth --preset wax --grid 8x6x4 -o " + P("m4.vdb")).status, 0);
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --oversample 0 -o " + P("ds")), "oversample");
@@ -203,6 +204,17 @@ TEST_F(Cli, InverseCommandsRejectBadArguments) {
   ExpectOneLineError(Translume("solve " + P("ds") + " --init " + P("m4.vdb") + " -o " + P("r.vdb")), "8x6x4");
   EXPECT_FALSE(fs::exists(P("r.vdb")));
   ExpectOneLineError(Translume("evaluate " + P("m4.vdb") + " --dataset " + P("ds")), "8x6x4");
+  // Radiance 1e-30 of the model's: the fit runs into NaN. Said, with nothing written (it used
+  // to exit 0 with the starting guess as the material).
+  Dataset tiny = ReadDataset(P("ds"));
+  for (auto& c : tiny.conditions)
+    for (auto& plane : c.L)
+      for (float& v : plane) v *= 1e-30f;
+  WriteDataset(P("tiny"), tiny);
+  r = Translume("solve " + P("tiny") + " --max-iterations 5 -o " + P("r.vdb"));
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_NE(r.output.find("error: " + P("tiny") + ": the fit failed"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(P("r.vdb")));
   EXPECT_EQ(Translume("solve --help").status, 0);
   EXPECT_EQ(Translume("bench recovery --help").status, 0);
 }
@@ -217,7 +229,16 @@ TEST_F(Cli, OutputsNeverReplaceInputs) {
   // solve's report OUT.json would replace the dataset's own json; a checkpoint the material.
   ExpectOneLineError(Translume("solve " + P("ds/dataset.json") + " -o " + P("ds/dataset.vdb")), "would");
   ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("c.vdb") + " --checkpoint " + P("c.vdb")),
-                     "would overwrite the input");
+                     "is also an output of -o");
+  // Nor the report or a slice (the slice clobbered the checkpoint, whose resume then failed).
+  ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("c.vdb") + " --checkpoint " + P("c.json")), "its report");
+  ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("c.vdb") + " --checkpoint " + P("c_mu_k00.png")),
+                     "its slice");
+  // Outputs that cannot be written are found before the work, not after it.
+  ExpectOneLineError(Translume("solve " + P("ds") + " -o /proc/translume_r.vdb"), "cannot write into /proc");
+  ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("r.vdb") + " --checkpoint /proc/translume_ck"),
+                     "cannot write into /proc");
+  ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("m.vdb/r.vdb")), "is a file, not a folder");
   ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("r.vdb") + " --init " + P("r.vdb")), "would overwrite");
   fs::create_directories(P("r.json"));
   ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("r.vdb")), "is a folder");
@@ -239,6 +260,18 @@ TEST_F(Cli, OutputsNeverReplaceInputs) {
   std::ofstream(P("photos/a.png")) << "x";
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + P("photos")), "not empty");
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + dir_.string()), "holds the input");
+  // An earlier dataset with anything else in it is not replaced (the other files were lost).
+  std::ofstream(P("ds/notes.txt")) << "mine";
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + P("ds")), "notes.txt");
+  EXPECT_TRUE(fs::exists(P("ds/notes.txt")));
+  EXPECT_TRUE(fs::exists(P("ds/dataset.json")));
+  // A front-lit light over the whole face leaves no measured node.
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --setup front --lights 1x1 -o " + P("front")),
+                     "covers the whole face");
+  // A turntable's frames are outputs too: frame 1 of -o t.exr is t_001.exr.
+  fs::copy_file(std::string(TRANSLUME_SOURCE_DIR) + "/samples/sky.exr", P("t_001.exr"));
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --resolution 5 --image 16x16 --turntable 2 --light env:" +
+                               P("t_001.exr") + " -o " + P("t.exr")), "would overwrite the input");
   // Flags checked as flags.
   ExpectOneLineError(Translume("synth --preset wax --eta 0.5 -o " + P("e.vdb")), "--eta");
   ExpectOneLineError(Translume("synth --preset wax --threads 0 -o " + P("e.vdb")), "--threads");
@@ -387,12 +420,11 @@ TEST_F(Cli, AcquireStopsCleanlyOnSigint) {
   std::ifstream report(P("b_work/report.json"));
   ASSERT_TRUE(report);
   EXPECT_EQ(nlohmann::json::parse(report)["solve"]["termination"], "stopped");
-  // A work folder that cannot be made (a file stands in the way): the path first, one line
-  // (after acquire's header line).
+  // An output folder that cannot be made (a file stands in the way): found first, one line.
   r = Translume("acquire " + P("cap") + " -o " + P("m.vdb/sub/x.vdb"));
   EXPECT_EQ(r.status, 1) << r.output;
-  EXPECT_NE(r.output.find("translume acquire: error: " + P("m.vdb/sub/x_work") +
-                          ": cannot create directories: Not a directory\n"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("translume acquire: error: -o " + P("m.vdb/sub/x.vdb") + ": " + P("m.vdb") +
+                          " is a file, not a folder\n"), std::string::npos) << r.output;
 }
 
 // translume render / edit (issue 7, docs/render.md).
@@ -532,6 +564,7 @@ TEST_F(Cli, RenderAndEdit) {
                      "--variance-steps");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --variance-steps 10 -o " + P("x.png")), "--variance-steps");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --placement conformal -o " + P("x.png")), "--placement");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --specular nan -o " + P("x.png")), "--specular");
   // 16384^2 pixels at 8x8 samples would overflow the rasters' 32-bit index (and need ~275 GB).
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --image 16384x16384 --supersample 8 -o " + P("x.png")),
                      "at most 2^31 - 1");

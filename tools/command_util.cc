@@ -1,13 +1,17 @@
 // SPDX-License-Identifier: MIT
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <csignal>
 #include <cstdlib>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fmt/format.h>
 #include <sstream>
+#include <fcntl.h>
+#include <unistd.h>
 
 #include "solver/status.h"
 #include "solver/threads.h"
@@ -96,8 +100,22 @@ void RequireNotInput(const char* flag, const std::string& out, const std::vector
 }
 
 void RequireFilePath(const char* flag, const std::string& path) {
-  if (std::filesystem::is_directory(path))
-    throw InputError(fmt::format("{} {}: is a folder, not a file", flag, path));
+  namespace fs = std::filesystem;
+  if (fs::is_directory(path)) throw InputError(fmt::format("{} {}: is a folder, not a file", flag, path));
+  // The output is written into its folder (created if missing, under the nearest one that
+  // exists), as a temporary file renamed into place: that folder must be writable.
+  std::error_code ec;
+  fs::path folder = fs::absolute(path, ec).parent_path();
+  while (!folder.empty() && !fs::exists(folder, ec) && folder != folder.root_path()) folder = folder.parent_path();
+  if (!fs::is_directory(folder, ec))
+    throw InputError(fmt::format("{} {}: {} is a file, not a folder", flag, path, folder.string()));
+  // A file made and removed at once: permissions alone do not tell (root, read-only mounts).
+  const fs::path probe = folder / fmt::format(".translume-probe.{}", getpid());
+  const int fd = open(probe.c_str(), O_CREAT | O_EXCL | O_WRONLY, 0600);
+  if (fd < 0)
+    throw InputError(fmt::format("{} {}: cannot write into {}: {}", flag, path, folder.string(), std::strerror(errno)));
+  close(fd);
+  unlink(probe.c_str());
 }
 
 bool ParseOrHelp(CLI::App& app, int argc, char** argv) {

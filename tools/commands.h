@@ -50,7 +50,9 @@ void RequireExtension(const std::string& path, std::initializer_list<const char*
 // in canonical form.
 void RequireNotInput(const char* flag, const std::string& out, const std::vector<std::string>& inputs);
 // Throws InputError "FLAG PATH: is a folder, not a file" when an output file's path names an
-// existing folder (checked before the work, so that it is not lost at the end).
+// existing folder, and "FLAG PATH: cannot write into FOLDER: ..." when the folder it would be
+// written into (or the nearest existing folder above it) is not writable (checked before the
+// work, so that it is not lost at the end).
 void RequireFilePath(const char* flag, const std::string& path);
 
 // Ctrl-C as a request to stop early: while a SigintGuard lives, the first SIGINT only sets a

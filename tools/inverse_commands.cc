@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fmt/format.h>
@@ -65,15 +66,35 @@ std::string FormatSeconds(double s) {
 }
 
 
+// The first entry of `dir` that a dataset does not consist of (dataset.json, q_*.exr, L_*.exr,
+// mask_*.exr and, at the top, holdout/ of the same), or "" if there is none.
+std::string ForeignEntry(const fs::path& dir, bool top) {
+  for (const fs::directory_entry& e : fs::directory_iterator(dir)) {
+    const std::string name = e.path().filename().string();
+    if (top && name == "holdout" && e.is_directory()) {
+      if (std::string f = ForeignEntry(e.path(), false); !f.empty()) return f;
+      continue;
+    }
+    const bool image = e.is_regular_file() && name.ends_with(".exr") &&
+                       (name.starts_with("q_") || name.starts_with("L_") || name.starts_with("mask_"));
+    if (!image && !(name == "dataset.json" && e.is_regular_file())) return e.path().string();
+  }
+  return "";
+}
+
 // simulate's -o: a new or empty folder, or an earlier dataset (which the new one replaces
-// whole, holdout/ included); never the folder that holds the input material.
+// whole, holdout/ included) holding nothing else; never the folder that holds the input material.
 void RequireDatasetFolder(const std::string& out, const std::string& material_path) {
   RequireNotInput("-o", out, {material_path});
   if (!fs::exists(out)) return;
   if (!fs::is_directory(out)) throw InputError(fmt::format("-o {}: is a file, not a folder", out));
-  if (!fs::is_empty(out) && !fs::exists(fs::path(out) / "dataset.json"))
+  if (fs::is_empty(out)) return;
+  if (!fs::exists(fs::path(out) / "dataset.json"))
     throw InputError(fmt::format("-o {}: the folder is not empty and holds no dataset.json; choose a new or empty "
                                  "folder (an earlier dataset there is replaced)", out));
+  if (const std::string f = ForeignEntry(out, true); !f.empty())
+    throw InputError(fmt::format("-o {}: holds {}, which is not part of a dataset and would be lost; choose a new or "
+                                 "empty folder (an earlier dataset alone is replaced)", out, f));
 }
 
 int RunSimulate(int argc, char** argv) {
@@ -143,13 +164,21 @@ int RunSolve(int argc, char** argv) {
   const fs::path base = fs::path(out).replace_extension("");
   const std::string report = base.string() + ".json";
   const std::string dataset_dir = DatasetFolder(dataset_path);
-  for (const std::string& path : {out, report}) {
-    RequireNotInput("-o", path, {dataset_path, dataset_dir, init, checkpoint});
+  std::vector<std::string> outputs = {out, report};
+  for (const std::string& slice : MaterialSlicePaths(base.string(), d.shape)) outputs.push_back(slice);
+  for (const std::string& path : outputs) {
+    RequireNotInput("-o", path, {dataset_path, dataset_dir, init});
     RequireFilePath("-o", path);
   }
   if (!checkpoint.empty()) {
     RequireNotInput("--checkpoint", checkpoint, {dataset_path, dataset_dir, init});
     RequireFilePath("--checkpoint", checkpoint);
+    std::error_code ec;
+    for (const std::string& path : outputs)
+      if (fs::weakly_canonical(path, ec) == fs::weakly_canonical(checkpoint, ec))
+        throw InputError(fmt::format("--checkpoint {}: is also an output of -o {} (its {}); choose another "
+                                     "name", checkpoint, out, path == out ? "material" : path == report ?
+                                     "report" : "slice " + path));
   }
   CheckFitsInMemory(EstimateMemory(d.shape, int(d.conditions.size()), Precision::kDouble).recovery_bytes,
                     fmt::format("a recovery on the {} grid with {} conditions", d.shape.ToString(),
@@ -209,6 +238,12 @@ int RunSolve(int argc, char** argv) {
   const bool interrupted = sigint->interrupted();
   sigint.reset();  // writing the outputs: Ctrl-C ends at once again
   if (tty) std::printf("\n");
+  // A fit that ran into NaN (data or spacing far outside what the model can reach) has no
+  // material to offer: say so instead of writing the starting guess as a result.
+  if (!std::isfinite(sum.final_objective) || !std::isfinite(sum.fit_error))
+    throw InputError(fmt::format("{}: the fit failed (objective {:.4g} -> {:.4g}: {}); nothing written. Check the "
+                                 "dataset's scale: L, q and spacing_mm", dataset_path, sum.initial_objective,
+                                 sum.final_objective, sum.message));
   if (!checkpoint.empty()) WriteCheckpoint(checkpoint, d, state);
   const Material m = MaterialFromState(d, state);
   WriteMaterial(out, m);

@@ -155,9 +155,12 @@ int RunRender(int argc, char** argv) {
   if (std::string err = ro.Validate(); !err.empty()) throw InputError("render: " + err);
   RenderLight L = RenderLight::Parse(light);
   const bool mesh = Extension(shape_name) == ".obj" || Extension(shape_name) == ".ply";
-  RequireNotInput("-o", out, {material, L.kind == RenderLight::Kind::kEnvironment ? L.path : "",
-                              mesh ? shape_name : "", polycube_path});
-  RequireFilePath("-o", out);
+  for (int f = 0; f < turntable; ++f) {
+    const std::string frame = FramePath(out, f, turntable);
+    RequireNotInput("-o", frame, {material, L.kind == RenderLight::Kind::kEnvironment ? L.path : "",
+                                  mesh ? shape_name : "", polycube_path});
+    RequireFilePath("-o", frame);
+  }
   if (!save_polycube.empty()) {
     RequireNotInput("--save-polycube", save_polycube, {material, mesh ? shape_name : "", polycube_path, out});
     RequireFilePath("--save-polycube", save_polycube);
