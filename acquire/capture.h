@@ -72,8 +72,9 @@ struct CaptureSpec {
 
 // Reads and validates DIR/capture.json (`path` may name the folder or the file). Throws
 // InputError "FILE: FIELD: problem" on: unknown format, unknown or mistyped fields, a setup
-// other than back|front, non-positive sizes, neither or both of spacing_mm and grid, a grid
-// that does not match the size, eta and C both given, corners not 4 pairs, a missing folder
+// other than back|front, non-positive sizes, neither or both of spacing_mm and grid, a spacing
+// (given or from the grid) that SpacingProblem refuses, more than 10^6 nodes on an axis, a grid
+// of other than whole numbers or that does not match the size, eta and C both given, corners not 4 pairs, a missing folder
 // or file, a condition with neither or both of pattern and light, pattern conditions without
 // a projector calibration, duplicate condition names.
 CaptureSpec ReadCapture(const std::string& path);

@@ -111,6 +111,26 @@ TEST_F(CaptureTest, EveryBrokenFieldIsNamed) {
   ExpectError([](auto& j) { j["conditions"][0]["light"] = "image:nope.png"; }, "conditions[0].light: file");
 }
 
+// Spacings outside SpacingProblem's range, grids too fine for any memory and fractional node
+// counts are refused at read (a tiny spacing overflowed the node count: a crash, a raw
+// "vector::reserve" or negative sizes in later messages; 16.5 nodes were truncated).
+TEST_F(CaptureTest, GridOutOfRangeIsRefusedAtRead) {
+  for (double h : {1e-320, 1e-200, 1e-20, 1e-8, 2e3})
+    ExpectError([&](auto& j) { j["spacing_mm"] = h; }, "spacing_mm: must be within 0.001..1000 mm");
+  ExpectError([](auto& j) { j["sample_mm"] = {1e300, 8.5, 2.5}; }, "spacing_mm: sample_mm[0] = 1e+300 mm is");
+  auto grid = [](nlohmann::json g) {
+    return [g](nlohmann::json& j) {
+      j.erase("spacing_mm");
+      j["grid"] = g;
+    };
+  };
+  ExpectError(grid({16.5, 18, 6}), "grid: expected 3 whole numbers of nodes, got 16.5");
+  ExpectError(grid({24, 1e12, 6}), "grid: every axis must have 2..1e+06 nodes, got 1e+12");
+  ExpectError(grid({24, 18, 1}), "grid: every axis must have 2..1e+06 nodes, got 1");
+  ExpectError([&](auto& j) { grid({24, 18, 6})(j); j["sample_mm"] = {1e-6, 8.5, 2.5}; },
+              "grid: the spacing sample_mm[0] / (grid[0] - 1) must be within 0.001..1000 mm");
+}
+
 // An image: light's file, like every path in capture.json, is relative to the capture folder
 // (it was read relative to the current folder).
 TEST_F(CaptureTest, ImageLightsAreRelativeToTheFolder) {
