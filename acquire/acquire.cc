@@ -280,7 +280,11 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
                                      camera.image_size.height));
       std::vector<cv::Point2f> patch;
       for (const auto& p : cap.white.patch) patch.emplace_back(float(p[0]), float(p[1]));
-      white = calib::WhiteFromPatch(w, b, patch, {cap.white.albedo[0], cap.white.albedo[1], cap.white.albedo[2]});
+      try {
+        white = calib::WhiteFromPatch(w, b, patch, {cap.white.albedo[0], cap.white.albedo[1], cap.white.albedo[2]});
+      } catch (const calib::CalibError& e) {
+        throw InputError(fmt::format("{}: white: {}", cap.file, e.what()));
+      }
       WriteAtomically(yml, [&](const std::string& tmp) {
         calib::WriteWhiteBalance(tmp, white, b.empty() ? cv::Vec3d() : cv::Vec3d(cv::mean(b).val), cap.white.black);
       });

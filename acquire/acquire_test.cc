@@ -12,6 +12,7 @@
 
 #include "acquire/simulate_capture.h"
 #include "calib/hdr.h"
+#include "calib/white.h"
 #include "solver/dataset.h"
 #include "solver/evaluate.h"
 #include "solver/material_io.h"
@@ -245,6 +246,25 @@ TEST_F(AcquireTest, CornersOutsideTheImageAreNamed) {
   const std::string c = Copy(Setup::kBack);
   EditJson(c, [](nlohmann::json& j) { j["face_corners_px"][2] = {900.0, 200.0}; });
   ExpectError(c, "face_corners_px: corner 2 (900.0, 200.0) is outside the 512x384 image");
+}
+
+// A white balance file with a NaN gain aborted on an internal check after the mapping, and a
+// negative one zeroed a channel: refused at read, naming the file.
+TEST_F(AcquireTest, UnusableWhiteGainsAreNamed) {
+  const std::string c = Copy(Setup::kBack);
+  calib::WhiteBalance w;
+  w.gains = {std::nan(""), 1, 1};
+  calib::WriteWhiteBalance((fs::path(c) / "white.yml").string(), w, {0, 0, 0}, "");
+  EditJson(c, [](nlohmann::json& j) { j["white"] = "white.yml"; });
+  ExpectError(c, (fs::path(c) / "white.yml").string() + ": white_gains must be finite and positive");
+}
+
+// A white patch reaching out of the image averaged only its inside part (gains 28% off), as
+// face corners outside the image are refused.
+TEST_F(AcquireTest, WhitePatchOutsideTheImageIsNamed) {
+  const std::string c = Copy(Setup::kBack);
+  EditJson(c, [](nlohmann::json& j) { j["white"]["patch"][1] = {900.0, 100.0}; });
+  ExpectError(c, "capture.json: white: white balance: patch corner 1 (900.0, 100.0) is outside the 512x384 image");
 }
 
 TEST_F(AcquireTest, InconsistentImageSizesAreNamed) {

@@ -7,8 +7,11 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <functional>
 #include <opencv2/core.hpp>
 #include <string>
+
+#include "calib/error.h"
 
 namespace translume::calib {
 
@@ -18,6 +21,16 @@ inline void ExpectSameMat(const cv::Mat& a, const cv::Mat& b, const std::string&
   ASSERT_EQ(a.size(), b.size()) << what;
   ASSERT_EQ(a.type(), b.type()) << what;
   EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0) << what << ":\n" << a << "\nread back as\n" << b;
+}
+
+// The message of the CalibError that f throws, or "(no error)".
+inline std::string CalibErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const CalibError& e) {
+    return e.what();
+  }
+  return "(no error)";
 }
 
 // A file name in the temporary folder, with this process's id so that test runs from several

@@ -35,6 +35,11 @@ void FitGains(const std::vector<cv::Vec3d>& m, const std::vector<cv::Vec3d>& rho
       den += m[k][c] * m[k][c];
     }
     if (!(den > 0)) throw CalibError("white balance: the reference patches are black");
+    // Negative or zero gains would turn every measurement dark or negative.
+    if (!(num > 0))
+      throw CalibError(fmt::format("white balance: the white reference is not brighter than the black "
+                                   "reference in the {} channel (maybe the white and black images are "
+                                   "swapped)", "RGB"[c]));
     w->gains[c] = num / den;
     double r = 0;
     for (size_t k = 0; k < m.size(); ++k) {
@@ -81,6 +86,11 @@ cv::Vec3d MeanInPolygon(const cv::Mat& hdr, const std::vector<cv::Point2f>& poly
 WhiteBalance WhiteFromPatch(const cv::Mat& white, const cv::Mat& black,
                             const std::vector<cv::Point2f>& corners, const cv::Vec3d& albedo) {
   if (corners.size() != 4) throw CalibError("white balance: a patch needs 4 corners");
+  for (size_t k = 0; k < 4; ++k)
+    if (corners[k].x < -0.5 || corners[k].y < -0.5 || corners[k].x > white.cols - 0.5 ||
+        corners[k].y > white.rows - 0.5)
+      throw CalibError(fmt::format("white balance: patch corner {} ({:.1f}, {:.1f}) is outside the {}x{} image",
+                                   k, corners[k].x, corners[k].y, white.cols, white.rows));
   for (int c = 0; c < 3; ++c)
     if (!(albedo[c] > 0 && albedo[c] <= 1)) throw CalibError("white balance: albedo must be in (0, 1]");
   WhiteBalance w;
@@ -185,6 +195,10 @@ WhiteBalance ReadWhiteBalance(const std::string& path) {
   WhiteBalance w;
   g.convertTo(g, CV_64F);
   w.gains = cv::Vec3d(g.at<double>(0), g.at<double>(1), g.at<double>(2));
+  for (int c = 0; c < 3; ++c)
+    if (!(w.gains[c] > 0) || !std::isfinite(w.gains[c]))
+      throw CalibError(fmt::format("{}: white_gains must be finite and positive, got {} {} {}", path,
+                                   w.gains[0], w.gains[1], w.gains[2]));
   cv::Mat r;
   fs["residual"] >> r;
   if (r.total() == 3) {

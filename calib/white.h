@@ -28,7 +28,10 @@ struct WhiteBalance {
 cv::Vec3d MeanInPolygon(const cv::Mat& hdr, const std::vector<cv::Point2f>& polygon);
 
 // A white patch of known albedo (per channel) whose 4 image corners are given.
-// white, black: CV_32FC3 linear HDR images (black may be empty: nothing subtracted).
+// white, black: CV_32FC3 linear HDR images (black may be empty: nothing subtracted). Throws
+// CalibError when a corner lies outside the image (OpenCV convention: beyond -0.5 or size - 0.5)
+// or the patch is not brighter under white than under black in some channel (both here and for
+// the ColorChecker: the gains must be positive).
 WhiteBalance WhiteFromPatch(const cv::Mat& white, const cv::Mat& black,
                             const std::vector<cv::Point2f>& corners, const cv::Vec3d& albedo);
 
@@ -47,7 +50,7 @@ WhiteBalance WhiteFromColorChecker(const cv::Mat& white, const cv::Mat& black,
 void WriteWhiteBalance(const std::string& path, const WhiteBalance& w,
                        const cv::Vec3d& black_mean, const std::string& black_image);
 // Reads white_gains, residual, patches and method back (not the black level); throws CalibError
-// naming the file when it cannot be read or lacks white_gains.
+// naming the file when it cannot be read, lacks white_gains or a gain is not finite and positive.
 WhiteBalance ReadWhiteBalance(const std::string& path);
 
 }  // namespace translume::calib

@@ -1,10 +1,12 @@
 // SPDX-License-Identifier: MIT
 #include "calib/white.h"
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <opencv2/calib3d.hpp>
 
 #include "calib/colorchecker.h"
@@ -117,6 +119,22 @@ TEST(White, BadInputs) {
                CalibError);
 }
 
+// The white and black references swapped gave negative gains (every measurement dark), and a
+// patch reaching outside the image averaged only its inside part (gains 28% off): both refused.
+TEST(White, SwappedReferencesAndPatchOutsideTheImageAreRefused) {
+  const ChartScene s({-0.2, 0.1, 0.0});
+  EXPECT_NE(CalibErrorOf([&] { WhiteFromPatch(s.black, s.white, s.PatchCorners(18), s.chart.albedo[18]); })
+                .find("the white reference is not brighter than the black reference in the R channel "
+                      "(maybe the white and black images are swapped)"), std::string::npos);
+  std::vector<cv::Point2f> corners = s.PatchCorners(18);
+  corners[1].x = float(s.white.cols) + 20;
+  EXPECT_NE(CalibErrorOf([&] { WhiteFromPatch(s.white, s.black, corners, s.chart.albedo[18]); })
+                .find(fmt::format("patch corner 1 ({:.1f}, {:.1f}) is outside the {}x{} image", corners[1].x,
+                                  corners[1].y, s.white.cols, s.white.rows)), std::string::npos);
+  corners[1].x = float(s.white.cols) - 0.5f;  // the last pixel's far edge is inside
+  EXPECT_NO_THROW(WhiteFromPatch(s.white, s.black, corners, s.chart.albedo[18]));
+}
+
 // MeanInPolygon of an image whose channels are x, y and x * y over the pixels with centres in the
 // axis-aligned square (10..20, 5..15): a product set, so the means are exactly 15, 10 and 150
 // (whether or not the boundary pixels count, as long as both sides are treated alike); one pixel
@@ -158,6 +176,24 @@ TEST(White, YamlRoundTrip) {
   }
   std::filesystem::remove(path);
   EXPECT_THROW(ReadWhiteBalance(path), CalibError);
+}
+
+// Gains that are not finite and positive are refused naming the file (NaN gains aborted acquire
+// on an internal check; negative or zero ones zeroed a channel's measurements).
+TEST(White, NonPositiveOrNonFiniteGainsAreRefusedAtRead) {
+  const std::string path = TempPath("translume_white_bad_gains.yml");
+  for (double g : {std::nan(""), std::numeric_limits<double>::infinity(), -1.0, 0.0}) {
+    WhiteBalance w;
+    w.gains = {g, 1.0, 1.0};
+    WriteWhiteBalance(path, w, {0, 0, 0}, "");
+    try {
+      ReadWhiteBalance(path);
+      ADD_FAILURE() << "gain " << g << " accepted";
+    } catch (const CalibError& e) {
+      EXPECT_EQ(std::string(e.what()).find(path + ": white_gains must be finite and positive"), 0u) << e.what();
+    }
+  }
+  std::filesystem::remove(path);
 }
 
 }  // namespace

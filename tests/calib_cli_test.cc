@@ -191,6 +191,14 @@ TEST_F(CalibCli, CalibrateWhite) {
                                P("out.yml")), P("missing.exr") + ": no such file");
   ExpectOneLineError(Translume(base + "--black " + P("out.exr") + " --chart colorchecker -o " + P("out.yml")),
                      P("out.exr") + ": cannot read image");
+  // White and black swapped gave negative gains, written as a calibration; a patch reaching out
+  // of the image gave gains 28% off.
+  ExpectOneLineError(Translume(fmt::format("calibrate white {} --black {} --patch {} --albedo 0.9 -o {}", P("black.exr"),
+                                           P("white.exr"), corners, P("out.yml"))),
+                     P("black.exr") + " and --black " + P("white.exr") +
+                         ": white balance: the white reference is not brighter than the black reference");
+  ExpectOneLineError(Translume(base + "--patch 100,100,5000,100,5000,400,100,400 --albedo 0.9 -o " + P("out.yml")),
+                     "patch corner 1 (5000.0, 100.0) is outside the");
 }
 
 TEST_F(CalibCli, ResponseThenHdr) {

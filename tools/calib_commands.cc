@@ -194,8 +194,14 @@ int RunCalibrateWhite(int argc, char** argv) {
   const calib::ResponseCurve* response = response_path.empty() ? nullptr : &curve;
   const cv::Mat white = calib::ReadHdrOrStack(white_path, response);
   const cv::Mat black = black_path.empty() ? cv::Mat() : calib::ReadHdrOrStack(black_path, response);
-  const calib::WhiteBalance w = patch.empty() ? calib::WhiteFromColorChecker(white, black)
-                                              : calib::WhiteFromPatch(white, black, corners, albedo);
+  calib::WhiteBalance w;
+  try {
+    w = patch.empty() ? calib::WhiteFromColorChecker(white, black)
+                      : calib::WhiteFromPatch(white, black, corners, albedo);
+  } catch (const calib::CalibError& e) {
+    throw calib::CalibError(fmt::format("{}{}: {}", white_path, black_path.empty() ? "" : " and --black " + black_path,
+                                        e.what()));
+  }
   cv::Vec3d black_mean(0, 0, 0);
   if (!black.empty()) {
     const cv::Scalar m = cv::mean(black);
