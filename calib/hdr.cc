@@ -266,6 +266,8 @@ ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
   ResponseCurve curve;
   curve.lut.create(256, 1, CV_32FC3);
   std::mt19937_64 rng(o.seed);
+  std::string dirs;
+  for (const ExposureStack& s : stacks) dirs += (dirs.empty() ? "" : ", ") + s.dir;
   for (int c = 0; c < 3; ++c) {
     // Sample positions, stratified by the code in the middle exposure so that the whole
     // curve is constrained.
@@ -293,6 +295,7 @@ ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
     std::vector<double> rhs;
     int row = 0;
     int used = 0;
+    int lowest = 255, highest = 0;  // the codes that data rows cover
     for (size_t k = 0; k < samples.size(); ++k) {
       const ExposureStack& s = stacks[samples[k].stack];
       int valid = 0;
@@ -305,6 +308,8 @@ ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
       for (const Exposure& e : s.exposures) {
         const int z = e.pixels.at<cv::Vec3b>(samples[k].p)[c];
         if (z <= 2 || z >= 253) continue;
+        lowest = std::min(lowest, z);
+        highest = std::max(highest, z);
         const double w = HatWeight(z);
         t.emplace_back(row, z, w);
         t.emplace_back(row, col, -w);
@@ -333,6 +338,14 @@ ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
     Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(AtA);
     if (solver.info() != Eigen::Success) throw CalibError("response: the least-squares system is singular");
     const Eigen::VectorXd g = solver.solve(A.transpose() * b);
+    // Where the data constrain the curve it must rise: photos that do not brighten with their
+    // exposure times (one photo copied, times swapped or wrong) fit a curve that falls or stays flat.
+    for (int z = lowest + 1; z <= highest; ++z)
+      if (!(g[z] > g[z - 1]))
+        throw CalibError(fmt::format("response: the fitted curve does not rise at code {} ({} channel), "
+                                     "within the codes the photos cover: the photos of {} do not brighten "
+                                     "with their exposure times (check EXIF or exposures.json)",
+                                     z, "RGB"[c], dirs));
     for (int z = 0; z < 256; ++z) curve.lut.at<cv::Vec3f>(z)[c] = float(std::exp(g[z]));
   }
   // Codes without data follow the smoothness prior; enforce monotonicity at the ends.
@@ -440,6 +453,36 @@ HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
   h.radiance.create(size, CV_32FC3);
   h.flags.create(size, CV_8UC3);
   const double lo = eight ? o.low_code : o.low_linear, hi = eight ? o.high_code : o.high_linear;
+  // Exposures next in time must brighten as their times say (swapped or wrong times, a copied
+  // photo): the median ratio of their linear values, over samples well inside the valid range
+  // in both (on a grid of ~10^4 pixels), within a factor of 2 of the ratio of their times.
+  // Pairs with fewer than 50 such samples are not judged.
+  const int step = std::max(1, int(std::sqrt(double(size.area()) / 1e4)));
+  const double well_lo = lo + 0.1 * (hi - lo), well_hi = hi - 0.1 * (hi - lo);
+  for (size_t k = 0; k + 1 < P; ++k) {
+    const size_t a = order[k], b = order[k + 1];
+    std::vector<double> ratios;
+    for (int y = 0; y < size.height; y += step)
+      for (int x = 0; x < size.width; x += step)
+        for (int c = 0; c < 3; ++c) {
+          const float va = code(stack.exposures[a].pixels, y, x, c), vb = code(stack.exposures[b].pixels, y, x, c);
+          if (!(va > well_lo && va < well_hi && vb > well_lo && vb < well_hi)) continue;
+          double xa = linear(va, c), xb = linear(vb, c);
+          if (blacks[a]) xa -= linear(code(blacks[a]->pixels, y, x, c), c);
+          if (blacks[b]) xb -= linear(code(blacks[b]->pixels, y, x, c), c);
+          if (xa > 0 && xb > 0) ratios.push_back(xb / xa);
+        }
+    if (ratios.size() < 50) continue;
+    std::nth_element(ratios.begin(), ratios.begin() + long(ratios.size() / 2), ratios.end());
+    const double measured = ratios[ratios.size() / 2];
+    const double expected = stack.exposures[b].seconds / stack.exposures[a].seconds;
+    if (measured > 2 * expected || measured < 0.5 * expected)
+      throw CalibError(fmt::format("{}: {} ({:g} s) is {:.2f}x as bright as {} ({:g} s), but its exposure time is "
+                                   "{:.2f}x as long: check the times (EXIF or exposures.json)", stack.dir,
+                                   fs::path(stack.exposures[b].path).filename().string(), stack.exposures[b].seconds,
+                                   measured, fs::path(stack.exposures[a].path).filename().string(),
+                                   stack.exposures[a].seconds, expected));
+  }
   std::atomic<size_t> saturated{0}, under{0};
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& r) {
     size_t sat_local = 0, under_local = 0;

@@ -76,8 +76,9 @@ struct ResponseOptions {
 
 // Debevec & Malik 1997: solves for g = ln(lut) per channel from one or more 8-bit stacks by
 // weighted least squares (hat weights, clipped codes 0..2 and 253..255 excluded) with a
-// smoothness prior. Throws CalibError when a stack is not 8-bit or the data do not constrain
-// the curve.
+// smoothness prior. Throws CalibError when a stack is not 8-bit, the data do not constrain
+// the curve, or the fitted curve does not rise over the codes the data cover (the photos do not
+// brighten with their exposure times).
 ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
                                 const ResponseOptions& options = {});
 
@@ -111,7 +112,10 @@ struct HdrImage {
 // over the samples that are neither saturated nor under-exposed in their channel (w: a hat
 // over the valid code range, so long exposures weigh more: the estimate is noise-optimal for
 // shot noise). A channel saturated in every exposure is +inf and flagged; one under-exposed in
-// every exposure takes the longest exposure's value (>= 0) and is flagged.
+// every exposure takes the longest exposure's value (>= 0) and is flagged. Throws CalibError
+// naming the stack and both photos when two exposures next in time contradict their times: the
+// median ratio of their linear values, over samples well inside the valid range in both, more
+// than 2x off the ratio of their times (pairs with fewer than 50 such samples are not judged).
 HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
                   const ExposureStack* black = nullptr, const MergeOptions& options = {});
 

@@ -17,6 +17,7 @@
 
 #include "calib/error.h"
 #include "calib/synthetic_rig.h"
+#include "calib/test_util.h"
 
 namespace translume::calib {
 namespace {
@@ -175,6 +176,41 @@ TEST(Hdr, ResponseFromTwoStacksWithDifferentTimes) {
   EXPECT_THROW(CalibrateResponse({a, ExposureStack{"one", {a.exposures[0]}}}), CalibError);
 }
 
+// Six copies of one photo with different exposure times fitted a curve that falls within the
+// codes the photos cover, and it was written as a calibration.
+TEST(Hdr, ResponseFromPhotosThatDoNotBrightenIsRefused) {
+  const SyntheticResponse f;
+  const auto t = NineTimes();
+  const auto images = SyntheticRig::RenderExposureStack(TestScene(31), t, f);
+  const ExposureStack copies = MakeStack(std::vector<cv::Mat>(6, images[4]), {t.begin(), t.begin() + 6});
+  EXPECT_NE(CalibErrorOf([&] { CalibrateResponse({copies}); })
+                .find("the photos of synthetic do not brighten with their exposure times"), std::string::npos);
+}
+
+// Two exposure times swapped (in exposures.json, say) gave radiance 3.5x off without a word:
+// exposures next in time must brighten by their times' ratio within 2x.
+TEST(Hdr, MergeRefusesTimesThatContradictThePhotos) {
+  auto t = NineTimes();
+  StackOptions so;
+  so.bits = 16;
+  so.seed = 15;
+  const auto images = SyntheticRig::RenderExposureStack(TestScene(14), t, {}, so);
+  EXPECT_NO_THROW(MergeHdr(MakeStack(images, t), nullptr));
+  std::swap(t[3], t[4]);
+  const std::string e = CalibErrorOf([&] { MergeHdr(MakeStack(images, t), nullptr); });
+  EXPECT_EQ(e.find("synthetic: e4.png ("), 0u) << e;
+  EXPECT_NE(e.find("x as bright as e2.png ("), std::string::npos) << e;  // ~6.25x
+  EXPECT_NE(e.find("but its exposure time is 2.50x as long"), std::string::npos) << e;
+  // 8-bit photos through a response curve, as acquire merges them.
+  const SyntheticResponse f;
+  t = NineTimes();
+  const auto eight = SyntheticRig::RenderExposureStack(TestScene(16), t, f, {});
+  const ResponseCurve curve = CalibrateResponse({MakeStack(eight, t)});
+  EXPECT_NO_THROW(MergeHdr(MakeStack(eight, t), &curve));
+  std::swap(t[5], t[6]);
+  EXPECT_NE(CalibErrorOf([&] { MergeHdr(MakeStack(eight, t), &curve); }).find("as bright as e4.png"), std::string::npos);
+}
+
 TEST(Hdr, SixteenBitLinearMergeWithBlackFrames) {
   const auto t = NineTimes();
   StackOptions so;
@@ -274,14 +310,6 @@ class HdrFiles : public ::testing::Test {
       out->close();
     }
   }
-  std::string Error(const std::function<void()>& f) {
-    try {
-      f();
-    } catch (const CalibError& e) {
-      return e.what();
-    }
-    return "(no error)";
-  }
   fs::path dir_;
   std::string nlohmann_json_;
 };
@@ -333,7 +361,7 @@ TEST_F(HdrFiles, UnusableExifTimeFallsBackToJson) {
   double exif = 0;
   ReadRgbImage(P("x0.jpg"), &exif);
   if (std::isfinite(exif)) GTEST_SKIP() << "this OpenImageIO writes 1/8 s readably: " << exif;
-  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); })
+  EXPECT_EQ(CalibErrorOf([&] { ReadExposureStack(dir_.string()); })
                 .find(P("x0.jpg") + ": no exposure time (its EXIF ExposureTime inf is unusable"), 0u);
   std::ofstream(dir_ / "exposures.json") << "{\"x0.jpg\": 0.125, \"x1.jpg\": 0.5}";
   const ExposureStack s = ReadExposureStack(dir_.string());
@@ -343,30 +371,30 @@ TEST_F(HdrFiles, UnusableExifTimeFallsBackToJson) {
 
 TEST_F(HdrFiles, BadStacksNameTheFile) {
   WriteStack(false);
-  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img0.png") + ": no exposure time"), 0u);
+  EXPECT_EQ(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find(P("img0.png") + ": no exposure time"), 0u);
   std::ofstream(dir_ / "exposures.json") << nlohmann_json_;
   cv::imwrite(P("img3.png"), cv::Mat(10, 10, CV_8UC3));
   std::ofstream(dir_ / "exposures.json") << nlohmann_json_.substr(0, nlohmann_json_.size() - 1) + ", \"img3.png\": 1}";
-  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": image is 10x10 but 3 of the stack's 4 photos are 64x48"), 0u);
+  EXPECT_EQ(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": image is 10x10 but 3 of the stack's 4 photos are 64x48"), 0u);
   // The odd photo is named also when it sorts first.
   fs::rename(P("img3.png"), P("a.png"));
   std::ofstream(dir_ / "exposures.json") << nlohmann_json_.substr(0, nlohmann_json_.size() - 1) + ", \"a.png\": 1}";
-  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("a.png") + ": image is 10x10"), 0u);
+  EXPECT_EQ(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find(P("a.png") + ": image is 10x10"), 0u);
   fs::remove(P("a.png"));
   std::ofstream(dir_ / "exposures.json") << nlohmann_json_.substr(0, nlohmann_json_.size() - 1) + ", \"img3.png\": 1}";
   // A greyscale photo among colour ones (read as grey RGB, it would skew the colours).
   cv::imwrite(P("img3.png"), cv::Mat(48, 64, CV_8UC1, cv::Scalar(100)));
-  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": a greyscale photo"), 0u);
+  EXPECT_EQ(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": a greyscale photo"), 0u);
   std::ofstream(P("img3.png")) << "not a png at all";
-  EXPECT_EQ(Error([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": cannot read image"), 0u);
+  EXPECT_EQ(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": cannot read image"), 0u);
   for (int j : {1, 2, 3}) fs::remove(P(fmt::format("img{}.png", j)));
-  EXPECT_NE(Error([&] { ReadExposureStack(dir_.string()); }).find("at least 2 images, found 1"), std::string::npos);
+  EXPECT_NE(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find("at least 2 images, found 1"), std::string::npos);
   // An 8-bit stack needs a response curve; a response file must be valid.
   WriteStack();
   const ExposureStack s = ReadExposureStack(dir_.string());
-  EXPECT_NE(Error([&] { MergeHdr(s, nullptr); }).find("need a response curve"), std::string::npos);
+  EXPECT_NE(CalibErrorOf([&] { MergeHdr(s, nullptr); }).find("need a response curve"), std::string::npos);
   std::ofstream(P("bad.yml")) << "%YAML:1.0\nresponse: 3\n";
-  EXPECT_NE(Error([&] { ReadResponse(P("bad.yml")); }).find(P("bad.yml") + ": "), std::string::npos);
+  EXPECT_NE(CalibErrorOf([&] { ReadResponse(P("bad.yml")); }).find(P("bad.yml") + ": "), std::string::npos);
 }
 
 // A JPEG cut short (a copy interrupted, a failing card) decodes "successfully" in OpenImageIO,
@@ -380,7 +408,7 @@ TEST_F(HdrFiles, CutShortJpegIsRefused) {
   std::ifstream in(whole, std::ios::binary);
   const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() / 2);
-  EXPECT_EQ(Error([&] { ReadRgbImage(cut); }).find(cut + ": damaged image"), 0u);
+  EXPECT_EQ(CalibErrorOf([&] { ReadRgbImage(cut); }).find(cut + ": damaged image"), 0u);
 }
 
 TEST_F(HdrFiles, ResponseAndExrRoundTrip) {
