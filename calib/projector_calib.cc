@@ -15,6 +15,7 @@ namespace translume::calib {
 std::string ProjectorCalibOptions::Validate() const {
   if (min_planes < 3) return "min_planes must be at least 3";
   if (!(outlier_factor > 1)) return "outlier_factor (--outlier-factor) must be > 1";
+  if (!(max_rms_px > 0)) return "max_rms_px must be positive";
   return "";
 }
 
@@ -148,6 +149,16 @@ ProjectorCalibration CalibrateProjector(const CameraCalibration& camera, const B
   pc.stereo_camera_rms = std::sqrt(sc / std::max(per_view.rows, 1));
   pc.stereo_projector_rms = std::sqrt(sp / std::max(per_view.rows, 1));
   pc.used_planes = names;
+  const double worst = std::max({pc.projector_rms, pc.stereo_camera_rms, pc.stereo_projector_rms});
+  if (!(worst <= o.max_rms_px))
+    throw CalibError(fmt::format(
+        "projector calibration: reprojection RMS {:.2f} px (projector fit {:.2f}, stereo camera {:.2f}, "
+        "stereo projector {:.2f}) is above {:g} px: the projected corners do not match the pattern's; {}",
+        worst, pc.projector_rms, pc.stereo_camera_rms, pc.stereo_projector_rms, o.max_rms_px,
+        o.rear_projection ? "the planes were taken as rear projection (--rear, capture.json projector.rear): "
+                            "if the projector lit them from the camera's side, leave it off"
+                          : "if the projector lit the planes from behind (a back-lit rig), calibrate with "
+                            "rear projection (--rear, capture.json projector.rear)"));
   return pc;
 }
 

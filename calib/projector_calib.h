@@ -31,6 +31,10 @@ struct ProjectorCalibOptions {
   // screen) from the side opposite the camera, so the camera sees the projected pattern
   // mirrored left-right; each detected row of corners is reversed to match the projector's.
   bool rear_projection = false;
+  // The calibration is refused when its reprojection RMS (the projector fit's or either stereo
+  // one's) exceeds this: good planes give ~0.1-0.5 px, while planes taken as front projection
+  // that were rear projected (or the reverse) give ~10 px or more.
+  double max_rms_px = 2.0;
   std::string Validate() const;
 };
 
@@ -64,8 +68,9 @@ std::vector<cv::Point3f> CornersOnPlane(const CameraCalibration& camera,
 // corners in plane coordinates; then calibrateCamera for the projector with the pattern's
 // projector-pixel corners, and stereoCalibrate with both intrinsics fixed for the pose.
 // Planes where either board is not found, or whose projector RMS is an outlier, are dropped
-// and listed. Throws CalibError when photos differ in size from the camera calibration or
-// fewer than min_planes planes remain.
+// and listed. Throws CalibError when photos differ in size from the camera calibration, fewer
+// than min_planes planes remain, or the reprojection RMS exceeds max_rms_px (with a hint on
+// rear projection).
 ProjectorCalibration CalibrateProjector(const CameraCalibration& camera, const BoardSpec& board,
                                         const ProjectorChessboard& pattern,
                                         const std::vector<PlaneView>& planes,

@@ -135,6 +135,20 @@ TEST(ProjectorCalib, DropsPlanesWithoutPatternAndRejectsTooFew) {
   EXPECT_THROW(CalibrateProjector(s.camera, s.board, s.pattern, planes), CalibError);
 }
 
+// Planes calibrated with the wrong projection side (rear-projected planes without --rear gave a
+// stereo RMS of ~16 px, and the calibration was written) are refused, with the hint.
+TEST(ProjectorCalib, ImplausibleRmsIsRefusedWithARearHint) {
+  const ProjectorScene s(5, false);
+  try {
+    CalibrateProjector(s.camera, s.board, s.pattern, s.planes, {.min_planes = 3, .rear_projection = true});
+    ADD_FAILURE() << "no error";
+  } catch (const CalibError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find(") is above 2 px: the projected corners do not match"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("if the projector lit them from the camera's side, leave it off"), std::string::npos) << msg;
+  }
+}
+
 // CornersOnPlane inverts the camera: points of a tilted plane projected through the rig's own
 // distortion code (not OpenCV's) come back onto the plane. The image points are floats (~3e-5
 // px at 1000 px, ~1e-5 mm at 480 mm with f = 1200 px) and undistortion iterates to 1e-12, so
