@@ -112,6 +112,30 @@ TEST_F(Cli, CapturePipelineErrorsAreOneLine) {
   ExpectOneLineError(Translume("acquire " + P("nowhere") + " -o " + P("folder.vdb")), "-o " + P("folder.vdb") + ": is a folder");
 }
 
+// A capture folder that capture.json's reader accepts (empty stacks: acquire would stop later).
+void WriteMinimalCapture(const fs::path& dir) {
+  for (const char* d : {"camera", "white", "s0"}) fs::create_directories(dir / d);
+  std::ofstream(dir / "response.yml") << "%YAML:1.0\n";
+  std::ofstream(dir / "capture.json") << R"({"format": "translume-capture/1", "setup": "back",
+    "sample_mm": [7.5, 5.5, 1.5], "spacing_mm": 0.5, "camera": {"photos": "camera", "board": "chessboard:9x6:2"},
+    "response": "response.yml", "white": {"white": "white", "patch": [[2, 2], [40, 2], [40, 30], [2, 30]],
+    "albedo": 0.9}, "conditions": [{"name": "a", "stack": "s0", "light": "region:0,0/2"}]})";
+}
+
+// The work folder OUT_work is refused when it is the capture folder or holds it (acquire wrote
+// its calibration, HDR and dataset files into a capture folder named m_work).
+TEST_F(Cli, AcquireWorkFolderStaysOutOfTheCapture) {
+  WriteMinimalCapture(P("wk3/m_work"));
+  ExpectOneLineError(Translume("acquire " + P("wk3/m_work") + " -o " + P("wk3/m.vdb")),
+                     "-o " + P("wk3/m.vdb") + ": its work folder " + P("wk3/m_work") +
+                         " is or lies inside the capture folder");
+  EXPECT_FALSE(fs::exists(P("wk3/m_work/stages.json")));
+  WriteMinimalCapture(P("wk4/m_work/cap"));
+  ExpectOneLineError(Translume("acquire " + P("wk4/m_work/cap") + " -o " + P("wk4/m.vdb")),
+                     "its work folder " + P("wk4/m_work") + " holds the capture folder");
+  EXPECT_FALSE(fs::exists(P("wk4/m_work/stages.json")));
+}
+
 TEST_F(Cli, GlPlatformsCanBeForcedAndBadOnesAreNamed) {
   CommandRun r = Translume("info --gl", "TRANSLUME_GL=osmesa");
   ASSERT_EQ(r.status, 0) << r.output;

@@ -93,9 +93,18 @@ int RunAcquire(int argc, char** argv) {
   o.recovery = flags.Options("acquire");
   o.solve = !no_solve;
   const acquire::CaptureSpec cap = acquire::ReadCapture(capture_path);
-  const fs::path out_abs = fs::weakly_canonical(fs::absolute(out)), cap_abs = fs::weakly_canonical(fs::absolute(cap.dir));
-  if (std::mismatch(cap_abs.begin(), cap_abs.end(), out_abs.begin(), out_abs.end()).first == cap_abs.end())
+  const std::string work = acquire::WorkDir(out);
+  const fs::path out_abs = fs::weakly_canonical(fs::absolute(out)), cap_abs = fs::weakly_canonical(fs::absolute(cap.dir)),
+                 work_abs = fs::weakly_canonical(fs::absolute(work));
+  auto within = [](const fs::path& a, const fs::path& folder) {  // a is folder or lies inside it
+    return std::mismatch(folder.begin(), folder.end(), a.begin(), a.end()).first == folder.end();
+  };
+  if (within(out_abs, cap_abs))
     throw InputError(fmt::format("-o {}: write outside the capture folder (inputs are never touched)", out));
+  // So must the work folder: a capture folder named OUT_work would receive its files.
+  if (within(work_abs, cap_abs) || within(cap_abs, work_abs))
+    throw InputError(fmt::format("-o {}: its work folder {} {} the capture folder {}; choose another -o", out, work,
+                                 within(work_abs, cap_abs) ? "is or lies inside" : "holds", cap.dir));
   CheckFitsInMemory(EstimateMemory(cap.grid, int(cap.conditions.size()), Precision::kDouble).recovery_bytes,
                     fmt::format("{}: a recovery on the {} grid with {} conditions", cap.file, cap.grid.ToString(),
                                 cap.conditions.size()));
