@@ -9,6 +9,9 @@
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include "calib/board.h"
+#include "calib/error.h"
+#include "calib/photo_io.h"
 #include "solver/dataset.h"
 #include "solver/material.h"
 #include "solver/status.h"
@@ -86,8 +89,21 @@ class Reader {
     const std::string rel = String(v, field);
     const fs::path p = fs::path(dir_) / rel;
     if (folder ? !fs::is_directory(p) : !fs::is_regular_file(p))
-      Fail(field, fmt::format("{} {} not found", folder ? "folder" : "file", p.string()));
+      Fail(field, !fs::exists(p) ? fmt::format("{} {} not found", folder ? "folder" : "file", p.string())
+                  : folder       ? fmt::format("{} is a file, expected a folder", p.string())
+                                 : fmt::format("{} is a folder, expected a file", p.string()));
     return p.string();
+  }
+  // Runs a calib parser over a field's text; its CalibError becomes this file's InputError,
+  // under `field` (empty: the message names the field itself).
+  template <typename F>
+  void Parse(const std::string& field, F&& parse) const {
+    try {
+      parse();
+    } catch (const calib::CalibError& e) {
+      if (!field.empty()) Fail(field, e.what());
+      throw InputError(fmt::format("{}: {}", file_, e.what()));
+    }
   }
 
  private:
@@ -109,13 +125,17 @@ CaptureSpec ReadCapture(const std::string& path) {
   const fs::path dir = is_dir ? fs::path(path) : fs::path(path).parent_path();
   s.dir = (dir.empty() ? fs::path(".") : dir).string();
   s.file = is_dir ? (fs::path(path) / "capture.json").string() : path;
+  if (fs::is_directory(s.file)) throw InputError(fmt::format("{}: is a folder, not a file", s.file));
   std::ifstream in(s.file);
   if (!in) throw InputError(fmt::format("{}: cannot open (a capture folder holds capture.json)", s.file));
   json j;
   try {
     j = json::parse(in);
-  } catch (const json::parse_error& e) {
-    throw InputError(fmt::format("{}: not valid JSON ({})", s.file, e.what()));
+  } catch (const json::exception& e) {  // also a number beyond a double's range (1e999)
+    std::string why = e.what();  // without the "[json.exception.KIND.ID] " prefix
+    if (const size_t at = why.find("] "); why.rfind("[json.exception.", 0) == 0 && at != std::string::npos)
+      why.erase(0, at + 2);
+    throw InputError(fmt::format("{}: not valid JSON: {}", s.file, why));
   }
   const Reader r(s.file, s.dir);
   if (!j.is_object()) r.Fail("(top level)", "expected an object");
@@ -182,6 +202,7 @@ CaptureSpec ReadCapture(const std::string& path) {
     r.CheckKeys(cam, "camera", {"photos", "board"});
     s.camera.photos = r.Path(r.Get(cam, "photos", "camera."), "camera.photos", true);
     s.camera.board = r.String(r.Get(cam, "board", "camera."), "camera.board");
+    r.Parse("camera.board", [&] { calib::BoardSpec::Parse(s.camera.board); });
   } else {
     r.Fail("camera", "expected a calibration file or {\"photos\", \"board\"}");
   }
@@ -194,9 +215,14 @@ CaptureSpec ReadCapture(const std::string& path) {
       r.CheckKeys(p, "projector", {"planes", "board", "pattern", "projector_size", "rear"});
       s.projector.planes = r.Path(r.Get(p, "planes", "projector."), "projector.planes", true);
       s.projector.board = r.String(r.Get(p, "board", "projector."), "projector.board");
+      r.Parse("projector.board", [&] { calib::BoardSpec::Parse(s.projector.board); });
       if (p.contains("pattern")) s.projector.pattern = r.String(p["pattern"], "projector.pattern");
       if (p.contains("projector_size"))
         s.projector.projector_size = r.String(p["projector_size"], "projector.projector_size");
+      r.Parse("", [&] {
+        calib::ParseProjectorChessboard(s.projector.pattern, s.projector.projector_size, "projector.pattern",
+                                        "projector.projector_size");
+      });
       if (p.contains("rear")) {
         if (!p["rear"].is_boolean()) r.Fail("projector.rear", "expected true or false");
         s.projector.rear = p["rear"].get<bool>();

@@ -74,9 +74,11 @@ struct CaptureSpec {
 // InputError "FILE: FIELD: problem" on: unknown format, unknown or mistyped fields, a setup
 // other than back|front, non-positive sizes, neither or both of spacing_mm and grid, a spacing
 // (given or from the grid) that SpacingProblem refuses, more than 10^6 nodes on an axis, a grid
-// of other than whole numbers or that does not match the size, eta and C both given, corners not 4 pairs, a missing folder
-// or file, a condition with neither or both of pattern and light, pattern conditions without
-// a projector calibration, duplicate condition names.
+// of other than whole numbers or that does not match the size, eta and C both given, corners
+// not 4 pairs, a missing folder or file (or one of the other kind), a board or projector
+// pattern and size that do not parse, a condition with neither or both of pattern and light,
+// pattern conditions without a projector calibration, duplicate condition names; and
+// "FILE: problem" when the file is a folder or not JSON (a number out of a double's range too).
 CaptureSpec ReadCapture(const std::string& path);
 
 // The JSON text of a spec, paths relative to spec.dir (what ReadCapture reads back).

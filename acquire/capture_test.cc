@@ -20,7 +20,8 @@ class CaptureTest : public ::testing::Test {
     dir_ = fs::temp_directory_path() /
            (std::string("translume_capture_") + ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(dir_);
-    for (const char* d : {"calib/camera", "lighting/00", "lighting/01", "calib/white"}) fs::create_directories(dir_ / d);
+    for (const char* d : {"calib/camera", "calib/planes", "lighting/00", "lighting/01", "calib/white"})
+      fs::create_directories(dir_ / d);
     std::ofstream(dir_ / "calib/response.yml") << "%YAML:1.0\n";
     base_ = nlohmann::json::parse(R"({
       "format": "translume-capture/1", "setup": "back", "sample_mm": [11.5, 8.5, 2.5],
@@ -140,6 +141,51 @@ TEST_F(CaptureTest, ImageLightsAreRelativeToTheFolder) {
   const CaptureSpec s = ReadCapture(Write(j));
   EXPECT_EQ(fs::path(s.conditions[0].Light(s.dir).image_path), dir_ / "stripes.png");
   EXPECT_EQ(s.conditions[0].light, "image:stripes.png");  // as given, for CaptureJson
+}
+
+// Every message names capture.json and the field (or the file): paths of the wrong kind said
+// "not found", boards and the projector pattern were checked only after the camera calibration
+// (naming --projector-size, a flag the user never gave), and a JSON number out of range or a
+// folder named capture.json gave the JSON library's own text.
+TEST_F(CaptureTest, MessagesNameTheFileAndField) {
+  ExpectError([](auto& j) { j["camera"] = "calib/camera"; }, "camera: " + (dir_ / "calib/camera").string() +
+                                                                 " is a folder, expected a file");
+  ExpectError([](auto& j) { j["camera"]["photos"] = "calib/response.yml"; },
+              "camera.photos: " + (dir_ / "calib/response.yml").string() + " is a file, expected a folder");
+  ExpectError([](auto& j) { j["conditions"][1]["stack"] = "calib/response.yml"; },
+              "conditions[1].stack: " + (dir_ / "calib/response.yml").string() + " is a file, expected a folder");
+  ExpectError([](auto& j) { j["camera"]["board"] = "chess:9x6"; }, "camera.board: board 'chess:9x6': expected");
+  auto projector = [](const char* key, const char* value) {
+    return [=](nlohmann::json& j) {
+      j["projector"] = {{"planes", "calib/planes"}, {"board", "chessboard:9x6:2"}};
+      j["projector"][key] = value;
+    };
+  };
+  ExpectError(projector("board", "chessboard:6x6:2"), "projector.board: board 'chessboard:6x6:2'");
+  ExpectError(projector("projector_size", "1024"), "projector.projector_size 1024: expected WIDTHxHEIGHT");
+  ExpectError(projector("projector_size", "32x32"), "projector.projector_size 32x32: each side must be");
+  ExpectError(projector("pattern", "11x7:200"), "projector.pattern 11x7:200: ");
+  ExpectError(projector("pattern", "11x7"), "projector.pattern 11x7: expected COLSxROWS:SQUARE_PX");
+  nlohmann::json j = base_;
+  projector("pattern", "11x7:64")(j);
+  EXPECT_EQ(ReadCapture(Write(j)).projector.pattern, "11x7:64");
+
+  std::ofstream(dir_ / "capture.json") << R"({"format": "translume-capture/1", "eta": 1e999})";
+  try {
+    ReadCapture(dir_.string());
+    ADD_FAILURE() << "1e999 accepted";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), (dir_ / "capture.json").string() +
+                                         ": not valid JSON: number overflow parsing '1e999'");
+  }
+  fs::remove(dir_ / "capture.json");
+  fs::create_directories(dir_ / "capture.json");
+  try {
+    ReadCapture(dir_.string());
+    ADD_FAILURE() << "a folder capture.json accepted";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), (dir_ / "capture.json").string() + ": is a folder, not a file");
+  }
 }
 
 TEST_F(CaptureTest, NotJsonIsNamed) {

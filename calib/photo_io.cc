@@ -61,20 +61,21 @@ std::vector<PlaneView> ReadPlaneFolder(const std::string& dir) {
   return out;
 }
 
-ProjectorChessboard ParseProjectorChessboard(const std::string& text, const std::string& size) {
+ProjectorChessboard ParseProjectorChessboard(const std::string& text, const std::string& size,
+                                             const std::string& pattern_name, const std::string& size_name) {
   std::smatch m, n;
-  static const std::regex pat(R"((\d+)x(\d+):(\d+))"), wh(R"((\d+)x(\d+))");
+  static const std::regex pat(R"((\d{1,6})x(\d{1,6}):(\d{1,6}))"), wh(R"((\d{1,6})x(\d{1,6}))");
   if (!std::regex_match(text, m, pat))
-    throw CalibError(fmt::format("--pattern {}: expected COLSxROWS:SQUARE_PX", text));
+    throw CalibError(fmt::format("{} {}: expected COLSxROWS:SQUARE_PX", pattern_name, text));
   if (!std::regex_match(size, n, wh))
-    throw CalibError(fmt::format("--projector-size {}: expected WIDTHxHEIGHT", size));
+    throw CalibError(fmt::format("{} {}: expected WIDTHxHEIGHT", size_name, size));
   const int w = std::stoi(n[1]), h = std::stoi(n[2]);
   if (w < 64 || h < 64 || w > 16384 || h > 16384)
-    throw CalibError(fmt::format("--projector-size {}: each side must be 64..16384 pixels", size));
+    throw CalibError(fmt::format("{} {}: each side must be 64..16384 pixels", size_name, size));
   const ProjectorChessboard b = ProjectorChessboard::Centered(
       {std::stoi(n[1]), std::stoi(n[2])}, std::stoi(m[1]), std::stoi(m[2]), std::stoi(m[3]));
   if (std::string why = b.Validate(); !why.empty())
-    throw CalibError(fmt::format("--pattern {}: {}", text, why));
+    throw CalibError(fmt::format("{} {}: {}", pattern_name, text, why));
   return b;
 }
 

@@ -23,7 +23,10 @@ std::vector<NamedImage> ReadPhotoFolder(const std::string& dir);
 std::vector<PlaneView> ReadPlaneFolder(const std::string& dir);
 
 // "COLSxROWS:SQUARE_PX" centred on a projector of size "WIDTHxHEIGHT". Throws CalibError naming
-// the option (--pattern / --projector-size) on malformed text or an invalid board.
-ProjectorChessboard ParseProjectorChessboard(const std::string& pattern, const std::string& size);
+// the option (pattern_name / size_name: the command line's flags, or a file's fields) on
+// malformed text or an invalid board.
+ProjectorChessboard ParseProjectorChessboard(const std::string& pattern, const std::string& size,
+                                             const std::string& pattern_name = "--pattern",
+                                             const std::string& size_name = "--projector-size");
 
 }  // namespace translume::calib
