@@ -143,7 +143,23 @@ CameraCalibration ReadCameraCalibration(const std::string& path) {
   c.K = cv::Matx33d(K);
   c.dist.convertTo(c.dist, CV_64F);
   c.dist = c.dist.reshape(1, 1);
+  if (std::string why = IntrinsicsProblem(c.K, c.dist, "camera_matrix", "distortion_coefficients"); !why.empty())
+    throw CalibError(path + ": " + why);
   return c;
+}
+
+std::string IntrinsicsProblem(const cv::Matx33d& K, const cv::Mat& dist, const std::string& matrix,
+                              const std::string& distortion) {
+  for (int k = 0; k < 9; ++k)
+    if (!std::isfinite(K.val[k])) return fmt::format("{}: element {} is {}, must be finite", matrix, k, K.val[k]);
+  if (!(K(0, 0) > 0) || !(K(1, 1) > 0))
+    return fmt::format("{}: fx {:g} and fy {:g} must be positive", matrix, K(0, 0), K(1, 1));
+  cv::Mat d;
+  dist.convertTo(d, CV_64F);
+  for (int k = 0; k < int(d.total()); ++k)
+    if (!std::isfinite(d.at<double>(k)))
+      return fmt::format("{}: coefficient {} is {}, must be finite", distortion, k, d.at<double>(k));
+  return "";
 }
 
 }  // namespace translume::calib

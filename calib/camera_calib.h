@@ -50,7 +50,13 @@ void WriteCameraCalibration(const std::string& path, const CameraCalibration& c,
                             const std::string& board);
 // Reads camera_matrix, distortion_coefficients, image_width/height (and rms, per_view_errors,
 // std_intrinsics, views, dropped_views where present) back; rvecs/tvecs are not stored. Throws
-// CalibError naming the file when it cannot be read or lacks a field.
+// CalibError naming the file when it cannot be read, lacks a field or holds intrinsics that
+// IntrinsicsProblem refuses.
 CameraCalibration ReadCameraCalibration(const std::string& path);
+
+// "" when K and dist are usable intrinsics (every number finite, fx and fy positive), else the
+// problem, naming the fields `matrix` and `distortion` ("camera_matrix: fx is 0, must be positive").
+std::string IntrinsicsProblem(const cv::Matx33d& K, const cv::Mat& dist, const std::string& matrix,
+                              const std::string& distortion);
 
 }  // namespace translume::calib

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 
 #include "calib/error.h"
@@ -160,6 +161,32 @@ TEST(CameraCalib, YamlRoundTripLoadsInOpenCV) {
   EXPECT_TRUE(r.rvecs.empty());
   std::filesystem::remove(path);
   EXPECT_THROW(ReadCameraCalibration(path), CalibError);
+}
+
+// Intrinsics no camera has (fx 0, a NaN) are refused at read, naming the file and the field;
+// they went on into the pose and the mapping.
+TEST(CameraCalib, UnusableIntrinsicsAreRefusedAtRead) {
+  const std::string path = TempPath("translume_camera_bad.yml");
+  auto expect = [&](const CameraCalibration& c, const std::string& what) {
+    WriteCameraCalibration(path, c, "chessboard:9x6:25");
+    try {
+      ReadCameraCalibration(path);
+      ADD_FAILURE() << "accepted; expected " << what;
+    } catch (const CalibError& e) {
+      EXPECT_EQ(std::string(e.what()).find(path + ": " + what), 0u) << e.what();
+    }
+  };
+  CameraCalibration c;
+  c.image_size = {640, 480};
+  c.K = {0, 0, 320, 0, 1000, 240, 0, 0, 1};
+  c.dist = cv::Mat::zeros(1, 5, CV_64F);
+  expect(c, "camera_matrix: fx 0 and fy 1000 must be positive");
+  c.K(0, 0) = std::nan("");
+  expect(c, "camera_matrix: element 0 is ");  // "nan" or "-nan", "must be finite"
+  c.K(0, 0) = 1000;
+  c.dist.at<double>(1) = std::numeric_limits<double>::infinity();
+  expect(c, "distortion_coefficients: coefficient 1 is inf, must be finite");
+  std::filesystem::remove(path);
 }
 
 }  // namespace

@@ -204,6 +204,14 @@ ProjectorCalibration ReadProjectorCalibration(const std::string& path) {
   p.K = cv::Matx33d(K);
   p.R = cv::Matx33d(R);
   p.T = cv::Vec3d(T.reshape(1, 3));
+  if (std::string why = IntrinsicsProblem(p.K, p.dist, "projector_matrix", "projector_distortion"); !why.empty())
+    throw CalibError(path + ": " + why);
+  if (p.projector_size.width <= 0 || p.projector_size.height <= 0)
+    throw CalibError(fmt::format("{}: projector_width {} and projector_height {} must be positive", path,
+                                 p.projector_size.width, p.projector_size.height));
+  // A rotation: finite and orthonormal (to the precision of a written file).
+  if (!cv::checkRange(R) || !cv::checkRange(T) || cv::norm(p.R * p.R.t() - cv::Matx33d::eye()) > 1e-6)
+    throw CalibError(path + ": R must be a rotation and T finite");
   fs["projector_rms"] >> p.projector_rms;
   fs["stereo_camera_rms"] >> p.stereo_camera_rms;
   fs["stereo_projector_rms"] >> p.stereo_projector_rms;

@@ -83,7 +83,8 @@ ProjectorCalibration CalibrateProjector(const CameraCalibration& camera, const B
 void WriteProjectorCalibration(const std::string& path, const ProjectorCalibration& p,
                                const CameraCalibration& camera, const std::string& pattern);
 // Reads the projector's fields back (not the camera's or the pattern); throws CalibError naming
-// the file when it cannot be read or lacks projector_matrix, projector_distortion, R or T.
+// the file when it cannot be read, lacks projector_matrix, projector_distortion, R or T, or holds
+// unusable values (IntrinsicsProblem, a size that is not positive, R no rotation, T not finite).
 ProjectorCalibration ReadProjectorCalibration(const std::string& path);
 
 }  // namespace translume::calib

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <opencv2/calib3d.hpp>
 
 #include "calib/error.h"
@@ -234,6 +235,22 @@ TEST(ProjectorCalib, YamlRoundTrip) {
   }
   std::filesystem::remove(path);
   EXPECT_THROW(ReadProjectorCalibration(path), CalibError);
+  // Unusable values are refused naming the file and the field (a NaN went on into q).
+  for (int k : {0, 1, 2}) {
+    ProjectorCalibration bad = p;
+    if (k == 0) bad.K(1, 2) = std::nan("");
+    if (k == 1) bad.R(0, 0) = std::nan("");
+    if (k == 2) bad.T[2] = std::numeric_limits<double>::infinity();
+    WriteProjectorCalibration(path, bad, camera, "11x7:64");
+    try {
+      ReadProjectorCalibration(path);
+      ADD_FAILURE() << "case " << k << " accepted";
+    } catch (const CalibError& e) {
+      EXPECT_EQ(std::string(e.what()).find(path + (k ? ": R must be a rotation and T finite"
+                                                     : ": projector_matrix: element 5 is ")), 0u) << e.what();
+    }
+  }
+  std::filesystem::remove(path);
 }
 
 }  // namespace
