@@ -44,6 +44,23 @@ std::string FirstLine(std::string s) {
   return s.empty() ? "unknown error" : s;
 }
 
+// Whether a PNG file lacks its IEND chunk in its last 4 KiB (a copy cut short). Such a file is
+// refused before decoding: OpenImageIO 2.4 leaves libpng's default error handler, which prints
+// its own "libpng error:" line on stderr besides our one-line error.
+bool PngCutShort(const std::string& path) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  const std::streamoff size = in.tellg();
+  std::string bytes(8, '\0');
+  in.seekg(0);
+  if (size < 8 || !in.read(bytes.data(), 8) || bytes != "\x89PNG\r\n\x1a\n") return false;
+  const std::streamoff tail = std::min<std::streamoff>(size, 4096);
+  bytes.assign(size_t(tail), '\0');
+  in.seekg(size - tail);
+  in.read(bytes.data(), tail);
+  // The chunk: length 0, type IEND, its fixed CRC.
+  return bytes.find(std::string("\0\0\0\0IEND\xae\x42\x60\x82", 12)) == std::string::npos;
+}
+
 // Debevec & Malik's hat weight over the 8-bit codes.
 double HatWeight(int z) { return z <= 127 ? z + 1.0 : 256.0 - z; }
 
@@ -58,6 +75,7 @@ bool IsPhotoFile(const std::string& path) {
 
 cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds, bool* grey) {
   if (!fs::exists(path)) throw CalibError(path + ": no such file");
+  if (PngCutShort(path)) throw CalibError(path + ": damaged image (a PNG cut short: no IEND chunk at its end)");
   OIIO::ImageSpec config;
   if (IsRaw(path)) {
     config.attribute("raw:use_camera_wb", 0);

@@ -34,7 +34,8 @@ bool IsPhotoFile(const std::string& path);
 // files (.cr2 .cr3 .nef .arw .dng .raf .orf .rw2 .pef .srw) are decoded linearly (no white
 // balance, no auto brightness, linear colour space) to CV_16UC3. *exif_seconds receives the EXIF
 // ExposureTime (0 when absent), *grey whether the file itself was grey (one or two channels).
-// Throws CalibError "PATH: problem", also for a damaged JPEG (cut short or corrupt data).
+// Throws CalibError "PATH: problem", also for a damaged JPEG (cut short or corrupt data) and a
+// PNG cut short (no IEND chunk).
 cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds = nullptr, bool* grey = nullptr);
 
 // Throws CalibError "NAME: image is WxH but K of WHOSE N photos are W2xH2" for the first photo

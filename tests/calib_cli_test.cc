@@ -242,6 +242,11 @@ TEST_F(CalibCli, HdrBadInputs) {
   ExpectOneLineError(Translume("hdr " + P("s") + " -o " + P("out.exr")), "need a response curve");
   ExpectOneLineError(Translume("hdr " + P("s") + " --response " + P("none.yml") + " -o " + P("out.exr")),
                      P("none.yml") + ": no such file");
+  // A PNG cut short: our line only, not libpng's own "libpng error:" line too.
+  const std::string whole = ReadAll(P("s/e1.png"));
+  std::ofstream(P("s/e1.png"), std::ios::binary) << whole.substr(0, whole.size() / 2);
+  ExpectOneLineError(Translume("hdr " + P("s") + " -o " + P("out.exr")),
+                     P("s/e1.png") + ": damaged image (a PNG cut short");
   std::ofstream(P("s/e1.png")) << "truncated";
   ExpectOneLineError(Translume("hdr " + P("s") + " -o " + P("out.exr")), P("s/e1.png") + ": cannot read image");
   fs::remove(P("s/e1.png"));
