@@ -147,6 +147,11 @@ TEST_F(CalibCli, CalibrateProjectorFromPlanes) {
                      "would overwrite the input");
   ExpectOneLineError(Translume("calibrate projector " + P("planes") + " --camera " + P("pattern.png") +
                                " --board chessboard:9x6:25 -o " + P("out.yml")), P("pattern.png"));
+  // The missing option is named, not the list of all four.
+  ExpectOneLineError(Translume("calibrate projector " + P("planes") + " --board chessboard:9x6:25 -o " + P("out.yml")),
+                     "--camera is required");
+  ExpectOneLineError(Translume("calibrate projector " + P("planes") + " --board chessboard:9x6:25"),
+                     "--camera and -o are required");
   // Planes shot from the camera's side, calibrated as rear projection: refused, with the hint.
   ExpectOneLineError(Translume(args + P("out.yml") + " --rear"), "if the projector lit them from the camera's side");
   fs::remove(P("planes/p2_pattern.png"));

@@ -108,8 +108,16 @@ int RunCalibrateProjector(int argc, char** argv) {
                 pattern.projector_size.height, pattern.cols, pattern.rows, pattern.square_px);
     return 0;
   }
-  if (dir.empty() || camera_path.empty() || board_text.empty() || out.empty())
-    throw CLI::RequiredError("PLANES_DIR, --camera, --board and -o");
+  std::vector<std::string> missing;
+  for (const auto& [value, name] : {std::pair{&dir, "PLANES_DIR"}, {&camera_path, "--camera"},
+                                    {&board_text, "--board"}, {&out, "-o"}})
+    if (value->empty()) missing.push_back(name);
+  if (!missing.empty()) {
+    std::string names = missing[0];
+    for (size_t k = 1; k < missing.size(); ++k) names += (k + 1 < missing.size() ? ", " : " and ") + missing[k];
+    throw CLI::RequiredError(names + (missing.size() > 1 ? " are required" : " is required"),
+                             CLI::ExitCodes::RequiredError);
+  }
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   RequireNotInput("-o", out, {dir, camera_path});
   const calib::BoardSpec board = calib::BoardSpec::Parse(board_text);
