@@ -32,9 +32,9 @@ struct ProjectorCalibOptions {
   // mirrored left-right; each detected row of corners is reversed to match the projector's.
   bool rear_projection = false;
   // The calibration is refused when its reprojection RMS (the projector fit's or either stereo
-  // one's) exceeds this: good planes give ~0.1-0.5 px, while planes taken as front projection
+  // one's) exceeds this: good planes give ~0.1-1 px, while planes taken as front projection
   // that were rear projected (or the reverse) give ~10 px or more.
-  double max_rms_px = 2.0;
+  double max_rms_px = 3.0;
   std::string Validate() const;
 };
 

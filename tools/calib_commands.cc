@@ -91,6 +91,8 @@ int RunCalibrateProjector(int argc, char** argv) {
   app.add_option("--min-planes", o.min_planes, "Fewest usable planes")->capture_default_str();
   app.add_flag("--rear", o.rear_projection, "Rear projection (back-lit rig): the projector lights "
                "the plane, a diffusing screen, from behind, so the camera sees the pattern mirrored");
+  app.add_option("--max-rms", o.max_rms_px, "Refuse a calibration whose reprojection RMS (projector fit or "
+                 "stereo) is above this, px")->capture_default_str();
   app.add_option("--write-pattern", write_pattern, "Write the pattern image (.png) and exit");
   app.add_option("-o,--output", out, "Output calibration (.yml)");
   AddCommonOptions(app);
