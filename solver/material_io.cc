@@ -14,6 +14,7 @@
 #include <set>
 
 #include "solver/atomic_file.h"
+#include "solver/memory.h"
 #include "solver/status.h"
 
 namespace translume {
@@ -157,6 +158,9 @@ void WriteVdb(const std::string& path, const Material& m, const MaterialCorrupti
     fake->tree().setValue(openvdb::Coord(0, 0, 0), 1.0f);
     grids = {kappa, fake, density, albedo};
   }
+  if (bad == MC::kHugeTiles)
+    for (auto* grid : {kappa.get(), mu.get()})
+      grid->fill(openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(4095)), openvdb::Vec3f(0.5f), true);
   if (bad == MC::kRotated || bad == MC::kMirrored)
     for (const auto& grid : grids) {
       if (bad == MC::kRotated) grid->transform().postRotate(0.3, openvdb::math::Z_AXIS);
@@ -297,6 +301,9 @@ Material ReadMaterialFile(const std::string& path, bool trailer) {
                                    path, names[g], grids[g]->activeVoxelCount(),
                                    m.shape.ToString(), m.shape.size()));
   }
+  // A valid file of tiles can hold a grid far too large to hold densely (4096^3 in 480 KB).
+  CheckFitsInMemory(m.shape.size() * 6 * int64_t(sizeof(float)),
+                    fmt::format("{}: its {} grid, held densely,", path, m.shape.ToString()));
   for (int c = 0; c < 3; ++c) {
     m.kappa[c].resize(m.shape.size());
     m.mu[c].resize(m.shape.size());

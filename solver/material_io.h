@@ -28,6 +28,7 @@ Material ReadMaterial(const std::string& path);
 enum class MaterialCorruption {
   kMissingMu, kMissingC, kUnknownMetadata, kShapeMismatch, kNegativeKappa, kNanMu,
   kWrongGridType, kMissingVoxel, kWrongFormat, kRotated, kMirrored,
+  kHugeTiles,  // valid, but a 4096^3 grid of active tiles: far more than memory holds densely
   kNoChecksum  // not corrupt: a file as written before the checksum trailer (still read)
 };
 void WriteCorruptMaterialForTest(const std::string& path, const Material& material,

@@ -130,6 +130,7 @@ TEST_F(MaterialIo, RejectsEveryBrokenFile) {
       {MaterialCorruption::kWrongFormat, "translume_format"},
       {MaterialCorruption::kRotated, "axis-aligned"},
       {MaterialCorruption::kMirrored, "axis-aligned"},
+      {MaterialCorruption::kHugeTiles, "4096x4096x4096 grid, held densely, needs about"},
   };
   int n = 0;
   for (const auto& [corruption, what] : cases) {
