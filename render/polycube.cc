@@ -189,6 +189,13 @@ Polycube ParsePolycube(const std::string& text, const std::string& what) {
     p.cubes.push_back(c);
   }
   if (std::string err = p.Validate(); !err.empty()) throw InputError(what + ": " + err);
+  // Only the cubes' arrangement matters: the lattice starts at 0 on every axis whatever the
+  // file's offset (a polycube one cube over from the origin built a different, folded grid).
+  std::array<int, 3> lo = p.cubes[0];
+  for (const auto& c : p.cubes)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]);
+  for (auto& c : p.cubes)
+    for (int a = 0; a < 3; ++a) c[a] -= lo[a];
   return p;
 }
 

@@ -939,6 +939,23 @@ TriangleMesh ReadMesh(const std::string& path) {
   if (ext == ".obj") m = ReadObj(path, in);
   else if (ext == ".ply") m = ReadPly(path, in);
   else throw InputError(path + ": unknown mesh format (expected .obj or .ply)");
+  for (size_t v = 0; v < m.vertices.size(); ++v)
+    if (!m.vertices[v].allFinite()) throw InputError(fmt::format("{}: vertex {} is not finite", path, v + 1));
+  // Vertices that no triangle uses (strays are common in exported OBJ files) would widen the
+  // bounding box that the polycube is fitted to: dropped.
+  std::vector<int> used(m.vertices.size(), -1);
+  for (const auto& t : m.triangles)
+    for (int c = 0; c < 3; ++c)
+      if (t[c] >= 0 && t[c] < int(used.size())) used[size_t(t[c])] = 0;
+  if (std::count(used.begin(), used.end(), -1) > 0) {
+    std::vector<Vec3> kept;
+    for (size_t v = 0; v < used.size(); ++v)
+      if (used[v] == 0) used[v] = int(kept.size()), kept.push_back(m.vertices[v]);
+    for (auto& t : m.triangles)
+      for (int c = 0; c < 3; ++c)
+        if (t[c] >= 0 && t[c] < int(used.size())) t[c] = used[size_t(t[c])];
+    m.vertices.swap(kept);
+  }
   if (std::string err = m.Validate(); !err.empty()) throw InputError(path + ": " + err);
   return m;
 }

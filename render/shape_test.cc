@@ -80,6 +80,12 @@ TEST(Shape, ObjAndPlyMeshes) {
   const auto binary = ReadMesh(Write("tl_tet_bin.ply", bin));
   EXPECT_EQ(binary.vertices[3], Vec3(0, 0, 1));
   EXPECT_EQ(binary.triangles, ascii.triangles);
+  // A vertex no face uses is dropped (it widened the box the polycube is fitted to).
+  const auto stray = ReadMesh(Write("tl_stray.obj", "v 9 9 9\n" + kTet + "v 1000 1000 1000\n"
+                                    "f 2 4 3\nf 2 3 5\nf 3 4 5\nf 2 5 4\n"));
+  EXPECT_EQ(stray.vertices.size(), 4u);
+  EXPECT_EQ(stray.triangles, closed.triangles);
+  EXPECT_EQ(stray.vertices, closed.vertices);
 }
 
 // Binary big-endian PLY (used to be refused as an unsupported format), with a blank header
@@ -129,6 +135,17 @@ TEST(Shape, BadMeshesGiveClearErrors) {
   expect_error(Write("tl_junk.obj", kTet + "f 1 3 2abc\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"), "line 5: bad face index '2abc'");
   expect_error(Write("tl_zero.obj", kTet + "f 1 3 0\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"), "bad face index '0'");
   expect_error(Write("tl_mesh.stl", "solid"), "unknown mesh format");
+  // Binary PLY took NaN coordinates (OBJ refused them): both refuse any non-finite vertex.
+  std::string bin = "ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                    "property float z\nelement face 4\nproperty list uchar int vertex_indices\nend_header\n";
+  const float xyz[12] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, NAN};
+  bin.append(reinterpret_cast<const char*>(xyz), sizeof(xyz));
+  const int32_t faces[4][3] = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}};
+  for (const auto& f : faces) {
+    bin.push_back(char(3));
+    bin.append(reinterpret_cast<const char*>(f), sizeof(f));
+  }
+  expect_error(Write("tl_nan.ply", bin), "vertex 4 is not finite");
   expect_error(Write("tl_garbage.obj", "garbage\nmore\n"), "not an OBJ mesh");
   expect_error((fs::temp_directory_path() / "tl_missing.obj").string(), "cannot open");
 }
