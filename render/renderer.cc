@@ -154,6 +154,7 @@ RenderLight RenderLight::Parse(const std::string& text) {
     throw InputError("--light " + text + ": expected three numbers X,Y,Z");
   if (l.kind == Kind::kDirectional) {
     if (l.v.norm() == 0) throw InputError("--light " + text + ": the direction must be non-zero");
+    l.v /= l.v.cwiseAbs().maxCoeff();  // |v| of 1e308 components overflows
     l.v.normalize();
   }
   return l;
@@ -354,7 +355,9 @@ std::vector<std::pair<Vec3, std::array<double, 3>>> EnvironmentSamples(const Ima
   // partition of the sphere), so sum_k E_k is the integral of the map over the sphere.
   for (int y = 0; y < env.height; ++y) {
     const double theta = kPi * (y + 0.5) / env.height;
-    const double domega = (2 * kPi / env.width) * (kPi / env.height) * std::sin(theta);
+    // The row's exact solid angle over its pixels: (2 pi / W) (cos theta_0 - cos theta_1).
+    const double domega =
+        (2 * kPi / env.width) * (std::cos(kPi * y / env.height) - std::cos(kPi * (y + 1) / env.height));
     for (int x = 0; x < env.width; ++x) {
       const double phi = 2 * kPi * (x + 0.5) / env.width;
       const Vec3 d(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta));
@@ -364,7 +367,9 @@ std::vector<std::pair<Vec3, std::array<double, 3>>> EnvironmentSamples(const Ima
         if (const double dd = d.dot(out[k].first); dd > best_dot) best_dot = dd, best = k;
       for (int c = 0; c < 3; ++c) {
         const float v = env.at(x, y, std::min(c, env.channels - 1));
-        if (std::isfinite(v) && v > 0) out[best].second[c] += v * domega;
+        if (!std::isfinite(v))
+          throw InputError(fmt::format("--light env: pixel ({}, {}) is not finite ({})", x, y, v));
+        if (v > 0) out[best].second[c] += v * domega;
       }
     }
   }
