@@ -228,6 +228,8 @@ std::string DiffusionOptions::Validate() const {
   if (iterations.empty()) return "give at least one iteration count";
   for (int i : iterations)
     if (i < 0) return "iteration counts must be >= 0";
+  if (std::all_of(iterations.begin(), iterations.end(), [](int i) { return i == 0; }))
+    return "every iteration count is 0: no diffusion would run";
   if (coherent_iterations < 0) return "coherent_iterations must be >= 0";
   for (int d : depth)
     if (d < -1) return "adaptive depths must be >= 0 layers (or -1 for all)";

@@ -2,6 +2,7 @@
 #include "render/edit.h"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <fmt/format.h>
 
@@ -41,9 +42,13 @@ void EditOptions::ParseTerm(const std::string& text, bool add) {
 
 void EditOptions::ParseDepth(const std::string& text) {
   int a = 0, b = 0;
-  char colon = 0, rest = 0;
-  if (std::sscanf(text.c_str(), "%d%c%d%c", &a, &colon, &b, &rest) != 3 || colon != ':')
-    throw InputError("--depth " + text + ": expected A:B (node layers)");
+  const size_t colon = text.find(':');
+  auto whole = [&](size_t from, size_t to, int* v) {  // the whole text, in int's range (no wrap-around)
+    const auto [end, ec] = std::from_chars(text.data() + from, text.data() + to, *v);
+    return ec == std::errc() && end == text.data() + to && to > from;
+  };
+  if (colon == std::string::npos || !whole(0, colon, &a) || !whole(colon + 1, text.size(), &b))
+    throw InputError("--depth " + text + ": expected A:B (node layers, whole numbers)");
   if (a < 0 || b < a) throw InputError("--depth " + text + ": the depth range A:B needs 0 <= A <= B");
   depth_begin = a;
   depth_end = b;

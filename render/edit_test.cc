@@ -54,6 +54,9 @@ TEST(Edit, BadEditsAreRefused) {
   EXPECT_THROW(o.ParseDepth("2:-1"), InputError);
   EXPECT_THROW(o.ParseDepth("-1:2"), InputError);
   EXPECT_THROW(o.ParseDepth("3:1"), InputError);
+  // Past int's range: refused, not wrapped (4294967296:4294967298 edited layers 0:2).
+  EXPECT_THROW(o.ParseDepth("4294967296:4294967298"), InputError);
+  EXPECT_THROW(o.ParseDepth("0:99999999999"), InputError);
   o.ParseDepth("2:2");
   EXPECT_EQ(o.depth_begin, 2);
   EXPECT_EQ(o.depth_end, 2);

@@ -475,6 +475,11 @@ TEST_F(Cli, RenderAndEdit) {
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("no light reaches the surface"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("inside the object"), std::string::npos) << r.output;
+  // An eye inside the object sees nothing: said, not a silent black image.
+  r = Translume("render homogeneous:0.2,0.02 --shape sphere --resolution 5 --camera 0,0,2 --image 16x16 -o " +
+                P("blind.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("not in the camera's view"), std::string::npos) << r.output;
   // A polycube with a hole on a shape without one renders, with a note naming both genera.
   std::ofstream(P("ring.cubes")) << "0 0 0\n1 0 0\n2 0 0\n0 1 0\n2 1 0\n0 2 0\n1 2 0\n2 2 0\n";
   r = Translume("render homogeneous:0.2,0.02 --shape sphere --polycube " + P("ring.cubes") +
@@ -589,6 +594,15 @@ TEST_F(Cli, RenderAndEdit) {
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --variance-steps 10 -o " + P("x.png")), "--variance-steps");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --placement conformal -o " + P("x.png")), "--placement");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --specular nan -o " + P("x.png")), "--specular");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --iterations 0 -o " + P("x.png")), "no diffusion would run");
+  ExpectOneLineError(Translume("render homogeneous:0.2,0.01,5 -o " + P("x.png")), "homogeneous:KAPPA,MU");
+  // The env map is an input of --save-polycube too (it was overwritten with polycube text).
+  fs::copy_file(std::string(TRANSLUME_SOURCE_DIR) + "/samples/sky.exr", P("sky.exr"));
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --light env:" + P("sky.exr") + " --save-polycube " +
+                               P("sky.exr") + " -o " + P("x.png")), "would overwrite the input");
+  WriteImage(P("nan_sky.exr"), Image{4, 2, 3, std::vector<float>(24, NAN)});
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --light env:" + P("nan_sky.exr") + " -o " + P("x.png")),
+                     "pixel (0, 0) is not finite");
   // 16384^2 pixels at 8x8 samples would overflow the rasters' 32-bit index (and need ~275 GB).
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --image 16384x16384 --supersample 8 -o " + P("x.png")),
                      "at most 2^31 - 1");

@@ -118,6 +118,13 @@ void RequireFilePath(const char* flag, const std::string& path) {
   unlink(probe.c_str());
 }
 
+void RequireFinitePixels(const Image& image, const std::string& what) {
+  for (size_t i = 0; i < image.data.size(); ++i)
+    if (!std::isfinite(image.data[i]))
+      throw InputError(fmt::format("{}: pixel ({}, {}) is not finite", what, i / image.channels % image.width,
+                                   i / image.channels / image.width));
+}
+
 bool ParseOrHelp(CLI::App& app, int argc, char** argv) {
   try {
     app.parse(argc, argv);

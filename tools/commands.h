@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include "solver/image.h"
+
 namespace translume {
 
 // Subcommands: argv[0] is the subcommand's name. Each returns the process exit status and may
@@ -54,6 +56,8 @@ void RequireNotInput(const char* flag, const std::string& out, const std::vector
 // written into (or the nearest existing folder above it) is not writable (checked before the
 // work, so that it is not lost at the end).
 void RequireFilePath(const char* flag, const std::string& path);
+// Throws InputError "WHAT: pixel (X, Y) is not finite" at an image's first NaN or inf.
+void RequireFinitePixels(const Image& image, const std::string& what);
 
 // Ctrl-C as a request to stop early: while a SigintGuard lives, the first SIGINT only sets a
 // flag that long-running work polls (between iterations, stages); a second one ends the

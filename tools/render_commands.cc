@@ -41,9 +41,9 @@ std::vector<NodeMaterial> LoadNodeMaterials(const std::string& spec, const std::
     m = ProceduralNodeMaterial(finest, spec.substr(11));
   } else if (spec.rfind("homogeneous:", 0) == 0) {
     float k = 0, u = 0;
-    char comma = 0;
-    if (std::sscanf(spec.c_str() + 12, "%f%c%f", &k, &comma, &u) != 3 || comma != ',' || !(k > 0) ||
-        !(u > 0))
+    char comma = 0, rest = 0;
+    if (std::sscanf(spec.c_str() + 12, "%f%c%f%c", &k, &comma, &u, &rest) != 3 || comma != ',' || !(k > 0) ||
+        !(u > 0) || !std::isfinite(k) || !std::isfinite(u))
       throw InputError("material " + spec + ": expected homogeneous:KAPPA,MU with both > 0");
     m = ConstantNodeMaterial(finest, {k, k, k}, {u, u, u});
   } else {
@@ -162,10 +162,16 @@ int RunRender(int argc, char** argv) {
     RequireFilePath("-o", frame);
   }
   if (!save_polycube.empty()) {
-    RequireNotInput("--save-polycube", save_polycube, {material, mesh ? shape_name : "", polycube_path, out});
+    std::vector<std::string> inputs = {material, L.kind == RenderLight::Kind::kEnvironment ? L.path : "",
+                                       mesh ? shape_name : "", polycube_path};
+    for (int f = 0; f < turntable; ++f) inputs.push_back(FramePath(out, f, turntable));
+    RequireNotInput("--save-polycube", save_polycube, inputs);
     RequireFilePath("--save-polycube", save_polycube);
   }
-  if (L.kind == RenderLight::Kind::kEnvironment) L.environment = std::make_shared<Image>(ReadImage(L.path));
+  if (L.kind == RenderLight::Kind::kEnvironment) {
+    L.environment = std::make_shared<Image>(ReadImage(L.path));
+    RequireFinitePixels(*L.environment, "--light env:" + L.path);
+  }
 
   std::unique_ptr<Shape> shape = mesh ? MakeMeshShape(ReadMesh(shape_name), shape_name, size_mm)
                                       : MakeBuiltinShape(shape_name, size_mm);
@@ -250,6 +256,10 @@ int RunRender(int argc, char** argv) {
       float brightest = 0;
       for (const auto& channel : renderer.boundary_radiance())
         for (float v : channel) brightest = std::max(brightest, v);
+      const bool blank = std::all_of(img.data.begin(), img.data.end(), [](float v) { return v == 0; });
+      if (blank && brightest > 0)
+        std::printf("render: note: the image is black: the object is not in the camera's view (is --camera's "
+                    "eye inside the object, or too far away?)\n");
       if (brightest == 0)
         std::printf("render: note: no light reaches the surface, so the object renders black%s\n",
                     L.kind == RenderLight::Kind::kPoint         ? " (is the point light inside the object?)"
@@ -285,7 +295,10 @@ int RunEdit(int argc, char** argv) {
   RequireFilePath("-o", out);
   const Material m = ReadMaterial(material);
   Image mask_image;
-  if (!mask.empty()) mask_image = ReadImage(mask);
+  if (!mask.empty()) {
+    mask_image = ReadImage(mask);
+    RequireFinitePixels(mask_image, "--mask " + mask);
+  }
   const Material edited = EditMaterial(m, eo, mask.empty() ? nullptr : &mask_image);
   WriteMaterial(out, edited);
   std::printf("wrote %s: kappa x%g %+g mm, mu x%g %+g /mm%s%s\n", out.c_str(), eo.scale_kappa,
