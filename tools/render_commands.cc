@@ -223,6 +223,13 @@ int RunRender(int argc, char** argv) {
   dopt.iterations = ParseIntList(iterations, "--iterations");
   if (!depth.empty()) dopt.depth = ParseIntList(depth, "--depth");
   dopt.frame_coherence = coherence;
+  // Measured on the torus at 9^3 (the converged frames against the coherent ones): mean 1.5 %,
+  // at most 7 % off at 10-degree steps; 4-5 %, at most 15 % at 30 degrees.
+  if (coherence && turntable == 1) std::printf("render: note: --coherence does nothing for a single frame\n");
+  if (coherence && turntable > 1 && turntable < 36)
+    std::printf("render: note: --coherence starts each frame from the last and relaxes it %d steps, so at "
+                "%.0f-degree steps frames lag the converged image (on a torus up to ~15 %% at 30 degrees, ~7 %% at "
+                "10); use 36 or more frames, or leave --coherence off\n", dopt.coherent_iterations, 360.0 / turntable);
   if (std::string err = dopt.Validate(); !err.empty()) throw InputError("--iterations/--depth: " + err);
   std::printf("render: %s on %s, polygrid %zu cubes x %d^3 (%lld nodes, %lld boundary, %lld with axis-fallback "
               "Laplacian weights), %zu levels, built in %.2f s\n", material.c_str(), shape->name().c_str(),
