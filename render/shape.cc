@@ -422,6 +422,7 @@ TriangleMesh ReadObj(const std::string& path, std::istream& in) {
   int line_no = 0;
   while (std::getline(in, line)) {
     ++line_no;
+    if (line_no == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);  // a UTF-8 byte order mark
     std::istringstream ls(line);
     std::string tag;
     if (!(ls >> tag) || tag[0] == '#') continue;
@@ -493,10 +494,23 @@ TriangleMesh ReadPly(const std::string& path, std::istream& in) {
   }
   const uint16_t one = 1;
   const bool host_big_endian = *reinterpret_cast<const uint8_t*>(&one) == 0;
+  for (const Element& e : elements)
+    if (e.name == "vertex")
+      for (const char* axis : {"x", "y", "z"})
+        if (std::none_of(e.props.begin(), e.props.end(), [&](const Prop& p) { return !p.list && p.name == axis; }))
+          MeshError(path, std::string("PLY vertices have no property '") + axis + "'");
   auto read_value = [&](const std::string& type) -> double {
     if (!binary) {
-      double v;
-      if (!(in >> v)) MeshError(path, "PLY data ends early");
+      std::string text;
+      if (!(in >> text)) MeshError(path, "PLY data ends early");
+      double v = 0;
+      try {
+        size_t used = 0;
+        v = std::stod(text, &used);
+        if (used != text.size()) throw std::invalid_argument(text);
+      } catch (const std::exception&) {
+        MeshError(path, "PLY value '" + text + "' is not a number");
+      }
       return v;
     }
     auto get = [&](auto x) {

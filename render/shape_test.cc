@@ -80,6 +80,9 @@ TEST(Shape, ObjAndPlyMeshes) {
   const auto binary = ReadMesh(Write("tl_tet_bin.ply", bin));
   EXPECT_EQ(binary.vertices[3], Vec3(0, 0, 1));
   EXPECT_EQ(binary.triangles, ascii.triangles);
+  // A UTF-8 byte order mark before the first line (it dropped the first vertex).
+  EXPECT_EQ(ReadMesh(Write("tl_bom.obj", "\xEF\xBB\xBF" + kTet + "f 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n")).vertices,
+            closed.vertices);
   // A vertex no face uses is dropped (it widened the box the polycube is fitted to).
   const auto stray = ReadMesh(Write("tl_stray.obj", "v 9 9 9\n" + kTet + "v 1000 1000 1000\n"
                                     "f 2 4 3\nf 2 3 5\nf 3 4 5\nf 2 5 4\n"));
@@ -146,6 +149,15 @@ TEST(Shape, BadMeshesGiveClearErrors) {
     bin.append(reinterpret_cast<const char*>(f), sizeof(f));
   }
   expect_error(Write("tl_nan.ply", bin), "vertex 4 is not finite");
+  const std::string ascii_header =
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 4\nproperty list uchar int vertex_indices\nend_header\n";
+  const std::string tet_faces = "3 0 2 1\n3 0 1 3\n3 1 2 3\n3 0 3 2\n";
+  expect_error(Write("tl_inf.ply", ascii_header + "0 0 0\n1 0 0\n0 1 inf\n0 0 1\n" + tet_faces), "vertex 3 is not finite");
+  expect_error(Write("tl_word.ply", ascii_header + "0 0 0\n1 0 0\n0 1 x\n0 0 1\n" + tet_faces), "'x' is not a number");
+  std::string no_z = ascii_header;
+  no_z.erase(no_z.find("property float z\n"), 17);
+  expect_error(Write("tl_noz.ply", no_z + "0 0\n1 0\n0 1\n0 0\n" + tet_faces), "no property 'z'");
   expect_error(Write("tl_garbage.obj", "garbage\nmore\n"), "not an OBJ mesh");
   expect_error((fs::temp_directory_path() / "tl_missing.obj").string(), "cannot open");
 }
