@@ -605,6 +605,8 @@ TEST_F(Cli, RenderAndEdit) {
   fs::copy_file(std::string(TRANSLUME_SOURCE_DIR) + "/samples/sky.exr", P("sky.exr"));
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --light env:" + P("sky.exr") + " --save-polycube " +
                                P("sky.exr") + " -o " + P("x.png")), "would overwrite the input");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --turntable 2 --save-polycube " + P("q_001.png") + " -o " +
+                               P("q.png")), "is also frame 1 of -o");
   WriteImage(P("nan_sky.exr"), Image{4, 2, 3, std::vector<float>(24, NAN)});
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --light env:" + P("nan_sky.exr") + " -o " + P("x.png")),
                      "pixel (0, 0) is not finite");

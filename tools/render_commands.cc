@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <cstdio>
 #include <fmt/format.h>
 #include <fstream>
@@ -162,11 +163,16 @@ int RunRender(int argc, char** argv) {
     RequireFilePath("-o", frame);
   }
   if (!save_polycube.empty()) {
-    std::vector<std::string> inputs = {material, L.kind == RenderLight::Kind::kEnvironment ? L.path : "",
-                                       mesh ? shape_name : "", polycube_path};
-    for (int f = 0; f < turntable; ++f) inputs.push_back(FramePath(out, f, turntable));
-    RequireNotInput("--save-polycube", save_polycube, inputs);
+    RequireNotInput("--save-polycube", save_polycube,
+                    {material, L.kind == RenderLight::Kind::kEnvironment ? L.path : "", mesh ? shape_name : "",
+                     polycube_path});
     RequireFilePath("--save-polycube", save_polycube);
+    std::error_code ec;
+    for (int f = 0; f < turntable; ++f)
+      if (std::filesystem::weakly_canonical(FramePath(out, f, turntable), ec) ==
+          std::filesystem::weakly_canonical(save_polycube, ec))
+        throw InputError(fmt::format("--save-polycube {}: is also frame {} of -o {}; choose another name",
+                                     save_polycube, f, out));
   }
   if (L.kind == RenderLight::Kind::kEnvironment) {
     L.environment = std::make_shared<Image>(ReadImage(L.path));
