@@ -93,6 +93,10 @@ DiffusionBackend ParseDiffusionBackend(const std::string& text) {
   throw InputError("--backend: unknown backend '" + text + "' (expected cpu or gl)");
 }
 
+namespace {
+
+// The factor of q in the boundary rows' source (see JacobiSystem): kappa_b kappa_j d, per
+// boundary node and channel, [b * 3 + c].
 std::vector<double> BoundarySourceCoefficients(const Polygrid& pg, const NodeMaterial& m) {
   std::vector<double> coef(pg.num_boundary() * 3);
   for (int64_t b = 0; b < pg.num_boundary(); ++b) {
@@ -102,6 +106,8 @@ std::vector<double> BoundarySourceCoefficients(const Polygrid& pg, const NodeMat
   }
   return coef;
 }
+
+}  // namespace
 
 JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double C,
                                const BoundaryLight& q) {
@@ -161,10 +167,10 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
 }
 
 HierarchyRelaxer::Level RelaxationRows(const Polygrid& pg, const NodeMaterial& m, double C) {
-  BoundaryLight none;
-  for (int c = 0; c < 3; ++c) none[c].assign(pg.num_boundary(), 0.f);
-  JacobiSystem S = BuildJacobiSystem(pg, m, C, none);
-  const std::vector<double> coef = BoundarySourceCoefficients(pg, m);
+  // With q = 1 the boundary rows' source is their coefficient kappa_b kappa_j d.
+  BoundaryLight unit;
+  for (int c = 0; c < 3; ++c) unit[c].assign(pg.num_boundary(), 1.f);
+  JacobiSystem S = BuildJacobiSystem(pg, m, C, unit);
   HierarchyRelaxer::Level v;
   v.size = S.size;
   v.num_interior = pg.num_interior;
@@ -173,9 +179,8 @@ HierarchyRelaxer::Level RelaxationRows(const Polygrid& pg, const NodeMaterial& m
   for (int64_t n = 0; n < v.size; ++n)
     for (int c = 0; c < 3; ++c)
       for (int k = 0; k < 6; ++k) v.a[(n * 3 + c) * 6 + k] *= S.inv_diag[n * 3 + c];
-  v.source_coef.resize(coef.size());
-  for (size_t i = 0; i < coef.size(); ++i)
-    v.source_coef[i] = float(coef[i] * S.inv_diag[v.num_interior * 3 + i]);
+  v.source_coef.assign(S.s.begin() + v.num_interior * 3, S.s.end());
+  for (size_t i = 0; i < v.source_coef.size(); ++i) v.source_coef[i] *= S.inv_diag[v.num_interior * 3 + i];
   return v;
 }
 

@@ -107,10 +107,6 @@ class HierarchyRelaxer {
   static std::unique_ptr<HierarchyRelaxer> Create(DiffusionBackend backend);
 };
 
-// The factor of q in the boundary rows' source (see JacobiSystem): kappa_b kappa_j d, per
-// boundary node and channel, [b * 3 + c].
-std::vector<double> BoundarySourceCoefficients(const Polygrid& pg, const NodeMaterial& m);
-
 // A level's relaxation rows (HierarchyRelaxer::Level: nb, a, source_coef; size and
 // num_interior) from the polygrid and its material.
 HierarchyRelaxer::Level RelaxationRows(const Polygrid& pg, const NodeMaterial& m, double C);

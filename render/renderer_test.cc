@@ -537,7 +537,7 @@ TEST(Render, EnvironmentLightingWithOcclusion) {
   white->channels = 3;
   white->data.assign(64 * 32 * 3, 1.f);
   // Each row's exact solid angle: a constant map integrates to 4 pi at any size (the midpoint
-  // rule gave +23 % on a 4x2 map, +57 % on 2x1).
+  // rule gave +11 % on a 4x2 map, +57 % on 2x1).
   for (auto [w, h] : {std::pair{2, 1}, std::pair{4, 2}, std::pair{64, 32}}) {
     Image tiny;
     tiny.width = w;
