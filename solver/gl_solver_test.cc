@@ -5,7 +5,9 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "solver/gl_context.h"
@@ -76,6 +78,18 @@ TEST(GlContext, ReportsACompute43Context) {
   EXPECT_FALSE(info.renderer.empty());
   EXPECT_GE(info.max_work_group_invocations, 256);
   EXPECT_GE(info.max_work_group_count[0], 65535);
+}
+
+// The variant the shaders run in: llvmpipe's on llvmpipe, the GPU's elsewhere, or the one
+// TRANSLUME_GL_TUNING forces (the ctest GlSolver.GpuTuning runs every gl test with "gpu").
+TEST(GlSolver, ReportsItsShaderTuning) {
+  const std::string tuning = GlShaderTuning();
+  std::printf("shader tuning: %s\n", tuning.c_str());
+  const char* forced = std::getenv("TRANSLUME_GL_TUNING");
+  const bool llvmpipe = GlContext::Get().info().renderer.find("llvmpipe") != std::string::npos;
+  const std::string expected = forced ? forced : (llvmpipe ? "llvmpipe" : "gpu");
+  EXPECT_EQ(tuning.substr(0, tuning.find(' ')), expected);
+  EXPECT_EQ(gl_internal::GetTuning().images, expected == "llvmpipe");
 }
 
 // The error compiling `source` as `file_name` reports ("" and a failed test if it compiles).
