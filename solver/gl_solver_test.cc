@@ -45,13 +45,13 @@ void VariedBatch(const GridShape& s, int m, std::vector<float>& b, std::vector<f
 }
 
 // m right-hand sides of grid s, back to back: smooth interior sources (another phase in each
-// field), and a spot at (5, 4, 0) in field 1.
+// field), and a spot at (5, 4, 0) in field 1 (where m > 1).
 std::vector<float> SourcesAndASpot(const GridShape& s, int m) {
   const int64_t n = s.size();
   std::vector<float> b(m * n);
   for (int64_t p = 0; p < n; ++p)
     for (int f = 0; f < m; ++f) b[f * n + p] = 0.001f * (1.0f + std::sin(0.2f * p + f));
-  b[n + s.index(5, 4, 0)] = 1.0f;
+  if (m > 1) b[n + s.index(5, 4, 0)] = 1.0f;
   return b;
 }
 
