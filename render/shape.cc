@@ -1020,9 +1020,14 @@ Vec3 ClosestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const V
   return out;
 }
 
+std::string SizeProblem(double size_mm) {
+  if (std::isfinite(size_mm) && size_mm >= kMinSizeMm && size_mm <= kMaxSizeMm) return "";
+  return fmt::format("must be within {:g}..{:g} mm, got {:g}", kMinSizeMm, kMaxSizeMm, size_mm);
+}
+
 std::unique_ptr<Shape> MakeBuiltinShape(const std::string& name, double size_mm,
                                         int tessellation) {
-  if (!(size_mm > 0)) throw InputError("--size: must be > 0 mm");
+  if (const std::string err = SizeProblem(size_mm); !err.empty()) throw InputError("--size: " + err);
   const double unit = size_mm / 3;  // slab and torus are 3 units wide
   if (name == "sphere") return std::make_unique<SphereShape>(size_mm / 2, 0.0, tessellation);
   if (name == "blob") {
@@ -1052,6 +1057,8 @@ std::unique_ptr<Shape> MakePolycubeSolidShape(const Polycube& polycube, double s
 std::unique_ptr<Shape> MakeMeshShape(TriangleMesh mesh, const std::string& name,
                                      double size_mm) {
   if (std::string err = mesh.Validate(); !err.empty()) throw InputError(name + ": " + err);
+  if (const std::string err = SizeProblem(size_mm); size_mm != 0 && !err.empty())
+    throw InputError("--size: " + err);
   Vec3 lo, hi;
   mesh.Bounds(&lo, &hi);
   const Vec3 centre = (lo + hi) / 2;

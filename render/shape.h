@@ -97,7 +97,8 @@ class Shape {
 //   bunny  the solid of BuiltinPolycube("bunny"), 253 unit cubes (body, head, ears, tail; the
 //          cube count of the paper's Bunny, for the frame-rate benchmark): a blocky bunny,
 //          11 x 7 x 10 cubes at most; each exposed face is tessellation/12 quads per side
-// `tessellation` sets the render mesh's resolution. Throws InputError on an unknown name.
+// `tessellation` sets the render mesh's resolution. Throws InputError on an unknown name or a
+// size that SizeProblem refuses.
 std::unique_ptr<Shape> MakeBuiltinShape(const std::string& name, double size_mm,
                                         int tessellation = 48);
 std::unique_ptr<Shape> MakeBoxShape(const Vec3& extent_mm, int tessellation = 8);
@@ -105,9 +106,15 @@ std::unique_ptr<Shape> MakeBoxShape(const Vec3& extent_mm, int tessellation = 8)
 // each exposed cube face is a tessellation x tessellation grid of quads.
 std::unique_ptr<Shape> MakePolycubeSolidShape(const Polycube& polycube, double size_mm,
                                               int tessellation, const std::string& name);
-// A validated mesh, scaled and centred so that its largest extent is size_mm (<= 0: as is).
+// A validated mesh, scaled and centred so that its largest extent is size_mm (0: as is; other
+// sizes as SizeProblem allows).
 std::unique_ptr<Shape> MakeMeshShape(TriangleMesh mesh, const std::string& name,
                                      double size_mm);
+// What is wrong with an object's largest extent in mm ("" if nothing): it must be finite and
+// within kMinSizeMm..kMaxSizeMm (a micron to a kilometre). Beyond that the renderer's float
+// geometry overflows: a sphere of 1e30 mm rendered black, one of 1e300 mm crashed.
+constexpr double kMinSizeMm = 1e-3, kMaxSizeMm = 1e6;
+std::string SizeProblem(double size_mm);
 
 // A polycube for a mesh shape (`--polycube auto:N`): the shape's bounding box (lo, hi) cut into
 // cells, `cubes` along its longest axis and proportionally many (at least 1) along the others;

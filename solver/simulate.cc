@@ -131,7 +131,9 @@ std::vector<float> MeasurementMask(const GridShape& s, Setup setup, const FacePa
 
 std::string SimulateOptions::Validate() const {
   if (lights.empty()) return "at least one light is needed";
-  if (!(noise >= 0) || !std::isfinite(noise)) return fmt::format("noise must be >= 0, got {}", noise);
+  // Above a relative sigma of 1 the noise outweighs the signal (1e300 overflowed the data to inf).
+  if (!(noise >= 0 && noise <= 1))
+    return fmt::format("noise must be within 0..1 (a relative sigma: 0.01 = 1 %), got {}", noise);
   if (oversample < 1 || oversample > 8) return fmt::format("oversample must be in [1, 8], got {}", oversample);
   if (holdout < 0) return "holdout must be >= 0";
   if (!(tolerance > 0 && tolerance < 1)) return "tolerance must be in (0, 1)";

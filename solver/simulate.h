@@ -34,7 +34,7 @@ std::vector<float> MeasurementMask(const GridShape& shape, Setup setup, const Fa
 struct SimulateOptions {
   std::vector<LightSpec> lights;  // the training conditions (e.g. RegionLights("4x4"))
   Setup setup = Setup::kBack;
-  double noise = 0;         // relative Gaussian noise sigma per pixel and channel (0.01 = 1 %)
+  double noise = 0;         // relative Gaussian noise sigma per pixel and channel (0.01 = 1 %), <= 1
   int oversample = 2;       // forward solves on a grid this many times finer per axis
   int holdout = 0;          // extra held-out conditions: random spots on the lit face
   uint64_t seed = 1;        // noise and holdout spot positions

@@ -217,6 +217,8 @@ TEST_F(Cli, InverseCommandsRejectBadArguments) {
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --lights 0x4 -o " + P("ds")), "0x4");
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --setup side -o " + P("ds")), "side");
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --noise -1 -o " + P("ds")), "noise");
+  // 1e300 overflowed the data, and the error named the dataset's temporary folder.
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --noise 1e300 -o " + P("ds")), "noise must be within 0..1");
   EXPECT_FALSE(fs::exists(P("ds")));
   ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + P("ds")).status, 0);
   ExpectOneLineError(Translume("solve " + P("nope") + " -o " + P("r.vdb")), "no such file");
@@ -599,6 +601,11 @@ TEST_F(Cli, RenderAndEdit) {
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --variance-steps 10 -o " + P("x.png")), "--variance-steps");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --placement conformal -o " + P("x.png")), "--placement");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --specular nan -o " + P("x.png")), "--specular");
+  // An object of 1e300 mm crashed the renderer (its float geometry overflowed).
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --size 1e300 -o " + P("x.png")), "--size: must be within");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --size 0 -o " + P("x.png")), "--size: must be within");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --shape " + std::string(TRANSLUME_SOURCE_DIR) +
+                               "/samples/bar.obj --size -1 -o " + P("x.png")), "--size: must be within");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --iterations 0 -o " + P("x.png")), "no diffusion would run");
   ExpectOneLineError(Translume("render homogeneous:0.2,0.01,5 -o " + P("x.png")), "homogeneous:KAPPA,MU");
   // The env map is an input of --save-polycube too (it was overwritten with polycube text).

@@ -165,7 +165,7 @@ void AddBenchRecovery(CLI::App& bench) {
     if (!(o.noisy_lambda >= 0) || !std::isfinite(o.noisy_lambda)) throw InputError("--noisy-lambda: must be >= 0");
     if (!(o.max_seconds >= 0)) throw InputError("bench recovery: --max-seconds must be >= 0");
     for (double n : o.noises)
-      if (!(n >= 0)) throw InputError(fmt::format("bench recovery: noise {} must be >= 0", n));
+      if (!(n >= 0 && n <= 1)) throw InputError(fmt::format("bench recovery: noise {} must be within 0..1", n));
     if (std::string err = o.recovery.Validate(); !err.empty())
       throw InputError("bench recovery: " + err);
     if (o.data_backend == Backend::kGl ||

@@ -99,7 +99,7 @@ int RunRender(int argc, char** argv) {
                  "1..12 whose polycube has the mesh's genus, a grid that does not fold and cubes at most 2:1; "
                  "default: the shape's own (meshes: auto)");
   app.add_option("--save-polycube", save_polycube, "Write the polycube used (e.g. auto's) to this file");
-  app.add_option("--size", size_mm, "Largest extent of the object, mm")->capture_default_str();
+  app.add_option("--size", size_mm, "Largest extent of the object, mm (0.001 .. 1e6)")->capture_default_str();
   app.add_option("--resolution", resolution, "Polygrid nodes per cube edge")->capture_default_str();
   app.add_option("--levels", levels, "Hierarchy levels (Section 5.3)")->capture_default_str();
   app.add_option("--first-layer", first_layer, "First interior nodes at this fraction of the boundary spacing")
