@@ -604,6 +604,7 @@ TEST_F(Cli, RenderAndEdit) {
   // An object of 1e300 mm crashed the renderer (its float geometry overflowed).
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --size 1e300 -o " + P("x.png")), "--size: must be within");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --size 0 -o " + P("x.png")), "--size: must be within");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --first-layer 1e300 -o " + P("x.png")), "--first-layer: must be");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --shape " + std::string(TRANSLUME_SOURCE_DIR) +
                                "/samples/bar.obj --size -1 -o " + P("x.png")), "--size: must be within");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --iterations 0 -o " + P("x.png")), "no diffusion would run");

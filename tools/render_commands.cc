@@ -151,6 +151,8 @@ int RunRender(int argc, char** argv) {
   if (turntable < 1) throw InputError("--turntable: must be >= 1");
   if (levels < 1) throw InputError("--levels: must be >= 1");
   if (variance_steps < 0) throw InputError("--variance-steps: must be >= 0");
+  if (!(first_layer > 0 && first_layer < 0.5))
+    throw InputError(fmt::format("--first-layer: must be within (0, 0.5) of the boundary spacing, got {}", first_layer));
   if (app.count("--variance-steps") && placement != "variance")
     throw InputError("--variance-steps: applies to --placement variance only (placement is " + placement + ")");
   if (std::string err = ro.Validate(); !err.empty()) throw InputError("render: " + err);
