@@ -344,6 +344,7 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
 std::vector<std::pair<Vec3, std::array<double, 3>>> EnvironmentSamples(const Image& env, int count) {
   if (env.width < 2 || env.height < 1 || env.channels < 1)
     throw InputError("--light env: the environment image is empty");
+  if (const std::string problem = NonFinitePixel(env); !problem.empty()) throw InputError("--light env: " + problem);
   std::vector<std::pair<Vec3, std::array<double, 3>>> out(count);
   const double golden = kPi * (3 - std::sqrt(5.0));
   for (int k = 0; k < count; ++k) {
@@ -367,8 +368,6 @@ std::vector<std::pair<Vec3, std::array<double, 3>>> EnvironmentSamples(const Ima
         if (const double dd = d.dot(out[k].first); dd > best_dot) best_dot = dd, best = k;
       for (int c = 0; c < 3; ++c) {
         const float v = env.at(x, y, std::min(c, env.channels - 1));
-        if (!std::isfinite(v))
-          throw InputError(fmt::format("--light env: pixel ({}, {}) is not finite ({})", x, y, v));
         if (v > 0) out[best].second[c] += v * domega;
       }
     }

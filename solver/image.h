@@ -1,7 +1,9 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 
+#include <cmath>
 #include <cstddef>
+#include <string>
 #include <vector>
 
 namespace translume {
@@ -16,5 +18,16 @@ struct Image {
   float& at(int x, int y, int c) { return data[(size_t(y) * width + x) * channels + c]; }
   float at(int x, int y, int c) const { return data[(size_t(y) * width + x) * channels + c]; }
 };
+
+// "pixel (X, Y) is not finite" at an image's first NaN or inf, "" if there is none.
+inline std::string NonFinitePixel(const Image& image) {
+  for (size_t i = 0; i < image.data.size(); ++i)
+    if (!std::isfinite(image.data[i])) {
+      const size_t pixel = i / size_t(image.channels);
+      return "pixel (" + std::to_string(pixel % size_t(image.width)) + ", " +
+             std::to_string(pixel / size_t(image.width)) + ") is not finite";
+    }
+  return "";
+}
 
 }  // namespace translume

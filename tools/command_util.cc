@@ -119,10 +119,7 @@ void RequireFilePath(const char* flag, const std::string& path) {
 }
 
 void RequireFinitePixels(const Image& image, const std::string& what) {
-  for (size_t i = 0; i < image.data.size(); ++i)
-    if (!std::isfinite(image.data[i]))
-      throw InputError(fmt::format("{}: pixel ({}, {}) is not finite", what, i / image.channels % image.width,
-                                   i / image.channels / image.width));
+  if (const std::string problem = NonFinitePixel(image); !problem.empty()) throw InputError(what + ": " + problem);
 }
 
 bool ParseOrHelp(CLI::App& app, int argc, char** argv) {
