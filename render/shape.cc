@@ -5,6 +5,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <climits>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -582,6 +583,26 @@ std::string TriangleMesh::Validate() const {
     if (n > 1)
       return "inconsistent triangle orientation at edge " + std::to_string(e.first) + "-" +
              std::to_string(e.second);
+  }
+  // Every edge is now shared by two consistently oriented triangles, so around a vertex v each
+  // triangle (v, a, b) links a to b, and the links form cycles. A manifold vertex has one cycle
+  // (one fan); two or more fans meeting at one point (a bowtie) make it non-manifold.
+  std::vector<std::vector<std::pair<int, int>>> fan(vertices.size());
+  for (const auto& tri : triangles)
+    for (int c = 0; c < 3; ++c) fan[tri[c]].push_back({tri[(c + 1) % 3], tri[(c + 2) % 3]});
+  for (size_t v = 0; v < fan.size(); ++v) {
+    auto& links = fan[v];
+    if (links.empty()) continue;
+    std::sort(links.begin(), links.end());
+    size_t steps = 0;
+    int at = links.front().first;
+    do {
+      at = std::lower_bound(links.begin(), links.end(), std::make_pair(at, INT_MIN))->second;
+      ++steps;
+    } while (at != links.front().first && steps <= links.size());
+    if (steps != links.size())
+      return "non-manifold vertex " + std::to_string(v) + " (" +
+             std::to_string(links.size()) + " triangles around it form more than one fan)";
   }
   return "";
 }

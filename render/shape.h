@@ -23,7 +23,8 @@ struct TriangleMesh {
   // Empty if the mesh is a closed 2-manifold (every undirected edge shared by exactly two
   // triangles, used once in each direction), else the first broken constraint: too few
   // triangles, an index out of range, a degenerate triangle, an open (boundary) edge, a
-  // non-manifold edge (three or more triangles) or inconsistent orientation.
+  // non-manifold edge (three or more triangles), inconsistent orientation or a non-manifold
+  // vertex (two or more fans of triangles meeting at one vertex: a bowtie).
   std::string Validate() const;
   void Bounds(Vec3* lo, Vec3* hi) const;
   double Area() const;  // mm^2

@@ -132,6 +132,11 @@ TEST(Shape, BadMeshesGiveClearErrors) {
   expect_error(Write("tl_open.obj", kTet + "f 1 3 2\nf 1 2 4\nf 2 3 4\n"), "open");
   expect_error(Write("tl_nonmanifold.obj",
                      kTet + "v 1 1 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\nf 2 3 5\n"), "non-manifold");
+  // Two tetrahedra that share only vertex 1: every edge is fine, the vertex is a bowtie.
+  expect_error(Write("tl_bowtie.obj", kTet + "v -1 0 0\nv 0 -1 0\nv 0 0 -1\n"
+                                      "f 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"
+                                      "f 1 5 6\nf 1 7 5\nf 5 7 6\nf 1 6 7\n"),
+               "non-manifold vertex 0");
   expect_error(Write("tl_flipped.obj", kTet + "f 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 3 4\n"), "orientation");
   expect_error(Write("tl_range.obj", kTet + "f 1 3 9\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"), "out of range");
   // Face indices with trailing text, or 0 (OBJ counts from 1), are not read as numbers.
