@@ -13,6 +13,7 @@
 #include "calib/error.h"
 #include "calib/photo_io.h"
 #include "solver/dataset.h"
+#include "solver/json_file.h"
 #include "solver/material.h"
 #include "solver/status.h"
 
@@ -125,18 +126,7 @@ CaptureSpec ReadCapture(const std::string& path) {
   const fs::path dir = is_dir ? fs::path(path) : fs::path(path).parent_path();
   s.dir = (dir.empty() ? fs::path(".") : dir).string();
   s.file = is_dir ? (fs::path(path) / "capture.json").string() : path;
-  if (fs::is_directory(s.file)) throw InputError(fmt::format("{}: is a folder, not a file", s.file));
-  std::ifstream in(s.file);
-  if (!in) throw InputError(fmt::format("{}: cannot open (a capture folder holds capture.json)", s.file));
-  json j;
-  try {
-    j = json::parse(in);
-  } catch (const json::exception& e) {  // also a number beyond a double's range (1e999)
-    std::string why = e.what();  // without the "[json.exception.KIND.ID] " prefix
-    if (const size_t at = why.find("] "); why.rfind("[json.exception.", 0) == 0 && at != std::string::npos)
-      why.erase(0, at + 2);
-    throw InputError(fmt::format("{}: not valid JSON: {}", s.file, why));
-  }
+  const json j = ReadJsonFile(s.file, " (a capture folder holds capture.json)");
   const Reader r(s.file, s.dir);
   if (!j.is_object()) r.Fail("(top level)", "expected an object");
   r.CheckKeys(j, "", {"format", "setup", "sample_mm", "spacing_mm", "grid", "eta", "C",

@@ -16,6 +16,7 @@
 #include "calib/parallel.h"
 #include "calib/projector_pattern.h"
 #include "solver/atomic_file.h"
+#include "solver/json_file.h"
 #include "solver/light.h"
 #include "solver/material_io.h"
 #include "solver/simulate.h"
@@ -190,14 +191,7 @@ CaptureRig DefaultCaptureRig(const GridShape& grid, double h, Setup setup) {
 }
 
 CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double h, Setup setup) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path + ": cannot open the rig file");
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(in);
-  } catch (const std::exception&) {
-    throw InputError(path + ": not valid JSON");
-  }
+  const nlohmann::json j = ReadJsonFile(path, " the rig file");
   CaptureRig r = DefaultCaptureRig(grid, h, setup);
   auto fail = [&](const std::string& field, const std::string& why) {
     throw InputError(fmt::format("{}: {}: {}", path, field, why));
@@ -276,7 +270,8 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
 std::string SimulateCaptureOptions::Validate() const {
   if (lights < 1 || lights > 8) return fmt::format("lights must be 1x1 to 8x8, got {}x{}", lights, lights);
   if (oversample < 2 || oversample > 8 || oversample % 2) return fmt::format("oversample must be 2, 4, 6 or 8, got {}", oversample);
-  if (holdout < 0) return "holdout must be >= 0";
+  if (holdout < 0 || holdout > kMaxHoldout)
+    return fmt::format("holdout must be within 0..{}, got {}", kMaxHoldout, holdout);
   if (exposures < 2 || exposures > 16) return fmt::format("exposures must be in [2, 16], got {}", exposures);
   if (camera_views < 5) return "camera_views must be >= 5";
   if (planes < 4) return "planes must be >= 4";

@@ -189,8 +189,8 @@ ExposureStack ReadExposureStack(const std::string& dir) {
     std::ifstream f(json_path);
     try {
       times = nlohmann::json::parse(f);
-    } catch (const std::exception& e) {
-      throw CalibError(fmt::format("{}: not valid JSON", json_path.string()));
+    } catch (const nlohmann::json::exception& e) {  // e.g. a number beyond a double (1e999)
+      throw CalibError(fmt::format("{}: not valid JSON ({})", json_path.string(), e.what()));
     }
     if (!times.is_object())
       throw CalibError(json_path.string() + ": expected an object {\"file name\": seconds}");

@@ -351,6 +351,11 @@ TEST_F(HdrFiles, ReadsExifExposureTime) {
   const ExposureStack k = ReadExposureStack(dir_.string());
   EXPECT_NEAR(k.exposures[0].seconds, 0.01, 1e-5);
   EXPECT_DOUBLE_EQ(k.exposures[1].seconds, 0.04);
+  // A broken exposures.json says why (it said only "not valid JSON").
+  std::ofstream(dir_ / "exposures.json") << "{\"j1.jpg\": 1e999}";
+  const std::string bad = CalibErrorOf([&] { ReadExposureStack(dir_.string()); });
+  EXPECT_EQ(bad.find((dir_ / "exposures.json").string() + ": not valid JSON"), 0u) << bad;
+  EXPECT_NE(bad.find("number overflow parsing '1e999'"), std::string::npos) << bad;
 }
 
 // An EXIF time that is no time falls back to exposures.json, and without an entry there the

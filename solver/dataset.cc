@@ -12,6 +12,7 @@
 
 #include "solver/atomic_file.h"
 #include "solver/image_io.h"
+#include "solver/json_file.h"
 #include "solver/status.h"
 
 namespace translume {
@@ -70,15 +71,7 @@ Dataset ReadDataset(const std::string& path) {
   if (fs::is_directory(file)) file /= "dataset.json";
   const std::string f = file.string();
   if (!fs::exists(file)) throw InputError(fmt::format("{}: no such file", f));
-  json j;
-  {
-    std::ifstream in(file);
-    try {
-      j = json::parse(in);
-    } catch (const json::exception& e) {
-      throw InputError(fmt::format("{}: not valid JSON ({})", f, e.what()));
-    }
-  }
+  const json j = ReadJsonFile(f);
   if (!j.is_object()) throw InputError(fmt::format("{}: expected a JSON object", f));
   const std::string format = Field<std::string>(j, "format", f);
   if (format != kFormat)

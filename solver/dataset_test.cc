@@ -155,7 +155,11 @@ TEST_F(DatasetFiles, RejectsBrokenFilesWithOneLineNamingFileAndField) {
     ExpectError({"conditions[1]", "name", "[A-Za-z0-9_.-]"});
   }
   std::ofstream(Json()) << "{ not json";
-  ExpectError({"dataset.json", "JSON"});
+  ExpectError({"dataset.json", "not valid JSON", "line 1, column 4"});
+  // A number beyond a double's range: the parser's reason, with the number.
+  WriteDataset(dir_.string(), d_);
+  Rewrite("\"C\": 2.6", "\"C\": 1e999");
+  ExpectError({"dataset.json: not valid JSON: number overflow parsing '1e999'"});
 }
 
 TEST(Dataset, SafeConditionNames) {

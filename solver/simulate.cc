@@ -135,7 +135,8 @@ std::string SimulateOptions::Validate() const {
   if (!(noise >= 0 && noise <= 1))
     return fmt::format("noise must be within 0..1 (a relative sigma: 0.01 = 1 %), got {}", noise);
   if (oversample < 1 || oversample > 8) return fmt::format("oversample must be in [1, 8], got {}", oversample);
-  if (holdout < 0) return "holdout must be >= 0";
+  if (holdout < 0 || holdout > kMaxHoldout)
+    return fmt::format("holdout must be within 0..{}, got {}", kMaxHoldout, holdout);
   if (!(tolerance > 0 && tolerance < 1)) return "tolerance must be in (0, 1)";
   if (mask_margin < 0) return "mask_margin must be >= 0";
   return "";

@@ -31,12 +31,16 @@ std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
 std::vector<float> MeasurementMask(const GridShape& shape, Setup setup, const FacePattern& q,
                                    int margin = 2);
 
+// The most held-out conditions a simulation writes: as many as the most training lights
+// (RegionLights' 64x64). Each is a forward solve; far more were a typo (2^31 allocated 28 GB).
+inline constexpr int kMaxHoldout = 4096;
+
 struct SimulateOptions {
   std::vector<LightSpec> lights;  // the training conditions (e.g. RegionLights("4x4"))
   Setup setup = Setup::kBack;
   double noise = 0;         // relative Gaussian noise sigma per pixel and channel (0.01 = 1 %), <= 1
   int oversample = 2;       // forward solves on a grid this many times finer per axis
-  int holdout = 0;          // extra held-out conditions: random spots on the lit face
+  int holdout = 0;          // extra held-out conditions: random spots on the lit face, <= kMaxHoldout
   uint64_t seed = 1;        // noise and holdout spot positions
   double tolerance = 1e-9;  // relative residual of every forward solve
   int mask_margin = 2;      // front-lit: nodes masked around the lit region

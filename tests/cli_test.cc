@@ -105,6 +105,10 @@ TEST_F(Cli, CapturePipelineErrorsAreOneLine) {
   ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " -o " + P("full")),
                      "exists and is not empty");
   ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " --lights 3 -o " + P("c")), "3");
+  // A broken rig file says why (it said only "not valid JSON").
+  std::ofstream(P("rig.json")) << "{\"camera_distance_mm\": 1e999}";
+  ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " --rig " + P("rig.json") + " -o " + P("c")),
+                     "rig.json: not valid JSON: number overflow parsing '1e999'");
   ExpectOneLineError(Translume("acquire " + P("nowhere") + " -o " + P("out.vdb")), "capture.json");
   ExpectOneLineError(Translume("acquire " + P("full") + " -o " + P("out.exr")), "-o");
   // An output that names a folder stops before the work, not after the solve.
@@ -219,6 +223,9 @@ TEST_F(Cli, InverseCommandsRejectBadArguments) {
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --noise -1 -o " + P("ds")), "noise");
   // 1e300 overflowed the data, and the error named the dataset's temporary folder.
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --noise 1e300 -o " + P("ds")), "noise must be within 0..1");
+  // 2^31 - 1 held-out spots tried to allocate 28 GB and failed with a bare "out of memory".
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --holdout 2147483647 -o " + P("ds")),
+                     "holdout must be within 0..4096");
   EXPECT_FALSE(fs::exists(P("ds")));
   ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + P("ds")).status, 0);
   ExpectOneLineError(Translume("solve " + P("nope") + " -o " + P("r.vdb")), "no such file");

@@ -43,7 +43,7 @@ int RunSimulateCapture(int argc, char** argv) {
   app.add_option("--setup", setup, "back (projector behind the sample) or front")->capture_default_str();
   app.add_option("--lights", lights, "NxN regions of the lit face, one condition each")->capture_default_str();
   app.add_option("--oversample", o.oversample, "Forward solves on a grid this many times finer: 2, 4, 6 or 8")->capture_default_str();
-  app.add_option("--holdout", o.holdout, "Held-out spot conditions in truth/dataset/holdout")->capture_default_str();
+  app.add_option("--holdout", o.holdout, "Held-out spot conditions in truth/dataset/holdout: 0..4096")->capture_default_str();
   app.add_option("--exposures", o.exposures, "Photos per exposure stack, one stop apart: 2..16")->capture_default_str();
   app.add_flag("--auto-corners", o.auto_corners, "Leave the face corners to acquire's detection");
   app.add_option("--seed", o.seed, "Noise and pose seed")->capture_default_str();

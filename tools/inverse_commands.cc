@@ -110,7 +110,7 @@ int RunSimulate(int argc, char** argv) {
   app.add_option("--setup", setup, "back (lit back face) or front")->capture_default_str();
   app.add_option("--noise", o.noise, "Relative Gaussian noise sigma per pixel (0.01 = 1 %; at most 1)")->capture_default_str();
   app.add_option("--oversample", o.oversample, "Forward grid refinement factor per axis")->capture_default_str();
-  app.add_option("--holdout", o.holdout, "Held-out spot conditions to write into DATASET/holdout/")->capture_default_str();
+  app.add_option("--holdout", o.holdout, "Held-out spot conditions to write into DATASET/holdout/: 0..4096")->capture_default_str();
   app.add_option("--seed", o.seed, "Noise and holdout seed")->capture_default_str();
   app.add_option("--backend", backend, "cpu or gl (forward solves on the GPU; docs/gpu.md)")
       ->capture_default_str();

@@ -102,7 +102,7 @@ int RunRender(int argc, char** argv) {
   app.add_option("--size", size_mm, "Largest extent of the object, mm (0.001 .. 1e6)")->capture_default_str();
   app.add_option("--resolution", resolution, "Polygrid nodes per cube edge")->capture_default_str();
   app.add_option("--levels", levels, "Hierarchy levels (Section 5.3)")->capture_default_str();
-  app.add_option("--first-layer", first_layer, "First interior nodes at this fraction of the boundary spacing")
+  app.add_option("--first-layer", first_layer, "First interior nodes at this fraction of the boundary spacing: (0, 0.5)")
       ->capture_default_str();
   app.add_option("--placement", placement,
                  "Interior nodes: winslow (elliptic grid generation: nearer-orthogonal cells, more accurate on "
