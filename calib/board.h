@@ -17,6 +17,9 @@ namespace translume::calib {
 // (i, j) sits at (i * square, j * square); ChArUco corner id k at
 // ((k % (SX - 1) + 1) * square, (k / (SX - 1) + 1) * square).
 struct BoardSpec {
+  // Limits far beyond printed boards; larger ones were typos that allocated gigabytes.
+  static constexpr int kMaxBoardSide = 100;        // corners (chessboard) or squares (charuco)
+  static constexpr double kMaxSquareMm = 10000;    // 10 m
   enum class Kind { kChessboard, kCharuco };
   Kind kind = Kind::kChessboard;
   int cols = 9;  // chessboard: inner corners per row; charuco: squares per row
@@ -60,8 +63,18 @@ struct BoardDetection {
 BoardDetection DetectBoard(const BoardSpec& board, const cv::Mat& image,
                            int min_charuco_corners = 8);
 
+// Photos whose longest side exceeds this (px) are searched for a chessboard at 1/s of their
+// size (s the smallest whole factor that brings them within it; a 4096 x 3072 photo at
+// 1024 x 768; where the board is too small to be found there, at 1/(s/2), ..., full size)
+// and the corners refined at full resolution. OpenCV's SB detector is slow on
+// large photos (seconds per 12 MP photo) and there put some corners pixels off, where the
+// reduced search is within 0.02 px (CameraCalib.LargePhotosKeepTheirCornerAccuracy).
+inline constexpr int kChessboardSearchMaxSide = 1280;
+
 // A chessboard pattern detection of an arbitrary grid (used for projected patterns):
 // cols x rows inner corners, same ordering rules as above. Empty when not found.
-std::vector<cv::Point2f> FindChessboardGrid(const cv::Mat& image, int cols, int rows);
+// search_max_side: see kChessboardSearchMaxSide (tests compare with a full-size search).
+std::vector<cv::Point2f> FindChessboardGrid(const cv::Mat& image, int cols, int rows,
+                                            int search_max_side = kChessboardSearchMaxSide);
 
 }  // namespace translume::calib

@@ -6,12 +6,16 @@
 
 #include <unistd.h>
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <functional>
 #include <opencv2/core.hpp>
 #include <string>
+#include <vector>
 
 #include "calib/error.h"
+#include "calib/synthetic_rig.h"
 
 namespace translume::calib {
 
@@ -31,6 +35,28 @@ inline std::string CalibErrorOf(const std::function<void()>& f) {
     return e.what();
   }
   return "(no error)";
+}
+
+// The default rig with a 4096 x 3072 camera (4x the pixels per side, the same view), its focal
+// length times `zoom`.
+inline SyntheticRig LargeCameraRig(double zoom = 1) {
+  SyntheticRig rig = SyntheticRig::Default();
+  const double k = 4;
+  rig.camera.size = {4096, 3072};
+  rig.camera.K = {zoom * k * rig.camera.K(0, 0), 0, k * (rig.camera.K(0, 2) + 0.5) - 0.5,
+                  0, zoom * k * rig.camera.K(1, 1), k * (rig.camera.K(1, 2) + 0.5) - 0.5, 0, 0, 1};
+  return rig;
+}
+
+// RMS over `found` of the distance to the nearest `truth` corner (px).
+inline double CornerRmsToTruth(const std::vector<cv::Point2f>& found, const std::vector<cv::Point2d>& truth) {
+  double sum = 0;
+  for (const cv::Point2f& f : found) {
+    double nearest = 1e30;
+    for (const cv::Point2d& t : truth) nearest = std::min(nearest, cv::norm(cv::Point2d(f) - t));
+    sum += nearest * nearest;
+  }
+  return std::sqrt(sum / double(found.size()));
 }
 
 // A file name in the temporary folder, with this process's id so that test runs from several
