@@ -24,9 +24,6 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 constexpr const char* kFormat = "translume-capture/1";
-// The most nodes a grid axis may have: far beyond any sample (the memory check refuses much
-// less), and node counts of any finite size and spacing stay exact integers below it.
-constexpr double kMaxNodesPerAxis = 1e6;
 
 // Field access that names the file and the field in every error.
 class Reader {
@@ -148,10 +145,10 @@ CaptureSpec ReadCapture(const std::string& path) {
     if (std::string why = SpacingProblem(s.spacing_mm); !why.empty()) r.Fail("spacing_mm", why);
     for (int a = 0; a < 3; ++a) {
       const double cells = s.size_mm[size_t(a)] / s.spacing_mm;
-      if (!(cells < kMaxNodesPerAxis))
+      if (!(cells < double(kMaxGridAxis)))
         r.Fail("spacing_mm", fmt::format("sample_mm[{}] = {:g} mm is {:.3g} spacings of {:g} mm, more than "
                                          "the {:g} nodes a grid axis may have", a, s.size_mm[size_t(a)],
-                                         cells, s.spacing_mm, kMaxNodesPerAxis));
+                                         cells, s.spacing_mm, double(kMaxGridAxis)));
       if (std::abs(cells - std::round(cells)) > 1e-3 * std::max(1.0, cells))
         r.Fail("spacing_mm", fmt::format("sample_mm[{}] = {} is not a whole number of spacings {}",
                                          a, s.size_mm[size_t(a)], s.spacing_mm));
@@ -162,8 +159,8 @@ CaptureSpec ReadCapture(const std::string& path) {
     for (int a = 0; a < 3; ++a) {
       const double v = g[size_t(a)];
       if (v != std::floor(v)) r.Fail("grid", fmt::format("expected 3 whole numbers of nodes, got {:g}", v));
-      if (!(v >= 2 && v <= kMaxNodesPerAxis))
-        r.Fail("grid", fmt::format("every axis must have 2..{:g} nodes, got {:g}", kMaxNodesPerAxis, v));
+      if (!(v >= 2 && v <= double(kMaxGridAxis)))
+        r.Fail("grid", fmt::format("every axis must have 2..{:g} nodes, got {:g}", double(kMaxGridAxis), v));
       n[a] = int64_t(v);
     }
     s.spacing_mm = s.size_mm[0] / double(n[0] - 1);

@@ -103,6 +103,11 @@ cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds, bool* grey) 
                                  spec.depth, in->format_name()));
   if (nch < 1 || spec.width <= 0 || spec.height <= 0)
     throw CalibError(path + ": image has no pixels");
+  // A header's size, not a camera's (a 100 MP photo is 1e8 pixels): far larger were damaged files.
+  constexpr int64_t kMaxPhotoPixels = int64_t(1) << 28;
+  if (int64_t(spec.width) * spec.height > kMaxPhotoPixels)
+    throw CalibError(fmt::format("{}: a {}x{} image is larger than translume reads (at most {} pixels)",
+                                 path, spec.width, spec.height, kMaxPhotoPixels));
   cv::Mat raw(spec.height, spec.width, CV_MAKETYPE(depth, std::min(nch, 4)));
   const bool ok = in->read_image(0, 0, 0, std::min(nch, 4), type, raw.data);
   if (!ok) throw CalibError(fmt::format("{}: cannot decode image: {}", path, FirstLine(in->geterror())));

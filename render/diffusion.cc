@@ -6,6 +6,7 @@
 #include <Eigen/SparseLU>
 #include <algorithm>
 #include <cmath>
+#include <fmt/format.h>
 
 #include "solver/status.h"
 
@@ -232,7 +233,7 @@ std::vector<float> SolveReference(const JacobiSystem& S, int channels) {
 std::string DiffusionOptions::Validate() const {
   if (iterations.empty()) return "give at least one iteration count";
   for (int i : iterations)
-    if (i < 0) return "iteration counts must be >= 0";
+    if (i < 0 || i > 1000000) return fmt::format("iteration counts must be within 0..1000000, got {}", i);
   if (std::all_of(iterations.begin(), iterations.end(), [](int i) { return i == 0; }))
     return "every iteration count is 0: no diffusion would run";
   if (coherent_iterations < 0) return "coherent_iterations must be >= 0";

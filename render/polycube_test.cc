@@ -88,6 +88,13 @@ TEST(Polycube, BadFilesGiveClearErrors) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("bad.txt:2"), std::string::npos) << e.what();
   }
+  // A NUL quoted from the file ended the message there.
+  try {
+    ParsePolycube(std::string("0 0 0\n1 \0 0\n", 12), "nul.txt");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("got '1 \\x00 0'"), std::string::npos) << e.what();
+  }
   EXPECT_THROW(ReadPolycube("/nonexistent/cubes.txt"), InputError);
   EXPECT_THROW(BuiltinPolycube("cone"), InputError);
 }

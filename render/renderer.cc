@@ -341,10 +341,16 @@ BoundaryLight DipoleRadiance(const Polygrid& pg, const std::array<float, 3>& kap
   return L;
 }
 
-std::vector<std::pair<Vec3, std::array<double, 3>>> EnvironmentSamples(const Image& env, int count) {
+std::string EnvironmentMapProblem(const Image& env) {
   if (env.width < 2 || env.height < 1 || env.channels < 1)
-    throw InputError("--light env: the environment image is empty");
-  if (const std::string problem = NonFinitePixel(env); !problem.empty()) throw InputError("--light env: " + problem);
+    return fmt::format("a {}x{} image of {} channels: a latitude-longitude map needs at least 2x1 pixels",
+                       env.width, env.height, env.channels);
+  return NonFinitePixel(env);
+}
+
+std::vector<std::pair<Vec3, std::array<double, 3>>> EnvironmentSamples(const Image& env, int count) {
+  if (const std::string problem = EnvironmentMapProblem(env); !problem.empty())
+    throw InputError("--light env: " + problem);
   std::vector<std::pair<Vec3, std::array<double, 3>>> out(count);
   const double golden = kPi * (3 - std::sqrt(5.0));
   for (int k = 0; k < count; ++k) {

@@ -32,8 +32,13 @@ struct RenderLight {
   static RenderLight Parse(const std::string& text);
 };
 
+// "" if `env` can be a latitude-longitude environment map (at least 2 x 1 pixels, every pixel
+// finite), else the problem.
+std::string EnvironmentMapProblem(const Image& env);
+
 // The environment as `count` directions (a Fibonacci sphere) with the irradiance each carries:
-// E_k = sum of L(pixel) dOmega(pixel) over the pixels nearest to direction k (RGB).
+// E_k = sum of L(pixel) dOmega(pixel) over the pixels nearest to direction k (RGB). Throws
+// InputError on EnvironmentMapProblem.
 std::vector<std::pair<Vec3, std::array<double, 3>>> EnvironmentSamples(const Image& env, int count);
 
 struct RenderOptions {

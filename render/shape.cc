@@ -5,6 +5,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <charconv>
 #include <climits>
 #include <cmath>
 #include <cstdint>
@@ -459,8 +460,19 @@ TriangleMesh ReadObj(const std::string& path, std::istream& in) {
 // PLY: the vertex x/y/z properties and the face vertex_indices list.
 TriangleMesh ReadPly(const std::string& path, std::istream& in) {
   std::string line, word;
+  in.seekg(0, std::ios::end);
+  const int64_t file_bytes = int64_t(in.tellg());
+  in.seekg(0);
   std::getline(in, line);
   if (line.rfind("ply", 0) != 0) MeshError(path, "not a PLY file (no 'ply' magic)");
+  // Bytes per value of each scalar type (binary files).
+  const std::map<std::string, int> type_bytes = {
+      {"char", 1}, {"int8", 1}, {"uchar", 1}, {"uint8", 1}, {"short", 2}, {"int16", 2},
+      {"ushort", 2}, {"uint16", 2}, {"int", 4}, {"int32", 4}, {"uint", 4}, {"uint32", 4},
+      {"float", 4}, {"float32", 4}, {"double", 8}, {"float64", 8}};
+  const auto check_type = [&](const std::string& type) {
+    if (!type_bytes.count(type)) MeshError(path, "unsupported PLY property type '" + type + "'");
+  };
   bool binary = false, big_endian = false;
   struct Prop { std::string type, name, count_type; bool list = false; };
   struct Element { std::string name; int64_t count = 0; std::vector<Prop> props; };
@@ -477,7 +489,13 @@ TriangleMesh ReadPly(const std::string& path, std::istream& in) {
       } else if (word != "ascii") MeshError(path, "unsupported PLY format '" + word + "'");
     } else if (word == "element") {
       Element e;
-      ls >> e.name >> e.count;
+      std::string count;
+      ls >> e.name >> count;
+      const auto [end, ec] = std::from_chars(count.data(), count.data() + count.size(), e.count);
+      // Every element takes at least a byte of the file: a larger count is no PLY data.
+      if (ec != std::errc() || end != count.data() + count.size() || e.count < 0 || e.count > file_bytes)
+        MeshError(path, "PLY element '" + e.name + "' has count '" + count +
+                            "', not a whole number within the file's size");
       elements.push_back(e);
     } else if (word == "property") {
       if (elements.empty()) MeshError(path, "PLY property before any element");
@@ -488,6 +506,8 @@ TriangleMesh ReadPly(const std::string& path, std::istream& in) {
         ls >> p.count_type >> p.type;
       }
       ls >> p.name;
+      check_type(p.type);
+      if (p.list) check_type(p.count_type);
       elements.back().props.push_back(p);
     } else if (word == "end_header") {
       break;
@@ -532,16 +552,34 @@ TriangleMesh ReadPly(const std::string& path, std::istream& in) {
     if (type == "double" || type == "float64") return get(double());
     MeshError(path, "unsupported PLY property type '" + type + "'");
   };
+  // A list's count or a vertex index: a whole number within 0..most.
+  const auto read_whole = [&](const std::string& type, double most, const char* what) {
+    const double v = read_value(type);
+    if (!(v >= 0 && v <= most && v == std::floor(v)))
+      MeshError(path, fmt::format("PLY {} {} is not a whole number within 0..{:.0f}", what, v, most));
+    return int64_t(v);
+  };
   TriangleMesh m;
   for (const Element& e : elements) {
     for (int64_t r = 0; r < e.count; ++r) {
       Vec3 v = Vec3::Zero();
       for (const Prop& p : e.props) {
         if (p.list) {
-          const int n = int(read_value(p.count_type));
-          std::vector<int> f(n);
-          for (int i = 0; i < n; ++i) f[i] = int(read_value(p.type));
-          if (e.name == "face" && (p.name == "vertex_indices" || p.name == "vertex_index")) {
+          const int64_t n = read_whole(p.count_type, INT_MAX, "list length");
+          // Each entry takes its bytes (binary), or a digit and a space (ascii), of what is left
+          // (a count of 2^31 allocated 8 GB before the data ran out).
+          if (n > 64) {
+            const int64_t left = file_bytes - int64_t(in.tellg());
+            if (n > (binary ? left / type_bytes.at(p.type) : left / 2))
+              MeshError(path, fmt::format("PLY list length {} is longer than the rest of the file", n));
+          }
+          const bool indices = e.name == "face" && (p.name == "vertex_indices" || p.name == "vertex_index");
+          std::vector<int> f(size_t(n), 0);
+          for (int64_t i = 0; i < n; ++i) {
+            if (indices) f[size_t(i)] = int(read_whole(p.type, INT_MAX, "vertex index"));
+            else read_value(p.type);
+          }
+          if (indices) {
             if (n < 3) MeshError(path, "face with < 3 vertices");
             for (int i = 1; i + 1 < n; ++i) m.triangles.push_back({f[0], f[i], f[i + 1]});
           }
@@ -1083,6 +1121,13 @@ std::unique_ptr<Shape> MakeMeshShape(TriangleMesh mesh, const std::string& name,
   Vec3 lo, hi;
   mesh.Bounds(&lo, &hi);
   const Vec3 centre = (lo + hi) / 2;
+  // A closed mesh folded flat (all vertices in a plane or on a line) passes Validate and then
+  // rendered black: its enclosed volume is no more than rounding against its extent cubed.
+  double volume = 0;
+  for (const auto& t : mesh.triangles)
+    volume += (mesh.vertices[t[0]] - centre).dot((mesh.vertices[t[1]] - centre).cross(mesh.vertices[t[2]] - centre)) / 6;
+  if (!(std::abs(volume) > 1e-6 * std::pow((hi - lo).maxCoeff(), 3)))
+    throw InputError(name + ": the mesh encloses no volume (flat, or folded onto itself)");
   const double scale = size_mm > 0 ? size_mm / (hi - lo).maxCoeff() : 1.0;
   for (Vec3& v : mesh.vertices) v = (v - centre) * scale;
   return std::make_unique<MeshShape>(std::move(mesh), name);

@@ -137,6 +137,14 @@ TEST(Shape, BadMeshesGiveClearErrors) {
                                       "f 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"
                                       "f 1 5 6\nf 1 7 5\nf 5 7 6\nf 1 6 7\n"),
                "non-manifold vertex 0");
+  // A closed tetrahedron with its four vertices in one plane encloses nothing.
+  try {
+    MakeMeshShape(ReadMesh(Write("tl_flat.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0.2 0.2 0\n"
+                                                "f 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n")), "tl_flat.obj", 0);
+    ADD_FAILURE() << "a flat mesh was accepted";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "tl_flat.obj: the mesh encloses no volume (flat, or folded onto itself)");
+  }
   expect_error(Write("tl_flipped.obj", kTet + "f 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 3 4\n"), "orientation");
   expect_error(Write("tl_range.obj", kTet + "f 1 3 9\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"), "out of range");
   // Face indices with trailing text, or 0 (OBJ counts from 1), are not read as numbers.
@@ -163,6 +171,27 @@ TEST(Shape, BadMeshesGiveClearErrors) {
   std::string no_z = ascii_header;
   no_z.erase(no_z.find("property float z\n"), 17);
   expect_error(Write("tl_noz.ply", no_z + "0 0\n1 0\n0 1\n0 0\n" + tet_faces), "no property 'z'");
+  // Counts and indices the file cannot hold: a list of 2^31 - 1 indices allocated 8 GB before
+  // the data ran out; -1, 1e3 and 1.5 were read as something else; unknown types passed in ascii.
+  std::string long_list = bin;
+  long_list.replace(long_list.find("list uchar int"), 14, "list uint int");
+  long_list.resize(long_list.find("end_header\n") + 11 + sizeof(xyz));
+  const uint32_t count = 2147483647u;
+  long_list.append(reinterpret_cast<const char*>(&count), sizeof(count));
+  long_list.append(std::string(12, '\0'));
+  expect_error(Write("tl_long.ply", long_list), "PLY list length 2147483647 is longer than the rest of the file");
+  std::string minus = ascii_header;
+  minus.replace(minus.find("vertex 4"), 8, "vertex -1");
+  expect_error(Write("tl_minus.ply", minus + tet_faces), "element 'vertex' has count '-1'");
+  std::string exp = ascii_header;
+  exp.replace(exp.find("vertex 4"), 8, "vertex 1e3");
+  expect_error(Write("tl_exp.ply", exp + tet_faces), "count '1e3'");
+  expect_error(Write("tl_half.ply", ascii_header + "0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1.5\n3 0 1 3\n3 1 2 3\n3 0 3 2\n"),
+               "PLY vertex index 1.5 is not a whole number");
+  std::string f128 = ascii_header;
+  f128.replace(f128.find("float z"), 7, "float128 z");
+  expect_error(Write("tl_f128.ply", f128 + "0 0 0\n1 0 0\n0 1 0\n0 0 1\n" + tet_faces),
+               "unsupported PLY property type 'float128'");
   expect_error(Write("tl_garbage.obj", "garbage\nmore\n"), "not an OBJ mesh");
   expect_error((fs::temp_directory_path() / "tl_missing.obj").string(), "cannot open");
 }

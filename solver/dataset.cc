@@ -80,8 +80,11 @@ Dataset ReadDataset(const std::string& path) {
   const auto grid = Field<std::vector<int64_t>>(j, "grid", f);
   bool whole = j["grid"].is_array();
   for (const json& v : j["grid"]) whole &= v.is_number_integer();
-  if (grid.size() != 3 || !whole || grid[0] < 2 || grid[1] < 2 || grid[2] < 2)
-    throw InputError(fmt::format("{}: field \"grid\" must be [nx, ny, nz], whole numbers >= 2", f));
+  bool in_range = grid.size() == 3;
+  for (int64_t n : grid) in_range &= n >= 2 && n <= kMaxGridAxis;
+  if (!whole || !in_range)
+    throw InputError(fmt::format("{}: field \"grid\" must be [nx, ny, nz], whole numbers within 2..{}", f,
+                                 kMaxGridAxis));
   d.shape = {grid[0], grid[1], grid[2]};
   d.spacing_mm = Field<double>(j, "spacing_mm", f);
   if (const std::string p = SpacingProblem(d.spacing_mm); !p.empty())

@@ -29,6 +29,9 @@ GridShape ParseGridShape(const std::string& text, const std::string& what) {
   if (values.size() != 3) throw InputError(what + ": '" + text + "' is not a grid size NXxNYxNZ");
   for (int64_t v : values) {
     if (v < 2) throw InputError(what + ": every grid dimension must be at least 2 nodes, got '" + text + "'");
+    if (v > kMaxGridAxis)
+      throw InputError(what + ": every grid dimension must be at most " + std::to_string(kMaxGridAxis) +
+                       " nodes, got '" + text + "'");
   }
   return {values[0], values[1], values[2]};
 }

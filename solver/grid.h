@@ -29,7 +29,13 @@ inline constexpr double kMinSpacingMm = 1e-3, kMaxSpacingMm = 1e3;
 // ("must be within 0.001..1000 mm, got 1e-50").
 std::string SpacingProblem(double spacing_mm);
 
-// Parses "NXxNYxNZ" (e.g. "130x53x37"); throws InputError naming `what` on bad input.
+// The most nodes along one axis accepted anywhere. The paper's largest grid is 256x256x20; with
+// this bound a grid's node count cannot overflow int64 (larger grids then fail the memory
+// check, not an overflow).
+inline constexpr int64_t kMaxGridAxis = 65536;
+
+// Parses "NXxNYxNZ" (e.g. "130x53x37"), every dimension within 2..kMaxGridAxis; throws
+// InputError naming `what` on bad input.
 GridShape ParseGridShape(const std::string& text, const std::string& what);
 
 // Which face the projector lights (SPEC section 2).

@@ -13,6 +13,7 @@
 #include <string_view>
 
 #include "solver/atomic_file.h"
+#include "solver/memory.h"
 #include "solver/status.h"
 
 namespace translume {
@@ -63,6 +64,14 @@ Image ReadImage(const std::string& path) {
                                  spec.depth, in->format_name()));
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
     throw InputError(fmt::format("{}: the image has no pixels", path));
+  // The header's size is allocated before the pixels are decoded: a 661-byte PNG that claimed
+  // 20000 x 20000 took 4.8 GB.
+  if (int64_t(spec.width) * spec.height > kMaxImagePixels || spec.nchannels > kMaxImageChannels)
+    throw InputError(fmt::format("{}: a {}x{} image of {} channels is larger than translume reads "
+                                 "(at most {} pixels of at most {} channels)", path, spec.width,
+                                 spec.height, spec.nchannels, kMaxImagePixels, kMaxImageChannels));
+  CheckFitsInMemory(int64_t(spec.width) * spec.height * spec.nchannels * int64_t(sizeof(float)),
+                    fmt::format("{}: its {}x{} pixels", path, spec.width, spec.height));
   Image img;
   img.width = spec.width;
   img.height = spec.height;

@@ -12,8 +12,13 @@
 
 namespace translume {
 
+// The largest image ReadImage takes: 2^28 pixels (16384 x 16384; a 100 MP photo is 1e8) of at
+// most 64 channels, and within the available memory as floats.
+inline constexpr int64_t kMaxImagePixels = int64_t(1) << 28;
+inline constexpr int kMaxImageChannels = 64;
+
 // Reads any format OpenImageIO knows, converted to float (8/16-bit integers map to [0, 1]).
-// Throws InputError naming the file on failure.
+// Throws InputError naming the file on failure, and on an image larger than the above.
 Image ReadImage(const std::string& path);
 
 // Writes an image; the format follows the extension (.exr: float, .png: 8-bit after clamping to

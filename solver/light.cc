@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <fmt/format.h>
 
+#include "solver/parse.h"
 #include "solver/status.h"
 
 namespace translume {
@@ -38,11 +39,12 @@ LightSpec LightSpec::Parse(const std::string& text) {
   char tail = 0;
   if (kind == "region") {
     s.kind = Kind::kRegion;
-    if (std::sscanf(args.c_str(), "%d,%d/%d%c", &s.region_i, &s.region_j, &s.region_n, &tail) != 3)
-      Bad(text, "region needs I,J/N");
-    if (s.region_n < 1 || s.region_i < 0 || s.region_j < 0 || s.region_i >= s.region_n ||
-        s.region_j >= s.region_n)
-      Bad(text, "region needs 0 <= I, J < N");
+    const auto ijn = WholeNumbers(args, ",/");
+    if (!ijn) Bad(text, "region needs I,J/N");
+    const int64_t i = (*ijn)[0], j = (*ijn)[1], n = (*ijn)[2];
+    if (n < 1 || n > kMaxGridAxis || i < 0 || j < 0 || i >= n || j >= n)
+      Bad(text, fmt::format("region needs 0 <= I, J < N <= {}", kMaxGridAxis));
+    s.region_i = int(i), s.region_j = int(j), s.region_n = int(n);
   } else if (kind == "spot") {
     s.kind = Kind::kSpot;
     if (std::sscanf(args.c_str(), "%lf,%lf,%lf%c", &s.spot_x, &s.spot_y, &s.spot_r, &tail) != 3)
@@ -123,10 +125,10 @@ std::vector<float> RasterizeLight(const LightSpec& spec, const GridShape& shape,
 }
 
 std::vector<LightSpec> RegionLights(const std::string& nxn) {
-  int a = 0, b = 0;
-  char tail = 0;
-  if (std::sscanf(nxn.c_str(), "%dx%d%c", &a, &b, &tail) != 2 || a != b || a < 1 || a > 64)
+  const auto ab = WholeNumbers(nxn, "x");
+  if (!ab || (*ab)[0] != (*ab)[1] || (*ab)[0] < 1 || (*ab)[0] > 64)
     throw InputError(fmt::format("--lights: '{}' is not NxN with 1 <= N <= 64", nxn));
+  const int a = int((*ab)[0]);
   std::vector<LightSpec> lights;
   for (int j = 0; j < a; ++j)
     for (int i = 0; i < a; ++i)

@@ -85,7 +85,10 @@ TEST(Light, ImagePatternUsesLuminanceAndTheImageAxes) {
 
 TEST(Light, MalformedSpecsAreRejectedWithTheirText) {
   for (const char* bad : {"", "region:1,2", "region:4,0/4", "spot:1,2", "spot:1,2,-3", "image:",
-                          "laser:1", "uniformly", "region:1,1/2x"}) {
+                          "laser:1", "uniformly", "region:1,1/2x",
+                          // Beyond int: sscanf's %d read these as region 0,0/1 and "2x2".
+                          "region:4294967296,0/4294967297", "region:0,0/99999999999999999999",
+                          "region:0,,0/2", "region:0,0/"}) {
     try {
       LightSpec::Parse(bad);
       FAIL() << "accepted '" << bad << "'";
@@ -94,6 +97,8 @@ TEST(Light, MalformedSpecsAreRejectedWithTheirText) {
     }
   }
   EXPECT_THROW(RegionLights("4x3"), InputError);
+  EXPECT_THROW(RegionLights("4294967298x4294967298"), InputError);
+  EXPECT_EQ(RegionLights("+3x3").size(), 9u);
   EXPECT_THROW(RasterizeLightFile(LightSpec::Parse("image:/nonexistent.png"), {4, 4, 2}, 1.0), InputError);
 }
 

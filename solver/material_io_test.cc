@@ -157,6 +157,27 @@ TEST_F(MaterialIo, AVolumeIsNoImage) {
   }
 }
 
+// An image header's size is checked before it is allocated: a 54-byte BMP that claims 20000 x
+// 20000 pixels (a 661-byte PNG that did took 4.8 GB before decoding failed).
+TEST_F(MaterialIo, AHugeImageHeaderIsRefusedBeforeAllocating) {
+  std::string bmp = "BM";
+  const auto put = [&](uint32_t v, int bytes) {
+    for (int b = 0; b < bytes; ++b) bmp.push_back(char((v >> (8 * b)) & 0xff));
+  };
+  put(54, 4), put(0, 4), put(54, 4);                  // file size, reserved, pixel data offset
+  put(40, 4), put(20000, 4), put(20000, 4);           // BITMAPINFOHEADER, width, height
+  put(1, 2), put(24, 2), put(0, 4), put(0, 4);        // planes, bits per pixel, BI_RGB, image size
+  put(2835, 4), put(2835, 4), put(0, 4), put(0, 4);  // resolution, palette
+  std::ofstream(Path("huge.bmp"), std::ios::binary) << bmp;
+  try {
+    ReadImage(Path("huge.bmp"));
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), Path("huge.bmp") + ": a 20000x20000 image of 3 channels is larger than "
+                                     "translume reads (at most 268435456 pixels of at most 64 channels)");
+  }
+}
+
 TEST_F(MaterialIo, RefusesToWriteInvalidMaterialAndLeavesNothing) {
   Material bad = material_;
   bad.mu[1][3] = 0;

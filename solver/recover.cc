@@ -6,6 +6,7 @@
 #include <omp.h>
 
 #include <chrono>
+#include <climits>
 #include <cmath>
 #include <exception>
 #include <fmt/format.h>
@@ -602,11 +603,45 @@ void WriteCheckpoint(const std::string& path, const Dataset& d, const RecoverySt
   });
 }
 
+namespace {
+
+// Parses nothing; refuses nesting deeper than a checkpoint's (nlohmann's CBOR reader recurses
+// once per level, so 200000 nested arrays overflowed the stack).
+class NestingCheck : public nlohmann::json_sax<nlohmann::json> {
+ public:
+  bool null() override { return true; }
+  bool boolean(bool) override { return true; }
+  bool number_integer(number_integer_t) override { return true; }
+  bool number_unsigned(number_unsigned_t) override { return true; }
+  bool number_float(number_float_t, const string_t&) override { return true; }
+  bool string(string_t&) override { return true; }
+  bool binary(binary_t&) override { return true; }
+  bool start_object(std::size_t) override { return ++depth_ <= kMaxDepth; }
+  bool key(string_t&) override { return true; }
+  bool end_object() override { return --depth_, true; }
+  bool start_array(std::size_t) override { return ++depth_ <= kMaxDepth; }
+  bool end_array() override { return --depth_, true; }
+  bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override { return false; }
+  bool too_deep() const { return depth_ > kMaxDepth; }
+
+ private:
+  static constexpr int kMaxDepth = 8;
+  int depth_ = 0;
+};
+
+}  // namespace
+
 RecoveryState ReadCheckpoint(const std::string& path, const Dataset& d) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(fmt::format("{}: cannot open checkpoint", path));
   const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), {});
   RecoveryState s;
+  const auto corrupt = [&](const std::string& why) {
+    return InputError(fmt::format("{}: corrupt checkpoint ({})", path, why));
+  };
+  NestingCheck nesting;
+  nlohmann::json::sax_parse(bytes, &nesting, nlohmann::json::input_format_t::cbor);
+  if (nesting.too_deep()) throw corrupt("nested deeper than a checkpoint");
   try {
     const nlohmann::json j = nlohmann::json::from_cbor(bytes);
     if (j.at("format") != "translume-checkpoint/1")
@@ -618,19 +653,41 @@ RecoveryState ReadCheckpoint(const std::string& path, const Dataset& d) {
     s.x = j.at("x").get<std::vector<double>>();
     if (int64_t(s.x.size()) != 6 * d.shape.size())
       throw InputError(fmt::format("{}: checkpoint has the wrong number of parameters", path));
-    s.kappa_scale = j.at("kappa_scale").get<std::array<double, 3>>();
-    s.mu_scale = j.at("mu_scale").get<std::array<double, 3>>();
-    s.homogeneous_kappa = j.at("homogeneous_kappa").get<std::array<double, 3>>();
-    s.homogeneous_mu = j.at("homogeneous_mu").get<std::array<double, 3>>();
-    s.iteration = j.at("iteration").get<int>();
-    s.solves = j.at("solves").get<int64_t>();
+    // Every scale and homogeneous value is a kappa or mu: finite and > 0.
+    for (const char* key : {"kappa_scale", "mu_scale", "homogeneous_kappa", "homogeneous_mu"}) {
+      const auto v = j.at(key).get<std::array<double, 3>>();
+      for (double x : v)
+        if (!(x > 0 && std::isfinite(x))) throw corrupt(fmt::format("{} must be finite and > 0, got {}", key, x));
+    }
+    s.kappa_scale = j["kappa_scale"].get<std::array<double, 3>>();
+    s.mu_scale = j["mu_scale"].get<std::array<double, 3>>();
+    s.homogeneous_kappa = j["homogeneous_kappa"].get<std::array<double, 3>>();
+    s.homogeneous_mu = j["homogeneous_mu"].get<std::array<double, 3>>();
+    const auto count = [&](const nlohmann::json& v, const char* what, int64_t most) {
+      if (!v.is_number_integer() || v.get<int64_t>() < 0 || v.get<int64_t>() > most)
+        throw corrupt(fmt::format("{} must be a whole number within 0..{}, got {}", what, most, v.dump()));
+      return v.get<int64_t>();
+    };
+    s.iteration = int(count(j.at("iteration"), "iteration", INT_MAX));
+    s.solves = count(j.at("solves"), "solves", INT64_MAX);
     s.seconds = j.at("seconds").get<double>();
-    for (const auto& h : j.at("history"))
-      s.history.push_back({h[0].get<int>(), h[1].get<double>(), h[2].get<double>(),
-                           h[3].get<int64_t>(), h[4].get<double>()});
+    if (!(s.seconds >= 0 && std::isfinite(s.seconds))) throw corrupt("seconds must be finite and >= 0");
+    const nlohmann::json& history = j.at("history");
+    if (!history.is_array()) throw corrupt("history must be a list");
+    for (size_t r = 0; r < history.size(); ++r) {
+      const nlohmann::json& h = history[r];
+      bool numbers = h.is_array() && h.size() == 5;
+      for (size_t k = 0; numbers && k < 5; ++k) numbers = h[k].is_number();
+      if (!numbers) throw corrupt(fmt::format("history row {} must be 5 numbers", r));
+      s.history.push_back({int(count(h[0], "a history row's iteration", INT_MAX)), h[1].get<double>(),
+                           h[2].get<double>(), count(h[3], "a history row's solves", INT64_MAX),
+                           h[4].get<double>()});
+    }
   } catch (const nlohmann::json::exception& e) {
-    throw InputError(fmt::format("{}: corrupt checkpoint ({})", path, e.what()));
+    throw corrupt(e.what());
   }
+  // The parameters are log kappa and log mu: the material they make must be valid.
+  if (std::string err = MaterialFromState(d, s).Validate(); !err.empty()) throw corrupt("parameters: " + err);
   return s;
 }
 

@@ -5,6 +5,9 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <functional>
+#include <nlohmann/json.hpp>
 
 #include "solver/evaluate.h"
 #include "solver/light.h"
@@ -196,6 +199,51 @@ TEST(Recover, CheckpointResumeMatchesUninterruptedRun) {
   mg.tolerance = 1e-10;
   EXPECT_LT(RelightingError(RenderFrontFace(mc, d.setup, q, mg), RenderFrontFace(ma, d.setup, q, mg)), 1e-6);
   EXPECT_THROW(ReadCheckpoint("/nonexistent/ck.bin", d), InputError);
+}
+
+// A checkpoint is a file a user hands back: damage in it is named, never a crash (an empty
+// history row was read past its end, scales of 0 tripped a CHECK, deep nesting overflowed the
+// stack, NaN parameters were blamed on the dataset).
+TEST(Recover, CorruptCheckpointsAreNamed) {
+  const Material m = SynthesizeMaterial({.preset = "wax", .shape = {6, 5, 3}});
+  SimulateOptions so;
+  so.lights = RegionLights("1x1");
+  so.oversample = 1;
+  const Dataset d = SimulateDataset(m, so).training;
+  RecoveryState st = StateFromMaterial(d, m);
+  st.history.push_back({1, 2.0, 3.0, 4, 5.0});
+  const std::string path = (std::filesystem::temp_directory_path() / "translume_corrupt_checkpoint.bin").string();
+  WriteCheckpoint(path, d, st);
+  std::ifstream in(path, std::ios::binary);
+  const nlohmann::json good = nlohmann::json::from_cbor(std::vector<uint8_t>((std::istreambuf_iterator<char>(in)), {}));
+  EXPECT_EQ(ReadCheckpoint(path, d).history.size(), 1u);
+  const auto expect = [&](const std::vector<uint8_t>& bytes, const std::string& what) {
+    std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+    try {
+      ReadCheckpoint(path, d);
+      ADD_FAILURE() << "accepted: " << what;
+    } catch (const InputError& e) {
+      const std::string msg = e.what();
+      EXPECT_EQ(msg.find(path + ": corrupt checkpoint ("), 0u) << msg;
+      EXPECT_NE(msg.find(what), std::string::npos) << msg;
+    }
+  };
+  const auto with = [&](const std::function<void(nlohmann::json&)>& change) {
+    nlohmann::json j = good;
+    change(j);
+    return nlohmann::json::to_cbor(j);
+  };
+  expect(with([](auto& j) { j["history"] = {nlohmann::json::array()}; }), "history row 0 must be 5 numbers");
+  expect(with([](auto& j) { j["history"] = {{1}}; }), "history row 0 must be 5 numbers");
+  expect(with([](auto& j) { j["kappa_scale"] = {0, 0, 0}; }), "kappa_scale must be finite and > 0, got 0");
+  expect(with([](auto& j) { j["mu_scale"][1] = -1; }), "mu_scale must be finite and > 0, got -1");
+  expect(with([](auto& j) { j["iteration"] = int64_t(1) << 40; }), "iteration must be a whole number within 0..");
+  expect(with([](auto& j) { j["x"][7] = 1e300; }), "parameters: node");
+  expect(with([](auto& j) { j["x"][7] = NAN; }), "parameters: node");
+  std::vector<uint8_t> deep(200000, 0x81);  // a CBOR array of one element, nested 200000 times
+  deep.push_back(0);
+  expect(deep, "nested deeper than a checkpoint");
+  std::filesystem::remove(path);
 }
 
 // --init: a material's state gives the material back (float values), with the dataset's grid,

@@ -69,6 +69,13 @@ TEST_F(Cli, BadArgumentsGiveOneLineAndNoOutput) {
   ExpectOneLineError(Translume("synth --preset granite -o " + P("g.vdb")), "granite");
   EXPECT_FALSE(fs::exists(P("g.vdb")));
   ExpectOneLineError(Translume("synth --preset wax --grid 10x1x4 -o " + P("g.vdb")), "--grid");
+  // Node counts that overflow int64 crashed (a segfault) or wrapped to "no --grid" (the preset's
+  // own grid, silently).
+  ExpectOneLineError(Translume("synth --preset wax --grid 8x6x384307168202282326 -o " + P("g.vdb")),
+                     "--grid: every grid dimension must be at most 65536 nodes");
+  ExpectOneLineError(Translume("synth --preset marble --grid 2097152x2097152x2097152 -o " + P("g.vdb")),
+                     "at most 65536");
+  ExpectOneLineError(Translume("info --grid 2097152x2097152x2097152"), "at most 65536");
   ExpectOneLineError(Translume("synth --preset wax -o " + P("g.png")), ".vdb");
   ASSERT_EQ(Translume("synth --preset wax --grid 8x8x4 -o " + P("m.vdb")).status, 0);
   ExpectOneLineError(Translume("forward " + P("m.vdb") + " --light spot:1,2 -o " + P("L.exr")),
@@ -612,6 +619,13 @@ TEST_F(Cli, RenderAndEdit) {
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --size 1e300 -o " + P("x.png")), "--size: must be within");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --size 0 -o " + P("x.png")), "--size: must be within");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --first-layer 1e300 -o " + P("x.png")), "--first-layer: must be");
+  // 4294967297 wrapped to 1 (a 1x1 image written without a word); a turntable of 2^31 - 1 frames ran on.
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --image 4294967297x1 -o " + P("x.png")),
+                     "--image 4294967297x1: expected WxH");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --turntable 2147483647 -o " + P("x.png")),
+                     "--turntable: must be within 1..3600");
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --iterations 2147483647 -o " + P("x.png")),
+                     "iteration counts must be within 0..1000000");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --shape " + std::string(TRANSLUME_SOURCE_DIR) +
                                "/samples/bar.obj --size -1 -o " + P("x.png")), "--size: must be within");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --iterations 0 -o " + P("x.png")), "no diffusion would run");
@@ -625,6 +639,10 @@ TEST_F(Cli, RenderAndEdit) {
   WriteImage(P("nan_sky.exr"), Image{4, 2, 3, std::vector<float>(24, NAN)});
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --light env:" + P("nan_sky.exr") + " -o " + P("x.png")),
                      "pixel (0, 0) is not finite");
+  // A one-pixel-wide map was "empty", and the message did not name the file.
+  WriteImage(P("thin_sky.exr"), Image{1, 8, 3, std::vector<float>(24, 1.f)});
+  ExpectOneLineError(Translume("render " + P("m.vdb") + " --light env:" + P("thin_sky.exr") + " -o " + P("x.png")),
+                     "thin_sky.exr: a 1x8 image of 3 channels: a latitude-longitude map needs at least 2x1 pixels");
   // 16384^2 pixels at 8x8 samples would overflow the rasters' 32-bit index (and need ~275 GB).
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --image 16384x16384 --supersample 8 -o " + P("x.png")),
                      "at most 2^31 - 1");

@@ -3,6 +3,7 @@
 // (Wang et al. 2008, Section 5; docs/render.md).
 #include <algorithm>
 #include <chrono>
+#include <climits>
 #include <cmath>
 #include <filesystem>
 #include <cstdio>
@@ -19,6 +20,7 @@
 #include "solver/atomic_file.h"
 #include "solver/image_io.h"
 #include "solver/material_io.h"
+#include "solver/parse.h"
 #include "solver/status.h"
 #include "tools/commands.h"
 
@@ -123,7 +125,7 @@ int RunRender(int argc, char** argv) {
                  "object's centre in mm (default: the whole object in view; nearer for a close-up)");
   app.add_option("--image", image, "Output size WxH")->capture_default_str();
   app.add_option("--supersample", ro.supersample, "Samples per pixel per axis")->capture_default_str();
-  app.add_option("--turntable", turntable, "Frames of a turntable (object rotating under fixed light)")->capture_default_str();
+  app.add_option("--turntable", turntable, "Frames of a turntable (object rotating under fixed light): 1..3600")->capture_default_str();
   app.add_flag("--coherence", coherence, "Frame coherence: start each frame from the last solution");
   app.add_option("--model", ro.model, "polygrid or dipole (homogeneous baseline)")->capture_default_str();
   app.add_option("--specular", ro.specular, "Ward rho_s")->capture_default_str();
@@ -137,9 +139,11 @@ int RunRender(int argc, char** argv) {
   if (ParseOrHelp(app, argc, argv)) return 0;
   const std::string ext = Extension(out);
   RequireExtension(out, {".png", ".exr"}, "-o");
-  char rest = 0;
-  if (std::sscanf(image.c_str(), "%dx%d%c", &ro.width, &ro.height, &rest) != 2)
-    throw InputError("--image " + image + ": expected WxH");
+  const auto wh = WholeNumbers(image, "x");
+  if (!wh || (*wh)[0] < 1 || (*wh)[1] < 1 || (*wh)[0] > INT_MAX || (*wh)[1] > INT_MAX)
+    throw InputError("--image " + image + ": expected WxH, whole numbers of pixels");
+  ro.width = int((*wh)[0]);
+  ro.height = int((*wh)[1]);
   if (!camera.empty()) {
     const std::vector<double> v = ParseNumbers(camera, "--camera", 2, 3);
     ro.azimuth_deg = v[0];
@@ -148,7 +152,8 @@ int RunRender(int argc, char** argv) {
       throw InputError("--camera " + camera + ": the distance (mm, from the object's centre) must be > 0");
   }
   if (exposure && !std::isfinite(*exposure)) throw InputError("--exposure: must be a finite number of stops");
-  if (turntable < 1) throw InputError("--turntable: must be >= 1");
+  if (turntable < 1 || turntable > 3600)
+    throw InputError(fmt::format("--turntable: must be within 1..3600 frames (0.1 degree steps), got {}", turntable));
   if (levels < 1) throw InputError("--levels: must be >= 1");
   if (variance_steps < 0) throw InputError("--variance-steps: must be >= 0");
   if (!(first_layer > 0 && first_layer < 0.5))
@@ -178,7 +183,8 @@ int RunRender(int argc, char** argv) {
   }
   if (L.kind == RenderLight::Kind::kEnvironment) {
     L.environment = std::make_shared<Image>(ReadImage(L.path));
-    RequireFinitePixels(*L.environment, "--light env:" + L.path);
+    if (const std::string problem = EnvironmentMapProblem(*L.environment); !problem.empty())
+      throw InputError("--light env:" + L.path + ": " + problem);
   }
 
   std::unique_ptr<Shape> shape = mesh ? MakeMeshShape(ReadMesh(shape_name), shape_name, size_mm)

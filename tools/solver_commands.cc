@@ -137,6 +137,10 @@ int RunInfo(int argc, char** argv) {
   const Precision sized_precision = ParsePrecision(precision);  // checked even without a grid
   if (!material_path.empty() && !grid.empty())
     throw InputError("info: give a material or --grid, not both");
+  // Inputs first: bad input is one line, not a report cut short.
+  GridShape shape;
+  if (!material_path.empty()) shape = ReadMaterial(material_path).shape;
+  if (!grid.empty()) shape = ParseGridShape(grid, "--grid");
   std::printf("translume %s (%s build)\n", TRANSLUME_VERSION, TRANSLUME_BUILD_TYPE);
   std::printf("backends: cpu (multigrid-preconditioned CG, float and double), gl (OpenGL compute, "
               "float)\n");
@@ -159,9 +163,6 @@ int RunInfo(int argc, char** argv) {
   std::printf("indices: 64-bit\n");
   const int64_t avail = AvailableMemoryBytes();
   if (avail > 0) std::printf("memory available: %s\n", FormatBytes(avail).c_str());
-  GridShape shape;
-  if (!material_path.empty()) shape = ReadMaterial(material_path).shape;
-  if (!grid.empty()) shape = ParseGridShape(grid, "--grid");
   if (shape.size() > 0) {
     const MemoryEstimate e = EstimateMemory(shape, conditions, sized_precision);
     std::printf("grid %s (%lld nodes), %s:\n", shape.ToString().c_str(), (long long)shape.size(),
