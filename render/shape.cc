@@ -5,7 +5,6 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
-#include <charconv>
 #include <climits>
 #include <cmath>
 #include <cstdint>
@@ -18,6 +17,7 @@
 #include <sstream>
 
 #include "solver/atomic_file.h"
+#include "solver/parse.h"
 #include "solver/status.h"
 
 namespace translume {
@@ -61,10 +61,7 @@ TriangleMesh ParametricMesh(int nu, int nv, bool v_periodic,
 
 // Flips every triangle if the enclosed signed volume is negative (inward-facing triangles).
 void OrientOutward(TriangleMesh* m) {
-  double volume = 0;
-  for (const auto& t : m->triangles)
-    volume += m->vertices[t[0]].dot(m->vertices[t[1]].cross(m->vertices[t[2]])) / 6;
-  if (volume < 0)
+  if (m->Volume() < 0)
     for (auto& t : m->triangles) std::swap(t[1], t[2]);
 }
 
@@ -491,9 +488,10 @@ TriangleMesh ReadPly(const std::string& path, std::istream& in) {
       Element e;
       std::string count;
       ls >> e.name >> count;
-      const auto [end, ec] = std::from_chars(count.data(), count.data() + count.size(), e.count);
+      const auto n = WholeNumbers(count, "");
+      if (n) e.count = (*n)[0];
       // Every element takes at least a byte of the file: a larger count is no PLY data.
-      if (ec != std::errc() || end != count.data() + count.size() || e.count < 0 || e.count > file_bytes)
+      if (!n || e.count < 0 || e.count > file_bytes)
         MeshError(path, "PLY element '" + e.name + "' has count '" + count +
                             "', not a whole number within the file's size");
       elements.push_back(e);
@@ -909,6 +907,17 @@ void TriangleMesh::Bounds(Vec3* lo, Vec3* hi) const {
   }
 }
 
+double TriangleMesh::Volume() const {
+  if (vertices.empty()) return 0;
+  Vec3 lo, hi;
+  Bounds(&lo, &hi);
+  const Vec3 c = (lo + hi) / 2;  // about the box's centre: less cancellation far from the origin
+  double volume = 0;
+  for (const auto& t : triangles)
+    volume += (vertices[t[0]] - c).dot((vertices[t[1]] - c).cross(vertices[t[2]] - c)) / 6;
+  return volume;
+}
+
 double TriangleMesh::Area() const {
   double area = 0;
   for (const auto& t : triangles)
@@ -1123,10 +1132,7 @@ std::unique_ptr<Shape> MakeMeshShape(TriangleMesh mesh, const std::string& name,
   const Vec3 centre = (lo + hi) / 2;
   // A closed mesh folded flat (all vertices in a plane or on a line) passes Validate and then
   // rendered black: its enclosed volume is no more than rounding against its extent cubed.
-  double volume = 0;
-  for (const auto& t : mesh.triangles)
-    volume += (mesh.vertices[t[0]] - centre).dot((mesh.vertices[t[1]] - centre).cross(mesh.vertices[t[2]] - centre)) / 6;
-  if (!(std::abs(volume) > 1e-6 * std::pow((hi - lo).maxCoeff(), 3)))
+  if (!(std::abs(mesh.Volume()) > 1e-6 * std::pow((hi - lo).maxCoeff(), 3)))
     throw InputError(name + ": the mesh encloses no volume (flat, or folded onto itself)");
   const double scale = size_mm > 0 ? size_mm / (hi - lo).maxCoeff() : 1.0;
   for (Vec3& v : mesh.vertices) v = (v - centre) * scale;

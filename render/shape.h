@@ -28,6 +28,8 @@ struct TriangleMesh {
   std::string Validate() const;
   void Bounds(Vec3* lo, Vec3* hi) const;
   double Area() const;  // mm^2
+  // Enclosed signed volume (mm^3) of a closed mesh: > 0 when its triangles face outward.
+  double Volume() const;
   // For a closed 2-manifold (Validate() empty): the handles summed over the connected pieces,
   // from V - E + F = 2 (pieces - genus) over the vertices that triangles use.
   int Genus() const;

@@ -1,32 +1,19 @@
 // SPDX-License-Identifier: MIT
 #include "solver/grid.h"
 
-#include <charconv>
 #include <cmath>
 #include <fmt/format.h>
 #include <vector>
 
+#include "solver/parse.h"
 #include "solver/status.h"
 
 namespace translume {
 
 GridShape ParseGridShape(const std::string& text, const std::string& what) {
-  std::vector<int64_t> values;
-  size_t start = 0;
-  while (start <= text.size()) {
-    size_t end = text.find('x', start);
-    if (end == std::string::npos) end = text.size();
-    int64_t v = 0;
-    const char* first = text.data() + start;
-    const char* last = text.data() + end;
-    auto [ptr, ec] = std::from_chars(first, last, v);
-    if (ec != std::errc() || ptr != last || first == last) {
-      throw InputError(what + ": '" + text + "' is not a grid size NXxNYxNZ");
-    }
-    values.push_back(v);
-    start = end + 1;
-  }
-  if (values.size() != 3) throw InputError(what + ": '" + text + "' is not a grid size NXxNYxNZ");
+  const auto parsed = WholeNumbers(text, "xx");
+  if (!parsed) throw InputError(what + ": '" + text + "' is not a grid size NXxNYxNZ");
+  const std::vector<int64_t>& values = *parsed;
   for (int64_t v : values) {
     if (v < 2) throw InputError(what + ": every grid dimension must be at least 2 nodes, got '" + text + "'");
     if (v > kMaxGridAxis)

@@ -654,15 +654,16 @@ RecoveryState ReadCheckpoint(const std::string& path, const Dataset& d) {
     if (int64_t(s.x.size()) != 6 * d.shape.size())
       throw InputError(fmt::format("{}: checkpoint has the wrong number of parameters", path));
     // Every scale and homogeneous value is a kappa or mu: finite and > 0.
-    for (const char* key : {"kappa_scale", "mu_scale", "homogeneous_kappa", "homogeneous_mu"}) {
+    const auto positive = [&](const char* key) {
       const auto v = j.at(key).get<std::array<double, 3>>();
       for (double x : v)
         if (!(x > 0 && std::isfinite(x))) throw corrupt(fmt::format("{} must be finite and > 0, got {}", key, x));
-    }
-    s.kappa_scale = j["kappa_scale"].get<std::array<double, 3>>();
-    s.mu_scale = j["mu_scale"].get<std::array<double, 3>>();
-    s.homogeneous_kappa = j["homogeneous_kappa"].get<std::array<double, 3>>();
-    s.homogeneous_mu = j["homogeneous_mu"].get<std::array<double, 3>>();
+      return v;
+    };
+    s.kappa_scale = positive("kappa_scale");
+    s.mu_scale = positive("mu_scale");
+    s.homogeneous_kappa = positive("homogeneous_kappa");
+    s.homogeneous_mu = positive("homogeneous_mu");
     const auto count = [&](const nlohmann::json& v, const char* what, int64_t most) {
       if (!v.is_number_integer() || v.get<int64_t>() < 0 || v.get<int64_t>() > most)
         throw corrupt(fmt::format("{} must be a whole number within 0..{}, got {}", what, most, v.dump()));
