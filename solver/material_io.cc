@@ -84,6 +84,65 @@ bool CheckTrailer(const std::string& path, uint64_t size) {
   return true;
 }
 
+// OpenVDB trusts the lengths in a file's header and allocates them before reading: a damaged
+// file without a trailer (another tool's) made it allocate 5-22 GB. "" if the header's counts,
+// string lengths and grid offsets (docs/formats.md) fit in the file, else the problem. Checks
+// files of format versions 218 (string UUIDs) to OPENVDB_FILE_VERSION; older ones as they are.
+std::string VdbHeaderProblem(const std::string& path, uint64_t size) {
+  std::ifstream in(path, std::ios::binary);
+  uint64_t pos = 0;
+  bool cut = false;
+  const auto read = [&](void* out, uint64_t n) {
+    if (cut || n > size - pos || !in.read(static_cast<char*>(out), std::streamsize(n))) cut = true;
+    else pos += n;
+  };
+  const auto u32 = [&] {
+    uint8_t b[4] = {0, 0, 0, 0};
+    read(b, 4);
+    return uint32_t(b[0]) | uint32_t(b[1]) << 8 | uint32_t(b[2]) << 16 | uint32_t(b[3]) << 24;
+  };
+  const auto u64 = [&] { const uint64_t lo = u32(); return lo | uint64_t(u32()) << 32; };
+  // A length-prefixed string: its length must fit in the rest of the file.
+  const auto skip_string = [&](const char* what) -> std::string {
+    const uint32_t n = u32();
+    if (cut) return "";
+    if (n > size - pos) return fmt::format("{} of {} bytes, beyond the file's end", what, n);
+    in.seekg(std::streamoff(n), std::ios::cur);
+    pos += n;
+    return "";
+  };
+  if (u64() != 0x56444220) return "not an OpenVDB file (no magic number)";
+  const uint32_t version = u32();
+  if (version < openvdb::OPENVDB_FILE_VERSION_ROOTNODE_MAP || version > openvdb::OPENVDB_FILE_VERSION)
+    return fmt::format("OpenVDB file format version {}, this build reads {} to {}", version,
+                       int(openvdb::OPENVDB_FILE_VERSION_ROOTNODE_MAP), openvdb::OPENVDB_FILE_VERSION);
+  if (version < openvdb::OPENVDB_FILE_VERSION_BOOST_UUID) return "";
+  u32(), u32();  // library major, minor
+  char offsets = 0, uuid[36];
+  read(&offsets, 1);
+  read(uuid, 36);
+  const uint32_t entries = u32();
+  if (!cut && entries > size - pos) return fmt::format("{} metadata entries, more than the file holds", entries);
+  for (uint32_t e = 0; e < entries && !cut; ++e)
+    for (const char* what : {"a metadata name", "a metadata type", "a metadata value"})
+      if (std::string p = skip_string(what); !p.empty()) return p;
+  const uint32_t grids = u32();
+  if (!cut && grids > size - pos) return fmt::format("{} grids, more than the file holds", grids);
+  for (uint32_t g = 0; g < grids && offsets && !cut; ++g) {
+    for (const char* what : {"a grid name", "a grid type", "a grid's instance parent"})
+      if (std::string p = skip_string(what); !p.empty()) return p;
+    const uint64_t grid_pos = u64(), block_pos = u64(), end_pos = u64();
+    if (cut) break;
+    if (!(pos <= grid_pos && grid_pos <= block_pos && block_pos <= end_pos))
+      return fmt::format("grid {}'s offsets {}, {}, {} are out of order", g, grid_pos, block_pos, end_pos);
+    if (end_pos > size)
+      return fmt::format("grid {} ends at byte {}, beyond the file's {} bytes (truncated?)", g, end_pos, size);
+    in.seekg(std::streamoff(end_pos));
+    pos = end_pos;
+  }
+  return cut ? "its header ends early (truncated?)" : "";
+}
+
 void InitVdb() {
   static std::once_flag once;
   std::call_once(once, [] { openvdb::initialize(); });
@@ -342,6 +401,9 @@ Material ReadMaterial(const std::string& path) {
     throw InputError(fmt::format("{}: not a material file: {} bytes is too short for an OpenVDB file "
                                  "with two grids (truncated?)", path, bytes));
   const bool trailer = !ec && CheckTrailer(path, bytes);
+  if (!trailer && !ec)
+    if (const std::string problem = VdbHeaderProblem(path, bytes); !problem.empty())
+      throw InputError(fmt::format("{}: not a readable OpenVDB material ({})", path, problem));
   try {
     return ReadMaterialFile(path, trailer);
   } catch (const InputError&) {

@@ -118,6 +118,26 @@ TEST_F(MaterialIo, RejectsEveryBrokenFile) {
   // A file from before the trailer still reads.
   WriteCorruptMaterialForTest(Path("old.vdb"), material_, MaterialCorruption::kNoChecksum);
   EXPECT_EQ(ReadMaterial(Path("old.vdb")).kappa, material_.kappa);
+  // Such a file (or another tool's) has no checksum: lengths in its header that the file cannot
+  // hold are refused before OpenVDB allocates them (a metadata name of 4 GB took 21 GB).
+  std::string old;
+  {
+    std::ifstream in(Path("old.vdb"), std::ios::binary);
+    old.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const auto patched = [&](size_t at, uint32_t value) {
+    std::string b = old;
+    for (int i = 0; i < 4; ++i) b[at + size_t(i)] = char((value >> (8 * i)) & 0xff);
+    std::ofstream(Path("patched.vdb"), std::ios::binary) << b;
+    return Path("patched.vdb");
+  };
+  ExpectRejected(patched(0x08, 1), "OpenVDB file format version 1, this build reads 213 to 224");
+  ExpectRejected(patched(0x39, 0x7fffffff), "2147483647 metadata entries, more than the file holds");
+  ExpectRejected(patched(0x3d, 0xfffffff0), "a metadata name of 4294967280 bytes, beyond the file's end");
+  const size_t grid_name = old.find(std::string("\x05\0\0\0kappa", 9));
+  ASSERT_NE(grid_name, std::string::npos);
+  ExpectRejected(patched(grid_name, 0xfffffff0), "a grid name of 4294967280 bytes");
+  ExpectRejected(patched(grid_name + 9 + 4 + 16 + 4 + 16, 0x7fffffff), "grid 0 ends at byte 2147483647, beyond");
   const std::pair<MaterialCorruption, std::string> cases[] = {
       {MaterialCorruption::kMissingMu, "missing grid 'mu'"},
       {MaterialCorruption::kMissingC, "missing file metadata 'C'"},
