@@ -197,8 +197,8 @@ std::vector<cv::Point2f> FindChessboardGrid(const cv::Mat& image, int cols, int 
     if (bad[k]) c[k] = predicted[k];
   // The SB detector's corners carry a bias of ~0.1 px on synthetic views with lens
   // distortion; a saddle-point refinement in a window of a quarter square removes most of it.
-  // From a reduced search, coarse to fine: at 1/s, 1/(s/2), ..., full size, each level's start
-  // the level above's result (a 4x jump started the full-size refinement too far away).
+  // From a reduced search, coarse to fine: at 1/s, 1/(s/2), ..., full size, each level starting
+  // from the level above's result.
   for (int f = s;; f /= 2) {
     const cv::Mat level = reduced(f);
     double spacing = 1e30;
