@@ -343,6 +343,9 @@ TEST_F(Cli, BenchForwardSmoke) {
   EXPECT_GT(jacobi["iterations"].get<int>(), 20 * j[0]["iterations"].get<int>());
   ExpectOneLineError(Translume("bench forward --jacobi-factor 0"), "jacobi-factor");
   ExpectOneLineError(Translume("bench forward --backend gl --cpu-time"), "--cpu-time");
+  // Every grid is sized before the first runs (this one ended in a bare "out of memory").
+  ExpectOneLineError(Translume("bench forward --grids 17x13x9 65536x65536x65536"),
+                     "--grids 65536x65536x65536: a forward solve on it needs about");
 }
 
 // The gl benchmark reports the stencil's bandwidth against a copy, and how far its solution is

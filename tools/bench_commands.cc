@@ -15,6 +15,7 @@
 #include "solver/bench_recovery.h"
 #include "solver/forward.h"
 #include "solver/gl_context.h"
+#include "solver/memory.h"
 #include "solver/status.h"
 #include "solver/synthetic.h"
 #include "solver/threads.h"
@@ -83,8 +84,14 @@ void AddBenchForward(CLI::App& bench) {
   fwd->add_flag("--json", f->json, "Print JSON instead of a table");
   fwd->callback([f] {
     ForwardBenchOptions o = f->o;
-    for (const auto& g : f->grids) o.grids.push_back(ParseGridShape(g, "--grids"));
     o.precision = ParsePrecision(f->precision);
+    for (const auto& g : f->grids) {
+      o.grids.push_back(ParseGridShape(g, "--grids"));
+      // Checked before any grid runs, as forward does (a grid too large ended in a bare "out of
+      // memory" after the smaller ones had run).
+      CheckFitsInMemory(EstimateMemory(o.grids.back(), 1, o.precision).forward_bytes,
+                        fmt::format("--grids {}: a forward solve on it", g));
+    }
     o.backend = ParseBackend(f->backend);
     if (o.cpu_time && o.backend == Backend::kGl)
       throw InputError("--cpu-time: only with --backend cpu (the gl solver runs on the GPU)");

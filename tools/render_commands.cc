@@ -115,8 +115,8 @@ int RunRender(int argc, char** argv) {
                  "smoothing only)")
       ->capture_default_str();
   app.add_option("--iterations", iterations,
-                 "Relaxation steps per level, coarsest first (a longer list than the levels drops its first "
-                 "entries, a shorter one repeats its last)")->capture_default_str();
+                 "Relaxation steps per level (0..1000000), coarsest first (a longer list than the levels drops "
+                 "its first entries, a shorter one repeats its last)")->capture_default_str();
   app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all)");
   app.add_option("--backend", backend, "All three passes on cpu or gl (compute shaders)")->capture_default_str();
   app.add_option("--light", light, "dir:X,Y,Z | point:X,Y,Z (mm; shadows in every direction: a cube shadow map when near or inside the object's bounding sphere) | env:FILE.exr (lat-long)")->capture_default_str();
