@@ -133,16 +133,7 @@ TEST(ProjectorCalib, LargePhotosKeepTheirPatternCornerAccuracy) {
       ASSERT_TRUE(rig.ProjectorPixelOnPlane(pose, p, &xyz));
       on_plane.push_back({xyz[0], xyz[1], xyz[2]});
     }
-    const std::vector<cv::Point2d> truth = rig.camera.Project(on_plane);
-    const auto rms = [&](const std::vector<cv::Point2f>& found) { return CornerRmsToTruth(found, truth); };
-    const auto reduced = FindChessboardGrid(photo, pattern.cols, pattern.rows);
-    const auto full = FindChessboardGrid(photo, pattern.cols, pattern.rows, 1 << 30);
-    ASSERT_EQ(reduced.size(), truth.size());
-    ASSERT_EQ(full.size(), truth.size());
-    std::printf("pattern corner RMS against the truth: reduced search %.3f px, full-size search %.3f px\n",
-                rms(reduced), rms(full));
-    EXPECT_LT(rms(reduced), 0.1);
-    EXPECT_LE(rms(reduced), rms(full) + 0.005);
+    ExpectReducedSearchAccurate(photo, pattern.cols, pattern.rows, rig.camera.Project(on_plane), 0.1, 0.005);
   }
 }
 

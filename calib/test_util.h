@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <cmath>
 #include <filesystem>
 #include <functional>
@@ -14,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "calib/board.h"
 #include "calib/error.h"
 #include "calib/synthetic_rig.h"
 
@@ -46,6 +48,25 @@ inline SyntheticRig LargeCameraRig(double zoom = 1) {
   rig.camera.K = {zoom * k * rig.camera.K(0, 0), 0, k * (rig.camera.K(0, 2) + 0.5) - 0.5,
                   0, zoom * k * rig.camera.K(1, 1), k * (rig.camera.K(1, 2) + 0.5) - 0.5, 0, 0, 1};
   return rig;
+}
+
+// RMS over `found` of the distance to the nearest `truth` corner (px).
+inline double CornerRmsToTruth(const std::vector<cv::Point2f>& found, const std::vector<cv::Point2d>& truth);
+
+// FindChessboardGrid on `photo` with its reduced search and with a full-size one: both find
+// every corner, and the reduced search's RMS from `truth` is below `bound` and no more than the
+// full-size search's plus `slack` (px). Prints both.
+inline void ExpectReducedSearchAccurate(const cv::Mat& photo, int cols, int rows,
+                                        const std::vector<cv::Point2d>& truth, double bound,
+                                        double slack = 0) {
+  const auto reduced = FindChessboardGrid(photo, cols, rows);
+  const auto full = FindChessboardGrid(photo, cols, rows, 1 << 30);
+  ASSERT_EQ(reduced.size(), truth.size());
+  ASSERT_EQ(full.size(), truth.size());
+  const double r = CornerRmsToTruth(reduced, truth), f = CornerRmsToTruth(full, truth);
+  std::printf("corner RMS against the truth: reduced search %.3f px, full-size search %.3f px\n", r, f);
+  EXPECT_LT(r, bound);
+  EXPECT_LE(r, f + slack);
 }
 
 // RMS over `found` of the distance to the nearest `truth` corner (px).
