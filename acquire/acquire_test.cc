@@ -25,11 +25,17 @@ namespace {
 namespace fs = std::filesystem;
 
 // A small simulated capture (a 512x384 camera and projector, 2x2 regions, 6 exposures), made
-// once and kept in the temp folder: every test process of this binary reuses it.
+// once and kept in the temp folder: every test process of this build of the binary reuses it.
+// The folder's name holds the binary's modification time: a capture made by an earlier build
+// hid for a day that the front-lit one could no longer be made.
 std::string SmallCapture(translume::Setup setup) {
+  const auto built = fs::last_write_time("/proc/self/exe").time_since_epoch().count();
   const fs::path dir = fs::temp_directory_path() /
-                       (std::string("translume_acquire_test_v1_") + SetupName(setup));
+                       fmt::format("translume_acquire_test_{}_{}", SetupName(setup), built);
   if (fs::exists(dir / "capture.json")) return dir.string();
+  const std::string earlier = fmt::format("translume_acquire_test_{}_", SetupName(setup));
+  for (const auto& e : fs::directory_iterator(fs::temp_directory_path()))
+    if (e.path().filename().string().rfind(earlier, 0) == 0 && e.path() != dir) fs::remove_all(e.path());
   SynthOptions so;
   so.preset = "marble";
   so.shape = {24, 18, setup == Setup::kBack ? 6 : 10};

@@ -486,8 +486,7 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     }
     WriteDataset((tmp / "truth/dataset").string(), truth);
     if (o.holdout > 0) {
-      SimulateOptions so;
-      so.lights = {LightSpec::Parse("uniform")};
+      SimulateOptions so;  // no training lights: the training truth is the photos' own, above
       so.setup = o.setup;
       so.oversample = K;
       so.holdout = o.holdout;

@@ -130,7 +130,7 @@ std::vector<float> MeasurementMask(const GridShape& s, Setup setup, const FacePa
 }
 
 std::string SimulateOptions::Validate() const {
-  if (lights.empty()) return "at least one light is needed";
+  if (lights.empty() && holdout == 0) return "at least one light (or held-out condition) is needed";
   // Above a relative sigma of 1 the noise outweighs the signal (1e300 overflowed the data to inf).
   if (!(noise >= 0 && noise <= 1))
     return fmt::format("noise must be within 0..1 (a relative sigma: 0.01 = 1 %), got {}", noise);
@@ -199,7 +199,7 @@ SimulatedData SimulateDataset(const Material& material, const SimulateOptions& o
   const Material fine = RefineMaterial(material, o.oversample);
   std::mt19937_64 rng(o.seed);
   SimulatedData out;
-  out.training = Simulate(material, fine, o, o.lights, "c", &rng);
+  if (!o.lights.empty()) out.training = Simulate(material, fine, o, o.lights, "c", &rng);
   if (o.holdout > 0) {
     const double h = material.spacing_mm;
     const double w = (material.shape.nx - 1) * h, ht = (material.shape.ny - 1) * h;

@@ -36,7 +36,7 @@ std::vector<float> MeasurementMask(const GridShape& shape, Setup setup, const Fa
 inline constexpr int kMaxHoldout = 4096;
 
 struct SimulateOptions {
-  std::vector<LightSpec> lights;  // the training conditions (e.g. RegionLights("4x4"))
+  std::vector<LightSpec> lights;  // the training conditions (e.g. RegionLights("4x4")); none: holdout only
   Setup setup = Setup::kBack;
   double noise = 0;         // relative Gaussian noise sigma per pixel and channel (0.01 = 1 %), <= 1
   int oversample = 2;       // forward solves on a grid this many times finer per axis
@@ -50,7 +50,7 @@ struct SimulateOptions {
 };
 
 struct SimulatedData {
-  Dataset training;
+  Dataset training;  // no conditions when options.lights is empty
   Dataset holdout;  // no conditions when options.holdout == 0
   std::vector<LightSpec> holdout_lights;
 };
