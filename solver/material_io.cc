@@ -7,6 +7,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fmt/format.h>
 #include <fstream>
@@ -14,6 +15,7 @@
 #include <set>
 
 #include "solver/atomic_file.h"
+#include "solver/child_process.h"
 #include "solver/memory.h"
 #include "solver/status.h"
 
@@ -266,9 +268,16 @@ std::string Short(const std::string& text) {
   return out;
 }
 
-Material ReadMaterialFile(const std::string& path, bool trailer) {
+// Reads the material of an OpenVDB file; `trailer` says whether its checksum trailer was found
+// and checked. Uses no thread pool, so that it can run in RunInChildProcess's child: the
+// active boxes and counts are summed serially (OpenVDB's own use TBB), and where `keep_grids`
+// is given the grids are moved there instead of freed (freeing a tree uses TBB too).
+Material ReadMaterialFile(const std::string& path, bool trailer,
+                          std::vector<openvdb::GridBase::Ptr>* keep_grids) {
   openvdb::io::File file(path);
-  file.open();
+  // Without delayed loading: the whole file is read now, as it is used, and damaged files crash
+  // OpenVDB's delayed-load bookkeeping (an assertion on its masks) 3x as often.
+  file.open(false);
   Material m;
   auto meta = file.getMetadata();
   bool have_c = false, have_eta = false;
@@ -315,6 +324,7 @@ Material ReadMaterialFile(const std::string& path, bool trailer) {
     if (!file.hasGrid(names[g]))
       throw InputError(fmt::format("{}: missing grid '{}'", path, names[g]));
     auto base = file.readGrid(names[g]);
+    if (keep_grids) keep_grids->push_back(base);
     grids[g] = openvdb::gridPtrCast<openvdb::Vec3fGrid>(base);
     if (!grids[g])
       throw InputError(fmt::format("{}: grid '{}' has type {}, expected Vec3f", path, names[g],
@@ -323,6 +333,7 @@ Material ReadMaterialFile(const std::string& path, bool trailer) {
   file.close();
 
   openvdb::CoordBBox box[2];
+  openvdb::Index64 active_voxels[2] = {0, 0};
   for (int g = 0; g < 2; ++g) {
     const auto& xf = grids[g]->transform();
     const openvdb::Vec3d vs = xf.voxelSize();
@@ -344,7 +355,14 @@ Material ReadMaterialFile(const std::string& path, bool trailer) {
     else if (std::abs(vs[0] - m.spacing_mm) > 1e-6 * m.spacing_mm)
       throw InputError(fmt::format("{}: grids 'kappa' and 'mu' have different voxel sizes "
                                    "({} and {} mm)", path, m.spacing_mm, vs[0]));
-    box[g] = grids[g]->evalActiveVoxelBoundingBox();
+    openvdb::Index64 active = 0;
+    for (auto it = grids[g]->cbeginValueOn(); it; ++it) {
+      openvdb::CoordBBox b;
+      it.getBoundingBox(b);
+      box[g].expand(b);
+      active += it.getVoxelCount();
+    }
+    active_voxels[g] = active;
     if (box[g].empty()) throw InputError(fmt::format("{}: grid '{}' is empty", path, names[g]));
     if (box[g].min() != openvdb::Coord(0, 0, 0))
       throw InputError(fmt::format("{}: grid '{}' does not start at voxel (0,0,0)", path,
@@ -355,9 +373,9 @@ Material ReadMaterialFile(const std::string& path, bool trailer) {
   const openvdb::Coord dim = box[0].dim();
   m.shape = {dim.x(), dim.y(), dim.z()};
   for (int g = 0; g < 2; ++g) {
-    if (int64_t(grids[g]->activeVoxelCount()) != m.shape.size())
+    if (int64_t(active_voxels[g]) != m.shape.size())
       throw InputError(fmt::format("{}: grid '{}' has {} active voxels, a dense {} grid needs {}",
-                                   path, names[g], grids[g]->activeVoxelCount(),
+                                   path, names[g], active_voxels[g],
                                    m.shape.ToString(), m.shape.size()));
   }
   // A valid file of tiles can hold a grid far too large to hold densely (4096^3 in 480 KB).
@@ -386,6 +404,45 @@ Material ReadMaterialFile(const std::string& path, bool trailer) {
   return m;
 }
 
+// The material as bytes, for RunInChildProcess: shape, spacing, eta, C, then kappa and mu per
+// channel.
+std::string EncodeMaterial(const Material& m) {
+  std::string out;
+  auto put = [&](const void* data, size_t bytes) { out.append(static_cast<const char*>(data), bytes); };
+  const int64_t shape[3] = {m.shape.nx, m.shape.ny, m.shape.nz};
+  const double scalars[3] = {m.spacing_mm, m.eta, m.C};
+  put(shape, sizeof shape);
+  put(scalars, sizeof scalars);
+  for (const auto* field : {&m.kappa, &m.mu})
+    for (const std::vector<float>& channel : *field) put(channel.data(), channel.size() * sizeof(float));
+  return out;
+}
+
+Material DecodeMaterial(const std::string& bytes) {
+  Material m;
+  size_t at = 0;
+  auto get = [&](void* data, size_t size) {
+    TL_CHECK(at + size <= bytes.size());
+    std::memcpy(data, bytes.data() + at, size);
+    at += size;
+  };
+  int64_t shape[3];
+  double scalars[3];
+  get(shape, sizeof shape);
+  get(scalars, sizeof scalars);
+  m.shape = {shape[0], shape[1], shape[2]};
+  m.spacing_mm = scalars[0];
+  m.eta = scalars[1];
+  m.C = scalars[2];
+  for (auto* field : {&m.kappa, &m.mu})
+    for (std::vector<float>& channel : *field) {
+      channel.resize(m.shape.size());
+      get(channel.data(), channel.size() * sizeof(float));
+    }
+  TL_CHECK(at == bytes.size());
+  return m;
+}
+
 }  // namespace
 
 Material ReadMaterial(const std::string& path) {
@@ -405,9 +462,20 @@ Material ReadMaterial(const std::string& path) {
     if (const std::string problem = VdbHeaderProblem(path, bytes); !problem.empty())
       throw InputError(fmt::format("{}: not a readable OpenVDB material ({})", path, problem));
   try {
-    return ReadMaterialFile(path, trailer);
+    if (trailer) return ReadMaterialFile(path, true, nullptr);
+    // Another tool's file (or one written before the trailer): nothing vouches for its grid
+    // data, and damaged data can make OpenVDB's reader corrupt the heap or fail an assertion.
+    return DecodeMaterial(RunInChildProcess([&] {
+      return EncodeMaterial(ReadMaterialFile(path, false, new std::vector<openvdb::GridBase::Ptr>));
+    }));
   } catch (const InputError&) {
     throw;
+  } catch (const ChildCrashed& e) {
+    throw InputError(fmt::format("{}: not a readable OpenVDB material (damaged grid data: OpenVDB's "
+                                 "reader {})", path, Short(e.what())));
+  } catch (const std::bad_alloc&) {
+    throw InputError(fmt::format("{}: not a readable OpenVDB material (damaged grid data: reading it "
+                                 "asked for more memory than is available)", path));
   } catch (const std::exception& e) {
     throw InputError(fmt::format("{}: not a readable OpenVDB material (truncated or corrupt: {})", path,
                                  Short(e.what())));

@@ -160,12 +160,50 @@ TEST_F(MaterialIo, RejectsEveryBrokenFile) {
   }
 }
 
+// Damaged grid data in a file without a checksum trailer (another tool's): OpenVDB's reader
+// trusts it and, in-process, corrupted the heap or failed an assertion on almost every byte
+// changed here. The file is read in a child process: one line naming the file, and this process
+// lives on. (The offsets are in the kappa grid's first leaf of this material as Debian 12's
+// OpenVDB 10 writes it: 62 of these 64 changes crash the reader, 2 make it ask for gigabytes.)
+TEST_F(MaterialIo, DamagedGridDataWithoutChecksumIsAnErrorNotACrash) {
+  WriteCorruptMaterialForTest(Path("old.vdb"), material_, MaterialCorruption::kNoChecksum);
+  std::string old;
+  {
+    std::ifstream in(Path("old.vdb"), std::ios::binary);
+    old.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  ASSERT_GT(old.size(), 9000u);
+  int damaged = 0;
+  for (size_t at = 8930; at < 8994; ++at) {
+    std::string b = old;
+    b[at] = '1';
+    if (b[at] == old[at]) continue;
+    std::ofstream(Path("damaged.vdb"), std::ios::binary) << b;
+    try {
+      ReadMaterial(Path("damaged.vdb"));
+    } catch (const InputError& e) {
+      const std::string msg = e.what();
+      EXPECT_EQ(msg.rfind(Path("damaged.vdb") + ": ", 0), 0u) << msg;
+      EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+      EXPECT_LT(msg.size(), 300u) << msg;
+      if (msg.find("damaged grid data") != std::string::npos) ++damaged;
+    }
+  }
+  EXPECT_GE(damaged, 32);
+  // The undamaged file reads through the same child process, exactly.
+  const Material back = ReadMaterial(Path("old.vdb"));
+  EXPECT_EQ(back.shape, material_.shape);
+  EXPECT_EQ(back.kappa, material_.kappa);
+  EXPECT_EQ(back.mu, material_.mu);
+  EXPECT_DOUBLE_EQ(back.spacing_mm, material_.spacing_mm);
+}
+
 // A volume where an image is read (a light pattern, a mask, a dataset image): one line, no
 // crash (OpenImageIO reads the .vdb as a 3-D image, whatever its file name).
 TEST_F(MaterialIo, AVolumeIsNoImage) {
   WriteMaterial(Path("m.vdb"), material_);
   fs::copy_file(Path("m.vdb"), Path("m.exr"));
-  for (const std::string path : {Path("m.vdb"), Path("m.exr")}) {
+  for (const std::string& path : {Path("m.vdb"), Path("m.exr")}) {
     try {
       ReadImage(path);
       ADD_FAILURE() << "no error for " << path;
