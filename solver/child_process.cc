@@ -63,17 +63,21 @@ void LimitAddressSpace() {
 [[noreturn]] void RunChild(const std::function<std::string()>& work, int answer_fd, int stderr_fd) {
   dup2(stderr_fd, STDERR_FILENO);
   if (kLimitAddressSpace) LimitAddressSpace();
-  std::string answer;
+  char kind = kResult;
+  std::string payload;
   try {
-    answer = kResult + work();
+    payload = work();
   } catch (const InputError& e) {
-    answer = kInputError + std::string(e.what());
+    kind = kInputError;
+    payload = e.what();
   } catch (const std::bad_alloc&) {
-    answer = kOutOfMemory;
+    kind = kOutOfMemory;
+    payload.clear();
   } catch (const std::exception& e) {
-    answer = kOtherError + std::string(e.what());
+    kind = kOtherError;
+    payload = e.what();
   }
-  _exit(WriteAll(answer_fd, answer.data(), answer.size()) ? 0 : 1);
+  _exit(WriteAll(answer_fd, &kind, 1) && WriteAll(answer_fd, payload.data(), payload.size()) ? 0 : 1);
 }
 
 // The last non-empty line of the file behind `fd`, at most 200 characters.
