@@ -267,7 +267,7 @@ std::string ResponseCurve::Validate() const {
 
 std::string ResponseOptions::Validate() const {
   if (samples_per_stack < 20) return "samples_per_stack (--samples) must be at least 20";
-  if (!(smoothness > 0)) return "smoothness must be positive";
+  if (!(smoothness > 0)) return "smoothness (--smoothness) must be positive";
   return "";
 }
 
@@ -407,7 +407,7 @@ ResponseCurve ReadResponse(const std::string& path) {
 
 std::string MergeOptions::Validate() const {
   if (low_code < 0 || high_code > 255 || high_code - low_code < 10)
-    return "need 0 <= low_code (--low) < high_code (--high) - 10 <= 245";
+    return "need 0 <= low_code (--low), high_code (--high) <= 255 and high_code - low_code >= 10";
   if (!(low_linear >= 0 && high_linear <= 1 && high_linear > low_linear))
     return "need 0 <= low_linear < high_linear <= 1";
   return "";

@@ -13,9 +13,9 @@
 namespace translume::calib {
 
 std::string ProjectorCalibOptions::Validate() const {
-  if (min_planes < 3) return "min_planes must be at least 3";
+  if (min_planes < 3) return "min_planes (--min-planes) must be at least 3";
   if (!(outlier_factor > 1)) return "outlier_factor (--outlier-factor) must be > 1";
-  if (!(max_rms_px > 0)) return "max_rms_px must be positive";
+  if (!(max_rms_px > 0)) return "max_rms_px (--max-rms) must be positive";
   return "";
 }
 

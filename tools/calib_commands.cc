@@ -11,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 #include <stdexcept>
+#include <vector>
 
 #include "calib/camera_calib.h"
 #include "calib/error.h"
@@ -154,8 +155,8 @@ int RunCalibrateResponse(int argc, char** argv) {
   for (const std::string& d : dirs) stacks.push_back(calib::ReadExposureStack(d));
   const calib::ResponseCurve curve = calib::CalibrateResponse(stacks, o);
   WriteAtomically(out, [&](const std::string& tmp) { calib::WriteResponse(tmp, curve); });
-  std::printf("wrote %s: response from %zu stacks; linear value of code 32 / 128 / 224: "
-              "R %.4f %.4f, G %.4f %.4f, B %.4f %.4f (code 128 = 1)\n",
+  std::printf("wrote %s: response from %zu stacks; linear value of code 32 / 224 "
+              "(code 128 = 1): R %.4f %.4f, G %.4f %.4f, B %.4f %.4f\n",
               out.c_str(), stacks.size(), curve.lut.at<cv::Vec3f>(32)[0], curve.lut.at<cv::Vec3f>(224)[0],
               curve.lut.at<cv::Vec3f>(32)[1], curve.lut.at<cv::Vec3f>(224)[1],
               curve.lut.at<cv::Vec3f>(32)[2], curve.lut.at<cv::Vec3f>(224)[2]);
@@ -237,6 +238,17 @@ int RunCalibrate(int argc, char** argv) {
       "  response    Camera response curve from 8-bit exposure stacks\n"
       "  white       White balance gains and black level under projector white\n"
       "Photo protocol: docs/capture.md.\n";
+  // "calibrate --threads N camera ..." is "calibrate camera ... --threads N" (every command
+  // takes --threads; the subcommand parses it).
+  std::vector<char*> args(argv, argv + argc);
+  size_t first = 1;
+  while (first < args.size() && std::string(args[first]).rfind("--threads", 0) == 0)
+    first += std::strchr(args[first], '=') ? 1 : 2;
+  if (first > 1 && first < args.size()) {
+    std::rotate(args.begin() + 1, args.begin() + long(first), args.end());
+    argc = int(args.size());
+    argv = args.data();
+  }
   if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h")) {
     std::fputs(kUsage, argc < 2 ? stderr : stdout);
     return argc < 2 ? 2 : 0;

@@ -117,7 +117,7 @@ int RunRender(int argc, char** argv) {
   app.add_option("--iterations", iterations,
                  "Relaxation steps per level (0..1000000), coarsest first (a longer list than the levels drops "
                  "its first entries, a shorter one repeats its last)")->capture_default_str();
-  app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all)");
+  app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all; the coarsest level, with no coarser solution to keep, always updates all)");
   app.add_option("--backend", backend, "All three passes on cpu or gl (compute shaders)")->capture_default_str();
   app.add_option("--light", light, "dir:X,Y,Z | point:X,Y,Z (mm; shadows in every direction: a cube shadow map when near or inside the object's bounding sphere) | env:FILE.exr (lat-long)")->capture_default_str();
   app.add_option("--camera", camera,
@@ -206,7 +206,8 @@ int RunRender(int argc, char** argv) {
     WriteAtomically(save_polycube, [&](const std::string& tmp) {
       std::ofstream f(tmp);
       f << "# " << pc.cubes.size() << " cubes for " << shape->name() << " (translume render --polycube "
-        << (polycube_path.empty() ? "default" : polycube_path) << ")\n" << FormatPolycube(pc);
+        << (auto_polycube ? polycube_label : polycube_path.empty() ? "default" : polycube_path) << ")\n"
+        << FormatPolycube(pc);
       if (!f.flush()) throw InputError(save_polycube + ": cannot write");
     });
     std::printf("render: wrote the polycube to %s\n", save_polycube.c_str());
