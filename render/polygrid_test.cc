@@ -13,6 +13,7 @@
 
 #include "render/diffusion.h"
 #include "render/material_map.h"
+#include "render/mesh_io.h"
 #include "solver/forward.h"
 #include "solver/status.h"
 

@@ -12,6 +12,7 @@
 #include <string>
 
 #include "render/material_map.h"
+#include "render/mesh_io.h"
 #include "render/render_passes.h"
 #include "render/test_metrics.h"
 #include "solver/image_io.h"

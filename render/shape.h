@@ -54,12 +54,6 @@ struct TriangleMesh {
 TriangleMesh ShadingMesh(const TriangleMesh& mesh, double max_edge, int64_t max_vertices,
                          std::vector<Vec3>* normals);
 
-// Reads a Wavefront OBJ ("v" and "f" records; polygons are fan-triangulated; "f a/b/c" and
-// negative indices accepted) or a PLY (ascii, binary_little_endian or binary_big_endian; vertex
-// x, y, z and a face vertex_indices list) by extension, and validates it. Throws InputError
-// naming the file and the problem.
-TriangleMesh ReadMesh(const std::string& path);
-void WriteObj(const std::string& path, const TriangleMesh& mesh);
 
 // A closed surface for the polygrid: the projection used to place boundary nodes (Section 5.1)
 // and a triangle mesh for the final shading pass.

@@ -14,6 +14,7 @@
 
 #include "render/edit.h"
 #include "render/material_map.h"
+#include "render/mesh_io.h"
 #include "render/polygrid.h"
 #include "render/renderer.h"
 #include "render/shape.h"
@@ -187,8 +188,10 @@ int RunRender(int argc, char** argv) {
       throw InputError("--light env:" + L.path + ": " + problem);
   }
 
-  std::unique_ptr<Shape> shape = mesh ? MakeMeshShape(ReadMesh(shape_name), shape_name, size_mm)
+  std::vector<std::string> repairs;
+  std::unique_ptr<Shape> shape = mesh ? MakeMeshShape(ReadMesh(shape_name, &repairs), shape_name, size_mm)
                                       : MakeBuiltinShape(shape_name, size_mm);
+  for (const std::string& repair : repairs) std::printf("render: %s: %s\n", shape_name.c_str(), repair.c_str());
   const bool auto_polycube = polycube_path.rfind("auto", 0) == 0 || (mesh && polycube_path.empty());
   if (polycube_path == "auto" || (mesh && polycube_path.empty())) {
     std::printf("render: choosing a polycube for %s (--polycube auto) ...\n", shape->name().c_str());
