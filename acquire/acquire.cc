@@ -207,6 +207,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   }
   rep.camera_rms_px = camera.rms;
   progress(fmt::format("camera: {}", camera.BriefReport()));
+  for (const std::string& d : camera.dropped) progress(fmt::format("  dropped {}", d));
   const DeviceIntrinsics cam = FromCalibration(camera.image_size, camera.K, camera.dist);
 
   std::optional<calib::ProjectorCalibration> projector;
@@ -235,6 +236,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       computed = true;
     }
     progress(fmt::format("projector: {}", projector->BriefReport()));
+    for (const std::string& d : projector->dropped) progress(fmt::format("  dropped {}", d));
   }
   if (projector) rep.projector_rms_px = projector->stereo_projector_rms;
 

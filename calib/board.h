@@ -72,7 +72,9 @@ BoardDetection DetectBoard(const BoardSpec& board, const cv::Mat& image,
 inline constexpr int kChessboardSearchMaxSide = 1280;
 
 // A chessboard pattern detection of an arbitrary grid (used for projected patterns):
-// cols x rows inner corners, same ordering rules as above. Empty when not found.
+// cols x rows inner corners, same ordering rules as above. Empty when not found. OpenCV's SB
+// detector first; where it finds nothing (JPEG photos of projected boards), OpenCV's older
+// quad detector; corners refined with cornerSubPix either way.
 // search_max_side: see kChessboardSearchMaxSide (tests compare with a full-size search).
 std::vector<cv::Point2f> FindChessboardGrid(const cv::Mat& image, int cols, int rows,
                                             int search_max_side = kChessboardSearchMaxSide);

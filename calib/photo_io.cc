@@ -44,7 +44,8 @@ std::vector<PlaneView> ReadPlaneFolder(const std::string& dir) {
   for (NamedImage& p : photos) {
     const std::string stem = fs::path(p.name).stem().string();
     const size_t us = stem.rfind('_');
-    const std::string kind = us == std::string::npos ? "" : stem.substr(us + 1);
+    std::string kind = us == std::string::npos ? "" : stem.substr(us + 1);
+    std::transform(kind.begin(), kind.end(), kind.begin(), [](unsigned char c) { return std::tolower(c); });
     if (kind != "board" && kind != "pattern")
       throw CalibError(p.name + ": plane photos must be named NAME_board.EXT or NAME_pattern.EXT");
     PlaneView& v = planes[stem.substr(0, us)];
@@ -52,12 +53,7 @@ std::vector<PlaneView> ReadPlaneFolder(const std::string& dir) {
     (kind == "board" ? v.board_photo : v.pattern_photo) = p.image;
   }
   std::vector<PlaneView> out;
-  for (auto& [name, v] : planes) {
-    if (v.board_photo.empty() || v.pattern_photo.empty())
-      throw CalibError(fmt::format("{}: plane has no {} photo", v.name,
-                                   v.board_photo.empty() ? "_board" : "_pattern"));
-    out.push_back(v);
-  }
+  for (auto& [name, v] : planes) out.push_back(v);
   return out;
 }
 

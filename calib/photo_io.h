@@ -18,8 +18,9 @@ cv::Mat ReadGray8(const std::string& path);
 // names are the paths. Throws CalibError when `dir` is not a folder or holds no photo.
 std::vector<NamedImage> ReadPhotoFolder(const std::string& dir);
 
-// Plane photos for CalibrateProjector: NAME_board.EXT and NAME_pattern.EXT pairs in one folder.
-// Throws CalibError naming the file for a photo of another name or a plane missing one photo.
+// Plane photos for CalibrateProjector: NAME_board.EXT and NAME_pattern.EXT pairs in one folder
+// (the suffixes in any case). A plane missing one photo has it empty (CalibrateProjector drops
+// it). Throws CalibError naming the file for a photo of another name.
 std::vector<PlaneView> ReadPlaneFolder(const std::string& dir);
 
 // "COLSxROWS:SQUARE_PX" centred on a projector of size "WIDTHxHEIGHT". Throws CalibError naming

@@ -59,7 +59,7 @@ ProjectorCalibration CalibrateProjector(const CameraCalibration& camera, const B
   const std::vector<cv::Point2f> proj_corners = pattern.Corners();
   for (const PlaneView& v : planes)  // before any (slow) detection
     for (const cv::Mat* m : {&v.board_photo, &v.pattern_photo})
-      if (m->size() != camera.image_size)
+      if (!m->empty() && m->size() != camera.image_size)
         throw CalibError(fmt::format("{}: photo is {}x{} but the camera calibration is {}x{}",
                                      v.name, m->cols, m->rows, camera.image_size.width,
                                      camera.image_size.height));
@@ -67,6 +67,7 @@ ProjectorCalibration CalibrateProjector(const CameraCalibration& camera, const B
   std::vector<BoardDetection> boards(planes.size());
   std::vector<std::vector<cv::Point2f>> grids(planes.size());
   ParallelFor(int(planes.size()), [&](int i) {
+    if (planes[size_t(i)].board_photo.empty() || planes[size_t(i)].pattern_photo.empty()) return;
     boards[size_t(i)] = DetectBoard(board, planes[size_t(i)].board_photo);
     if (boards[size_t(i)].found)
       grids[size_t(i)] = FindChessboardGrid(planes[size_t(i)].pattern_photo, pattern.cols, pattern.rows);
@@ -74,6 +75,10 @@ ProjectorCalibration CalibrateProjector(const CameraCalibration& camera, const B
   for (size_t i = 0; i < planes.size(); ++i) {
     const PlaneView& v = planes[i];
     const BoardDetection& d = boards[i];
+    if (v.board_photo.empty() || v.pattern_photo.empty()) {
+      pc.dropped.push_back(fmt::format("{}: no {} photo", v.name, v.board_photo.empty() ? "_board" : "_pattern"));
+      continue;
+    }
     if (!d.found) {
       pc.dropped.push_back(v.name + ": printed board not found");
       continue;

@@ -67,8 +67,8 @@ std::vector<cv::Point3f> CornersOnPlane(const CameraCalibration& camera,
 // the plane pose from the printed board (solvePnP with the calibrated camera), the projected
 // corners in plane coordinates; then calibrateCamera for the projector with the pattern's
 // projector-pixel corners, and stereoCalibrate with both intrinsics fixed for the pose.
-// Planes where either board is not found, or whose projector RMS is an outlier, are dropped
-// and listed. Throws CalibError when photos differ in size from the camera calibration, fewer
+// Planes missing a photo, where either board is not found, or whose projector RMS is an
+// outlier, are dropped and listed. Throws CalibError when photos differ in size from the camera calibration, fewer
 // than min_planes planes remain, or the reprojection RMS exceeds max_rms_px (with a hint on
 // rear projection).
 ProjectorCalibration CalibrateProjector(const CameraCalibration& camera, const BoardSpec& board,
