@@ -6,6 +6,8 @@
 #include <Eigen/Sparse>
 #include <OpenImageIO/imageio.h>
 #include <algorithm>
+#include <cctype>
+#include <cstdlib>
 #include <atomic>
 #include <cmath>
 #include <cstring>
@@ -75,6 +77,8 @@ bool IsPhotoFile(const std::string& path) {
 
 cv::Mat ReadRgbImage(const std::string& path, double* exif_seconds, bool* grey) {
   if (!fs::exists(path)) throw CalibError(path + ": no such file");
+  std::error_code ec;
+  if (fs::file_size(path, ec) == 0 && !ec) throw CalibError(path + ": empty file (0 bytes), not an image");
   if (PngCutShort(path)) throw CalibError(path + ": damaged image (a PNG cut short: no IEND chunk at its end)");
   OIIO::ImageSpec config;
   if (IsRaw(path)) {
@@ -178,6 +182,35 @@ void RequireOneSize(const std::vector<std::string>& names, const std::vector<cv:
                                    common->first.first, common->first.second));
 }
 
+namespace {
+
+bool SameIgnoringCase(const std::string& a, const std::string& b) {
+  return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](unsigned char x, unsigned char y) {
+           return std::tolower(x) == std::tolower(y);
+         });
+}
+
+// An exposures.json time: a number of seconds, or a string of one ("0.5") or of a shutter
+// speed as cameras show it ("1/30"); 0 if it is neither.
+double SecondsOf(const nlohmann::json& value) {
+  if (value.is_number()) return value.get<double>();
+  if (!value.is_string()) return 0;
+  const std::string text = value.get<std::string>();
+  double num = 0, den = 1;
+  char* end = nullptr;
+  num = std::strtod(text.c_str(), &end);
+  if (end == text.c_str()) return 0;
+  if (*end == '/') {
+    const char* start = end + 1;
+    den = std::strtod(start, &end);
+    if (end == start) return 0;
+  }
+  if (*end != '\0' || !(den > 0)) return 0;
+  return num / den;
+}
+
+}  // namespace
+
 ExposureStack ReadExposureStack(const std::string& dir) {
   if (!fs::is_directory(dir)) throw CalibError(dir + ": not a folder");
   std::vector<fs::path> files;
@@ -226,16 +259,20 @@ ExposureStack ReadExposureStack(const std::string& dir) {
     e.path = p.string();
     const double exif = exifs[i];
     e.pixels = std::move(pixels[i]);
-    const std::string name = p.filename().string();
-    // An entry in exposures.json overrides EXIF (a camera that writes wrong times).
+    std::string name = p.filename().string();
+    // An entry in exposures.json overrides EXIF (a camera that writes wrong times). Names match
+    // in any case where none matches exactly (t00.png for T00.PNG).
+    if (!times.contains(name))
+      for (const auto& [key, value] : times.items())
+        if (SameIgnoringCase(key, name)) name = key;
     const bool listed = times.contains(name);
-    if (listed && times[name].is_number()) e.seconds = times[name].get<double>();
-    else if (!listed && exif > 0 && std::isfinite(exif)) e.seconds = exif;
+    if (listed) e.seconds = SecondsOf(times[name]);
+    else if (exif > 0 && std::isfinite(exif)) e.seconds = exif;
     if (!(e.seconds > 0) || !std::isfinite(e.seconds)) {
       const std::string json = json_path.string();
       throw CalibError(fmt::format(
           "{}: no exposure time ({})", e.path,
-          listed ? fmt::format("its entry \"{}\" in {} is not a positive number of seconds", name, json)
+          listed ? fmt::format("its entry \"{}\" in {} is not a positive number of seconds (or \"1/30\")", name, json)
           : exif != 0 ? fmt::format("its EXIF ExposureTime {} is unusable and {} has no entry \"{}\"", exif, json, name)
                       : fmt::format("no EXIF ExposureTime and no positive entry \"{}\" in {}", name, json)));
     }
@@ -278,14 +315,13 @@ ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
   for (const ExposureStack& s : stacks) {
     if (s.exposures.size() < 2)
       throw CalibError(fmt::format("{}: an exposure stack needs at least 2 images", s.dir));
+    if (!s.IsEightBit())
+      throw CalibError(s.dir + ": the response curve is fitted to 8-bit stacks only; 16-bit and "
+                       "RAW photos are linear and need none (in capture.json: \"response\": \"linear\")");
     for (const Exposure& e : s.exposures)
       if (e.pixels.type() != CV_8UC3 || e.pixels.size() != s.Size() || !(e.seconds > 0))
         throw CalibError(e.path + ": expected 8-bit RGB of the stack's size with a positive time");
   }
-  for (const ExposureStack& s : stacks)
-    if (!s.IsEightBit())
-      throw CalibError(s.dir + ": the response curve is fitted to 8-bit stacks only (16-bit "
-                       "and RAW photos are linear and need none)");
   ResponseCurve curve;
   curve.lut.create(256, 1, CV_32FC3);
   std::mt19937_64 rng(o.seed);

@@ -174,6 +174,13 @@ TEST(Hdr, ResponseFromTwoStacksWithDifferentTimes) {
   const ResponseCurve two = CalibrateResponse({a, b});
   for (int c = 0; c < 3; ++c) EXPECT_LT(WorstResponseError(two, f, c), 0.04) << "channel " << c;
   EXPECT_THROW(CalibrateResponse({a, ExposureStack{"one", {a.exposures[0]}}}), CalibError);
+  // 16-bit photos need no response: the message says so, and how capture.json says it (it
+  // said "expected 8-bit RGB of the stack's size with a positive time").
+  ExposureStack deep = a;
+  for (Exposure& e : deep.exposures) e.pixels.convertTo(e.pixels, CV_16UC3, 257);
+  EXPECT_NE(CalibErrorOf([&] { CalibrateResponse({deep}); }).find("16-bit and RAW photos are linear and need none "
+                                                                  "(in capture.json: \"response\": \"linear\")"),
+            std::string::npos);
 }
 
 // Six copies of one photo with different exposure times fitted a curve that falls within the
@@ -351,6 +358,16 @@ TEST_F(HdrFiles, ReadsExifExposureTime) {
   const ExposureStack k = ReadExposureStack(dir_.string());
   EXPECT_NEAR(k.exposures[0].seconds, 0.01, 1e-5);
   EXPECT_DOUBLE_EQ(k.exposures[1].seconds, 0.04);
+  // Times as cameras show them ("1/30") or as strings, names in another case.
+  std::ofstream(dir_ / "exposures.json") << "{\"J0.JPG\": \"1/30\", \"j1.jpg\": \"0.25\"}";
+  const ExposureStack shown = ReadExposureStack(dir_.string());
+  EXPECT_DOUBLE_EQ(shown.exposures[0].seconds, 1.0 / 30);
+  EXPECT_DOUBLE_EQ(shown.exposures[1].seconds, 0.25);
+  for (const char* bad_time : {"\"1/0\"", "\"1/\"", "\"fast\"", "\"2 s\"", "-1"}) {
+    std::ofstream(dir_ / "exposures.json") << "{\"j0.jpg\": " << bad_time << "}";
+    EXPECT_NE(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find("is not a positive number of seconds"),
+              std::string::npos) << bad_time;
+  }
   // A broken exposures.json says why (it said only "not valid JSON").
   std::ofstream(dir_ / "exposures.json") << "{\"j1.jpg\": 1e999}";
   const std::string bad = CalibErrorOf([&] { ReadExposureStack(dir_.string()); });
@@ -392,6 +409,8 @@ TEST_F(HdrFiles, BadStacksNameTheFile) {
   EXPECT_EQ(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": a greyscale photo"), 0u);
   std::ofstream(P("img3.png")) << "not a png at all";
   EXPECT_EQ(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": cannot read image"), 0u);
+  std::ofstream(P("img3.png")).flush();  // a zero-byte photo (a copy that failed)
+  EXPECT_EQ(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find(P("img3.png") + ": empty file (0 bytes)"), 0u);
   for (int j : {1, 2, 3}) fs::remove(P(fmt::format("img{}.png", j)));
   EXPECT_NE(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find("at least 2 images, found 1"), std::string::npos);
   // An 8-bit stack needs a response curve; a response file must be valid.

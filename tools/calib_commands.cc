@@ -30,8 +30,6 @@ namespace fs = std::filesystem;
 
 
 
-// OpenCV's own thread pool follows --threads / TRANSLUME_THREADS too.
-void ApplyThreads() { cv::setNumThreads(NumThreads()); }
 
 // OpenCV exceptions carry multi-line messages: keep the first meaningful line.
 template <typename F>
@@ -61,7 +59,7 @@ int RunCalibrateCamera(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output calibration (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreads();
+  ApplyThreadsToOpenCv();
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   RequireNotInput("-o", out, {dir});
   const calib::BoardSpec board = calib::BoardSpec::Parse(board_text);
@@ -98,7 +96,7 @@ int RunCalibrateProjector(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output calibration (.yml)");
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreads();
+  ApplyThreadsToOpenCv();
   const calib::ProjectorChessboard pattern = calib::ParseProjectorChessboard(pattern_text, size);
   if (!write_pattern.empty()) {
     RequireExtension(write_pattern, {".png"}, "--write-pattern");
@@ -148,7 +146,7 @@ int RunCalibrateResponse(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output response curve (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreads();
+  ApplyThreadsToOpenCv();
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   RequireNotInput("-o", out, dirs);
   std::vector<calib::ExposureStack> stacks;
@@ -181,7 +179,7 @@ int RunCalibrateWhite(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output white balance (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreads();
+  ApplyThreadsToOpenCv();
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   const std::vector<std::string> inputs{white_path, black_path, response_path};
   RequireNotInput("-o", out, inputs);
@@ -228,6 +226,8 @@ int RunCalibrateWhite(int argc, char** argv) {
 }
 
 }  // namespace
+
+void ApplyThreadsToOpenCv() { cv::setNumThreads(NumThreads()); }
 
 int RunCalibrate(int argc, char** argv) {
   static const char* kUsage =
@@ -280,7 +280,7 @@ int RunHdr(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output HDR image (.exr)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreads();
+  ApplyThreadsToOpenCv();
   return OneLineErrors([&] {
     RequireExtension(out, {".exr"}, "-o");
     const std::vector<std::string> inputs{dir, black_dir, response_path};
