@@ -11,6 +11,7 @@
 #include <fstream>
 #include <map>
 #include <numeric>
+#include <set>
 #include <sstream>
 #include <unordered_map>
 
@@ -449,6 +450,25 @@ TriangleMesh Repair(const std::string& path, const MeshFile& f, std::vector<std:
   }
   note(welded, "vertices at the position of another welded to it (seams split by an exporter)");
   note(repeated, "triangles with a repeated vertex dropped");
+  // A face written twice (same corners, same way round) is one face.
+  {
+    std::set<std::array<int, 3>> seen;
+    size_t kept = 0;
+    int64_t twice = 0;
+    for (size_t t = 0; t < m.triangles.size(); ++t) {
+      std::array<int, 3> key = m.triangles[t];
+      std::rotate(key.begin(), std::min_element(key.begin(), key.end()), key.end());
+      if (!seen.insert(key).second) {
+        ++twice;
+        continue;
+      }
+      m.triangles[kept] = m.triangles[t];
+      source[kept++] = source[t];
+    }
+    m.triangles.resize(kept);
+    source.resize(kept);
+    note(twice, "triangles written twice dropped");
+  }
 
   // Keep the vertices that triangles use, in the file's order, and what the file calls each.
   std::vector<int> index(f.vertices.size(), -1), file_vertex;

@@ -22,6 +22,7 @@ namespace translume {
 //   vertex per triangle), and triangles that this makes degenerate are dropped; a welded
 //   vertex where separate pieces touch (more than one fan of triangles around it) is split
 //   again, one copy per fan;
+// - a triangle written twice (same corners, same way round) is kept once;
 // - vertices no triangle uses are dropped;
 // - triangles whose orientation disagrees with their neighbours' are flipped (per connected
 //   piece, the orientation of the majority of its triangles is kept);

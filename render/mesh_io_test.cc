@@ -218,6 +218,11 @@ TEST(MeshIo, RepeatedCornersAreDropped) {
   const TriangleMesh m = ReadMesh(Write("tl_repeat.obj", kTet + "f 1 3 2 2\nf 1 2 4\nf 2 3 4 4\nf 1 4 3\nf 1 1 2\n"), &repairs);
   EXPECT_EQ(m.triangles.size(), 4u);
   EXPECT_EQ(repairs, (std::vector<std::string>{"1 faces with fewer than three distinct corners dropped"}));
+  // A face written twice (its edges were 'shared by 3 triangles').
+  repairs.clear();
+  const TriangleMesh twice = ReadMesh(Write("tl_twice.obj", kTet + "f 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\nf 4 2 3\n"), &repairs);
+  EXPECT_EQ(twice.triangles.size(), 4u);
+  EXPECT_EQ(repairs, (std::vector<std::string>{"1 triangles written twice dropped"}));
 }
 
 // An L-shaped prism whose two caps are single non-convex hexagons: a fan from the first corner
