@@ -8,16 +8,11 @@
 #include <climits>
 #include <cmath>
 #include <cstdint>
-#include <cstring>
 #include <fmt/format.h>
-#include <fstream>
 #include <functional>
 #include <map>
 #include <set>
-#include <sstream>
 
-#include "solver/atomic_file.h"
-#include "solver/parse.h"
 #include "solver/status.h"
 
 namespace translume {
