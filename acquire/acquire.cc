@@ -314,6 +314,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     if (s.IsEightBit() && !curve)
       throw InputError(fmt::format("{}: 8-bit photos need a camera response (capture.json: response)", stack));
     const calib::HdrImage hdr = calib::MergeHdr(s, s.IsEightBit() ? curve : nullptr);
+    if (!hdr.time_warning.empty()) progress("warning: " + hdr.time_warning);
     WriteAtomically(exr, [&](const std::string& tmp) { calib::WriteExr(tmp, hdr.radiance); });
     log.Record(key, sig);
     computed = true;

@@ -457,6 +457,9 @@ std::string HdrImage::BriefReport() const {
                      underexposed, 100.0 * underexposed / std::max<size_t>(n, 1));
 }
 
+// HdrImage::time_warning's threshold on a pair's brightness ratio against its time ratio.
+constexpr double kTimeRatioWarning = 0.03;
+
 HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
                   const ExposureStack* black, const MergeOptions& o) {
   if (std::string why = o.Validate(); !why.empty()) throw CalibError("hdr merge: " + why);
@@ -539,6 +542,13 @@ HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
     std::nth_element(ratios.begin(), ratios.begin() + long(ratios.size() / 2), ratios.end());
     const double measured = ratios[ratios.size() / 2];
     const double expected = stack.exposures[b].seconds / stack.exposures[a].seconds;
+    const double off = measured / expected - 1;
+    if (std::abs(off) > kTimeRatioWarning && ratios.size() >= 200 && h.time_warning.empty())
+      h.time_warning = fmt::format(
+          "{}: {} is {:.3f}x as bright as {}, but its exposure time is {:.3f}x as long ({:+.1f} %): "
+          "times as the camera labels them (1/8 for 0.133 s)? Use the true times (docs/capture.md)",
+          stack.dir, fs::path(stack.exposures[b].path).filename().string(), measured,
+          fs::path(stack.exposures[a].path).filename().string(), expected, 100 * off);
     if (measured > 2 * expected || measured < 0.5 * expected)
       throw CalibError(fmt::format("{}: {} ({:g} s) is {:.2f}x as bright as {} ({:g} s), but its exposure time is "
                                    "{:.2f}x as long: check the times (EXIF or exposures.json)", stack.dir,

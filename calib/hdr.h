@@ -104,6 +104,10 @@ struct HdrImage {
                      // saturated in every exposure
   cv::Mat flags;     // CV_8UC3 HdrFlag per channel
   size_t saturated = 0, underexposed = 0;  // channel samples flagged
+  // Where two exposures next in time brighten by a ratio more than 3 % off the ratio of their
+  // times (over 200 samples or more; shutter speeds as cameras label them, 1/8 for 0.133 s,
+  // are up to 7 % off): a sentence naming the stack, both photos and the ratios; else "".
+  std::string time_warning;
   std::string BriefReport() const;
 };
 

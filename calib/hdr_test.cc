@@ -148,6 +148,15 @@ TEST(Hdr, EightBitResponseAndMergeMeetTargets) {
   EXPECT_LE(e.median, 0.015);
   EXPECT_LE(e.p95, 0.04);
   ExpectSaturatedBlockFlagged(h);
+  EXPECT_EQ(h.time_warning, "");
+  // One time labelled 6 % short, as a camera labels 0.133 s "1/8": merged with a warning that
+  // names the pair (a capture labelled so mapped 9.6 % RMS off, silently).
+  ExposureStack labelled = stack;
+  labelled.exposures[3].seconds *= 0.94;
+  const std::string warning = MergeHdr(labelled, &curve).time_warning;
+  EXPECT_NE(warning.find("synthetic: e3.png is"), std::string::npos) << warning;
+  EXPECT_NE(warning.find("as bright as e2.png, but its exposure time is"), std::string::npos) << warning;
+  EXPECT_NE(warning.find("is 2.350x as long (+6."), std::string::npos) << warning;  // 2.5 / 2.35
   // OpenCV's stock MergeDebevec with the same curve, for comparison (SPEC section 8): its
   // weights do not exclude clipped samples.
   std::vector<cv::Mat> images;

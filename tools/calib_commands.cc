@@ -298,6 +298,7 @@ int RunHdr(int argc, char** argv) {
     WriteAtomically(out, [&](const std::string& tmp) { calib::WriteExr(tmp, h.radiance); });
     std::printf("wrote %s: %zu exposures, %s\n", out.c_str(), stack.exposures.size(),
                 h.BriefReport().c_str());
+    if (!h.time_warning.empty()) std::printf("hdr: warning: %s\n", h.time_warning.c_str());
     return 0;
   });
 }
