@@ -184,12 +184,6 @@ void RequireOneSize(const std::vector<std::string>& names, const std::vector<cv:
 
 namespace {
 
-bool SameIgnoringCase(const std::string& a, const std::string& b) {
-  return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](unsigned char x, unsigned char y) {
-           return std::tolower(x) == std::tolower(y);
-         });
-}
-
 // An exposures.json time: a number of seconds, or a string of one ("0.5") or of a shutter
 // speed as cameras show it ("1/30"); 0 if it is neither.
 double SecondsOf(const nlohmann::json& value) {
@@ -264,7 +258,7 @@ ExposureStack ReadExposureStack(const std::string& dir) {
     // in any case where none matches exactly (t00.png for T00.PNG).
     if (!times.contains(name))
       for (const auto& [key, value] : times.items())
-        if (SameIgnoringCase(key, name)) name = key;
+        if (Lower(key) == Lower(name)) name = key;
     const bool listed = times.contains(name);
     if (listed) e.seconds = SecondsOf(times[name]);
     else if (exif > 0 && std::isfinite(exif)) e.seconds = exif;

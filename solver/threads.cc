@@ -7,11 +7,26 @@
 
 #include <cstdlib>
 #include <string>
+#include <vector>
 
 namespace translume {
 
+namespace {
+std::vector<void (*)(int)>& Listeners() {
+  static std::vector<void (*)(int)> listeners;
+  return listeners;
+}
+}  // namespace
+
 void SetNumThreads(int n) {
-  if (n > 0) omp_set_num_threads(n);
+  if (n <= 0) return;
+  omp_set_num_threads(n);
+  for (auto* listener : Listeners()) listener(n);
+}
+
+void AddThreadCountListener(void (*listener)(int threads)) {
+  Listeners().push_back(listener);
+  listener(NumThreads());
 }
 
 int NumThreads() { return omp_get_max_threads(); }

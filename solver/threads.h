@@ -17,6 +17,9 @@ inline constexpr int64_t kParallelNodes = 100000;
 // OMP_NUM_THREADS if set, else the number of hardware threads. `translume --threads N` sets it.
 void SetNumThreads(int n);
 int NumThreads();
+// Other thread pools that must follow SetNumThreads (OpenCV's, for calibration and HDR): called
+// now with NumThreads(), and again on every change. The translume binary registers OpenCV's.
+void AddThreadCountListener(void (*listener)(int threads));
 // Called once at start-up: applies TRANSLUME_THREADS; returns "" or what is wrong with it.
 std::string InitThreadsFromEnvironment();
 

@@ -50,7 +50,6 @@ int RunSimulateCapture(int argc, char** argv) {
   app.add_option("-o,--output", out, "New capture folder")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreadsToOpenCv();
   o.setup = ParseSetup(setup);
   const auto regions = RegionLights(lights);  // validates NxN
   o.lights = regions.front().region_n;
@@ -89,7 +88,6 @@ int RunAcquire(int argc, char** argv) {
   app.add_flag("--no-solve", no_solve, "Stop after writing the node-space dataset");
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreadsToOpenCv();
   RequireExtension(out, {".vdb"}, "-o");
   RequireFilePath("-o", out);  // else found only when the material is written, after the solve
   o.recovery = flags.Options("acquire");
@@ -161,7 +159,6 @@ int RunDemo(int argc, char** argv) {
   app.add_option("--max-iterations", iterations, "Optimiser iterations")->capture_default_str();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreadsToOpenCv();
   const auto t0 = std::chrono::steady_clock::now();
   auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
   auto print = [](const std::string& line) {

@@ -59,7 +59,6 @@ int RunCalibrateCamera(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output calibration (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreadsToOpenCv();
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   RequireNotInput("-o", out, {dir});
   const calib::BoardSpec board = calib::BoardSpec::Parse(board_text);
@@ -96,7 +95,6 @@ int RunCalibrateProjector(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output calibration (.yml)");
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreadsToOpenCv();
   const calib::ProjectorChessboard pattern = calib::ParseProjectorChessboard(pattern_text, size);
   if (!write_pattern.empty()) {
     RequireExtension(write_pattern, {".png"}, "--write-pattern");
@@ -146,7 +144,6 @@ int RunCalibrateResponse(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output response curve (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreadsToOpenCv();
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   RequireNotInput("-o", out, dirs);
   std::vector<calib::ExposureStack> stacks;
@@ -179,7 +176,6 @@ int RunCalibrateWhite(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output white balance (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreadsToOpenCv();
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   const std::vector<std::string> inputs{white_path, black_path, response_path};
   RequireNotInput("-o", out, inputs);
@@ -226,8 +222,6 @@ int RunCalibrateWhite(int argc, char** argv) {
 }
 
 }  // namespace
-
-void ApplyThreadsToOpenCv() { cv::setNumThreads(NumThreads()); }
 
 int RunCalibrate(int argc, char** argv) {
   static const char* kUsage =
@@ -280,7 +274,6 @@ int RunHdr(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output HDR image (.exr)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  ApplyThreadsToOpenCv();
   return OneLineErrors([&] {
     RequireExtension(out, {".exr"}, "-o");
     const std::vector<std::string> inputs{dir, black_dir, response_path};

@@ -38,9 +38,6 @@ CLI::Validator PositiveFinite();
 
 // Options every subcommand takes (--threads).
 void AddCommonOptions(CLI::App& app);
-// OpenCV's own thread pool (calibration, HDR) follows --threads / TRANSLUME_THREADS too: call
-// after parsing in every command that runs calib code (calib_commands.cc).
-void ApplyThreadsToOpenCv();
 // The lower-case extension of `path` (".png"), or "" if it has none.
 std::string Extension(const std::string& path);
 // Throws InputError "FLAG PATH: the output must end in EXT" unless `path` ends in one of `exts`

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <cstring>
 #include <new>
+#include <opencv2/core/utility.hpp>
 #include <opencv2/core/utils/logger.hpp>
 #include <exception>
 #include <string>
@@ -55,6 +56,8 @@ int main(int argc, char** argv) {
   // OpenCV's own log lines ("[ERROR:0@0.029] ... Can't open file") would come before ours,
   // which name the file and the problem.
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
+  // OpenCV's thread pool (calibration, HDR) follows --threads and TRANSLUME_THREADS too.
+  translume::AddThreadCountListener([](int threads) { cv::setNumThreads(threads); });
   if (const std::string err = translume::InitThreadsFromEnvironment(); !err.empty()) {
     std::fprintf(stderr, "translume: error: %s\n", err.c_str());
     return 1;
