@@ -245,14 +245,18 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     response = calib::ReadResponse(cap.response.file);
   } else if (!cap.response.stacks.empty()) {
     const std::string yml = (work / "response.yml").string();
-    const std::string sig = Signature(cap.response.stacks);
+    const std::string sig = Signature(cap.response.stacks, calib::ToString(cap.exposure_times));
     if (log.Done("response", sig, {yml})) {
       response = calib::ReadResponse(yml);
     } else {
       progress("calibrating the camera response ...");
       std::vector<calib::ExposureStack> stacks;
       for (const auto& d : cap.response.stacks) stacks.push_back(calib::ReadExposureStack(d));
-      response = calib::CalibrateResponse(stacks);
+      calib::ResponseOptions ro;
+      ro.shutter = cap.exposure_times;
+      response = calib::CalibrateResponse(stacks, ro);
+      if (response->other_fit_rms > 0 || response->shutter == calib::ShutterTimes::kApex)
+        progress("response: " + response->ShutterReport());
       WriteAtomically(yml, [&](const std::string& tmp) { calib::WriteResponse(tmp, *response); });
       log.Record("response", sig);
       computed = true;
@@ -261,6 +265,41 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   const calib::ResponseCurve* curve = response ? &*response : nullptr;
   // The file the curve came from: stages that merge stacks depend on it.
   const std::string response_file = !cap.response.file.empty() ? cap.response.file : (work / "response.yml").string();
+  // How every stack's exposure times are read: one reading for the whole capture, so that no
+  // stack's scale differs from another's by a label's rounding.
+  calib::MergeOptions merge_options;
+  merge_options.shutter = cap.exposure_times;
+  if (merge_options.shutter == calib::ShutterTimes::kAuto && curve) merge_options.shutter = curve->shutter;
+  if (merge_options.shutter == calib::ShutterTimes::kAuto) {
+    // Linear photos: their brightness steps decide, pooled over the white and lighting stacks
+    // until every pair of times that tells the readings apart has been judged.
+    std::vector<std::string> judged;
+    if (fs::is_directory(cap.white.white)) judged.push_back(cap.white.white);
+    for (const auto& c : cap.conditions) judged.push_back(c.stack);
+    const std::string txt = (work / "exposure_times.txt").string();
+    const std::string sig = Signature(judged);
+    std::string reading;
+    if (log.Done("exposure_times", sig, {txt})) {
+      std::ifstream(txt) >> reading;
+    } else {
+      calib::ShutterJudge judge;
+      for (const std::string& d : judged) {
+        const calib::ExposureStack stack = calib::ReadExposureStack(d);
+        if (stack.IsEightBit()) continue;  // refused in the merge, which names the response
+        judge.Add(stack);
+        if (judge.Decisive()) break;
+      }
+      const calib::ShutterChoice choice = judge.Choice();
+      reading = calib::ToString(choice.times);
+      if (choice.pairs > 0) progress(choice.BriefReport());
+      WriteAtomically(txt, [&](const std::string& tmp) {
+        std::ofstream(tmp) << reading << "\n" << choice.BriefReport() << "\n";
+      });
+      log.Record("exposure_times", sig);
+    }
+    merge_options.shutter = calib::ParseShutterTimes(reading, txt);
+  }
+  const std::string times_sig = calib::ToString(merge_options.shutter);
 
   calib::WhiteBalance white;
   if (!cap.white.file.empty()) {
@@ -268,14 +307,15 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   } else {
     const std::string yml = (work / "white.yml").string();
     const std::string sig = Signature({cap.white.white, cap.white.black, response_file},
-                                      fmt::format("{}{}", nlohmann::json(cap.white.patch).dump(),
-                                                  nlohmann::json(cap.white.albedo).dump()));
+                                      fmt::format("{}{}{}", nlohmann::json(cap.white.patch).dump(),
+                                                  nlohmann::json(cap.white.albedo).dump(), times_sig));
     if (log.Done("white", sig, {yml})) {
       white = calib::ReadWhiteBalance(yml);
     } else {
       progress("white balance ...");
-      const cv::Mat w = calib::ReadHdrOrStack(cap.white.white, curve);
-      const cv::Mat b = cap.white.black.empty() ? cv::Mat() : calib::ReadHdrOrStack(cap.white.black, curve);
+      const cv::Mat w = calib::ReadHdrOrStack(cap.white.white, curve, merge_options);
+      const cv::Mat b =
+          cap.white.black.empty() ? cv::Mat() : calib::ReadHdrOrStack(cap.white.black, curve, merge_options);
       if (w.size() != camera.image_size)
         throw InputError(fmt::format("{}: images are {}x{} but the camera calibration is {}x{}",
                                      cap.white.white, w.cols, w.rows, camera.image_size.width,
@@ -304,7 +344,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   // key: the stage log's; exr: where the merged image is kept.
   auto merge = [&](const std::string& key, const fs::path& exr_path, const std::string& stack) {
     const std::string exr = exr_path.string();
-    const std::string sig = Signature({stack, response_file});
+    const std::string sig = Signature({stack, response_file}, times_sig);
     if (log.Done(key, sig, {exr})) return calib::ReadLinearRgb(exr);
     const calib::ExposureStack s = calib::ReadExposureStack(stack);
     if (s.Size() != camera.image_size)
@@ -313,7 +353,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
                                    camera.image_size.height));
     if (s.IsEightBit() && !curve)
       throw InputError(fmt::format("{}: 8-bit photos need a camera response (capture.json: response)", stack));
-    const calib::HdrImage hdr = calib::MergeHdr(s, s.IsEightBit() ? curve : nullptr);
+    const calib::HdrImage hdr = calib::MergeHdr(s, s.IsEightBit() ? curve : nullptr, nullptr, merge_options);
     if (!hdr.time_warning.empty()) progress("warning: " + hdr.time_warning);
     WriteAtomically(exr, [&](const std::string& tmp) { calib::WriteExr(tmp, hdr.radiance); });
     log.Record(key, sig);

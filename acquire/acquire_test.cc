@@ -28,12 +28,14 @@ namespace fs = std::filesystem;
 // once and kept in the temp folder: every test process of this build of the binary reuses it.
 // The folder's name holds the binary's modification time: a capture made by an earlier build
 // hid for a day that the front-lit one could no longer be made.
-std::string SmallCapture(translume::Setup setup) {
+// `variant` names a kind of rig (empty: the default) and `rig_fields` its fields in the rig file.
+std::string SmallCapture(translume::Setup setup, const std::string& variant = "",
+                         const std::string& rig_fields = "") {
   const auto built = fs::last_write_time("/proc/self/exe").time_since_epoch().count();
-  const fs::path dir = fs::temp_directory_path() /
-                       fmt::format("translume_acquire_test_{}_{}", SetupName(setup), built);
+  const std::string kind = SetupName(setup) + variant;
+  const fs::path dir = fs::temp_directory_path() / fmt::format("translume_acquire_test_{}_{}", kind, built);
   if (fs::exists(dir / "capture.json")) return dir.string();
-  const std::string earlier = fmt::format("translume_acquire_test_{}_", SetupName(setup));
+  const std::string earlier = fmt::format("translume_acquire_test_{}_", kind);
   for (const auto& e : fs::directory_iterator(fs::temp_directory_path()))
     if (e.path().filename().string().rfind(earlier, 0) == 0 && e.path() != dir) fs::remove_all(e.path());
   SynthOptions so;
@@ -41,9 +43,9 @@ std::string SmallCapture(translume::Setup setup) {
   so.shape = {24, 18, setup == Setup::kBack ? 6 : 10};
   const Material m = SynthesizeMaterial(so);
   CaptureRig rig = DefaultCaptureRig(m.shape, m.spacing_mm, setup);
-  const fs::path rig_file = fs::temp_directory_path() / "translume_acquire_test_rig.json";
+  const fs::path rig_file = fs::temp_directory_path() / ("translume_acquire_test_rig" + kind + ".json");
   std::ofstream(rig_file) << R"({"camera": {"size": [512, 384], "K": [1500, 0, 257.1, 0, 1500.6, 190.3, 0, 0, 1]},
-                                 "projector": {"size": [512, 384]}})";
+                                 "projector": {"size": [512, 384]})" << rig_fields << "}";
   rig = ReadCaptureRig(rig_file.string(), m.shape, m.spacing_mm, setup);
   SimulateCaptureOptions o;
   o.setup = setup;
@@ -70,9 +72,11 @@ class AcquireTest : public ::testing::Test {
     fs::create_directories(dir_);
   }
   void TearDown() override { fs::remove_all(dir_); }
-  std::string Copy(translume::Setup setup) {
+  std::string Copy(translume::Setup setup) { return CopyOf(SmallCapture(setup)); }
+  std::string CopyOf(const std::string& capture) {
     const fs::path c = dir_ / "capture";
-    fs::copy(SmallCapture(setup), c, fs::copy_options::recursive);
+    fs::remove_all(c);
+    fs::copy(capture, c, fs::copy_options::recursive);
     return c.string();
   }
   std::string Out() const { return (dir_ / "out" / "m.vdb").string(); }
@@ -143,6 +147,42 @@ TEST_F(AcquireTest, AutomaticCornersWithinTwoPercent) {
   for (size_t k = 0; k < 4; ++k)
     for (size_t a = 0; a < 2; ++a)
       EXPECT_NEAR(rep["face_corners_px"][k][a].get<double>(), given[k][a], 0.5) << "corner " << k;
+}
+
+// A camera that labels its shutter speeds as cameras do (it exposes 1/32 s and writes 1/30;
+// 1/16 s as 1/15): read as labelled, the merge's brightness jumps by 6.7 % between the photos
+// at 1/15 and 1/8. Both an 8-bit capture (the response fit decides) and a 16-bit one (the
+// stacks' brightness steps decide) are read as APEX times and map as well as exact times.
+TEST_F(AcquireTest, CameraShutterLabelsAreReadAsApexTimes) {
+  for (int bits : {8, 16}) {
+    const std::string c = CopyOf(SmallCapture(Setup::kBack, fmt::format("_labels{}", bits),
+                                              fmt::format(R"(, "shutter_labels": true, "bits": {})", bits)));
+    const nlohmann::json times = nlohmann::json::parse(std::ifstream(c + "/lighting/00/exposures.json"));
+    EXPECT_DOUBLE_EQ(times["t00.png"].get<double>(), 1 / 30.);
+    AcquireOptions o;
+    o.solve = false;
+    std::string said;
+    const AcquireReport r = Acquire(ReadCapture(c), Out(), o, [&](const std::string& line) { said += line + "\n"; });
+    const Dataset truth = ReadDataset(c + "/truth/dataset");
+    const DatasetMismatch apex = CompareDatasets(ReadDataset(r.dataset_dir), truth);
+    EXPECT_NE(said.find("exposure times read as APEX shutter speeds"), std::string::npos) << said;
+    EXPECT_EQ(said.find("warning"), std::string::npos) << said;
+    if (bits == 8) {
+      EXPECT_EQ(calib::ReadResponse(r.work_dir + "/response.yml").shutter, calib::ShutterTimes::kApex);
+    } else {
+      std::string reading;
+      std::ifstream(r.work_dir + "/exposure_times.txt") >> reading;
+      EXPECT_EQ(reading, "apex");
+    }
+    EditJson(c, [](nlohmann::json& j) { j["exposure_times"] = "labelled"; });
+    const AcquireReport rl = Acquire(ReadCapture(c), (dir_ / "labelled" / "m.vdb").string(), o);
+    const DatasetMismatch labelled = CompareDatasets(ReadDataset(rl.dataset_dir), truth);
+    std::printf("%d-bit, shutter labels: L relative RMS %.3f %% read as APEX times, %.3f %% as labelled\n", bits,
+                100 * apex.L_rms, 100 * labelled.L_rms);
+    EXPECT_LE(apex.L_rms, 0.02);
+    EXPECT_LE(apex.q_rms, 0.02);
+    EXPECT_GT(labelled.L_rms, 1.5 * apex.L_rms);
+  }
 }
 
 // Conditions given as light specs on the lit face (a rig whose projector is aligned to the

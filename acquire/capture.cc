@@ -128,7 +128,7 @@ CaptureSpec ReadCapture(const std::string& path) {
   if (!j.is_object()) r.Fail("(top level)", "expected an object");
   r.CheckKeys(j, "", {"format", "setup", "sample_mm", "spacing_mm", "grid", "eta", "C",
                       "face_corners_px", "camera", "projector", "response", "white", "black",
-                      "conditions", "comment"});
+                      "conditions", "exposure_times", "comment"});
   if (r.String(r.Get(j, "format", ""), "format") != kFormat)
     r.Fail("format", fmt::format("expected \"{}\"", kFormat));
   const std::string setup = r.String(r.Get(j, "setup", ""), "setup");
@@ -257,6 +257,12 @@ CaptureSpec ReadCapture(const std::string& path) {
     r.Fail("white", "expected a calibration file or {\"white\", \"patch\", \"albedo\", ...}");
   }
   if (j.contains("black")) s.black = r.Path(j["black"], "black", true);
+  if (j.contains("exposure_times")) {
+    const std::string times = r.String(j["exposure_times"], "exposure_times");
+    if (times != "auto" && times != "labelled" && times != "apex")
+      r.Fail("exposure_times", "expected \"auto\", \"labelled\" or \"apex\"");
+    s.exposure_times = calib::ParseShutterTimes(times, s.file);
+  }
 
   const json& cs = r.Get(j, "conditions", "");
   if (!cs.is_array() || cs.empty()) r.Fail("conditions", "expected a non-empty list");
@@ -334,6 +340,7 @@ std::string CaptureJson(const CaptureSpec& s) {
     if (!s.white.black.empty()) j["white"]["black"] = rel(s.white.black);
   }
   if (!s.black.empty()) j["black"] = rel(s.black);
+  if (s.exposure_times != calib::ShutterTimes::kAuto) j["exposure_times"] = calib::ToString(s.exposure_times);
   json cs = json::array();
   for (const auto& c : s.conditions) {
     json e = {{"name", c.name}, {"stack", rel(c.stack)}};

@@ -6,8 +6,9 @@
 #include <string>
 #include <vector>
 
-#include "solver/light.h"
+#include "calib/shutter.h"
 #include "solver/grid.h"
+#include "solver/light.h"
 
 namespace translume::acquire {
 
@@ -57,6 +58,9 @@ struct CaptureSpec {
     std::array<double, 3> albedo{};   // the patch's RGB albedo
   } white;
   std::string black;  // optional: stack of the sample under projector black, subtracted
+  // How the photos' exposure times are read (docs/capture.md, "Exposure times"): "auto" (the
+  // response fit, or the linear stacks' brightness steps, decides), "labelled" or "apex".
+  calib::ShutterTimes exposure_times = calib::ShutterTimes::kAuto;
 
   struct Condition {
     std::string name;

@@ -72,6 +72,13 @@ TEST_F(CaptureTest, ReadsAndRoundTrips) {
   EXPECT_EQ(t.conditions[0].stack, s.conditions[0].stack);
   EXPECT_EQ(t.white.patch, s.white.patch);
   EXPECT_EQ(t.camera.board, s.camera.board);
+  EXPECT_EQ(t.exposure_times, calib::ShutterTimes::kAuto);
+  nlohmann::json j = base_;
+  j["exposure_times"] = "apex";
+  const CaptureSpec a = ReadCapture(Write(j));
+  EXPECT_EQ(a.exposure_times, calib::ShutterTimes::kApex);
+  std::ofstream(dir_ / "capture.json") << CaptureJson(a);
+  EXPECT_EQ(ReadCapture(dir_.string()).exposure_times, calib::ShutterTimes::kApex);
 }
 
 TEST_F(CaptureTest, GridInsteadOfSpacing) {
@@ -94,6 +101,8 @@ TEST_F(CaptureTest, EveryBrokenFieldIsNamed) {
   ExpectError([](auto& j) { j["response"] = 3; }, "response: expected");
   ExpectError([](auto& j) { j["white"]["albedo"] = 1.5; }, "white.albedo: must be in (0, 1]");
   ExpectError([](auto& j) { j["colour"] = 1; }, "colour: unknown field");
+  ExpectError([](auto& j) { j["exposure_times"] = "nominal"; },
+              "exposure_times: expected \"auto\", \"labelled\" or \"apex\"");
   ExpectError([](auto& j) { j["conditions"][1]["name"] = "a"; }, "conditions[1].name: duplicate");
   // Names the node-space dataset would refuse after the HDR stage (it aborted there).
   for (const char* bad : {"lit(0,1)", "r\u00e9gion", "a:b", "..", "x y"})

@@ -228,7 +228,7 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
   for (const auto& [k, v] : j.items())
     if (k != "camera" && k != "projector" && k != "distance_scale" && k != "tilt_deg" &&
         k != "camera_gain" && k != "projector_black" && k != "bits" && k != "read_noise" &&
-        k != "shot_noise" && k != "comment")
+        k != "shot_noise" && k != "shutter_labels" && k != "comment")
       fail(k, "unknown field");
   device("camera", &r.camera);
   const bool projector_K = device("projector", &r.projector);
@@ -263,6 +263,10 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
       if (!j[k].is_number() || !(j[k].get<double>() >= 0)) fail(k, "expected a number >= 0");
       (std::string(k) == "read_noise" ? r.noise.read_noise : r.noise.shot_noise) = j[k].get<double>();
     }
+  if (j.contains("shutter_labels")) {
+    if (!j["shutter_labels"].is_boolean()) fail("shutter_labels", "expected true or false");
+    r.shutter_labels = j["shutter_labels"].get<bool>();
+  }
   PlaceRig(&r, Geom(grid, h), setup, scale, tilt, projector_K);
   return r;
 }
@@ -311,7 +315,14 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
       calib::StackOptions so = rig.noise;
       so.bits = bits;
       so.seed = seed;
-      return WriteStack(dir_out, calib::SyntheticRig::RenderExposureStack(radiance, times, rig.response, so), times);
+      std::vector<double> written = times;
+      if (rig.shutter_labels)
+        for (double& t : written) t = calib::ShutterLabel(t);
+      return WriteStack(dir_out, calib::SyntheticRig::RenderExposureStack(radiance, times, rig.response, so), written);
+    };
+    // n times one stop apart from t0 (rounded to a power of two with shutter labels).
+    auto exposures = [&](double t0, int n) {
+      return Exposures(rig.shutter_labels ? std::exp2(std::round(std::log2(t0))) : t0, n);
     };
     const double D = rig.camera_from_sample.t[2];
 
@@ -348,7 +359,7 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
 
     // Response: two stacks of a static scene with smooth gradients over 4 decades.
     std::vector<std::string> response_stacks;
-    const std::vector<double> rtimes = Exposures(1.0 / 64, 10);
+    const std::vector<double> rtimes = exposures(1.0 / 64, 10);
     for (int s = 0; s < 2; ++s) {
       cv::Mat scene(rig.camera.size, CV_32FC3);
       for (int y = 0; y < scene.rows; ++y)
@@ -400,7 +411,7 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
       for (int c = 0; c < 3; ++c)
         for (float v : fine_L[size_t(m)][size_t(c)]) brightest = std::max(brightest, rig.camera_gain[c] * v);
     const cv::Vec3d gain = rig.camera_gain * (0.8 * 30 / brightest);
-    const std::vector<double> mtimes = Exposures(1.0 / 30, o.exposures);
+    const std::vector<double> mtimes = exposures(1.0 / 30, o.exposures);
 
     // White calibration: a white card (albedo 0.9) where the sample goes, projector white and
     // black; its patch corners are the face's corners pulled 15 % towards the centre.
@@ -408,8 +419,8 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     const cv::Vec3d white_radiance = gain * (albedo / kPi);
     // Stacks from 10 % of full scale for the brightest channel, one stop apart.
     const double wmax = std::max({white_radiance[0], white_radiance[1], white_radiance[2]});
-    const std::vector<double> wtimes = Exposures(0.1 / wmax, 5),
-                              btimes = Exposures(0.1 / (wmax * std::max(rig.projector_black, 1e-6)), 5);
+    const std::vector<double> wtimes = exposures(0.1 / wmax, 5),
+                              btimes = exposures(0.1 / (wmax * std::max(rig.projector_black, 1e-6)), 5);
     for (int s = 0; s < 2; ++s) {
       const double q = s == 0 ? 1.0 : rig.projector_black;
       const cv::Mat img = RenderFace(rig, srig, g, [&](double, double) { return white_radiance * q; });

@@ -25,6 +25,9 @@ struct CaptureRig {
   int bits = 8;                   // photo bit depth: 8 (through `response`) or 16 (linear)
   calib::StackOptions noise;      // read and shot noise of the exposure stacks
   double blur_sigma_px = 0.5;     // optical blur of calibration photos
+  // Exposures at APEX times (1/32 s, 1/16 s, ...: powers of two), written as a camera labels
+  // them (1/30, 1/15; calib/shutter.h). Otherwise times as written (1/30 s, 1/15 s, 0.133 s).
+  bool shutter_labels = false;
 };
 
 // A rig for a sample of `grid` and spacing h: a 1024x768 camera (f = 3000 px, mild barrel
@@ -35,7 +38,8 @@ CaptureRig DefaultCaptureRig(const GridShape& grid, double h, Setup setup);
 
 // Reads a rig file (JSON; docs/capture.md "Simulated captures"): any of camera / projector
 // {size [w, h], K [9], dist [5]}, distance_scale, tilt_deg [3], camera_gain [3],
-// projector_black, bits, read_noise, shot_noise, over DefaultCaptureRig. Throws InputError.
+// projector_black, bits, read_noise, shot_noise, shutter_labels, over DefaultCaptureRig. Throws
+// InputError.
 CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double h, Setup setup);
 
 struct SimulateCaptureOptions {

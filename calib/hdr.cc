@@ -15,6 +15,7 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
@@ -66,7 +67,113 @@ bool PngCutShort(const std::string& path) {
 // Debevec & Malik's hat weight over the 8-bit codes.
 double HatWeight(int z) { return z <= 127 ? z + 1.0 : 256.0 - z; }
 
+// A stack's samples as linear values: codes (8-bit, 16-bit scaled to full scale 1, float) and
+// their linearisation (8-bit through `response`).
+struct Linearizer {
+  const ResponseCurve* response = nullptr;
+  bool eight = false;
+  float full = 1.f;
+  Linearizer(const ExposureStack& stack, const ResponseCurve* r)
+      : response(r), eight(stack.IsEightBit()),
+        full(!stack.exposures.empty() && stack.exposures[0].pixels.depth() == CV_16U ? 65535.f : 1.f) {}
+  float Code(const cv::Mat& m, int y, int x, int c) const {
+    switch (m.depth()) {
+      case CV_8U: return m.at<cv::Vec3b>(y, x)[c];
+      case CV_16U: return m.at<cv::Vec3w>(y, x)[c] / full;
+      default: return m.at<cv::Vec3f>(y, x)[c];
+    }
+  }
+  double Linear(float v, int c) const { return eight ? response->lut.at<cv::Vec3f>(int(v))[c] : v; }
+};
+
+// Per exposure of `stack`, the black stack's exposure of the same time (null without `black`).
+std::vector<const Exposure*> MatchBlacks(const ExposureStack& stack, const ExposureStack* black) {
+  std::vector<const Exposure*> blacks(stack.exposures.size(), nullptr);
+  if (!black) return blacks;
+  for (size_t j = 0; j < stack.exposures.size(); ++j) {
+    const Exposure& e = stack.exposures[j];
+    for (const Exposure& b : black->exposures)
+      if (std::abs(b.seconds / e.seconds - 1) < 0.01) blacks[j] = &b;
+    if (!blacks[j])
+      throw CalibError(fmt::format("{}: the black stack {} has no photo at {} s", e.path, black->dir, e.seconds));
+    if (blacks[j]->pixels.size() != e.pixels.size() || blacks[j]->pixels.depth() != e.pixels.depth())
+      throw CalibError(fmt::format("{}: size or bit depth differs from {}", blacks[j]->path, e.path));
+  }
+  return blacks;
+}
+
+// The exposures' indices sorted by time, shortest first.
+std::vector<size_t> TimeOrder(const ExposureStack& stack) {
+  std::vector<size_t> order(stack.exposures.size());
+  for (size_t j = 0; j < order.size(); ++j) order[j] = j;
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return stack.exposures[a].seconds < stack.exposures[b].seconds;
+  });
+  return order;
+}
+
+// Two exposures next in time (indices into the stack, a the shorter) and how much brighter b is:
+// the median ratio of their linear values (black subtracted) over samples well inside the valid
+// range [lo, hi] in both, on a grid of ~10^4 pixels.
+struct PairRatio {
+  size_t a = 0, b = 0;
+  double measured = 0;
+  size_t samples = 0;
+};
+
+std::vector<PairRatio> MeasurePairRatios(const ExposureStack& stack, const Linearizer& lin,
+                                         const std::vector<const Exposure*>& blacks, double lo, double hi) {
+  const std::vector<size_t> order = TimeOrder(stack);
+  const cv::Size size = stack.Size();
+  const int step = std::max(1, int(std::sqrt(double(size.area()) / 1e4)));
+  const double well_lo = lo + 0.1 * (hi - lo), well_hi = hi - 0.1 * (hi - lo);
+  std::vector<PairRatio> pairs;
+  for (size_t k = 0; k + 1 < order.size(); ++k) {
+    const size_t a = order[k], b = order[k + 1];
+    std::vector<double> ratios;
+    for (int y = 0; y < size.height; y += step)
+      for (int x = 0; x < size.width; x += step)
+        for (int c = 0; c < 3; ++c) {
+          const float va = lin.Code(stack.exposures[a].pixels, y, x, c), vb = lin.Code(stack.exposures[b].pixels, y, x, c);
+          if (!(va > well_lo && va < well_hi && vb > well_lo && vb < well_hi)) continue;
+          double xa = lin.Linear(va, c), xb = lin.Linear(vb, c);
+          if (blacks[a]) xa -= lin.Linear(lin.Code(blacks[a]->pixels, y, x, c), c);
+          if (blacks[b]) xb -= lin.Linear(lin.Code(blacks[b]->pixels, y, x, c), c);
+          if (xa > 0 && xb > 0) ratios.push_back(xb / xa);
+        }
+    PairRatio p;
+    p.a = a;
+    p.b = b;
+    p.samples = ratios.size();
+    if (!ratios.empty()) {
+      std::nth_element(ratios.begin(), ratios.begin() + long(ratios.size() / 2), ratios.end());
+      p.measured = ratios[ratios.size() / 2];
+    }
+    pairs.push_back(p);
+  }
+  return pairs;
+}
+
+// Pairs with fewer samples are not judged at all (MergeHdr's 2x check) ...
+constexpr size_t kMinPairSamples = 50;
+// ... and pairs with fewer are not weighed against 3 % (the warning, ChooseShutterTimes).
+constexpr size_t kMinPairSamplesForPercent = 200;
+
 }  // namespace
+
+bool HasApexLabels(const ExposureStack& stack) {
+  for (const Exposure& e : stack.exposures)
+    if (std::abs(ApexSeconds(e.seconds) / e.seconds - 1) > 0.005) return true;
+  return false;
+}
+
+ExposureStack WithShutterTimes(const ExposureStack& stack, ShutterTimes times) {
+  if (times == ShutterTimes::kAuto) throw std::logic_error("WithShutterTimes: kAuto must be decided first");
+  ExposureStack s = stack;
+  if (times == ShutterTimes::kApex)
+    for (Exposure& e : s.exposures) e.seconds = ApexSeconds(e.seconds);
+  return s;
+}
 
 bool IsPhotoFile(const std::string& path) {
   static const std::set<std::string> ext = {".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".exr"};
@@ -302,21 +409,12 @@ std::string ResponseOptions::Validate() const {
   return "";
 }
 
-ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
-                                const ResponseOptions& o) {
-  if (std::string why = o.Validate(); !why.empty()) throw CalibError("response: " + why);
-  if (stacks.empty()) throw CalibError("response: no exposure stacks");
-  for (const ExposureStack& s : stacks) {
-    if (s.exposures.size() < 2)
-      throw CalibError(fmt::format("{}: an exposure stack needs at least 2 images", s.dir));
-    if (!s.IsEightBit())
-      throw CalibError(s.dir + ": the response curve is fitted to 8-bit stacks only; 16-bit and "
-                       "RAW photos are linear and need none (in capture.json: \"response\": \"linear\")");
-    for (const Exposure& e : s.exposures)
-      if (e.pixels.type() != CV_8UC3 || e.pixels.size() != s.Size() || !(e.seconds > 0))
-        throw CalibError(e.path + ": expected 8-bit RGB of the stack's size with a positive time");
-  }
+namespace {
+
+// CalibrateResponse for one reading of the times (the stacks' seconds as they are).
+ResponseCurve FitResponse(const std::vector<ExposureStack>& stacks, const ResponseOptions& o) {
   ResponseCurve curve;
+  double residual2 = 0, weight2 = 0;
   curve.lut.create(256, 1, CV_32FC3);
   std::mt19937_64 rng(o.seed);
   std::string dirs;
@@ -347,6 +445,7 @@ ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
     std::vector<Triplet> t;
     std::vector<double> rhs;
     int row = 0;
+    double data_weight2 = 0;
     int used = 0;
     int lowest = 255, highest = 0;  // the codes that data rows cover
     for (size_t k = 0; k < samples.size(); ++k) {
@@ -367,9 +466,11 @@ ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
         t.emplace_back(row, z, w);
         t.emplace_back(row, col, -w);
         rhs.push_back(w * std::log(e.seconds));
+        data_weight2 += w * w;
         ++row;
       }
     }
+    const int data_rows = row;
     if (used < 10)
       throw CalibError("response: fewer than 10 pixels are well exposed in two or more photos; "
                        "use stacks with overlapping exposures");
@@ -391,6 +492,9 @@ ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
     Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(AtA);
     if (solver.info() != Eigen::Success) throw CalibError("response: the least-squares system is singular");
     const Eigen::VectorXd g = solver.solve(A.transpose() * b);
+    const Eigen::VectorXd r = (A * g - b).head(data_rows);
+    residual2 += r.squaredNorm();
+    weight2 += data_weight2;
     // Where the data constrain the curve it must rise: photos that do not brighten with their
     // exposure times (one photo copied, times swapped or wrong) fit a curve that falls (by 20 %
     // and more in the copied-photo case). Noise may leave wiggles of a percent or so where few
@@ -411,7 +515,66 @@ ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
       float& v = curve.lut.at<cv::Vec3f>(z)[c];
       v = std::max(v, std::nextafter(curve.lut.at<cv::Vec3f>(z - 1)[c], 1e30f));
     }
+  curve.fit_rms = std::sqrt(residual2 / std::max(weight2, 1e-300));
   return curve;
+}
+
+}  // namespace
+
+ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
+                                const ResponseOptions& o) {
+  if (std::string why = o.Validate(); !why.empty()) throw CalibError("response: " + why);
+  if (stacks.empty()) throw CalibError("response: no exposure stacks");
+  bool apex_labels = false;
+  for (const ExposureStack& s : stacks) {
+    if (s.exposures.size() < 2)
+      throw CalibError(fmt::format("{}: an exposure stack needs at least 2 images", s.dir));
+    if (!s.IsEightBit())
+      throw CalibError(s.dir + ": the response curve is fitted to 8-bit stacks only; 16-bit and "
+                       "RAW photos are linear and need none (in capture.json: \"response\": \"linear\")");
+    for (const Exposure& e : s.exposures)
+      if (e.pixels.type() != CV_8UC3 || e.pixels.size() != s.Size() || !(e.seconds > 0))
+        throw CalibError(e.path + ": expected 8-bit RGB of the stack's size with a positive time");
+    apex_labels = apex_labels || HasApexLabels(s);
+  }
+  auto fit = [&](ShutterTimes times) {
+    std::vector<ExposureStack> read;
+    for (const ExposureStack& s : stacks) read.push_back(WithShutterTimes(s, times));
+    ResponseCurve curve = FitResponse(read, o);
+    curve.shutter = times;
+    return curve;
+  };
+  if (o.shutter != ShutterTimes::kAuto || !apex_labels)
+    return fit(o.shutter == ShutterTimes::kAuto ? ShutterTimes::kLabelled : o.shutter);
+  // Both readings; one that the photos contradict outright (the curve falls) loses.
+  std::optional<ResponseCurve> labelled, apex;
+  std::string labelled_error;
+  try {
+    labelled = fit(ShutterTimes::kLabelled);
+  } catch (const CalibError& e) {
+    labelled_error = e.what();
+  }
+  try {
+    apex = fit(ShutterTimes::kApex);
+  } catch (const CalibError&) {
+  }
+  if (!labelled && !apex) throw CalibError(labelled_error);
+  if (!apex) return *labelled;
+  if (!labelled) return *apex;
+  // Within 2 % of each other the two readings fit alike (a short bracket whose labels are off
+  // by one common factor): the labels stay.
+  ResponseCurve& best = apex->fit_rms < 0.98 * labelled->fit_rms ? *apex : *labelled;
+  best.other_fit_rms = (&best == &*apex ? labelled : apex)->fit_rms;
+  return best;
+}
+
+std::string ResponseCurve::ShutterReport() const {
+  const std::string how = shutter == ShutterTimes::kApex ? "read as APEX shutter speeds (1/30 as 1/32 s)"
+                                                         : "as labelled";
+  if (!(other_fit_rms > 0)) return fmt::format("exposure times {}", how);
+  return fmt::format("exposure times {}: fit residual {:.2f} %, {:.2f} % {}", how, 100 * fit_rms,
+                     100 * other_fit_rms,
+                     shutter == ShutterTimes::kApex ? "as labelled" : "read as APEX shutter speeds");
 }
 
 void WriteResponse(const std::string& path, const ResponseCurve& curve) {
@@ -419,6 +582,7 @@ void WriteResponse(const std::string& path, const ResponseCurve& curve) {
   if (!fs.isOpened()) throw CalibError(path + ": cannot open for writing");
   fs << "channels" << "RGB";
   fs << "response" << curve.lut;
+  fs << "exposure_times" << ToString(curve.shutter);
 }
 
 ResponseCurve ReadResponse(const std::string& path) {
@@ -428,6 +592,12 @@ ResponseCurve ReadResponse(const std::string& path) {
     cv::FileStorage f(path, cv::FileStorage::READ);
     if (!f.isOpened()) throw CalibError(path + ": cannot read");
     f["response"] >> c.lut;
+    if (!f["exposure_times"].empty()) {
+      std::string times;
+      f["exposure_times"] >> times;
+      c.shutter = ParseShutterTimes(times, path);
+      if (c.shutter == ShutterTimes::kAuto) throw CalibError(path + ": exposure_times must be \"labelled\" or \"apex\"");
+    }
   } catch (const cv::Exception&) {
     throw CalibError(path + ": not an OpenCV YAML/XML file");
   }
@@ -454,9 +624,9 @@ std::string HdrImage::BriefReport() const {
 // HdrImage::time_warning's threshold on a pair's brightness ratio against its time ratio.
 constexpr double kTimeRatioWarning = 0.03;
 
-HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
-                  const ExposureStack* black, const MergeOptions& o) {
-  if (std::string why = o.Validate(); !why.empty()) throw CalibError("hdr merge: " + why);
+namespace {
+
+void CheckMergeInput(const ExposureStack& stack) {
   if (stack.exposures.size() < 2)
     throw CalibError(fmt::format("{}: an exposure stack needs at least 2 images", stack.dir));
   for (const Exposure& e : stack.exposures) {
@@ -468,87 +638,115 @@ HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
     if (!(e.seconds > 0) || !std::isfinite(e.seconds))
       throw CalibError(e.path + ": exposure time must be positive");
   }
-  const bool eight = stack.IsEightBit();
+}
+
+std::string FileName(const Exposure& e) { return fs::path(e.path).filename().string(); }
+
+}  // namespace
+
+std::string ShutterChoice::BriefReport() const {
+  const std::string how = times == ShutterTimes::kApex ? "read as APEX shutter speeds (1/30 as 1/32 s)"
+                                                       : "as labelled";
+  if (pairs == 0) return fmt::format("exposure times {}", how);
+  return fmt::format("exposure times {}: brightness steps {:.2f} % RMS off the labels, {:.2f} % off the "
+                     "APEX times ({} pairs)", how, 100 * labelled_rms, 100 * apex_rms, pairs);
+}
+
+void ShutterJudge::Add(const ExposureStack& stack, const ExposureStack* black) {
+  if (std::string why = options_.Validate(); !why.empty()) throw CalibError("hdr merge: " + why);
+  CheckMergeInput(stack);
+  if (stack.IsEightBit())
+    throw CalibError(stack.dir + ": the exposure times of 8-bit photos are judged by the response fit");
+  if (!HasApexLabels(stack)) return;
+  apex_labels_ = true;
+  const ExposureStack apex = WithShutterTimes(stack, ShutterTimes::kApex);
+  std::optional<ExposureStack> apex_black;
+  if (black) apex_black = WithShutterTimes(*black, ShutterTimes::kApex);
+  const std::vector<PairRatio> pairs =
+      MeasurePairRatios(apex, Linearizer(apex, nullptr), MatchBlacks(apex, apex_black ? &*apex_black : nullptr),
+                        options_.low_linear, options_.high_linear);
+  for (const PairRatio& p : pairs) {
+    const std::pair<double, double> key{stack.exposures[p.a].seconds, stack.exposures[p.b].seconds};
+    const double labelled_ratio = key.second / key.first;
+    const double apex_ratio = apex.exposures[p.b].seconds / apex.exposures[p.a].seconds;
+    const bool telling = std::abs(apex_ratio / labelled_ratio - 1) > 0.005;
+    if (telling && std::find(telling_.begin(), telling_.end(), key) == telling_.end()) telling_.push_back(key);
+    if (p.samples < kMinPairSamplesForPercent) continue;
+    if (telling && std::find(judged_.begin(), judged_.end(), key) == judged_.end()) judged_.push_back(key);
+    const double labelled = std::log(p.measured / labelled_ratio), as_apex = std::log(p.measured / apex_ratio);
+    sum_labelled_ += labelled * labelled;
+    sum_apex_ += as_apex * as_apex;
+    ++pairs_;
+  }
+}
+
+bool ShutterJudge::Decisive() const { return !telling_.empty() && judged_.size() == telling_.size(); }
+
+ShutterChoice ShutterJudge::Choice() const {
+  ShutterChoice choice;
+  if (!apex_labels_ || pairs_ == 0) return choice;
+  choice.pairs = pairs_;
+  choice.labelled_rms = std::sqrt(sum_labelled_ / pairs_);
+  choice.apex_rms = std::sqrt(sum_apex_ / pairs_);
+  if (choice.apex_rms < 0.8 * choice.labelled_rms) choice.times = ShutterTimes::kApex;
+  return choice;
+}
+
+ShutterChoice ChooseShutterTimes(const ExposureStack& stack, const ExposureStack* black,
+                                 const MergeOptions& options) {
+  ShutterJudge judge(options);
+  judge.Add(stack, black);
+  return judge.Choice();
+}
+
+HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* response,
+                  const ExposureStack* given_black, const MergeOptions& o) {
+  if (std::string why = o.Validate(); !why.empty()) throw CalibError("hdr merge: " + why);
+  CheckMergeInput(given_stack);
+  const bool eight = given_stack.IsEightBit();
   if (eight && !response)
-    throw CalibError(stack.dir + ": 8-bit photos need a response curve (translume calibrate "
+    throw CalibError(given_stack.dir + ": 8-bit photos need a response curve (translume calibrate "
                      "response)");
   if (eight) {
     if (std::string why = response->Validate(); !why.empty()) throw CalibError("response: " + why);
   }
+  ShutterTimes times = o.shutter;
+  if (times == ShutterTimes::kAuto)
+    times = eight ? response->shutter : ChooseShutterTimes(given_stack, given_black, o).times;
+  const ExposureStack stack = WithShutterTimes(given_stack, times);
+  std::optional<ExposureStack> black_read;
+  if (given_black) black_read = WithShutterTimes(*given_black, times);
+  const ExposureStack* black = black_read ? &*black_read : nullptr;
   const size_t P = stack.exposures.size();
-  // Per exposure: linearisation lookup and the matching black exposure.
-  std::vector<const Exposure*> blacks(P, nullptr);
-  if (black) {
-    for (size_t j = 0; j < P; ++j) {
-      const Exposure& e = stack.exposures[j];
-      for (const Exposure& b : black->exposures)
-        if (std::abs(b.seconds / e.seconds - 1) < 0.01) blacks[j] = &b;
-      if (!blacks[j])
-        throw CalibError(fmt::format("{}: the black stack {} has no photo at {} s", e.path,
-                                     black->dir, e.seconds));
-      if (blacks[j]->pixels.size() != e.pixels.size() ||
-          blacks[j]->pixels.depth() != e.pixels.depth())
-        throw CalibError(fmt::format("{}: size or bit depth differs from {}", blacks[j]->path, e.path));
-    }
-  }
-  const float full = stack.exposures[0].pixels.depth() == CV_16U ? 65535.f : 1.f;
-  auto code = [&](const cv::Mat& m, int y, int x, int c) -> float {
-    switch (m.depth()) {
-      case CV_8U: return m.at<cv::Vec3b>(y, x)[c];
-      case CV_16U: return m.at<cv::Vec3w>(y, x)[c] / full;
-      default: return m.at<cv::Vec3f>(y, x)[c];
-    }
-  };
-  auto linear = [&](float v, int c) -> double {
-    return eight ? response->lut.at<cv::Vec3f>(int(v))[c] : v;
-  };
-  // Exposures sorted by time: shortest first.
-  std::vector<size_t> order(P);
-  for (size_t j = 0; j < P; ++j) order[j] = j;
-  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return stack.exposures[a].seconds < stack.exposures[b].seconds;
-  });
+  const std::vector<const Exposure*> blacks = MatchBlacks(stack, black);
+  const Linearizer lin(stack, response);
+  auto code = [&](const cv::Mat& m, int y, int x, int c) { return lin.Code(m, y, x, c); };
+  auto linear = [&](float v, int c) { return lin.Linear(v, c); };
+  const std::vector<size_t> order = TimeOrder(stack);
   HdrImage h;
+  h.shutter = times;
   const cv::Size size = stack.Size();
   h.radiance.create(size, CV_32FC3);
   h.flags.create(size, CV_8UC3);
   const double lo = eight ? o.low_code : o.low_linear, hi = eight ? o.high_code : o.high_linear;
   // Exposures next in time must brighten as their times say (swapped or wrong times, a copied
-  // photo): the median ratio of their linear values, over samples well inside the valid range
-  // in both (on a grid of ~10^4 pixels), within a factor of 2 of the ratio of their times.
-  // Pairs with fewer than 50 such samples are not judged.
-  const int step = std::max(1, int(std::sqrt(double(size.area()) / 1e4)));
-  const double well_lo = lo + 0.1 * (hi - lo), well_hi = hi - 0.1 * (hi - lo);
-  for (size_t k = 0; k + 1 < P; ++k) {
-    const size_t a = order[k], b = order[k + 1];
-    std::vector<double> ratios;
-    for (int y = 0; y < size.height; y += step)
-      for (int x = 0; x < size.width; x += step)
-        for (int c = 0; c < 3; ++c) {
-          const float va = code(stack.exposures[a].pixels, y, x, c), vb = code(stack.exposures[b].pixels, y, x, c);
-          if (!(va > well_lo && va < well_hi && vb > well_lo && vb < well_hi)) continue;
-          double xa = linear(va, c), xb = linear(vb, c);
-          if (blacks[a]) xa -= linear(code(blacks[a]->pixels, y, x, c), c);
-          if (blacks[b]) xb -= linear(code(blacks[b]->pixels, y, x, c), c);
-          if (xa > 0 && xb > 0) ratios.push_back(xb / xa);
-        }
-    if (ratios.size() < 50) continue;
-    std::nth_element(ratios.begin(), ratios.begin() + long(ratios.size() / 2), ratios.end());
-    const double measured = ratios[ratios.size() / 2];
-    const double expected = stack.exposures[b].seconds / stack.exposures[a].seconds;
-    const double off = measured / expected - 1;
-    if (std::abs(off) > kTimeRatioWarning && ratios.size() >= 200 && h.time_warning.empty())
+  // photo): the median ratio of their linear values within a factor of 2 of the ratio of their
+  // times. Pairs with fewer than 50 samples are not judged.
+  for (const PairRatio& p : MeasurePairRatios(stack, lin, blacks, lo, hi)) {
+    if (p.samples < kMinPairSamples) continue;
+    const Exposure &ea = stack.exposures[p.a], &eb = stack.exposures[p.b];
+    const double expected = eb.seconds / ea.seconds;
+    const double off = p.measured / expected - 1;
+    if (std::abs(off) > kTimeRatioWarning && p.samples >= kMinPairSamplesForPercent && h.time_warning.empty())
       h.time_warning = fmt::format(
-          "{}: {} is {:.3f}x as bright as {}, but its exposure time is {:.3f}x as long ({:+.1f} %): "
-          "times as the camera labels them (1/8 for 0.133 s)? Use the true times (docs/capture.md)",
-          stack.dir, fs::path(stack.exposures[b].path).filename().string(), measured,
-          fs::path(stack.exposures[a].path).filename().string(), expected, 100 * off);
-    if (measured > 2 * expected || measured < 0.5 * expected)
+          "{}: {} is {:.3f}x as bright as {}, but its exposure time is {:.3f}x as long ({:+.1f} %): times as "
+          "a camera labels them (1/30 for 1/32 s)? Use the true times, or read them as APEX shutter speeds "
+          "(docs/capture.md, \"Exposure times\")",
+          stack.dir, FileName(eb), p.measured, FileName(ea), expected, 100 * off);
+    if (p.measured > 2 * expected || p.measured < 0.5 * expected)
       throw CalibError(fmt::format("{}: {} ({:g} s) is {:.2f}x as bright as {} ({:g} s), but its exposure time is "
                                    "{:.2f}x as long: check the times (EXIF or exposures.json)", stack.dir,
-                                   fs::path(stack.exposures[b].path).filename().string(), stack.exposures[b].seconds,
-                                   measured, fs::path(stack.exposures[a].path).filename().string(),
-                                   stack.exposures[a].seconds, expected));
+                                   FileName(eb), eb.seconds, p.measured, FileName(ea), ea.seconds, expected));
   }
   std::atomic<size_t> saturated{0}, under{0};
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& r) {
@@ -596,9 +794,9 @@ HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
   return h;
 }
 
-cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response) {
+cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response, const MergeOptions& options) {
   if (!fs::is_directory(path)) return ReadLinearRgb(path);
-  return MergeHdr(ReadExposureStack(path), response).radiance;
+  return MergeHdr(ReadExposureStack(path), response, nullptr, options).radiance;
 }
 
 }  // namespace translume::calib

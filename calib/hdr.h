@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "calib/shutter.h"
+
 namespace translume::calib {
 
 // One photo of an exposure stack. pixels: RGB order, CV_8UC3 (codes through the camera
@@ -23,6 +25,13 @@ struct ExposureStack {
   bool IsEightBit() const { return !exposures.empty() && exposures[0].pixels.depth() == CV_8U; }
   cv::Size Size() const { return exposures.empty() ? cv::Size() : exposures[0].pixels.size(); }
 };
+
+// Whether an exposure's time is a shutter-speed label whose APEX time differs from it by more
+// than 0.5 % (1/30, 1/15, 15, 0.3; not 1/8, 1/4, 2).
+bool HasApexLabels(const ExposureStack& stack);
+// The stack with each time read as `times` (kApex: ApexSeconds; kLabelled: as is). The pixels
+// are shared, not copied. kAuto is a bug (throws std::logic_error).
+ExposureStack WithShutterTimes(const ExposureStack& stack, ShutterTimes times);
 
 // Whether a file in a photo folder or exposure stack is read as a photo: .png .jpg .jpeg .tif
 // .tiff .bmp .exr or a camera RAW file (below), in any case, and not a hidden file (a name
@@ -65,25 +74,42 @@ ExposureStack ReadExposureStack(const std::string& dir);
 // lut(128) = 1. (Channel ratios are therefore arbitrary; the white balance fixes them.)
 struct ResponseCurve {
   cv::Mat lut;
+  // How the exposure times of the stacks it was fitted to were read (never kAuto): stacks
+  // merged through this curve read theirs the same way (MergeHdr).
+  ShutterTimes shutter = ShutterTimes::kLabelled;
+  // Fit residual: RMS over the data rows of ln(lut(z)) - ln E - ln t, hat-weighted, ln units
+  // (0.01 = 1 %). Not stored in the file (0 after ReadResponse).
+  double fit_rms = 0;
+  // Under ShutterTimes::kAuto with APEX labels in the stacks: the other reading's fit_rms.
+  double other_fit_rms = 0;
   std::string Validate() const;  // empty when monotone, positive and finite
+  // "fitted to times as labelled" / "... read as APEX shutter speeds (fit residual 0.4 %, as
+  // labelled 2.1 %)".
+  std::string ShutterReport() const;
 };
 
 struct ResponseOptions {
   int samples_per_stack = 600;  // pixel positions per stack, stratified by intensity
   double smoothness = 30.0;     // lambda of Debevec & Malik's second-derivative term
   uint64_t seed = 1;
+  // kAuto: where the stacks' times include APEX labels (HasApexLabels), the curve is fitted to
+  // both readings, and the APEX one kept where its fit residual is over 2 % smaller. (Read both ways, an 8-bit
+  // stack alone cannot fix its times' common exponent: Grossberg & Nayar's exponential
+  // ambiguity. What decides is how evenly the photos' brightness steps follow the times.)
+  ShutterTimes shutter = ShutterTimes::kAuto;
   std::string Validate() const;
 };
 
 // Debevec & Malik 1997: solves for g = ln(lut) per channel from one or more 8-bit stacks by
 // weighted least squares (hat weights, clipped codes 0..2 and 253..255 excluded) with a
-// smoothness prior. Throws CalibError when a stack is not 8-bit, the data do not constrain
-// the curve, or the fitted curve does not rise over the codes the data cover (the photos do not
-// brighten with their exposure times).
+// smoothness prior, the stacks' times read as options.shutter says. Throws CalibError when a
+// stack is not 8-bit, the data do not constrain the curve, or the fitted curve does not rise
+// over the codes the data cover (the photos do not brighten with their exposure times).
 ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
                                 const ResponseOptions& options = {});
 
-// OpenCV FileStorage YAML with `response` (256x1, 3 channels RGB) and `channels: RGB`.
+// OpenCV FileStorage YAML with `response` (256x1, 3 channels RGB), `channels: RGB` and
+// `exposure_times: labelled|apex` (files without it: labelled).
 void WriteResponse(const std::string& path, const ResponseCurve& curve);
 ResponseCurve ReadResponse(const std::string& path);
 
@@ -93,6 +119,10 @@ struct MergeOptions {
   double low_linear = 0.0005;   // linear inputs: values <= this fraction of full scale are
                                 // under-exposed
   double high_linear = 0.97;    // linear inputs: values >= this fraction are saturated
+  // How the stack's (and the black stack's) times are read. kAuto: 8-bit stacks as their
+  // response was fitted (ResponseCurve::shutter); linear stacks as ChooseShutterTimes judges
+  // this stack.
+  ShutterTimes shutter = ShutterTimes::kAuto;
   std::string Validate() const;
 };
 
@@ -105,11 +135,50 @@ struct HdrImage {
   cv::Mat flags;     // CV_8UC3 HdrFlag per channel
   size_t saturated = 0, underexposed = 0;  // channel samples flagged
   // Where two exposures next in time brighten by a ratio more than 3 % off the ratio of their
-  // times (over 200 samples or more; shutter speeds as cameras label them, 1/8 for 0.133 s,
-  // are up to 7 % off): a sentence naming the stack, both photos and the ratios; else "".
+  // times as read (over 200 samples or more; camera labels read as labelled are up to 7 % off):
+  // a sentence naming the stack, both photos and the ratios; else "".
   std::string time_warning;
+  ShutterTimes shutter = ShutterTimes::kLabelled;  // how the times were read (never kAuto)
   std::string BriefReport() const;
 };
+
+// How the brightness steps of linear (16-bit, RAW or float) stacks agree with their times read
+// either way: the RMS over exposure pairs next in time (with 200 samples or more well inside the
+// valid range in both) of ln(measured ratio / time ratio).
+struct ShutterChoice {
+  ShutterTimes times = ShutterTimes::kLabelled;
+  double labelled_rms = 0, apex_rms = 0;  // ln units; 0 where not judged
+  int pairs = 0;                          // pairs judged
+  std::string BriefReport() const;        // "exposure times read as APEX shutter speeds: ..."
+};
+
+// Pools the pairs of one capture's linear stacks, which share one reading of their times. Add
+// stacks until Decisive() (or none is left), then Choice(): kApex where some stack has APEX
+// labels and the steps are off the APEX times by less than 0.8x their RMS off the labels;
+// kLabelled otherwise (also where no pair could be judged). 8-bit stacks are refused
+// (CalibError): their steps depend on the response, whose fit decides (ResponseOptions).
+class ShutterJudge {
+ public:
+  explicit ShutterJudge(const MergeOptions& options = {}) : options_(options) {}
+  void Add(const ExposureStack& stack, const ExposureStack* black = nullptr);
+  // Some pair of labels whose ratio differs from their APEX times' ratio by over 0.5 % has been
+  // seen, and every such pair has been judged in some stack. (Pairs off by one common factor,
+  // 1/4000 -> 1/2000 as 1/4096 -> 1/2048, cannot tell the readings apart; yet the readings
+  // differ in that stack's scale against the others', so the next stacks are needed.)
+  bool Decisive() const;
+  ShutterChoice Choice() const;
+
+ private:
+  MergeOptions options_;
+  double sum_labelled_ = 0, sum_apex_ = 0;
+  int pairs_ = 0;
+  bool apex_labels_ = false;
+  std::vector<std::pair<double, double>> telling_, judged_;  // labelled times (shorter, longer)
+};
+
+// One stack judged alone.
+ShutterChoice ChooseShutterTimes(const ExposureStack& stack, const ExposureStack* black = nullptr,
+                                 const MergeOptions& options = {});
 
 // Merges a stack: each exposure is linearised (8-bit through `response`, required; 16-bit and
 // float as is), the black stack's exposure of the same time (if given) is subtracted, and
@@ -126,6 +195,7 @@ HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
 
 // A linear HDR image from `path`: an image file read as is (ReadLinearRgb), or a stack folder
 // merged with MergeHdr (`response` for 8-bit stacks, may be null otherwise).
-cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response);
+cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response,
+                       const MergeOptions& options = {});
 
 }  // namespace translume::calib

@@ -67,14 +67,14 @@ struct ErrorStats {
 };
 
 // Relative errors after one scale per channel (the median ratio) over finite, unflagged pixels
-// outside the saturated block.
-ErrorStats Errors(const cv::Mat& truth, const HdrImage& h, bool one_scale_for_all) {
+// outside the saturated block (truth above `brightest`).
+ErrorStats Errors(const cv::Mat& truth, const HdrImage& h, bool one_scale_for_all, float brightest = 1.0f) {
   std::vector<double> ratio[3];
   for (int y = 0; y < truth.rows; ++y)
     for (int x = 0; x < truth.cols; ++x)
       for (int c = 0; c < 3; ++c) {
         const float t = truth.at<cv::Vec3f>(y, x)[c];
-        if (t > 1.0f) continue;
+        if (t > brightest) continue;
         ratio[c].push_back(h.radiance.at<cv::Vec3f>(y, x)[c] / t);
       }
   ErrorStats s;
@@ -190,6 +190,133 @@ TEST(Hdr, ResponseFromTwoStacksWithDifferentTimes) {
   EXPECT_NE(CalibErrorOf([&] { CalibrateResponse({deep}); }).find("16-bit and RAW photos are linear and need none "
                                                                   "(in capture.json: \"response\": \"linear\")"),
             std::string::npos);
+}
+
+// A camera set to 1/15 s exposes 1/16 s and writes "1/15" into EXIF; the labels below are a
+// one-stop bracket whose ends (1/15 and 15) are 6.7 % short of the APEX times.
+std::vector<double> LabelledBracket() { return {1 / 15., 1 / 8., 1 / 4., 1 / 2., 1, 2, 4, 8, 15}; }
+
+// TestScene brightened 10x (1e-3 .. 10 per second, the block 500) for the bracket's span.
+cv::Mat BrightScene(uint64_t seed) { return TestScene(seed) * 10; }
+
+std::vector<double> ApexTimes(const std::vector<double>& labels) {
+  std::vector<double> t;
+  for (double l : labels) t.push_back(ApexSeconds(l));
+  return t;
+}
+
+TEST(Shutter, ApexSecondsOfCameraLabels) {
+  EXPECT_DOUBLE_EQ(ApexSeconds(1 / 30.), 1 / 32.);
+  EXPECT_DOUBLE_EQ(ApexSeconds(0.0333), 1 / 32.);  // written with 3 digits
+  EXPECT_DOUBLE_EQ(ApexSeconds(1 / 125.), 1 / 128.);
+  EXPECT_DOUBLE_EQ(ApexSeconds(15), 16);
+  EXPECT_DOUBLE_EQ(ApexSeconds(30), 32);
+  EXPECT_DOUBLE_EQ(ApexSeconds(1 / 8.), 1 / 8.);
+  EXPECT_NEAR(ApexSeconds(1 / 10.), std::exp2(-10 / 3.), 1e-15);
+  EXPECT_NEAR(ApexSeconds(0.3), std::exp2(-5 / 3.), 1e-15);
+  EXPECT_NEAR(ApexSeconds(1 / 45.), std::exp2(-5.5), 1e-15);  // half stops
+  EXPECT_NEAR(ApexSeconds(1 / 6000.), std::exp2(-12.5), 1e-15);
+  for (double t : {1 / 32., 0.0417, 0.9, 2.25, 7.0, 1e-5, 100.0}) EXPECT_EQ(ApexSeconds(t), t);
+  EXPECT_EQ(ShutterLabel(1 / 32.), 1 / 30.);
+  EXPECT_EQ(ShutterLabel(16), 15);
+  EXPECT_EQ(ShutterLabel(std::exp2(-10 / 3.)), 1 / 10.);
+  EXPECT_EQ(ShutterLabel(0.0417), 0.0417);
+  EXPECT_EQ(ParseShutterTimes("apex", "x"), ShutterTimes::kApex);
+  EXPECT_EQ(CalibErrorOf([] { ParseShutterTimes("APEX?", "capture.json"); }),
+            "capture.json: exposure times must be \"auto\", \"labelled\" or \"apex\", not \"APEX?\"");
+  ExposureStack s{"s", {{"a", cv::Mat(), 1 / 8.}, {"b", cv::Mat(), 1 / 4.}}};
+  EXPECT_FALSE(HasApexLabels(s));
+  s.exposures[1].seconds = 1 / 15.;
+  EXPECT_TRUE(HasApexLabels(s));
+  EXPECT_EQ(WithShutterTimes(s, ShutterTimes::kApex).exposures[1].seconds, 1 / 16.);
+  EXPECT_EQ(WithShutterTimes(s, ShutterTimes::kLabelled).exposures[1].seconds, 1 / 15.);
+}
+
+// 8-bit: the response fit reads the labels as APEX times where that fits the photos better, and
+// the merge follows the curve. A camera that exposes exactly what it labels keeps its labels.
+TEST(Hdr, EightBitShutterLabelsReadAsApexTimes) {
+  const SyntheticResponse f;
+  const std::vector<double> labels = LabelledBracket(), apex = ApexTimes(labels);
+  StackOptions so;
+  so.seed = 41;
+  const ExposureStack calib = MakeStack(SyntheticRig::RenderExposureStack(BrightScene(41), apex, f, so), labels);
+  const ResponseCurve curve = CalibrateResponse({calib});
+  std::printf("%s\n", curve.ShutterReport().c_str());
+  EXPECT_EQ(curve.shutter, ShutterTimes::kApex);
+  EXPECT_GT(curve.other_fit_rms, 1.05 * curve.fit_rms);  // 2.81 % against 2.55 %
+  ResponseOptions as_labelled;
+  as_labelled.shutter = ShutterTimes::kLabelled;
+  const ResponseCurve labelled_curve = CalibrateResponse({calib}, as_labelled);
+  EXPECT_EQ(labelled_curve.shutter, ShutterTimes::kLabelled);
+  so.seed = 42;
+  const cv::Mat truth = BrightScene(43);
+  const ExposureStack stack = MakeStack(SyntheticRig::RenderExposureStack(truth, apex, f, so), labels);
+  const HdrImage h = MergeHdr(stack, &curve);
+  EXPECT_EQ(h.shutter, ShutterTimes::kApex);
+  EXPECT_EQ(h.time_warning, "");
+  const ErrorStats e = Errors(truth, h, false, 10), el = Errors(truth, MergeHdr(stack, &labelled_curve), false, 10);
+  std::printf("8-bit, labels read as APEX: median %.3f%%, p95 %.3f%%; as labelled: median %.3f%%, p95 %.3f%%\n",
+              100 * e.median, 100 * e.p95, 100 * el.median, 100 * el.p95);
+  // The dark end (1e-3 per second, codes near 10 in the longest exposure) sets the 95th
+  // percentile; as labelled, the error is twice as large.
+  EXPECT_LE(e.median, 0.015);
+  EXPECT_LE(e.p95, 0.06);
+  EXPECT_GT(el.median, 2 * e.median);
+  EXPECT_GT(el.p95, 1.5 * e.p95);
+  // A camera exposing exactly 1/15 s etc.
+  const ExposureStack exact = MakeStack(SyntheticRig::RenderExposureStack(BrightScene(41), labels, f, so), labels);
+  const ResponseCurve exact_curve = CalibrateResponse({exact});
+  std::printf("exact labels: %s\n", exact_curve.ShutterReport().c_str());
+  EXPECT_EQ(exact_curve.shutter, ShutterTimes::kLabelled);
+}
+
+// Linear stacks: each stack's brightness steps decide.
+TEST(Hdr, LinearShutterLabelsReadAsApexTimes) {
+  const std::vector<double> labels = LabelledBracket(), apex = ApexTimes(labels);
+  StackOptions so;
+  so.bits = 16;
+  so.seed = 44;
+  const cv::Mat truth = BrightScene(44);
+  const ExposureStack stack = MakeStack(SyntheticRig::RenderExposureStack(truth, apex, {}, so), labels);
+  const ShutterChoice choice = ChooseShutterTimes(stack);
+  std::printf("%s\n", choice.BriefReport().c_str());
+  EXPECT_EQ(choice.times, ShutterTimes::kApex);
+  EXPECT_LT(choice.apex_rms, 0.005);
+  EXPECT_GT(choice.labelled_rms, 0.02);
+  const HdrImage h = MergeHdr(stack, nullptr);
+  EXPECT_EQ(h.shutter, ShutterTimes::kApex);
+  EXPECT_EQ(h.time_warning, "");
+  MergeOptions as_labelled;
+  as_labelled.shutter = ShutterTimes::kLabelled;
+  const HdrImage hl = MergeHdr(stack, nullptr, nullptr, as_labelled);
+  EXPECT_NE(hl.time_warning, "");
+  const ErrorStats e = Errors(truth, h, true, 10), el = Errors(truth, hl, true, 10);
+  std::printf("16-bit, labels read as APEX: scale %.4f, median %.3f%%, p95 %.3f%%; as labelled: scale %.4f, "
+              "median %.3f%%, p95 %.3f%%\n", e.scale[0], 100 * e.median, 100 * e.p95, el.scale[0], 100 * el.median,
+              100 * el.p95);
+  EXPECT_NEAR(e.scale[0], 1.0, 0.005);
+  EXPECT_LE(e.median, 0.015);
+  EXPECT_LE(e.p95, 0.06);  // read noise at the dark end
+  EXPECT_GT(el.median, 2 * e.median);
+  EXPECT_GT(el.p95, 1.5 * e.p95);
+  // A grey card lies well inside the valid range in a few exposures only: the pairs that tell
+  // the readings apart (1/15 -> 1/8, 8 -> 15) are judged in another stack of the capture.
+  const cv::Mat card(40, 60, CV_32FC3, cv::Scalar::all(0.2));
+  const ExposureStack grey = MakeStack(SyntheticRig::RenderExposureStack(card, apex, {}, so), labels);
+  ShutterJudge judge;
+  judge.Add(grey);
+  EXPECT_FALSE(judge.Decisive());
+  EXPECT_EQ(judge.Choice().times, ShutterTimes::kLabelled);  // not judged: as given
+  judge.Add(stack);
+  EXPECT_TRUE(judge.Decisive());
+  EXPECT_EQ(judge.Choice().times, ShutterTimes::kApex);
+  so.seed = 45;
+  const ExposureStack exact = MakeStack(SyntheticRig::RenderExposureStack(truth, labels, {}, so), labels);
+  EXPECT_EQ(ChooseShutterTimes(exact).times, ShutterTimes::kLabelled);
+  EXPECT_EQ(MergeHdr(exact, nullptr).shutter, ShutterTimes::kLabelled);
+  EXPECT_NE(CalibErrorOf([&] { ChooseShutterTimes(MakeStack(SyntheticRig::RenderExposureStack(truth, apex,
+                                                                  SyntheticResponse(), {}), labels)); })
+                .find("judged by the response fit"), std::string::npos);
 }
 
 // Six copies of one photo with different exposure times fitted a curve that falls within the
@@ -450,6 +577,21 @@ TEST_F(HdrFiles, ResponseAndExrRoundTrip) {
   for (int z = 0; z < 256; ++z) c.lut.at<cv::Vec3f>(z) = cv::Vec3f::all(float(std::pow((z + 1) / 129.0, 2.2)));
   WriteResponse(P("r.yml"), c);
   EXPECT_EQ(cv::norm(ReadResponse(P("r.yml")).lut, c.lut, cv::NORM_INF), 0.0);
+  EXPECT_EQ(ReadResponse(P("r.yml")).shutter, ShutterTimes::kLabelled);
+  c.shutter = ShutterTimes::kApex;
+  WriteResponse(P("r.yml"), c);
+  EXPECT_EQ(ReadResponse(P("r.yml")).shutter, ShutterTimes::kApex);
+  // A file of an older translume has no exposure_times: labelled.
+  {
+    cv::FileStorage f(P("old.yml"), cv::FileStorage::WRITE);
+    f << "channels" << "RGB" << "response" << c.lut;
+  }
+  EXPECT_EQ(ReadResponse(P("old.yml")).shutter, ShutterTimes::kLabelled);
+  {
+    cv::FileStorage f(P("bad.yml"), cv::FileStorage::WRITE);
+    f << "response" << c.lut << "exposure_times" << "auto";
+  }
+  EXPECT_NE(CalibErrorOf([&] { ReadResponse(P("bad.yml")); }).find("bad.yml: exposure_times must be"), std::string::npos);
   cv::Mat img(5, 7, CV_32FC3, cv::Scalar(0.5, 2.0, 1e-4));
   img.at<cv::Vec3f>(1, 1)[0] = std::numeric_limits<float>::infinity();
   WriteExr(P("a.exr"), img);

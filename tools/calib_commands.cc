@@ -28,8 +28,14 @@ namespace {
 
 namespace fs = std::filesystem;
 
-
-
+// --exposure-times (calib/shutter.h; docs/capture.md, "Exposure times").
+void AddExposureTimesOption(CLI::App& app, std::string& times, const std::string& what_auto) {
+  app.add_option("--exposure-times", times,
+                 "How EXIF/exposures.json times are read: labelled (as given), apex (camera labels such "
+                 "as 1/30 as their APEX times, 1/32 s) or auto (" + what_auto + ")")
+      ->check(CLI::IsMember({"auto", "labelled", "apex"}))
+      ->capture_default_str();
+}
 
 // OpenCV exceptions carry multi-line messages: keep the first meaningful line.
 template <typename F>
@@ -141,9 +147,13 @@ int RunCalibrateResponse(int argc, char** argv) {
   app.add_option("STACKS", dirs, "Exposure stack folders")->required();
   app.add_option("--samples", o.samples_per_stack, "Pixels sampled per stack")->capture_default_str();
   app.add_option("--smoothness", o.smoothness, "Smoothness weight lambda")->capture_default_str();
+  std::string times = "auto";
+  AddExposureTimesOption(app, times,
+                         "fits both readings where the times include camera labels and keeps the better");
   app.add_option("-o,--output", out, "Output response curve (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
+  o.shutter = calib::ParseShutterTimes(times, "--exposure-times");
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   RequireNotInput("-o", out, dirs);
   std::vector<calib::ExposureStack> stacks;
@@ -155,6 +165,7 @@ int RunCalibrateResponse(int argc, char** argv) {
               out.c_str(), stacks.size(), curve.lut.at<cv::Vec3f>(32)[0], curve.lut.at<cv::Vec3f>(224)[0],
               curve.lut.at<cv::Vec3f>(32)[1], curve.lut.at<cv::Vec3f>(224)[1],
               curve.lut.at<cv::Vec3f>(32)[2], curve.lut.at<cv::Vec3f>(224)[2]);
+  std::printf("%s\n", curve.ShutterReport().c_str());
   return 0;
 }
 
@@ -271,10 +282,14 @@ int RunHdr(int argc, char** argv) {
   app.add_option("--black", black_dir, "Black frame stack (same exposure times) to subtract");
   app.add_option("--low", o.low_code, "8-bit: highest under-exposed code")->capture_default_str();
   app.add_option("--high", o.high_code, "8-bit: lowest saturated code")->capture_default_str();
+  std::string times = "auto";
+  AddExposureTimesOption(app, times, "8-bit photos as the response was fitted, linear ones as "
+                                     "this stack's brightness steps say");
   app.add_option("-o,--output", out, "Output HDR image (.exr)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   return OneLineErrors([&] {
+    o.shutter = calib::ParseShutterTimes(times, "--exposure-times");
     RequireExtension(out, {".exr"}, "-o");
     const std::vector<std::string> inputs{dir, black_dir, response_path};
     RequireNotInput("-o", out, inputs);
@@ -286,11 +301,20 @@ int RunHdr(int argc, char** argv) {
                   dir.c_str(), response_path.c_str());
     calib::ExposureStack black;
     if (!black_dir.empty()) black = calib::ReadExposureStack(black_dir);
+    if (o.shutter == calib::ShutterTimes::kAuto && !stack.IsEightBit() && calib::HasApexLabels(stack)) {
+      const calib::ShutterChoice choice = calib::ChooseShutterTimes(stack, black_dir.empty() ? nullptr : &black, o);
+      std::printf("hdr: %s\n", choice.BriefReport().c_str());
+      o.shutter = choice.times;
+    }
     const calib::HdrImage h = calib::MergeHdr(stack, response_path.empty() ? nullptr : &curve,
                                               black_dir.empty() ? nullptr : &black, o);
     WriteAtomically(out, [&](const std::string& tmp) { calib::WriteExr(tmp, h.radiance); });
     std::printf("wrote %s: %zu exposures, %s\n", out.c_str(), stack.exposures.size(),
                 h.BriefReport().c_str());
+    if (stack.IsEightBit() && calib::HasApexLabels(stack))
+      std::printf("hdr: exposure times %s, %s\n",
+                  h.shutter == calib::ShutterTimes::kApex ? "read as APEX shutter speeds (1/30 as 1/32 s)" : "as labelled",
+                  times != "auto" ? "as --exposure-times says" : "as the response was fitted");
     if (!h.time_warning.empty()) std::printf("hdr: warning: %s\n", h.time_warning.c_str());
     return 0;
   });
