@@ -387,6 +387,18 @@ ExposureStack ReadExposureStack(const std::string& dir) {
     }
     s.exposures.push_back(std::move(e));
   }
+  // An entry that names no photo: a misspelt name whose photo then took its EXIF time silently,
+  // or a photo moved away.
+  for (const auto& [key, value] : times.items()) {
+    bool found = false;
+    for (const fs::path& p : files) found = found || Lower(p.filename().string()) == Lower(key);
+    if (found) continue;
+    const fs::path named = fs::path(dir) / key;
+    throw CalibError(fmt::format("{}: the entry \"{}\" names no photo of the stack ({})", json_path.string(), key,
+                                 fs::exists(named) ? "that file is not read as a photo: see its extension"
+                                                   : fmt::format("the folder holds {} to {}", files.front().filename().string(),
+                                                                 files.back().filename().string())));
+  }
   return s;
 }
 

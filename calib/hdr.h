@@ -65,8 +65,8 @@ cv::Mat ReadLinearRgb(const std::string& path);
 // Reads every image in `dir` (sorted by name) with its exposure time: the EXIF ExposureTime
 // when present, else the entry for the file name in `dir`/exposures.json ({"name": seconds}).
 // Throws CalibError naming the file when a time is missing or not positive, images differ in
-// size, bit depth or colour (grey and colour files mixed), a file cannot be decoded, or the
-// folder holds fewer than 2 images.
+// size, bit depth or colour (grey and colour files mixed), a file cannot be decoded, the
+// folder holds fewer than 2 images, or an entry of exposures.json names no photo in it.
 ExposureStack ReadExposureStack(const std::string& dir);
 
 // Camera response of an 8-bit camera: lut is 256x1 CV_32FC3 (R, G, B), lut(z) = relative

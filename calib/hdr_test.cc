@@ -504,6 +504,15 @@ TEST_F(HdrFiles, ReadsExifExposureTime) {
     EXPECT_NE(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find("is not a positive number of seconds"),
               std::string::npos) << bad_time;
   }
+  // An entry that names no photo (misspelt: j1.jpg then took its EXIF time without a word).
+  std::ofstream(dir_ / "exposures.json") << "{\"j_1.jpg\": 0.04}";
+  EXPECT_EQ(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }),
+            (dir_ / "exposures.json").string() + ": the entry \"j_1.jpg\" names no photo of the stack (the folder "
+            "holds j0.jpg to j1.jpg)");
+  std::ofstream(dir_ / "notes.txt") << "tripod";
+  std::ofstream(dir_ / "exposures.json") << "{\"notes.txt\": 0.04}";
+  EXPECT_NE(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find("that file is not read as a photo"),
+            std::string::npos);
   // A broken exposures.json says why (it said only "not valid JSON").
   std::ofstream(dir_ / "exposures.json") << "{\"j1.jpg\": 1e999}";
   const std::string bad = CalibErrorOf([&] { ReadExposureStack(dir_.string()); });
