@@ -184,9 +184,14 @@ int RunCalibrateWhite(int argc, char** argv) {
   app.add_option("--chart", chart, "Reference chart: colorchecker");
   app.add_option("--patch", patch, "Image corners of a white patch X1,Y1,X2,Y2,X3,Y3,X4,Y4");
   app.add_option("--albedo", albedo_text, "Albedo of the patch: A or R,G,B");
+  std::string times = "auto";
+  AddExposureTimesOption(app, times, "8-bit photos as the response was fitted, linear ones as each stack's "
+                                     "brightness steps say; give the reading the lighting stacks take");
   app.add_option("-o,--output", out, "Output white balance (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
+  calib::MergeOptions merge;
+  merge.shutter = calib::ParseShutterTimes(times, "--exposure-times");
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   const std::vector<std::string> inputs{white_path, black_path, response_path};
   RequireNotInput("-o", out, inputs);
@@ -208,8 +213,8 @@ int RunCalibrateWhite(int argc, char** argv) {
   calib::ResponseCurve curve;
   if (!response_path.empty()) curve = calib::ReadResponse(response_path);
   const calib::ResponseCurve* response = response_path.empty() ? nullptr : &curve;
-  const cv::Mat white = calib::ReadHdrOrStack(white_path, response);
-  const cv::Mat black = black_path.empty() ? cv::Mat() : calib::ReadHdrOrStack(black_path, response);
+  const cv::Mat white = calib::ReadHdrOrStack(white_path, response, merge);
+  const cv::Mat black = black_path.empty() ? cv::Mat() : calib::ReadHdrOrStack(black_path, response, merge);
   calib::WhiteBalance w;
   try {
     w = patch.empty() ? calib::WhiteFromColorChecker(white, black)
