@@ -93,15 +93,6 @@ class StageLog {
 };
 
 
-DeviceIntrinsics FromCalibration(const cv::Size& size, const cv::Matx33d& K, const cv::Mat& dist) {
-  DeviceIntrinsics d;
-  d.size = size;
-  d.K = K;
-  cv::Mat d64;
-  dist.reshape(1, 1).convertTo(d64, CV_64F);
-  for (int i = 0; i < std::min(5, d64.cols); ++i) d.dist[i] = d64.at<double>(0, i);
-  return d;
-}
 
 // Side-by-side preview of measured (left) and fitted (right) radiance, one scale for both,
 // each node a square of pixels so that the image is at least ~512 pixels wide.
@@ -208,7 +199,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   rep.camera_rms_px = camera.rms;
   progress(fmt::format("camera: {}", camera.BriefReport()));
   for (const std::string& d : camera.dropped) progress(fmt::format("  dropped {}", d));
-  const DeviceIntrinsics cam = FromCalibration(camera.image_size, camera.K, camera.dist);
+  const DeviceIntrinsics cam = DeviceIntrinsics::From(camera.image_size, camera.K, camera.dist);
 
   std::optional<calib::ProjectorCalibration> projector;
   if (!cap.projector.file.empty()) {
@@ -414,7 +405,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   DeviceIntrinsics proj;
   calib::Pose projector_from_camera;
   if (projector) {
-    proj = FromCalibration(projector->projector_size, projector->K, projector->dist);
+    proj = DeviceIntrinsics::From(projector->projector_size, projector->K, projector->dist);
     projector_from_camera.R = projector->R;
     projector_from_camera.t = projector->T;
   }

@@ -9,9 +9,13 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 
+#include "acquire/face_mapping.h"
 #include "acquire/simulate_capture.h"
+#include "calib/camera_calib.h"
 #include "calib/hdr.h"
+#include "calib/projector_calib.h"
 #include "calib/white.h"
 #include "solver/dataset.h"
 #include "solver/evaluate.h"
@@ -183,6 +187,50 @@ TEST_F(AcquireTest, CameraShutterLabelsAreReadAsApexTimes) {
     EXPECT_LE(apex.q_rms, 0.02);
     EXPECT_GT(labelled.L_rms, 1.5 * apex.L_rms);
   }
+}
+
+// `translume patterns` for a real rig: the region patterns computed from the calibrations that
+// acquire makes of the simulated capture's photos, and the face corners, light what the
+// simulator's true rig lights (the capture's patterns/NN.png) up to the calibration's error.
+// The projector on the wrong side is named.
+TEST_F(AcquireTest, RegionPatternsFromCalibrationsMatchTheTrueRig) {
+  const std::string c = SmallCapture(Setup::kBack);
+  AcquireOptions o;
+  o.solve = false;
+  const AcquireReport r = Acquire(ReadCapture(c), Out(), o);
+  const calib::CameraCalibration camera = calib::ReadCameraCalibration(r.work_dir + "/camera.yml");
+  const calib::ProjectorCalibration projector = calib::ReadProjectorCalibration(r.work_dir + "/projector.yml");
+  const DeviceIntrinsics cam = DeviceIntrinsics::From(camera.image_size, camera.K, camera.dist);
+  const DeviceIntrinsics proj = DeviceIntrinsics::From(projector.projector_size, projector.K, projector.dist);
+  calib::Pose projector_from_camera;
+  projector_from_camera.R = projector.R;
+  projector_from_camera.t = projector.T;
+  const CaptureSpec cap = ReadCapture(c);
+  std::vector<cv::Point2d> corners;
+  for (const auto& p : cap.face_corners_px) corners.emplace_back(p[0], p[1]);
+  const calib::Pose camera_from_sample = EstimateSamplePose(cam, corners, cap.size_mm, "test");
+  const std::vector<cv::Mat> patterns =
+      RegionPatterns(proj, projector_from_camera, camera_from_sample, cap.size_mm, Setup::kBack, 2);
+  ASSERT_EQ(patterns.size(), 4u);
+  for (int m = 0; m < 4; ++m) {
+    const cv::Mat truth = cv::imread(fmt::format("{}/patterns/{:02d}.png", c, m), cv::IMREAD_GRAYSCALE);
+    ASSERT_EQ(truth.size(), patterns[size_t(m)].size());
+    const double both = cv::countNonZero(truth & patterns[size_t(m)]);
+    const double either = cv::countNonZero(truth | patterns[size_t(m)]);
+    std::printf("region %d: %d projector pixels, %d in the true rig's pattern, intersection over union %.4f\n", m,
+                cv::countNonZero(patterns[size_t(m)]), cv::countNonZero(truth), both / either);
+    EXPECT_GT(both / either, 0.97);
+  }
+  try {
+    RegionPatterns(proj, projector_from_camera, camera_from_sample, cap.size_mm, Setup::kFront, 2);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("the projector is on the back side of the sample, so it cannot light its "
+                                         "front face: is the setup back?"), std::string::npos) << e.what();
+  }
+  // Regions smaller than the projector's pixels.
+  EXPECT_THROW(RegionPatterns(proj, projector_from_camera, camera_from_sample, cap.size_mm, Setup::kBack, 400),
+               InputError);
 }
 
 // Conditions given as light specs on the lit face (a rig whose projector is aligned to the

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -85,8 +86,28 @@ std::vector<cv::Point3d> FrontFaceCorners(const GridShape& g, double h) {
   return {{0, 0, 0}, {X, 0, 0}, {X, Y, 0}, {0, Y, 0}};
 }
 
+DeviceIntrinsics DeviceIntrinsics::From(const cv::Size& size, const cv::Matx33d& K, const cv::Mat& dist) {
+  DeviceIntrinsics d;
+  d.size = size;
+  d.K = K;
+  cv::Mat d64;
+  dist.reshape(1, 1).convertTo(d64, CV_64F);
+  for (int i = 0; i < std::min(5, d64.cols); ++i) d.dist[i] = d64.at<double>(0, i);
+  return d;
+}
+
+std::array<double, 3> SampleSize(const GridShape& g, double h) {
+  return {double(g.nx - 1) * h, double(g.ny - 1) * h, double(g.nz - 1) * h};
+}
+
 calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
                                const GridShape& grid, double h, const std::string& what,
+                               double* rms_px) {
+  return EstimateSamplePose(camera, corners, SampleSize(grid, h), what, rms_px);
+}
+
+calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
+                               const std::array<double, 3>& size_mm, const std::string& what,
                                double* rms_px) {
   TL_CHECK(corners.size() == 4);
   for (size_t k = 0; k < 4; ++k)
@@ -95,7 +116,7 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
       throw InputError(fmt::format("{}: corner {} ({:.1f}, {:.1f}) is outside the {}x{} image", what,
                                    k, corners[k].x, corners[k].y, camera.size.width,
                                    camera.size.height));
-  const std::vector<cv::Point3d> obj = FrontFaceCorners(grid, h);
+  const std::vector<cv::Point3d> obj = {{0, 0, 0}, {size_mm[0], 0, 0}, {size_mm[0], size_mm[1], 0}, {0, size_mm[1], 0}};
   cv::Vec3d rvec, tvec;
   if (!cv::solvePnP(obj, corners, camera.K, camera.dist, rvec, tvec, false, cv::SOLVEPNP_IPPE))
     throw InputError(fmt::format("{}: no sample pose fits the four corners", what));
@@ -301,9 +322,12 @@ std::vector<float> ProjectPatternOnFace(const cv::Mat& pattern, const DeviceIntr
   return q;
 }
 
-cv::Mat PatternForFaceRect(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
-                           const calib::Pose& camera_from_sample, const GridShape& g, double h,
-                           Setup setup, const std::array<double, 4>& rect) {
+namespace {
+
+// Where each projector pixel's centre ray meets the plane z = `z` of the sample frame (mm):
+// CV_64FC2, NaN where it does not (parallel, or behind the projector).
+cv::Mat PlaneHits(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
+                  const calib::Pose& camera_from_sample, double z) {
   std::vector<cv::Point2d> pix, norm;
   pix.reserve(size_t(projector.size.area()));
   for (int y = 0; y < projector.size.height; ++y)
@@ -311,20 +335,75 @@ cv::Mat PatternForFaceRect(const DeviceIntrinsics& projector, const calib::Pose&
   cv::undistortPoints(pix, norm, projector.K, projector.dist, cv::noArray(), cv::noArray(),
                       cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 50, 1e-12));
   // Rays in the sample frame: origin o, direction R (x, y, 1).
-  const calib::Pose sample_from_projector =
-      camera_from_sample.Inverse() * projector_from_camera.Inverse();
+  const calib::Pose sample_from_projector = camera_from_sample.Inverse() * projector_from_camera.Inverse();
   const cv::Vec3d o = sample_from_projector.t;
-  const double z = LitFaceZ(g, h, setup);
-  cv::Mat out(projector.size, CV_8UC1, cv::Scalar(0));
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  cv::Mat hits(projector.size, CV_64FC2, cv::Scalar(nan, nan));
   for (size_t k = 0; k < norm.size(); ++k) {
     const cv::Vec3d d = sample_from_projector.R * cv::Vec3d(norm[k].x, norm[k].y, 1.0);
     if (std::abs(d[2]) < 1e-12) continue;
     const double s = (z - o[2]) / d[2];
     if (s <= 0) continue;
-    const double x = o[0] + s * d[0], y = o[1] + s * d[1];
-    if (x >= rect[0] && x <= rect[1] && y >= rect[2] && y <= rect[3])
-      out.at<uint8_t>(int(k) / projector.size.width, int(k) % projector.size.width) = 255;
+    hits.at<cv::Vec2d>(int(k) / projector.size.width, int(k) % projector.size.width) =
+        cv::Vec2d(o[0] + s * d[0], o[1] + s * d[1]);
   }
+  return hits;
+}
+
+}  // namespace
+
+cv::Mat PatternForFaceRect(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
+                           const calib::Pose& camera_from_sample, const GridShape& g, double h,
+                           Setup setup, const std::array<double, 4>& rect) {
+  const cv::Mat hits = PlaneHits(projector, projector_from_camera, camera_from_sample, LitFaceZ(g, h, setup));
+  cv::Mat out(projector.size, CV_8UC1, cv::Scalar(0));
+  for (int y = 0; y < out.rows; ++y)
+    for (int x = 0; x < out.cols; ++x) {
+      const cv::Vec2d p = hits.at<cv::Vec2d>(y, x);
+      if (p[0] >= rect[0] && p[0] <= rect[1] && p[1] >= rect[2] && p[1] <= rect[3]) out.at<uint8_t>(y, x) = 255;
+    }
+  return out;
+}
+
+std::vector<cv::Mat> RegionPatterns(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
+                                    const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
+                                    Setup setup, int n) {
+  TL_CHECK(n >= 1);
+  const double z = setup == Setup::kBack ? size_mm[2] : 0.0;
+  // The lit face must be turned towards the projector (its outward normal: +z back, -z front).
+  const cv::Vec3d projector_in_sample =
+      camera_from_sample.Inverse().Apply(projector_from_camera.Inverse().t);
+  if ((projector_in_sample[2] - z) * (setup == Setup::kBack ? 1.0 : -1.0) <= 0)
+    throw InputError(fmt::format("the projector is on the {} side of the sample, so it cannot light its {} face: "
+                                 "is the setup {}?", setup == Setup::kBack ? "front" : "back",
+                                 setup == Setup::kBack ? "back" : "front", setup == Setup::kBack ? "front" : "back"));
+  const cv::Mat hits = PlaneHits(projector, projector_from_camera, camera_from_sample, z);
+  // Region I covers [I X / n, (I + 1) X / n]; a pixel on a shared edge lights both. Counted
+  // first, so that regions no pixel lights are named before n^2 images are made.
+  auto for_regions = [&](const std::function<void(int, int, int)>& visit) {
+    for (int y = 0; y < hits.rows; ++y)
+      for (int x = 0; x < hits.cols; ++x) {
+        const cv::Vec2d p = hits.at<cv::Vec2d>(y, x);
+        if (!(p[0] >= 0 && p[0] <= size_mm[0] && p[1] >= 0 && p[1] <= size_mm[1])) continue;
+        // The regions next to the one p's coordinates round into (an edge may round either way).
+        const int i0 = int(p[0] * n / size_mm[0]), j0 = int(p[1] * n / size_mm[1]);
+        for (int J = std::max(0, j0 - 1); J < std::min(n, j0 + 2); ++J)
+          for (int I = std::max(0, i0 - 1); I < std::min(n, i0 + 2); ++I)
+            if (p[0] >= I * size_mm[0] / n && p[0] <= (I + 1) * size_mm[0] / n && p[1] >= J * size_mm[1] / n &&
+                p[1] <= (J + 1) * size_mm[1] / n)
+              visit(I + n * J, x, y);
+      }
+  };
+  std::vector<int64_t> count(size_t(n * n), 0);
+  for_regions([&](int m, int, int) { ++count[size_t(m)]; });
+  for (int m = 0; m < n * n; ++m)
+    if (count[size_t(m)] == 0)
+      throw InputError(fmt::format("no projector pixel lights region {} ({}, {}) of the {} face: the face lies partly "
+                                   "outside the projector's image, or the regions are smaller than its pixels",
+                                   m, m % n, m / n, setup == Setup::kBack ? "back" : "front"));
+  std::vector<cv::Mat> out;
+  for (int m = 0; m < n * n; ++m) out.emplace_back(projector.size, CV_8UC1, cv::Scalar(0));
+  for_regions([&](int m, int x, int y) { out[size_t(m)].at<uint8_t>(y, x) = 255; });
   return out;
 }
 

@@ -23,7 +23,12 @@ struct DeviceIntrinsics {
   cv::Matx33d K = cv::Matx33d::eye();
   cv::Vec<double, 5> dist{0, 0, 0, 0, 0};
   std::vector<cv::Point2d> Project(const std::vector<cv::Point3d>& camera_xyz) const;
+  // From a calibration's size, camera matrix and distortion (any length up to 5 used).
+  static DeviceIntrinsics From(const cv::Size& size, const cv::Matx33d& K, const cv::Mat& dist);
 };
+
+// A block sample's extent along x, y, z (mm): (n - 1) h per axis.
+std::array<double, 3> SampleSize(const GridShape& grid, double h);
 
 // The four front-face corners in the sample frame, in CaptureSpec's order:
 // (0, 0, 0), (X, 0, 0), (X, Y, 0), (0, Y, 0).
@@ -35,6 +40,9 @@ std::vector<cv::Point3d> FrontFaceCorners(const GridShape& grid, double h);
 // camera or shows the face from behind (corners counter-clockwise), or the pose misses the
 // corners by more than max(3 px, 2 % of the face's side in the image) RMS (corners listed from
 // another corner of a non-square face, or a wrong sample size).
+calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
+                               const std::array<double, 3>& size_mm, const std::string& what,
+                               double* rms_px = nullptr);
 calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
                                const GridShape& grid, double h, const std::string& what,
                                double* rms_px = nullptr);
@@ -73,6 +81,15 @@ std::vector<float> ProjectPatternOnFace(const cv::Mat& pattern, const DeviceIntr
 
 // The projector image (CV_8UC1, 255 inside) that lights the rectangle [x0, x1] x [y0, y1] (mm,
 // sample frame) of the lit face: pixels whose centre ray meets the lit face inside it.
+// The projector images (CV_8UC1, 255 inside) that light each of n x n equal regions of the lit
+// face of a block of `size_mm` (back face z = Z back-lit, front face z = 0 front-lit): region
+// m = I + n J covers [I X / n, (I + 1) X / n] x [J Y / n, (J + 1) Y / n] (mm, sample frame; a pixel
+// whose ray meets an edge lights both regions). Throws InputError when the lit face is turned
+// away from the projector (the setup is the other one) or a region gets no projector pixel.
+std::vector<cv::Mat> RegionPatterns(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
+                                    const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
+                                    Setup setup, int n);
+
 cv::Mat PatternForFaceRect(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
                            const calib::Pose& camera_from_sample, const GridShape& grid, double h,
                            Setup setup, const std::array<double, 4>& rect);

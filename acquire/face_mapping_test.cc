@@ -95,6 +95,17 @@ TEST(FaceMapping, RegionPatternRoundTrip) {
     const double rms = std::sqrt(RelightingError(got, want));
     std::printf("%s-lit: region pattern q vs ideal region light: relative RMS %.3f %%\n", SetupName(setup), 100 * rms);
     EXPECT_LT(rms, 0.02);
+    // RegionPatterns makes all four at once, the same images.
+    const std::vector<cv::Mat> all = RegionPatterns(rig.projector, rig.projector_from_camera, rig.camera_from_sample,
+                                                    SampleSize(kGrid, kH), setup, 2);
+    ASSERT_EQ(all.size(), 4u);
+    for (int m = 0; m < 4; ++m) {
+      const int I = m % 2, J = m / 2;
+      const cv::Mat one = PatternForFaceRect(rig.projector, rig.projector_from_camera, rig.camera_from_sample, kGrid,
+                                             kH, setup, {I * X / 2, (I + 1) * X / 2, J * Y / 2, (J + 1) * Y / 2});
+      EXPECT_EQ(cv::countNonZero(one != all[size_t(m)]), 0) << "region " << m;
+      EXPECT_GT(cv::countNonZero(one), 1000) << "region " << m;
+    }
   }
 }
 

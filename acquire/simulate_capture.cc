@@ -383,11 +383,10 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     const int M = N * N;
     std::vector<cv::Mat> patterns;
     std::vector<FacePattern> fine_q;
+    const std::vector<cv::Mat> region_patterns = RegionPatterns(
+        rig.projector, rig.projector_from_camera, rig.camera_from_sample, SampleSize(g.grid, g.h), o.setup, N);
     for (int m = 0; m < M; ++m) {
-      const int I = m % N, J = m / N;
-      const cv::Mat p = PatternForFaceRect(rig.projector, rig.projector_from_camera, rig.camera_from_sample,
-                                           g.grid, g.h, o.setup,
-                                           {I * g.X / N, (I + 1) * g.X / N, J * g.Y / N, (J + 1) * g.Y / N});
+      const cv::Mat& p = region_patterns[size_t(m)];
       calib::WriteImage8((tmp / "patterns" / fmt::format("{:02d}.png", m)).string(), p);
       cv::Mat pf;
       p.convertTo(pf, CV_32F, 1.0 / 255);

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: MIT
-// Subcommands of the capture pipeline: simulate-capture and acquire.
+// Subcommands of the capture pipeline: simulate-capture, patterns and acquire.
 #include <unistd.h>
 
 #include <chrono>
@@ -8,10 +8,19 @@
 #include <optional>
 #include <filesystem>
 #include <fmt/format.h>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
 
 #include "acquire/acquire.h"
 #include "acquire/capture.h"
+#include "acquire/face_mapping.h"
 #include "acquire/simulate_capture.h"
+#include "calib/camera_calib.h"
+#include "calib/hdr.h"
+#include "calib/photo_io.h"
+#include "calib/projector_calib.h"
+#include "solver/atomic_file.h"
 #include "solver/dataset.h"
 #include "solver/evaluate.h"
 #include "solver/light.h"
@@ -66,6 +75,98 @@ int RunSimulateCapture(int argc, char** argv) {
     std::fflush(stdout);
   });
   std::printf("wrote %s: %s\n", sum.capture_json.c_str(), sum.BriefReport().c_str());
+  return 0;
+}
+
+int RunPatterns(int argc, char** argv) {
+  CLI::App app{"Write the projector images that light NxN regions of the sample's lit face, one\n"
+               "condition each (docs/capture.md, step 6), from the camera and projector\n"
+               "calibrations and the sample's place: its front face's corners in the camera image,\n"
+               "given or found in a photo of the sample on a dark background. Also writes\n"
+               "conditions.json, the conditions list for capture.json.",
+               "translume patterns"};
+  std::string camera_path, projector_path, size_text, setup = "back", corners_text, photo, response_path,
+      lights = "4x4", out;
+  app.add_option("--camera", camera_path, "Camera calibration (translume calibrate camera)")->required();
+  app.add_option("--projector", projector_path, "Projector calibration (translume calibrate projector)")->required();
+  app.add_option("--sample-mm", size_text, "The block's extent X,Y,Z (mm), as sample_mm in capture.json")->required();
+  app.add_option("--setup", setup, "back (projector behind the sample) or front")->capture_default_str();
+  auto* corners_opt = app.add_option("--corners", corners_text,
+                                     "Front face corners in the camera image X1,Y1,..,X4,Y4 (node (0,0) first, "
+                                     "clockwise as the camera sees the face)");
+  auto* photo_opt = app.add_option("--photo", photo,
+                                   "Or: a camera photo (or exposure stack folder, or .exr) of the sample, lit, on a "
+                                   "dark background, in which the corners are found");
+  corners_opt->excludes(photo_opt);
+  app.add_option("--response", response_path, "Response curve for an 8-bit --photo stack");
+  app.add_option("--lights", lights, "NxN regions of the lit face, one condition each")->capture_default_str();
+  app.add_option("-o,--output", out, "New folder for NN.png and conditions.json (e.g. CAPTURE/patterns)")->required();
+  AddCommonOptions(app);
+  if (ParseOrHelp(app, argc, argv)) return 0;
+  if (corners_text.empty() == photo.empty()) throw InputError("give --corners or --photo");
+  const Setup s = ParseSetup(setup);
+  const int n = RegionLights(lights).front().region_n;  // validates NxN
+  const std::vector<double> size = ParseNumbers(size_text, "--sample-mm", 3, 3);
+  for (double v : size)
+    if (!(v > 0) || !std::isfinite(v)) throw InputError(fmt::format("--sample-mm {}: every extent must be positive", size_text));
+  std::vector<cv::Point2d> corners;
+  if (!corners_text.empty()) {
+    const std::vector<double> c = ParseNumbers(corners_text, "--corners", 8, 8);
+    for (int k = 0; k < 4; ++k) corners.emplace_back(c[size_t(2 * k)], c[size_t(2 * k + 1)]);
+  }
+  if (fs::exists(out) && !(fs::is_directory(out) && fs::is_empty(out)))
+    throw InputError(fmt::format("-o {}: exists and is not empty (a new folder of patterns is written)", out));
+  const calib::CameraCalibration camera = calib::ReadCameraCalibration(camera_path);
+  const calib::ProjectorCalibration projector = calib::ReadProjectorCalibration(projector_path);
+  const acquire::DeviceIntrinsics cam = acquire::DeviceIntrinsics::From(camera.image_size, camera.K, camera.dist);
+  const acquire::DeviceIntrinsics proj =
+      acquire::DeviceIntrinsics::From(projector.projector_size, projector.K, projector.dist);
+  calib::Pose projector_from_camera;
+  projector_from_camera.R = projector.R;
+  projector_from_camera.t = projector.T;
+  std::string what = "--corners";
+  if (corners.empty()) {
+    calib::ResponseCurve curve;
+    if (!response_path.empty()) curve = calib::ReadResponse(response_path);
+    const cv::Mat image = calib::ReadHdrOrStack(photo, response_path.empty() ? nullptr : &curve);
+    if (image.size() != camera.image_size)
+      throw InputError(fmt::format("{}: the image is {}x{} but the camera calibration {} is {}x{}", photo, image.cols,
+                                   image.rows, camera_path, camera.image_size.width, camera.image_size.height));
+    corners = acquire::DetectFaceCorners(image);
+    if (corners.empty())
+      throw InputError(photo + ": no four-sided sample found on a dark background; give --corners");
+    what = "--photo " + photo + ": the corners found";
+  }
+  double rms = 0;
+  const std::array<double, 3> size_mm{size[0], size[1], size[2]};
+  const calib::Pose camera_from_sample = acquire::EstimateSamplePose(cam, corners, size_mm, what, &rms);
+  std::vector<cv::Mat> images;
+  try {
+    images = acquire::RegionPatterns(proj, projector_from_camera, camera_from_sample, size_mm, s, n);
+  } catch (const InputError& e) {
+    throw InputError(fmt::format("{} and {}: {}", projector_path, what, e.what()));
+  }
+  const std::string folder = fs::path(out).filename().string();
+  nlohmann::json conditions = nlohmann::json::array();
+  int64_t fewest = std::numeric_limits<int64_t>::max(), most = 0;
+  for (size_t m = 0; m < images.size(); ++m) {
+    const std::string name = fmt::format("{:02d}", m);
+    conditions.push_back({{"name", name}, {"stack", "lighting/" + name}, {"pattern", folder + "/" + name + ".png"}});
+    const int64_t lit = cv::countNonZero(images[m]);
+    fewest = std::min(fewest, lit);
+    most = std::max(most, lit);
+  }
+  WriteFolderAtomically(out, [&](const std::string& tmp) {
+    for (size_t m = 0; m < images.size(); ++m)
+      calib::WriteImage8((fs::path(tmp) / fmt::format("{:02d}.png", m)).string(), images[m]);
+    std::ofstream(fs::path(tmp) / "conditions.json") << conditions.dump(2) << "\n";
+  });
+  std::printf("patterns: front face corners (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f), pose RMS %.2f px\n",
+              corners[0].x, corners[0].y, corners[1].x, corners[1].y, corners[2].x, corners[2].y, corners[3].x,
+              corners[3].y, rms);
+  std::printf("wrote %s: %zu patterns (%dx%d regions of the %s face, %lld to %lld projector pixels each) and "
+              "conditions.json for capture.json\n", out.c_str(), images.size(), n, n,
+              s == Setup::kBack ? "back" : "front", (long long)fewest, (long long)most);
   return 0;
 }
 

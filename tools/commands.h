@@ -22,6 +22,7 @@ int RunSimulate(int argc, char** argv);
 int RunSolve(int argc, char** argv);
 int RunEvaluate(int argc, char** argv);
 int RunSimulateCapture(int argc, char** argv);
+int RunPatterns(int argc, char** argv);
 int RunAcquire(int argc, char** argv);
 
 // `bench forward` and `bench recovery` (tools/bench_commands.cc, no file IO): each registers

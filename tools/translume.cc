@@ -26,6 +26,7 @@ const Command kCommands[] = {
     {"demo", translume::RunDemo, "Run the main job on the embedded default sample"},
     {"acquire", translume::RunAcquire, "From a capture folder of photos to a material (the pipeline)"},
     {"simulate-capture", translume::RunSimulateCapture, "Write a simulated capture folder of a material"},
+    {"patterns", translume::RunPatterns, "Write the projector images that light NxN regions of the sample"},
     {"synth", translume::RunSynth, "Write a synthetic material volume (.vdb)"},
     {"forward", translume::RunForward, "Simulate the front-face radiance of a material under a light"},
     {"simulate", translume::RunSimulate, "Simulate node-space data of a material (no photos): a dataset"},
