@@ -156,7 +156,7 @@ std::vector<PairRatio> MeasurePairRatios(const ExposureStack& stack, const Linea
 
 // Pairs with fewer samples are not judged at all (MergeHdr's 2x check) ...
 constexpr size_t kMinPairSamples = 50;
-// ... and pairs with fewer are not weighed against 3 % (the warning, ChooseShutterTimes).
+// ... and pairs with fewer are not weighed against 3 % (the warning, ShutterJudge).
 constexpr size_t kMinPairSamplesForPercent = 200;
 
 }  // namespace
