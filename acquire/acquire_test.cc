@@ -212,6 +212,10 @@ TEST_F(AcquireTest, RegionPatternsFromCalibrationsMatchTheTrueRig) {
   const std::vector<cv::Mat> patterns =
       RegionPatterns(proj, projector_from_camera, camera_from_sample, cap.size_mm, Setup::kBack, 2);
   ASSERT_EQ(patterns.size(), 4u);
+  EXPECT_TRUE(LitFaceInsideProjector(proj, projector_from_camera, camera_from_sample, cap.size_mm, Setup::kBack));
+  // A sample 3x as wide reaches past the projector's image (the face spans ~60 % of its width).
+  EXPECT_FALSE(LitFaceInsideProjector(proj, projector_from_camera, camera_from_sample,
+                                      {3 * cap.size_mm[0], cap.size_mm[1], cap.size_mm[2]}, Setup::kBack));
   for (int m = 0; m < 4; ++m) {
     const cv::Mat truth = cv::imread(fmt::format("{}/patterns/{:02d}.png", c, m), cv::IMREAD_GRAYSCALE);
     ASSERT_EQ(truth.size(), patterns[size_t(m)].size());

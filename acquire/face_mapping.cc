@@ -365,6 +365,20 @@ cv::Mat PatternForFaceRect(const DeviceIntrinsics& projector, const calib::Pose&
   return out;
 }
 
+bool LitFaceInsideProjector(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
+                            const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
+                            Setup setup) {
+  const double z = setup == Setup::kBack ? size_mm[2] : 0.0;
+  const std::vector<cv::Point3d> corners = {{0, 0, z}, {size_mm[0], 0, z}, {size_mm[0], size_mm[1], z}, {0, size_mm[1], z}};
+  const std::vector<cv::Point3d> in_projector = Transform(projector_from_camera, Transform(camera_from_sample, corners));
+  for (const cv::Point3d& p : in_projector)
+    if (p.z <= 0) return false;
+  for (const cv::Point2d& uv : projector.Project(in_projector))
+    if (!(uv.x >= -0.5 && uv.y >= -0.5 && uv.x <= projector.size.width - 0.5 && uv.y <= projector.size.height - 0.5))
+      return false;
+  return true;
+}
+
 std::vector<cv::Mat> RegionPatterns(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
                                     const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
                                     Setup setup, int n) {

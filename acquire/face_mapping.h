@@ -90,6 +90,12 @@ std::vector<cv::Mat> RegionPatterns(const DeviceIntrinsics& projector, const cal
                                     const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
                                     Setup setup, int n);
 
+// Whether the lit face's four corners (and so, the face being flat and the projector's distortion
+// mild, the whole face) fall inside the projector's image.
+bool LitFaceInsideProjector(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
+                            const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
+                            Setup setup);
+
 cv::Mat PatternForFaceRect(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
                            const calib::Pose& camera_from_sample, const GridShape& grid, double h,
                            Setup setup, const std::array<double, 4>& rect);

@@ -146,6 +146,9 @@ int RunPatterns(int argc, char** argv) {
   } catch (const InputError& e) {
     throw InputError(fmt::format("{} and {}: {}", projector_path, what, e.what()));
   }
+  if (!acquire::LitFaceInsideProjector(proj, projector_from_camera, camera_from_sample, size_mm, s))
+    std::printf("patterns: warning: the %s face reaches outside the projector's image: the regions at its edge are "
+                "lit only in part\n", s == Setup::kBack ? "back" : "front");
   const std::string folder = fs::path(out).filename().string();
   nlohmann::json conditions = nlohmann::json::array();
   int64_t fewest = std::numeric_limits<int64_t>::max(), most = 0;
