@@ -139,9 +139,10 @@ std::string AcquireReport::Table() const {
     s += fmt::format("  {:<18} {:8.1f}{}\n", name, t,
                      std::find(reused.begin(), reused.end(), name) != reused.end() ? "  (reused)" : "");
   s += fmt::format("calibration: camera RMS {:.3f} px, projector RMS {}, sample pose RMS {:.3f} px, "
-                   "white gains {:.4g} {:.4g} {:.4g}\n", camera_rms_px,
+                   "white gains {:.4g} {:.4g} {:.4g}, exposure times {}\n", camera_rms_px,
                    projector_rms_px < 0 ? std::string("-") : fmt::format("{:.3f} px", projector_rms_px),
-                   pose_rms_px, white_gains[0], white_gains[1], white_gains[2]);
+                   pose_rms_px, white_gains[0], white_gains[1], white_gains[2],
+                   exposure_times == "apex" ? "read as APEX shutter speeds" : exposure_times);
   s += "condition  measured  saturated  masked   fit error\n";
   for (const auto& c : conditions)
     s += fmt::format("  {:<8} {:8d} {:10d} {:7d}   {}\n", c.name, c.measured_nodes, c.saturated_nodes,
@@ -204,6 +205,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   std::optional<calib::ProjectorCalibration> projector;
   if (!cap.projector.file.empty()) {
     projector = calib::ReadProjectorCalibration(cap.projector.file);
+    if (std::string why = calib::CameraMismatch(camera, cap.projector.file); !why.empty())
+      throw InputError(fmt::format("{}: projector: {}", cap.file, why));
   } else if (!cap.projector.planes.empty()) {
     const std::string yml = (work / "projector.yml").string();
     const std::string sig = Signature({cap.projector.planes, camera_yml},
@@ -291,10 +294,15 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     merge_options.shutter = calib::ParseShutterTimes(reading, txt);
   }
   const std::string times_sig = calib::ToString(merge_options.shutter);
+  rep.exposure_times = times_sig;
 
   calib::WhiteBalance white;
   if (!cap.white.file.empty()) {
     white = calib::ReadWhiteBalance(cap.white.file);
+    if (!white.exposure_times.empty() && white.exposure_times != times_sig)
+      progress(fmt::format("warning: {}: its white stack's exposure times were read {}, this capture's are read {}: "
+                           "the gains may be off by up to 7 % (calibrate white --exposure-times {})",
+                           cap.white.file, white.exposure_times, times_sig, times_sig));
   } else {
     const std::string yml = (work / "white.yml").string();
     const std::string sig = Signature({cap.white.white, cap.white.black, response_file},
@@ -315,6 +323,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       for (const auto& p : cap.white.patch) patch.emplace_back(float(p[0]), float(p[1]));
       try {
         white = calib::WhiteFromPatch(w, b, patch, {cap.white.albedo[0], cap.white.albedo[1], cap.white.albedo[2]});
+        if (fs::is_directory(cap.white.white)) white.exposure_times = times_sig;
       } catch (const calib::CalibError& e) {
         throw InputError(fmt::format("{}: white: {}", cap.file, e.what()));
       }
@@ -511,6 +520,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   j["pose_rms_px"] = rep.pose_rms_px;
   j["face_corners_px"] = rep.face_corners_px;
   j["white_gains"] = rep.white_gains;
+  j["exposure_times"] = rep.exposure_times;
   nlohmann::json st = nlohmann::json::object();
   for (const auto& [name, t] : rep.stage_seconds) st[name] = t;
   j["stage_seconds"] = st;

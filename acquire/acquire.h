@@ -38,6 +38,7 @@ struct AcquireReport {
   double camera_rms_px = -1, projector_rms_px = -1, pose_rms_px = -1;
   std::vector<std::array<double, 2>> face_corners_px;
   std::array<double, 3> white_gains{};
+  std::string exposure_times;  // how the photos' times were read: "labelled" or "apex"
   std::vector<AcquireConditionReport> conditions;
   RecoverySummary solve;
   std::vector<std::string> previews;

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -40,8 +41,15 @@ std::string SmallCapture(translume::Setup setup, const std::string& variant = ""
   const fs::path dir = fs::temp_directory_path() / fmt::format("translume_acquire_test_{}_{}", kind, built);
   if (fs::exists(dir / "capture.json")) return dir.string();
   const std::string earlier = fmt::format("translume_acquire_test_{}_", kind);
-  for (const auto& e : fs::directory_iterator(fs::temp_directory_path()))
-    if (e.path().filename().string().rfind(earlier, 0) == 0 && e.path() != dir) fs::remove_all(e.path());
+  // Captures of other builds go once they are an hour old (a sanitizer build's tests may be
+  // using theirs meanwhile).
+  const auto hour_ago = fs::file_time_type::clock::now() - std::chrono::hours(1);
+  for (const auto& e : fs::directory_iterator(fs::temp_directory_path())) {
+    std::error_code ec;
+    if (e.path().filename().string().rfind(earlier, 0) == 0 && e.path() != dir &&
+        fs::last_write_time(e.path(), ec) < hour_ago && !ec)
+      fs::remove_all(e.path(), ec);
+  }
   SynthOptions so;
   so.preset = "marble";
   so.shape = {24, 18, setup == Setup::kBack ? 6 : 10};
@@ -170,6 +178,8 @@ TEST_F(AcquireTest, CameraShutterLabelsAreReadAsApexTimes) {
     const Dataset truth = ReadDataset(c + "/truth/dataset");
     const DatasetMismatch apex = CompareDatasets(ReadDataset(r.dataset_dir), truth);
     EXPECT_NE(said.find("exposure times read as APEX shutter speeds"), std::string::npos) << said;
+    EXPECT_EQ(r.exposure_times, "apex");
+    EXPECT_EQ(nlohmann::json::parse(std::ifstream(r.report_json))["exposure_times"], "apex");
     EXPECT_EQ(said.find("warning"), std::string::npos) << said;
     if (bits == 8) {
       EXPECT_EQ(calib::ReadResponse(r.work_dir + "/response.yml").shutter, calib::ShutterTimes::kApex);
@@ -178,7 +188,20 @@ TEST_F(AcquireTest, CameraShutterLabelsAreReadAsApexTimes) {
       std::ifstream(r.work_dir + "/exposure_times.txt") >> reading;
       EXPECT_EQ(reading, "apex");
     }
-    EditJson(c, [](nlohmann::json& j) { j["exposure_times"] = "labelled"; });
+    EXPECT_EQ(calib::ReadWhiteBalance(r.work_dir + "/white.yml").exposure_times, "apex");
+    // A white balance made with the other reading is named.
+    const std::string other = (dir_ / "white_apex.yml").string();
+    fs::copy_file(r.work_dir + "/white.yml", other, fs::copy_options::overwrite_existing);
+    const nlohmann::json white = nlohmann::json::parse(std::ifstream(c + "/capture.json"))["white"];
+    EditJson(c, [&](nlohmann::json& j) {
+      j["exposure_times"] = "labelled";
+      j["white"] = other;
+    });
+    std::string warned;
+    Acquire(ReadCapture(c), (dir_ / "mixed" / "m.vdb").string(), o, [&](const std::string& l) { warned += l + "\n"; });
+    EXPECT_NE(warned.find("white_apex.yml: its white stack's exposure times were read apex, this capture's are read "
+                          "labelled"), std::string::npos) << warned;
+    EditJson(c, [&](nlohmann::json& j) { j["white"] = white; });
     const AcquireReport rl = Acquire(ReadCapture(c), (dir_ / "labelled" / "m.vdb").string(), o);
     const DatasetMismatch labelled = CompareDatasets(ReadDataset(rl.dataset_dir), truth);
     std::printf("%d-bit, shutter labels: L relative RMS %.3f %% read as APEX times, %.3f %% as labelled\n", bits,
@@ -205,6 +228,12 @@ TEST_F(AcquireTest, RegionPatternsFromCalibrationsMatchTheTrueRig) {
   calib::Pose projector_from_camera;
   projector_from_camera.R = projector.R;
   projector_from_camera.t = projector.T;
+  // The projector's pose holds for the camera calibration it was made through.
+  EXPECT_EQ(calib::CameraMismatch(camera, r.work_dir + "/projector.yml"), "");
+  calib::CameraCalibration other = camera;
+  other.K(0, 0) *= 1.1;
+  EXPECT_NE(calib::CameraMismatch(other, r.work_dir + "/projector.yml").find("was calibrated through another camera "
+                                                                             "calibration"), std::string::npos);
   const CaptureSpec cap = ReadCapture(c);
   std::vector<cv::Point2d> corners;
   for (const auto& p : cap.face_corners_px) corners.emplace_back(p[0], p[1]);

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include "acquire/face_mapping.h"
 #include "calib/board.h"
 #include "calib/error.h"
 #include "calib/photo_io.h"
@@ -66,20 +67,9 @@ class Reader {
     if (!v.is_array() || v.size() != 4) Fail(field, "expected 4 [x, y] pixel pairs");
     std::vector<std::array<double, 2>> out;
     for (const json& p : v) out.push_back(Numbers<2>(p, field));
-    // A convex quadrilateral (every turn the same way) of some area: four points on a line let
-    // the sample pose fit them with a small error.
-    double area = 0;
-    int left = 0, right = 0;
-    for (int i = 0; i < 4; ++i) {
-      const auto &a = out[i], &b = out[(i + 1) % 4], &c = out[(i + 2) % 4];
-      area += 0.5 * (a[0] * b[1] - b[0] * a[1]);
-      const double turn = (b[0] - a[0]) * (c[1] - b[1]) - (b[1] - a[1]) * (c[0] - b[0]);
-      left += turn > 0;
-      right += turn < 0;
-    }
-    if (std::abs(area) < 16 || (left != 4 && right != 4))
-      Fail(field, fmt::format("the 4 corners must enclose a convex quadrilateral of at least 16 px^2 (area {:.1f})",
-                              std::abs(area)));
+    std::vector<cv::Point2d> points;
+    for (const auto& p : out) points.emplace_back(p[0], p[1]);
+    if (std::string why = QuadrilateralProblem(points); !why.empty()) Fail(field, why);
     return out;
   }
   // A path relative to the folder that must exist (a folder when `folder`).

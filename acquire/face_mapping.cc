@@ -100,6 +100,23 @@ std::array<double, 3> SampleSize(const GridShape& g, double h) {
   return {double(g.nx - 1) * h, double(g.ny - 1) * h, double(g.nz - 1) * h};
 }
 
+std::string QuadrilateralProblem(const std::vector<cv::Point2d>& c) {
+  TL_CHECK(c.size() == 4);
+  double area = 0;
+  int left = 0, right = 0;
+  for (size_t i = 0; i < 4; ++i) {
+    const cv::Point2d &a = c[i], &b = c[(i + 1) % 4], &d = c[(i + 2) % 4];
+    area += 0.5 * a.cross(b);
+    const double turn = (b - a).cross(d - b);
+    left += turn > 0;
+    right += turn < 0;
+  }
+  if (std::abs(area) < 16 || (left != 4 && right != 4))
+    return fmt::format("the 4 corners must enclose a convex quadrilateral of at least 16 px^2 (area {:.1f})",
+                       std::abs(area));
+  return "";
+}
+
 calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
                                const GridShape& grid, double h, const std::string& what,
                                double* rms_px) {
@@ -116,6 +133,7 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
       throw InputError(fmt::format("{}: corner {} ({:.1f}, {:.1f}) is outside the {}x{} image", what,
                                    k, corners[k].x, corners[k].y, camera.size.width,
                                    camera.size.height));
+  if (std::string why = QuadrilateralProblem(corners); !why.empty()) throw InputError(what + ": " + why);
   const std::vector<cv::Point3d> obj = {{0, 0, 0}, {size_mm[0], 0, 0}, {size_mm[0], size_mm[1], 0}, {0, size_mm[1], 0}};
   cv::Vec3d rvec, tvec;
   if (!cv::solvePnP(obj, corners, camera.K, camera.dist, rvec, tvec, false, cv::SOLVEPNP_IPPE))
@@ -128,9 +146,9 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
   // The face must be seen from its front (its outward normal, -z, towards the camera).
   const cv::Vec3d n = pose.R * cv::Vec3d(0, 0, -1);
   if (n.dot(-pose.t) <= 0)
-    throw InputError(fmt::format("{}: the corners are in the wrong order (expected node (0,0), "
-                                 "(nx-1,0), (nx-1,ny-1), (0,ny-1): the sample seen upright, "
-                                 "clockwise from its top-left corner)", what));
+    throw InputError(fmt::format("{}: the corners are in the wrong order (expected the face's corners "
+                                 "(0, 0), (X, 0), (X, Y), (0, Y): the sample seen upright, clockwise from its "
+                                 "top-left corner)", what));
   const auto px = camera.Project(Transform(pose, obj));
   double sq = 0, side = 0;
   for (size_t k = 0; k < 4; ++k) {
@@ -146,46 +164,16 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
   if (rms > bound)
     throw InputError(fmt::format(
         "{}: the corners do not fit the {:g} x {:g} mm front face (the best pose misses them by "
-        "{:.1f} px RMS, more than {:.1f} px): check their order (node (0,0), (nx-1,0), "
-        "(nx-1,ny-1), (0,ny-1)) and sample_mm", what, obj[2].x, obj[2].y, rms, bound));
+        "{:.1f} px RMS, more than {:.1f} px): check their order (the face's corner (0, 0) first, then clockwise "
+        "as the camera sees the face) and the sample's size", what, obj[2].x, obj[2].y, rms, bound));
   return pose;
 }
 
-std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb) {
-  CV_Assert(rgb.type() == CV_32FC3);
-  // Luminance (R + G + B), saturated pixels at the brightest finite value, negatives at 0.
-  cv::Mat lin(rgb.size(), CV_32F);
-  float top = 0;
-  for (int y = 0; y < rgb.rows; ++y)
-    for (int x = 0; x < rgb.cols; ++x) {
-      const cv::Vec3f v = rgb.at<cv::Vec3f>(y, x);
-      const float l = v[0] + v[1] + v[2];
-      lin.at<float>(y, x) = l;
-      if (std::isfinite(l)) top = std::max(top, l);
-    }
-  if (!(top > 0)) return {};
-  for (float& l : cv::Mat_<float>(lin)) l = std::isfinite(l) ? std::max(l, 0.0f) : top;
-  cv::Mat log8(lin.size(), CV_8U);
-  const float floor = top * 1e-6f;
-  for (int y = 0; y < lin.rows; ++y)
-    for (int x = 0; x < lin.cols; ++x) {
-      const float l = std::max(lin.at<float>(y, x), floor);
-      log8.at<uint8_t>(y, x) = cv::saturate_cast<uint8_t>(255.0 * std::log(l / floor) / std::log(top / floor));
-    }
-  cv::Mat mask;
-  cv::threshold(log8, mask, 0, 255, cv::THRESH_BINARY | cv::THRESH_OTSU);
-  std::vector<std::vector<cv::Point>> contours;
-  cv::findContours(mask, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
-  if (contours.empty()) return {};
-  const auto& blob = *std::max_element(contours.begin(), contours.end(), [](const auto& a, const auto& b) {
-    return cv::contourArea(a) < cv::contourArea(b);
-  });
-  std::vector<cv::Point> hull, quad;
-  cv::convexHull(blob, hull);
-  const double perimeter = cv::arcLength(hull, true);
-  for (double eps = 0.005; eps < 0.2 && quad.size() != 4; eps *= 1.3)
-    cv::approxPolyDP(hull, quad, eps * perimeter, true);
-  if (quad.size() != 4 || !cv::isContourConvex(quad)) return {};
+namespace {
+
+// The corners of `quad` (the outline of a bright blob in `lin`, luminance) to sub-pixel
+// accuracy, in DetectFaceCorners' order; empty where an edge does not show along a side.
+std::vector<cv::Point2d> RefineQuadrilateral(const cv::Mat& lin, const std::vector<cv::Point>& quad) {
   // Order: top-left (smallest x + y) first, then clockwise in the image.
   std::vector<cv::Point2d> c(quad.begin(), quad.end());
   if ((c[1] - c[0]).cross(c[2] - c[1]) < 0) std::reverse(c.begin(), c.end());
@@ -227,7 +215,7 @@ std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb) {
         prev = v;
       }
     }
-    if (edge.size() < 4) return {};
+    if (edge.size() < 4 || edge.size() < size_t(count) / 2) return {};  // no edge along most of the side
     cv::Vec4f l;
     cv::fitLine(edge, l, cv::DIST_HUBER, 0, 0.01, 0.01);
     // Line as a x + b y = c.
@@ -242,6 +230,68 @@ std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb) {
     out.emplace_back((p[2] * q[1] - p[1] * q[2]) / det, (p[0] * q[2] - p[2] * q[0]) / det);
   }
   return out;
+}
+
+}  // namespace
+
+std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb) {
+  CV_Assert(rgb.type() == CV_32FC3);
+  // Luminance (R + G + B), saturated pixels at the brightest finite value, negatives at 0.
+  cv::Mat lin(rgb.size(), CV_32F);
+  float top = 0;
+  for (int y = 0; y < rgb.rows; ++y)
+    for (int x = 0; x < rgb.cols; ++x) {
+      const cv::Vec3f v = rgb.at<cv::Vec3f>(y, x);
+      const float l = v[0] + v[1] + v[2];
+      lin.at<float>(y, x) = l;
+      if (std::isfinite(l)) top = std::max(top, l);
+    }
+  if (!(top > 0)) return {};
+  for (float& l : cv::Mat_<float>(lin)) l = std::isfinite(l) ? std::max(l, 0.0f) : top;
+  // The largest blob of a log-domain Otsu threshold, as a convex quadrilateral; the log scale
+  // starts at top * floor_fraction. A photo whose dark background is clipped at 0 keeps only its
+  // noise there, which a deep log scale lifts to mid grey in scattered pixels: a median removes
+  // most, and shallower scales (1e-4, 1e-2 of the top) are tried where no quadrilateral shows.
+  auto quadrilateral = [&](float floor_fraction) -> std::vector<cv::Point> {
+    cv::Mat log8(lin.size(), CV_8U);
+    const float floor = top * floor_fraction;
+    for (int y = 0; y < lin.rows; ++y)
+      for (int x = 0; x < lin.cols; ++x) {
+        const float l = std::max(lin.at<float>(y, x), floor);
+        log8.at<uint8_t>(y, x) = cv::saturate_cast<uint8_t>(255.0 * std::log(l / floor) / std::log(top / floor));
+      }
+    cv::medianBlur(log8, log8, 5);
+    cv::Mat mask;
+    cv::threshold(log8, mask, 0, 255, cv::THRESH_BINARY | cv::THRESH_OTSU);
+    std::vector<std::vector<cv::Point>> contours;
+    cv::findContours(mask, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+    if (contours.empty()) return {};
+    const auto& blob = *std::max_element(contours.begin(), contours.end(), [](const auto& a, const auto& b) {
+      return cv::contourArea(a) < cv::contourArea(b);
+    });
+    std::vector<cv::Point> hull, quad;
+    cv::convexHull(blob, hull);
+    const double perimeter = cv::arcLength(hull, true);
+    for (double eps = 0.005; eps < 0.2 && quad.size() != 4; eps *= 1.3)
+      cv::approxPolyDP(hull, quad, eps * perimeter, true);
+    if (quad.size() != 4 || !cv::isContourConvex(quad)) return {};
+    // A sample is solid: nearly all of its outline's inside lies above the threshold (an outline
+    // of scattered noise pixels is full of holes).
+    cv::Mat inside(mask.size(), CV_8U, cv::Scalar(0));
+    cv::fillConvexPoly(inside, quad, cv::Scalar(255));
+    const double area = cv::countNonZero(inside);
+    if (!(cv::countNonZero(inside & mask) >= 0.97 * area)) return {};
+    return quad;
+  };
+  // Each scale's quadrilateral in turn, until one refines (a scale that lets the background's
+  // noise through outlines the whole image, and no edge shows along its sides).
+  for (float floor_fraction : {1e-6f, 1e-4f, 1e-2f, 1e-1f}) {
+    const std::vector<cv::Point> quad = quadrilateral(floor_fraction);
+    if (quad.empty()) continue;
+    std::vector<cv::Point2d> corners = RefineQuadrilateral(lin, quad);
+    if (!corners.empty()) return corners;
+  }
+  return {};
 }
 
 FaceSamples ResampleFrontFace(const cv::Mat& img, const DeviceIntrinsics& camera,

@@ -34,6 +34,11 @@ std::array<double, 3> SampleSize(const GridShape& grid, double h);
 // (0, 0, 0), (X, 0, 0), (X, Y, 0), (0, Y, 0).
 std::vector<cv::Point3d> FrontFaceCorners(const GridShape& grid, double h);
 
+// "" when four image points enclose a convex quadrilateral (every turn the same way) of at
+// least 16 px^2, else "the 4 corners must enclose a convex quadrilateral of at least 16 px^2
+// (area A)": four points on a line let a pose fit them with a small error.
+std::string QuadrilateralProblem(const std::vector<cv::Point2d>& corners);
+
 // camera_from_sample from the front face's four image corners (planar PnP, IPPE, refined by
 // Levenberg-Marquardt). *rms_px receives the corners' reprojection RMS. Throws InputError
 // naming `what` when a corner lies outside the image, the pose puts the sample behind the
@@ -48,10 +53,13 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
                                double* rms_px = nullptr);
 
 // Finds the front face's four corners in a linear image of the lit sample on a dark background
-// (e.g. the sum of every condition's HDR): log-domain Otsu threshold, the largest blob, its
-// four-sided outline, each side refined by a line fit to the outline's points. Corners are
-// returned in image order top-left, top-right, bottom-right, bottom-left (the sample seen
-// upright: node (0, 0) top-left). Empty when no convex quadrilateral is found.
+// (e.g. the sum of every condition's HDR, or a photo whose background is clipped at 0): a
+// log-domain Otsu threshold after a 5x5 median, the largest blob, its four-sided outline, each
+// side refined by a line fit to sub-pixel edge points. The log scale spans 6 decades below the
+// brightest pixel, then 4, 2 and 1 until the blob is solid (97 % of its outline's inside) and an
+// edge shows along most of each side. Corners are returned in image order top-left, top-right,
+// bottom-right, bottom-left (the sample seen upright: node (0, 0) top-left). Empty when no
+// convex quadrilateral is found.
 std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& linear_rgb);
 
 // Node-space front-face radiance from a linear RGB image (CV_32FC3; +inf = saturated): every
@@ -84,8 +92,8 @@ std::vector<float> ProjectPatternOnFace(const cv::Mat& pattern, const DeviceIntr
 // The projector images (CV_8UC1, 255 inside) that light each of n x n equal regions of the lit
 // face of a block of `size_mm` (back face z = Z back-lit, front face z = 0 front-lit): region
 // m = I + n J covers [I X / n, (I + 1) X / n] x [J Y / n, (J + 1) Y / n] (mm, sample frame; a pixel
-// whose ray meets an edge lights both regions). Throws InputError when the lit face is turned
-// away from the projector (the setup is the other one) or a region gets no projector pixel.
+// whose ray meets an edge exactly lights both regions). Throws InputError when the lit face is
+// turned away from the projector (the setup is the other one) or a region gets no projector pixel.
 std::vector<cv::Mat> RegionPatterns(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
                                     const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
                                     Setup setup, int n);

@@ -297,6 +297,8 @@ double SecondsOf(const nlohmann::json& value) {
   if (value.is_number()) return value.get<double>();
   if (!value.is_string()) return 0;
   const std::string text = value.get<std::string>();
+  // Decimal only: strtod also takes "0x10", "inf" and "nan".
+  if (text.find_first_not_of("0123456789.eE+-/ ") != std::string::npos) return 0;
   double num = 0, den = 1;
   char* end = nullptr;
   num = std::strtod(text.c_str(), &end);
@@ -660,6 +662,9 @@ std::string ShutterChoice::BriefReport() const {
   const std::string how = times == ShutterTimes::kApex ? "read as APEX shutter speeds (1/30 as 1/32 s)"
                                                        : "as labelled";
   if (pairs == 0) return fmt::format("exposure times {}", how);
+  if (!decisive)
+    return fmt::format("exposure times {}: no well-exposed pair of photos tells the labels from APEX times ({} "
+                       "pair{} judged; force a reading where you know it)", how, pairs, pairs == 1 ? "" : "s");
   return fmt::format("exposure times {}: brightness steps {:.2f} % RMS off the labels, {:.2f} % off the "
                      "APEX times ({} pairs)", how, 100 * labelled_rms, 100 * apex_rms, pairs);
 }
@@ -697,6 +702,7 @@ bool ShutterJudge::Decisive() const { return !telling_.empty() && judged_.size()
 ShutterChoice ShutterJudge::Choice() const {
   ShutterChoice choice;
   if (!apex_labels_ || pairs_ == 0) return choice;
+  choice.decisive = !judged_.empty();
   choice.pairs = pairs_;
   choice.labelled_rms = std::sqrt(sum_labelled_ / pairs_);
   choice.apex_rms = std::sqrt(sum_apex_ / pairs_);
@@ -749,12 +755,18 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
     const Exposure &ea = stack.exposures[p.a], &eb = stack.exposures[p.b];
     const double expected = eb.seconds / ea.seconds;
     const double off = p.measured / expected - 1;
-    if (std::abs(off) > kTimeRatioWarning && p.samples >= kMinPairSamplesForPercent && h.time_warning.empty())
+    if (std::abs(off) > kTimeRatioWarning && p.samples >= kMinPairSamplesForPercent && h.time_warning.empty()) {
+      const std::string hint =
+          times == ShutterTimes::kApex ? "read as APEX shutter speeds: are they true times? Then read them as labelled"
+          : HasApexLabels(given_stack)
+              ? "times as a camera labels them (1/30 for 1/32 s)? Use the true times, or read them as APEX shutter "
+                "speeds"
+              : "use the true times";
       h.time_warning = fmt::format(
-          "{}: {} is {:.3f}x as bright as {}, but its exposure time is {:.3f}x as long ({:+.1f} %): times as "
-          "a camera labels them (1/30 for 1/32 s)? Use the true times, or read them as APEX shutter speeds "
+          "{}: {} is {:.3f}x as bright as {}, but its exposure time is {:.3f}x as long ({:+.1f} %): {} "
           "(docs/capture.md, \"Exposure times\")",
-          stack.dir, FileName(eb), p.measured, FileName(ea), expected, 100 * off);
+          stack.dir, FileName(eb), p.measured, FileName(ea), expected, 100 * off, hint);
+    }
     if (p.measured > 2 * expected || p.measured < 0.5 * expected)
       throw CalibError(fmt::format("{}: {} ({:g} s) is {:.2f}x as bright as {} ({:g} s), but its exposure time is "
                                    "{:.2f}x as long: check the times (EXIF or exposures.json)", stack.dir,
@@ -806,9 +818,12 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
   return h;
 }
 
-cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response, const MergeOptions& options) {
+cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response, const MergeOptions& options,
+                       ShutterTimes* times_read) {
   if (!fs::is_directory(path)) return ReadLinearRgb(path);
-  return MergeHdr(ReadExposureStack(path), response, nullptr, options).radiance;
+  HdrImage h = MergeHdr(ReadExposureStack(path), response, nullptr, options);
+  if (times_read) *times_read = h.shutter;
+  return h.radiance;
 }
 
 }  // namespace translume::calib

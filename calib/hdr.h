@@ -149,6 +149,7 @@ struct ShutterChoice {
   ShutterTimes times = ShutterTimes::kLabelled;
   double labelled_rms = 0, apex_rms = 0;  // ln units; 0 where not judged
   int pairs = 0;                          // pairs judged
+  bool decisive = false;                  // some judged pair tells the readings apart
   std::string BriefReport() const;        // "exposure times read as APEX shutter speeds: ..."
 };
 
@@ -194,8 +195,9 @@ HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
                   const ExposureStack* black = nullptr, const MergeOptions& options = {});
 
 // A linear HDR image from `path`: an image file read as is (ReadLinearRgb), or a stack folder
-// merged with MergeHdr (`response` for 8-bit stacks, may be null otherwise).
+// merged with MergeHdr (`response` for 8-bit stacks, may be null otherwise). *times_read receives
+// how a stack's times were read (HdrImage::shutter), and is left alone for an image file.
 cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response,
-                       const MergeOptions& options = {});
+                       const MergeOptions& options = {}, ShutterTimes* times_read = nullptr);
 
 }  // namespace translume::calib

@@ -307,6 +307,9 @@ TEST(Hdr, LinearShutterLabelsReadAsApexTimes) {
   judge.Add(grey);
   EXPECT_FALSE(judge.Decisive());
   EXPECT_EQ(judge.Choice().times, ShutterTimes::kLabelled);  // not judged: as given
+  EXPECT_FALSE(judge.Choice().decisive);
+  EXPECT_NE(judge.Choice().BriefReport().find("no well-exposed pair of photos tells the labels from APEX times"),
+            std::string::npos) << judge.Choice().BriefReport();
   judge.Add(stack);
   EXPECT_TRUE(judge.Decisive());
   EXPECT_EQ(judge.Choice().times, ShutterTimes::kApex);
@@ -314,6 +317,13 @@ TEST(Hdr, LinearShutterLabelsReadAsApexTimes) {
   const ExposureStack exact = MakeStack(SyntheticRig::RenderExposureStack(truth, labels, {}, so), labels);
   EXPECT_EQ(ChooseShutterTimes(exact).times, ShutterTimes::kLabelled);
   EXPECT_EQ(MergeHdr(exact, nullptr).shutter, ShutterTimes::kLabelled);
+  // Forced the wrong way, the warning says which way the times were read.
+  MergeOptions as_apex;
+  as_apex.shutter = ShutterTimes::kApex;
+  EXPECT_NE(MergeHdr(exact, nullptr, nullptr, as_apex).time_warning.find("read as APEX shutter speeds: are they true "
+                                                                         "times? Then read them as labelled"),
+            std::string::npos);
+  EXPECT_NE(hl.time_warning.find("times as a camera labels them (1/30 for 1/32 s)?"), std::string::npos) << hl.time_warning;
   EXPECT_NE(CalibErrorOf([&] { ChooseShutterTimes(MakeStack(SyntheticRig::RenderExposureStack(truth, apex,
                                                                   SyntheticResponse(), {}), labels)); })
                 .find("judged by the response fit"), std::string::npos);
@@ -499,7 +509,7 @@ TEST_F(HdrFiles, ReadsExifExposureTime) {
   const ExposureStack shown = ReadExposureStack(dir_.string());
   EXPECT_DOUBLE_EQ(shown.exposures[0].seconds, 1.0 / 30);
   EXPECT_DOUBLE_EQ(shown.exposures[1].seconds, 0.25);
-  for (const char* bad_time : {"\"1/0\"", "\"1/\"", "\"fast\"", "\"2 s\"", "-1"}) {
+  for (const char* bad_time : {"\"1/0\"", "\"1/\"", "\"fast\"", "\"2 s\"", "-1", "\"0x10\"", "\"inf\""}) {
     std::ofstream(dir_ / "exposures.json") << "{\"j0.jpg\": " << bad_time << "}";
     EXPECT_NE(CalibErrorOf([&] { ReadExposureStack(dir_.string()); }).find("is not a positive number of seconds"),
               std::string::npos) << bad_time;

@@ -230,4 +230,25 @@ ProjectorCalibration ReadProjectorCalibration(const std::string& path) {
   return p;
 }
 
+std::string CameraMismatch(const CameraCalibration& camera, const std::string& projector_path) {
+  CameraCalibration kept;
+  try {
+    kept = ReadCameraCalibration(projector_path);
+  } catch (const CalibError&) {
+    return "";
+  }
+  const double w = camera.image_size.width;
+  const bool differs = kept.image_size != camera.image_size ||
+                       std::abs(kept.K(0, 0) / camera.K(0, 0) - 1) > 0.02 ||
+                       std::abs(kept.K(1, 1) / camera.K(1, 1) - 1) > 0.02 ||
+                       std::abs(kept.K(0, 2) - camera.K(0, 2)) > 0.02 * w ||
+                       std::abs(kept.K(1, 2) - camera.K(1, 2)) > 0.02 * w;
+  if (!differs) return "";
+  return fmt::format("{} was calibrated through another camera calibration ({}x{}, fx {:.1f}, cx {:.1f}, cy {:.1f} "
+                     "against {}x{}, fx {:.1f}, cx {:.1f}, cy {:.1f} px): its camera-projector pose holds for that one",
+                     projector_path, kept.image_size.width, kept.image_size.height, kept.K(0, 0), kept.K(0, 2),
+                     kept.K(1, 2), camera.image_size.width, camera.image_size.height, camera.K(0, 0), camera.K(0, 2),
+                     camera.K(1, 2));
+}
+
 }  // namespace translume::calib

@@ -87,4 +87,10 @@ void WriteProjectorCalibration(const std::string& path, const ProjectorCalibrati
 // unusable values (IntrinsicsProblem, a size that is not positive, R no rotation, T not finite).
 ProjectorCalibration ReadProjectorCalibration(const std::string& path);
 
+// R and T hold for the camera intrinsics the projector was calibrated through, which its file
+// keeps. Where those differ from `camera`'s by more than 2 % (fx, fy; cx, cy against the image
+// width) or in image size: "PATH was calibrated through another camera calibration (fx A
+// against B px)"; else "" (also for a file that keeps none).
+std::string CameraMismatch(const CameraCalibration& camera, const std::string& projector_path);
+
 }  // namespace translume::calib

@@ -180,6 +180,7 @@ void WriteWhiteBalance(const std::string& path, const WhiteBalance& w,
   fs << "patches" << w.patches << "method" << w.method;
   fs << "black_level_mean" << cv::Mat(cv::Matx13d(black_mean[0], black_mean[1], black_mean[2]));
   fs << "black_image" << black_image;
+  if (!w.exposure_times.empty()) fs << "exposure_times" << w.exposure_times;
 }
 
 WhiteBalance ReadWhiteBalance(const std::string& path) {
@@ -207,6 +208,7 @@ WhiteBalance ReadWhiteBalance(const std::string& path) {
   }
   fs["patches"] >> w.patches;
   fs["method"] >> w.method;
+  if (!fs["exposure_times"].empty()) fs["exposure_times"] >> w.exposure_times;
   return w;
 }
 

@@ -20,6 +20,9 @@ struct WhiteBalance {
   cv::Vec3d residual{0, 0, 0};  // relative RMS misfit of the reference patches per channel
   int patches = 0;            // reference patches used
   std::string method;         // "colorchecker" or "patch"
+  // How the white stack's exposure times were read ("labelled" or "apex"; calib/shutter.h), so
+  // that the lighting stacks can be read alike; "" for an HDR image given as is.
+  std::string exposure_times;
   std::string BriefReport() const;
 };
 
@@ -49,7 +52,7 @@ WhiteBalance WhiteFromColorChecker(const cv::Mat& white, const cv::Mat& black,
 // (the black HDR's path, to subtract per pixel).
 void WriteWhiteBalance(const std::string& path, const WhiteBalance& w,
                        const cv::Vec3d& black_mean, const std::string& black_image);
-// Reads white_gains, residual, patches and method back (not the black level); throws CalibError
+// Reads white_gains, residual, patches, method and exposure_times back (not the black level); throws CalibError
 // naming the file when it cannot be read, lacks white_gains or a gain is not finite and positive.
 WhiteBalance ReadWhiteBalance(const std::string& path);
 

@@ -165,6 +165,10 @@ TEST(White, YamlRoundTrip) {
   EXPECT_EQ(r.residual, w.residual);
   EXPECT_EQ(r.patches, 6);
   EXPECT_EQ(r.method, "colorchecker");
+  EXPECT_EQ(r.exposure_times, "");  // an HDR image given as is
+  w.exposure_times = "apex";
+  WriteWhiteBalance(path, w, black, "black.exr");
+  EXPECT_EQ(ReadWhiteBalance(path).exposure_times, "apex");
   {
     cv::FileStorage fs(path, cv::FileStorage::READ);
     cv::Mat b;

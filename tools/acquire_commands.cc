@@ -17,6 +17,7 @@
 #include "acquire/face_mapping.h"
 #include "acquire/simulate_capture.h"
 #include "calib/camera_calib.h"
+#include "calib/error.h"
 #include "calib/hdr.h"
 #include "calib/photo_io.h"
 #include "calib/projector_calib.h"
@@ -104,6 +105,7 @@ int RunPatterns(int argc, char** argv) {
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   if (corners_text.empty() == photo.empty()) throw InputError("give --corners or --photo");
+  if (!response_path.empty() && photo.empty()) throw InputError("--response is for an 8-bit --photo stack");
   const Setup s = ParseSetup(setup);
   const int n = RegionLights(lights).front().region_n;  // validates NxN
   const std::vector<double> size = ParseNumbers(size_text, "--sample-mm", 3, 3);
@@ -114,10 +116,22 @@ int RunPatterns(int argc, char** argv) {
     const std::vector<double> c = ParseNumbers(corners_text, "--corners", 8, 8);
     for (int k = 0; k < 4; ++k) corners.emplace_back(c[size_t(2 * k)], c[size_t(2 * k + 1)]);
   }
-  if (fs::exists(out) && !(fs::is_directory(out) && fs::is_empty(out)))
+  if (fs::exists(out) && !fs::is_directory(out))
+    throw InputError(fmt::format("-o {}: is a file (a new folder of patterns is written)", out));
+  if (fs::exists(out) && !fs::is_empty(out))
     throw InputError(fmt::format("-o {}: exists and is not empty (a new folder of patterns is written)", out));
-  const calib::CameraCalibration camera = calib::ReadCameraCalibration(camera_path);
-  const calib::ProjectorCalibration projector = calib::ReadProjectorCalibration(projector_path);
+  auto flagged = [](const char* flag, const auto& read) {
+    try {
+      return read();
+    } catch (const calib::CalibError& e) {
+      throw InputError(fmt::format("{}: {}", flag, e.what()));
+    }
+  };
+  const calib::CameraCalibration camera = flagged("--camera", [&] { return calib::ReadCameraCalibration(camera_path); });
+  const calib::ProjectorCalibration projector =
+      flagged("--projector", [&] { return calib::ReadProjectorCalibration(projector_path); });
+  if (std::string why = calib::CameraMismatch(camera, projector_path); !why.empty())
+    throw InputError(fmt::format("--projector {}; give --camera the calibration it was made with", why));
   const acquire::DeviceIntrinsics cam = acquire::DeviceIntrinsics::From(camera.image_size, camera.K, camera.dist);
   const acquire::DeviceIntrinsics proj =
       acquire::DeviceIntrinsics::From(projector.projector_size, projector.K, projector.dist);
@@ -140,6 +154,9 @@ int RunPatterns(int argc, char** argv) {
   double rms = 0;
   const std::array<double, 3> size_mm{size[0], size[1], size[2]};
   const calib::Pose camera_from_sample = acquire::EstimateSamplePose(cam, corners, size_mm, what, &rms);
+  if (rms > 1.0)
+    std::printf("patterns: warning: the sample's pose misses the corners by %.2f px RMS: check --sample-mm and the "
+                "corners (hand-picked corners give 0.1-0.5 px)\n", rms);
   std::vector<cv::Mat> images;
   try {
     images = acquire::RegionPatterns(proj, projector_from_camera, camera_from_sample, size_mm, s, n);
@@ -149,11 +166,17 @@ int RunPatterns(int argc, char** argv) {
   if (!acquire::LitFaceInsideProjector(proj, projector_from_camera, camera_from_sample, size_mm, s))
     std::printf("patterns: warning: the %s face reaches outside the projector's image: the regions at its edge are "
                 "lit only in part\n", s == Setup::kBack ? "back" : "front");
-  const std::string folder = fs::path(out).filename().string();
+  // The folder's own name, also for "DIR/" and "DIR/.".
+  fs::path out_path = fs::absolute(out).lexically_normal();
+  if (out_path.filename().empty()) out_path = out_path.parent_path();
+  const std::string folder = out_path.filename().string();
+  // Names of one width that sort in order: 00..15, 000..999, 0000..4095.
+  const int width = std::max<int>(2, int(std::to_string(images.size() - 1).size()));
+  auto name_of = [&](size_t m) { return fmt::format("{:0{}d}", m, width); };
   nlohmann::json conditions = nlohmann::json::array();
   int64_t fewest = std::numeric_limits<int64_t>::max(), most = 0;
   for (size_t m = 0; m < images.size(); ++m) {
-    const std::string name = fmt::format("{:02d}", m);
+    const std::string name = name_of(m);
     conditions.push_back({{"name", name}, {"stack", "lighting/" + name}, {"pattern", folder + "/" + name + ".png"}});
     const int64_t lit = cv::countNonZero(images[m]);
     fewest = std::min(fewest, lit);
@@ -161,14 +184,14 @@ int RunPatterns(int argc, char** argv) {
   }
   WriteFolderAtomically(out, [&](const std::string& tmp) {
     for (size_t m = 0; m < images.size(); ++m)
-      calib::WriteImage8((fs::path(tmp) / fmt::format("{:02d}.png", m)).string(), images[m]);
+      calib::WriteImage8((fs::path(tmp) / (name_of(m) + ".png")).string(), images[m]);
     std::ofstream(fs::path(tmp) / "conditions.json") << conditions.dump(2) << "\n";
   });
   std::printf("patterns: front face corners (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f), pose RMS %.2f px\n",
               corners[0].x, corners[0].y, corners[1].x, corners[1].y, corners[2].x, corners[2].y, corners[3].x,
               corners[3].y, rms);
-  std::printf("wrote %s: %zu patterns (%dx%d regions of the %s face, %lld to %lld projector pixels each) and "
-              "conditions.json for capture.json\n", out.c_str(), images.size(), n, n,
+  std::printf("wrote %s: %zu pattern%s (%dx%d regions of the %s face, %lld to %lld projector pixels each) and "
+              "conditions.json for capture.json\n", out.c_str(), images.size(), images.size() == 1 ? "" : "s", n, n,
               s == Setup::kBack ? "back" : "front", (long long)fewest, (long long)most);
   return 0;
 }

@@ -213,7 +213,8 @@ int RunCalibrateWhite(int argc, char** argv) {
   calib::ResponseCurve curve;
   if (!response_path.empty()) curve = calib::ReadResponse(response_path);
   const calib::ResponseCurve* response = response_path.empty() ? nullptr : &curve;
-  const cv::Mat white = calib::ReadHdrOrStack(white_path, response, merge);
+  calib::ShutterTimes white_times = calib::ShutterTimes::kAuto;
+  const cv::Mat white = calib::ReadHdrOrStack(white_path, response, merge, &white_times);
   const cv::Mat black = black_path.empty() ? cv::Mat() : calib::ReadHdrOrStack(black_path, response, merge);
   calib::WhiteBalance w;
   try {
@@ -223,6 +224,7 @@ int RunCalibrateWhite(int argc, char** argv) {
     throw calib::CalibError(fmt::format("{}{}: {}", white_path, black_path.empty() ? "" : " and --black " + black_path,
                                         e.what()));
   }
+  if (white_times != calib::ShutterTimes::kAuto) w.exposure_times = calib::ToString(white_times);
   cv::Vec3d black_mean(0, 0, 0);
   if (!black.empty()) {
     const cv::Scalar m = cv::mean(black);
@@ -233,7 +235,10 @@ int RunCalibrateWhite(int argc, char** argv) {
   WriteAtomically(out, [&](const std::string& tmp) {
     calib::WriteWhiteBalance(tmp, w, black_mean, black_image);
   });
-  std::printf("wrote %s: %s\n", out.c_str(), w.BriefReport().c_str());
+  std::printf("wrote %s: %s%s\n", out.c_str(), w.BriefReport().c_str(),
+              w.exposure_times.empty() ? ""
+              : w.exposure_times == "apex" ? "; exposure times read as APEX shutter speeds"
+                                           : "; exposure times as labelled");
   return 0;
 }
 
