@@ -255,7 +255,7 @@ TEST_F(CalibCli, HdrBadInputs) {
   ExpectOneLineError(Translume("hdr " + P("s") + " -o " + P("out.exr")),
                      P("s/e0.png") + ": no exposure time");
   WriteStack("s", images, t);
-  ExpectOneLineError(Translume("hdr " + P("s") + " -o " + P("out.exr")), "need a response curve");
+  ExpectOneLineError(Translume("hdr " + P("s") + " -o " + P("out.exr")), "8-bit photos need --response");
   ExpectOneLineError(Translume("hdr " + P("s") + " --response " + P("none.yml") + " -o " + P("out.exr")),
                      P("none.yml") + ": no such file");
   // A PNG cut short: our line only, not libpng's own "libpng error:" line too.

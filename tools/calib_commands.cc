@@ -306,6 +306,8 @@ int RunHdr(int argc, char** argv) {
     calib::ResponseCurve curve;
     if (!response_path.empty()) curve = calib::ReadResponse(response_path);
     const calib::ExposureStack stack = calib::ReadExposureStack(dir);
+    if (response_path.empty() && stack.IsEightBit())
+      throw calib::CalibError(dir + ": 8-bit photos need --response (a curve from translume calibrate response)");
     if (!response_path.empty() && !stack.IsEightBit())
       std::printf("hdr: note: %s holds 16-bit, float or RAW photos, which are linear: --response %s is not used\n",
                   dir.c_str(), response_path.c_str());
