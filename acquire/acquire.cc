@@ -92,8 +92,6 @@ class StageLog {
   nlohmann::json log_;
 };
 
-
-
 // Side-by-side preview of measured (left) and fitted (right) radiance, one scale for both,
 // each node a square of pixels so that the image is at least ~512 pixels wide.
 void WriteComparison(const std::string& path, const GridShape& s, const FacePattern& measured,

@@ -13,6 +13,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "acquire/face_mapping.h"
+#include "acquire/patterns.h"
 #include "acquire/simulate_capture.h"
 #include "calib/camera_calib.h"
 #include "calib/hdr.h"
@@ -238,9 +239,34 @@ TEST_F(AcquireTest, RegionPatternsFromCalibrationsMatchTheTrueRig) {
   std::vector<cv::Point2d> corners;
   for (const auto& p : cap.face_corners_px) corners.emplace_back(p[0], p[1]);
   const calib::Pose camera_from_sample = EstimateSamplePose(cam, corners, cap.size_mm, "test");
-  const std::vector<cv::Mat> patterns =
-      RegionPatterns(proj, projector_from_camera, camera_from_sample, cap.size_mm, Setup::kBack, 2);
+  // What `translume patterns` does, from the corners and from a photo of the white card that
+  // lies where the sample goes.
+  PatternJob job;
+  job.camera = camera;
+  job.projector = projector;
+  job.projector_file = r.work_dir + "/projector.yml";
+  job.size_mm = cap.size_mm;
+  job.lights = 2;
+  job.corners = corners;
+  const PatternSet set = MakeRegionPatterns(job);
+  const std::vector<cv::Mat>& patterns = set.images;
   ASSERT_EQ(patterns.size(), 4u);
+  EXPECT_EQ(set.names, (std::vector<std::string>{"00", "01", "02", "03"}));
+  EXPECT_LT(set.pose_rms_px, 0.5);
+  EXPECT_TRUE(set.warnings.empty());
+  job.corners.clear();
+  const calib::ResponseCurve response = calib::ReadResponse(r.work_dir + "/response.yml");
+  job.photo = calib::ReadHdrOrStack(c + "/calib/white", &response);
+  const PatternSet from_photo = MakeRegionPatterns(job);
+  for (size_t k = 0; k < 4; ++k) EXPECT_LT(cv::norm(from_photo.corners[k] - corners[k]), 0.75) << "corner " << k;
+  const std::string folder = (dir_ / "cap2" / "patterns").string() + "/";
+  WritePatternFolder(set, folder);
+  const nlohmann::json conditions = nlohmann::json::parse(std::ifstream(folder + "conditions.json"));
+  EXPECT_EQ(conditions[2]["pattern"], "patterns/02.png");
+  EXPECT_THROW(WritePatternFolder(set, folder), InputError);  // not empty now
+  other.K(0, 0) = camera.K(0, 0) * 1.1;
+  job.camera = other;
+  EXPECT_THROW(MakeRegionPatterns(job), InputError);
   EXPECT_TRUE(LitFaceInsideProjector(proj, projector_from_camera, camera_from_sample, cap.size_mm, Setup::kBack));
   // A sample 3x as wide reaches past the projector's image (the face spans ~60 % of its width).
   EXPECT_FALSE(LitFaceInsideProjector(proj, projector_from_camera, camera_from_sample,

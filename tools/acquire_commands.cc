@@ -8,20 +8,13 @@
 #include <optional>
 #include <filesystem>
 #include <fmt/format.h>
-#include <fstream>
-#include <limits>
-#include <nlohmann/json.hpp>
 
 #include "acquire/acquire.h"
 #include "acquire/capture.h"
-#include "acquire/face_mapping.h"
+#include "acquire/patterns.h"
 #include "acquire/simulate_capture.h"
-#include "calib/camera_calib.h"
 #include "calib/error.h"
 #include "calib/hdr.h"
-#include "calib/photo_io.h"
-#include "calib/projector_calib.h"
-#include "solver/atomic_file.h"
 #include "solver/dataset.h"
 #include "solver/evaluate.h"
 #include "solver/light.h"
@@ -116,10 +109,9 @@ int RunPatterns(int argc, char** argv) {
     const std::vector<double> c = ParseNumbers(corners_text, "--corners", 8, 8);
     for (int k = 0; k < 4; ++k) corners.emplace_back(c[size_t(2 * k)], c[size_t(2 * k + 1)]);
   }
-  if (fs::exists(out) && !fs::is_directory(out))
-    throw InputError(fmt::format("-o {}: is a file (a new folder of patterns is written)", out));
-  if (fs::exists(out) && !fs::is_empty(out))
-    throw InputError(fmt::format("-o {}: exists and is not empty (a new folder of patterns is written)", out));
+  if (fs::exists(out) && (!fs::is_directory(out) || !fs::is_empty(out)))
+    throw InputError(fmt::format("-o {}: {} (a new folder of patterns is written)", out,
+                                 fs::is_directory(out) ? "exists and is not empty" : "is a file"));
   auto flagged = [](const char* flag, const auto& read) {
     try {
       return read();
@@ -127,72 +119,30 @@ int RunPatterns(int argc, char** argv) {
       throw InputError(fmt::format("{}: {}", flag, e.what()));
     }
   };
-  const calib::CameraCalibration camera = flagged("--camera", [&] { return calib::ReadCameraCalibration(camera_path); });
-  const calib::ProjectorCalibration projector =
-      flagged("--projector", [&] { return calib::ReadProjectorCalibration(projector_path); });
-  if (std::string why = calib::CameraMismatch(camera, projector_path); !why.empty())
-    throw InputError(fmt::format("--projector {}; give --camera the calibration it was made with", why));
-  const acquire::DeviceIntrinsics cam = acquire::DeviceIntrinsics::From(camera.image_size, camera.K, camera.dist);
-  const acquire::DeviceIntrinsics proj =
-      acquire::DeviceIntrinsics::From(projector.projector_size, projector.K, projector.dist);
-  calib::Pose projector_from_camera;
-  projector_from_camera.R = projector.R;
-  projector_from_camera.t = projector.T;
-  std::string what = "--corners";
+  acquire::PatternJob job;
+  job.camera = flagged("--camera", [&] { return calib::ReadCameraCalibration(camera_path); });
+  job.projector = flagged("--projector", [&] { return calib::ReadProjectorCalibration(projector_path); });
+  job.projector_file = projector_path;
+  job.size_mm = {size[0], size[1], size[2]};
+  job.setup = s;
+  job.lights = n;
+  job.corners = corners;
+  job.corners_source = "--corners";
   if (corners.empty()) {
     calib::ResponseCurve curve;
     if (!response_path.empty()) curve = calib::ReadResponse(response_path);
-    const cv::Mat image = calib::ReadHdrOrStack(photo, response_path.empty() ? nullptr : &curve);
-    if (image.size() != camera.image_size)
-      throw InputError(fmt::format("{}: the image is {}x{} but the camera calibration {} is {}x{}", photo, image.cols,
-                                   image.rows, camera_path, camera.image_size.width, camera.image_size.height));
-    corners = acquire::DetectFaceCorners(image);
-    if (corners.empty())
-      throw InputError(photo + ": no four-sided sample found on a dark background; give --corners");
-    what = "--photo " + photo + ": the corners found";
+    job.photo = calib::ReadHdrOrStack(photo, response_path.empty() ? nullptr : &curve);
+    job.corners_source = "--photo " + photo;
   }
-  double rms = 0;
-  const std::array<double, 3> size_mm{size[0], size[1], size[2]};
-  const calib::Pose camera_from_sample = acquire::EstimateSamplePose(cam, corners, size_mm, what, &rms);
-  if (rms > 1.0)
-    std::printf("patterns: warning: the sample's pose misses the corners by %.2f px RMS: check --sample-mm and the "
-                "corners (hand-picked corners give 0.1-0.5 px)\n", rms);
-  std::vector<cv::Mat> images;
-  try {
-    images = acquire::RegionPatterns(proj, projector_from_camera, camera_from_sample, size_mm, s, n);
-  } catch (const InputError& e) {
-    throw InputError(fmt::format("{} and {}: {}", projector_path, what, e.what()));
-  }
-  if (!acquire::LitFaceInsideProjector(proj, projector_from_camera, camera_from_sample, size_mm, s))
-    std::printf("patterns: warning: the %s face reaches outside the projector's image: the regions at its edge are "
-                "lit only in part\n", s == Setup::kBack ? "back" : "front");
-  // The folder's own name, also for "DIR/" and "DIR/.".
-  fs::path out_path = fs::absolute(out).lexically_normal();
-  if (out_path.filename().empty()) out_path = out_path.parent_path();
-  const std::string folder = out_path.filename().string();
-  // Names of one width that sort in order: 00..15, 000..999, 0000..4095.
-  const int width = std::max<int>(2, int(std::to_string(images.size() - 1).size()));
-  auto name_of = [&](size_t m) { return fmt::format("{:0{}d}", m, width); };
-  nlohmann::json conditions = nlohmann::json::array();
-  int64_t fewest = std::numeric_limits<int64_t>::max(), most = 0;
-  for (size_t m = 0; m < images.size(); ++m) {
-    const std::string name = name_of(m);
-    conditions.push_back({{"name", name}, {"stack", "lighting/" + name}, {"pattern", folder + "/" + name + ".png"}});
-    const int64_t lit = cv::countNonZero(images[m]);
-    fewest = std::min(fewest, lit);
-    most = std::max(most, lit);
-  }
-  WriteFolderAtomically(out, [&](const std::string& tmp) {
-    for (size_t m = 0; m < images.size(); ++m)
-      calib::WriteImage8((fs::path(tmp) / (name_of(m) + ".png")).string(), images[m]);
-    std::ofstream(fs::path(tmp) / "conditions.json") << conditions.dump(2) << "\n";
-  });
+  const acquire::PatternSet set = acquire::MakeRegionPatterns(job);
+  for (const std::string& w : set.warnings) std::printf("patterns: warning: %s\n", w.c_str());
+  acquire::WritePatternFolder(set, out);
+  const auto& c = set.corners;
   std::printf("patterns: front face corners (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f), pose RMS %.2f px\n",
-              corners[0].x, corners[0].y, corners[1].x, corners[1].y, corners[2].x, corners[2].y, corners[3].x,
-              corners[3].y, rms);
+              c[0].x, c[0].y, c[1].x, c[1].y, c[2].x, c[2].y, c[3].x, c[3].y, set.pose_rms_px);
   std::printf("wrote %s: %zu pattern%s (%dx%d regions of the %s face, %lld to %lld projector pixels each) and "
-              "conditions.json for capture.json\n", out.c_str(), images.size(), images.size() == 1 ? "" : "s", n, n,
-              s == Setup::kBack ? "back" : "front", (long long)fewest, (long long)most);
+              "conditions.json for capture.json\n", out.c_str(), set.images.size(), set.images.size() == 1 ? "" : "s",
+              n, n, s == Setup::kBack ? "back" : "front", (long long)set.fewest_pixels, (long long)set.most_pixels);
   return 0;
 }
 

@@ -1,0 +1,88 @@
+// SPDX-License-Identifier: MIT
+#include "acquire/patterns.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+
+#include "acquire/face_mapping.h"
+#include "calib/hdr.h"
+#include "solver/atomic_file.h"
+#include "solver/status.h"
+
+namespace translume::acquire {
+
+namespace fs = std::filesystem;
+
+PatternSet MakeRegionPatterns(const PatternJob& job) {
+  if (std::string why = calib::CameraMismatch(job.camera, job.projector_file); !why.empty())
+    throw InputError(why + "; use the camera calibration it was made with");
+  const DeviceIntrinsics cam = DeviceIntrinsics::From(job.camera.image_size, job.camera.K, job.camera.dist);
+  const DeviceIntrinsics proj =
+      DeviceIntrinsics::From(job.projector.projector_size, job.projector.K, job.projector.dist);
+  calib::Pose projector_from_camera;
+  projector_from_camera.R = job.projector.R;
+  projector_from_camera.t = job.projector.T;
+  PatternSet set;
+  set.corners = job.corners;
+  if (set.corners.empty()) {
+    if (job.photo.size() != job.camera.image_size)
+      throw InputError(fmt::format("{}: the image is {}x{} but the camera calibration is {}x{}", job.corners_source,
+                                   job.photo.cols, job.photo.rows, job.camera.image_size.width,
+                                   job.camera.image_size.height));
+    set.corners = DetectFaceCorners(job.photo);
+    if (set.corners.empty())
+      throw InputError(job.corners_source + ": no four-sided sample found on a dark background; give the corners");
+  }
+  const calib::Pose camera_from_sample =
+      EstimateSamplePose(cam, set.corners, job.size_mm, job.corners_source, &set.pose_rms_px);
+  if (set.pose_rms_px > 1.0)
+    set.warnings.push_back(fmt::format("the sample's pose misses the corners by {:.2f} px RMS: check the sample's size "
+                                       "and the corners (hand-picked corners give 0.1-0.5 px)", set.pose_rms_px));
+  try {
+    set.images = RegionPatterns(proj, projector_from_camera, camera_from_sample, job.size_mm, job.setup, job.lights);
+  } catch (const InputError& e) {
+    throw InputError(fmt::format("{} and {}: {}", job.projector_file, job.corners_source, e.what()));
+  }
+  set.face_inside_projector = LitFaceInsideProjector(proj, projector_from_camera, camera_from_sample, job.size_mm,
+                                                     job.setup);
+  if (!set.face_inside_projector)
+    set.warnings.push_back(fmt::format("the {} face reaches outside the projector's image: the regions at its edge are "
+                                       "lit only in part", job.setup == Setup::kBack ? "back" : "front"));
+  // Names of one width that sort in order: 00..15, 000..999, 0000..4095.
+  const int width = std::max<int>(2, int(std::to_string(set.images.size() - 1).size()));
+  set.fewest_pixels = std::numeric_limits<int64_t>::max();
+  for (size_t m = 0; m < set.images.size(); ++m) {
+    set.names.push_back(fmt::format("{:0{}d}", m, width));
+    const int64_t lit = cv::countNonZero(set.images[m]);
+    set.fewest_pixels = std::min(set.fewest_pixels, lit);
+    set.most_pixels = std::max(set.most_pixels, lit);
+  }
+  return set;
+}
+
+void WritePatternFolder(const PatternSet& set, const std::string& dir) {
+  TL_CHECK(set.images.size() == set.names.size());
+  if (fs::exists(dir) && !fs::is_directory(dir))
+    throw InputError(fmt::format("{}: is a file (a new folder of patterns is written)", dir));
+  if (fs::exists(dir) && !fs::is_empty(dir))
+    throw InputError(fmt::format("{}: exists and is not empty (a new folder of patterns is written)", dir));
+  // The folder's own name, also for "DIR/" and "DIR/.".
+  fs::path path = fs::absolute(dir).lexically_normal();
+  if (path.filename().empty()) path = path.parent_path();
+  const std::string folder = path.filename().string();
+  nlohmann::json conditions = nlohmann::json::array();
+  for (const std::string& name : set.names)
+    conditions.push_back({{"name", name}, {"stack", "lighting/" + name}, {"pattern", folder + "/" + name + ".png"}});
+  WriteFolderAtomically(dir, [&](const std::string& tmp) {
+    for (size_t m = 0; m < set.images.size(); ++m)
+      calib::WriteImage8((fs::path(tmp) / (set.names[m] + ".png")).string(), set.images[m]);
+    std::ofstream(fs::path(tmp) / "conditions.json") << conditions.dump(2) << "\n";
+  });
+}
+
+}  // namespace translume::acquire

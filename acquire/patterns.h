@@ -1,0 +1,51 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+
+#include <array>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "calib/camera_calib.h"
+#include "calib/projector_calib.h"
+#include "solver/grid.h"
+
+namespace translume::acquire {
+
+// `translume patterns` (docs/capture.md, step 6): the projector images that light N x N regions
+// of a real sample's lit face, from the rig's calibrations and the sample's place.
+struct PatternJob {
+  calib::CameraCalibration camera;
+  calib::ProjectorCalibration projector;
+  std::string projector_file;        // the projector calibration's file (CameraMismatch)
+  std::array<double, 3> size_mm{};   // the block's extent X, Y, Z
+  Setup setup = Setup::kBack;
+  int lights = 4;                    // N
+  // The front face's corners in the camera image (face_corners_px's order), or empty: found in
+  // `photo` (linear RGB, CV_32FC3, the camera's size: the sample lit on a dark background).
+  std::vector<cv::Point2d> corners;
+  cv::Mat photo;
+  std::string corners_source = "the corners";  // names corners or photo in messages
+};
+
+struct PatternSet {
+  std::vector<cv::Mat> images;     // CV_8UC1, 255 lit; region m = I + N J (RegionPatterns)
+  std::vector<std::string> names;  // "00".."15"; "000".. from 10 x 10 regions on
+  std::vector<cv::Point2d> corners;
+  double pose_rms_px = 0;
+  bool face_inside_projector = true;
+  int64_t fewest_pixels = 0, most_pixels = 0;
+  std::vector<std::string> warnings;  // a pose that misses the corners, a face outside the image
+};
+
+// Throws InputError naming the problem: a projector calibrated through another camera
+// calibration, no sample found in the photo, corners that are no convex quadrilateral or that
+// the pose cannot fit (EstimateSamplePose), and RegionPatterns' refusals.
+PatternSet MakeRegionPatterns(const PatternJob& job);
+
+// Writes `dir` (which must not exist or be empty) atomically: NAME.png per region and
+// conditions.json, the conditions list for capture.json (stacks lighting/NAME, patterns under
+// the folder's own name). Throws InputError where `dir` is a file or holds files.
+void WritePatternFolder(const PatternSet& set, const std::string& dir);
+
+}  // namespace translume::acquire
