@@ -87,7 +87,9 @@ struct Linearizer {
 };
 
 // Per exposure of `stack`, the black stack's exposure of the same time (null without `black`).
-std::vector<const Exposure*> MatchBlacks(const ExposureStack& stack, const ExposureStack* black) {
+// `given`: the stack as read from its folder (before WithShutterTimes), whose times messages quote.
+std::vector<const Exposure*> MatchBlacks(const ExposureStack& stack, const ExposureStack* black,
+                                         const ExposureStack& given) {
   std::vector<const Exposure*> blacks(stack.exposures.size(), nullptr);
   if (!black) return blacks;
   for (size_t j = 0; j < stack.exposures.size(); ++j) {
@@ -95,7 +97,8 @@ std::vector<const Exposure*> MatchBlacks(const ExposureStack& stack, const Expos
     for (const Exposure& b : black->exposures)
       if (std::abs(b.seconds / e.seconds - 1) < 0.01) blacks[j] = &b;
     if (!blacks[j])
-      throw CalibError(fmt::format("{}: the black stack {} has no photo at {} s", e.path, black->dir, e.seconds));
+      throw CalibError(fmt::format("{}: the black stack {} has no photo at {:g} s", e.path, black->dir,
+                                   given.exposures[j].seconds));
     if (blacks[j]->pixels.size() != e.pixels.size() || blacks[j]->pixels.depth() != e.pixels.depth())
       throw CalibError(fmt::format("{}: size or bit depth differs from {}", blacks[j]->path, e.path));
   }
@@ -680,7 +683,7 @@ void ShutterJudge::Add(const ExposureStack& stack, const ExposureStack* black) {
   std::optional<ExposureStack> apex_black;
   if (black) apex_black = WithShutterTimes(*black, ShutterTimes::kApex);
   const std::vector<PairRatio> pairs =
-      MeasurePairRatios(apex, Linearizer(apex, nullptr), MatchBlacks(apex, apex_black ? &*apex_black : nullptr),
+      MeasurePairRatios(apex, Linearizer(apex, nullptr), MatchBlacks(apex, apex_black ? &*apex_black : nullptr, stack),
                         options_.low_linear, options_.high_linear);
   for (const PairRatio& p : pairs) {
     const std::pair<double, double> key{stack.exposures[p.a].seconds, stack.exposures[p.b].seconds};
@@ -736,7 +739,7 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
   if (given_black) black_read = WithShutterTimes(*given_black, times);
   const ExposureStack* black = black_read ? &*black_read : nullptr;
   const size_t P = stack.exposures.size();
-  const std::vector<const Exposure*> blacks = MatchBlacks(stack, black);
+  const std::vector<const Exposure*> blacks = MatchBlacks(stack, black, given_stack);
   const Linearizer lin(stack, response);
   auto code = [&](const cv::Mat& m, int y, int x, int c) { return lin.Code(m, y, x, c); };
   auto linear = [&](float v, int c) { return lin.Linear(v, c); };

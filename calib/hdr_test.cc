@@ -317,6 +317,13 @@ TEST(Hdr, LinearShutterLabelsReadAsApexTimes) {
   const ExposureStack exact = MakeStack(SyntheticRig::RenderExposureStack(truth, labels, {}, so), labels);
   EXPECT_EQ(ChooseShutterTimes(exact).times, ShutterTimes::kLabelled);
   EXPECT_EQ(MergeHdr(exact, nullptr).shutter, ShutterTimes::kLabelled);
+  // A black stack without the shortest time: the message quotes the time as labelled (it quoted
+  // 0.0625, the APEX time read for 1/15, which appears in no file).
+  const ExposureStack black = MakeStack(
+      std::vector<cv::Mat>(labels.size() - 1, cv::Mat::zeros(truth.size(), CV_16UC3)),
+      std::vector<double>(labels.begin() + 1, labels.end()));
+  EXPECT_NE(CalibErrorOf([&] { MergeHdr(stack, nullptr, &black); }).find("has no photo at 0.0666667 s"),
+            std::string::npos) << CalibErrorOf([&] { MergeHdr(stack, nullptr, &black); });
   // Forced the wrong way, the warning says which way the times were read.
   MergeOptions as_apex;
   as_apex.shutter = ShutterTimes::kApex;
