@@ -140,7 +140,7 @@ std::string AcquireReport::Table() const {
                    "white gains {:.4g} {:.4g} {:.4g}, exposure times {}\n", camera_rms_px,
                    projector_rms_px < 0 ? std::string("-") : fmt::format("{:.3f} px", projector_rms_px),
                    pose_rms_px, white_gains[0], white_gains[1], white_gains[2],
-                   exposure_times == "apex" ? "read as APEX shutter speeds" : exposure_times);
+                   exposure_times.empty() ? "-" : calib::Describe(calib::ParseShutterTimes(exposure_times, "report")));
   s += "condition  measured  saturated  masked   fit error\n";
   for (const auto& c : conditions)
     s += fmt::format("  {:<8} {:8d} {:10d} {:7d}   {}\n", c.name, c.measured_nodes, c.saturated_nodes,

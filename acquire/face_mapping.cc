@@ -68,8 +68,18 @@ bool Bilinear(const cv::Mat& img, const cv::Point2d& p, cv::Vec3f* v) {
   return true;
 }
 
-double LitFaceZ(const GridShape& g, double h, Setup setup) {
-  return setup == Setup::kBack ? double(g.nz - 1) * h : 0.0;
+// The lit face's plane z (sample frame, mm): the back face back-lit, the front face front-lit.
+double LitFaceZ(const std::array<double, 3>& size_mm, Setup setup) {
+  return setup == Setup::kBack ? size_mm[2] : 0.0;
+}
+double LitFaceZ(const GridShape& g, double h, Setup setup) { return LitFaceZ(SampleSize(g, h), setup); }
+
+// Whether the lit face (plane z) is turned towards the projector: its outward normal is +z
+// back-lit, -z front-lit.
+bool LitFaceFacesProjector(const calib::Pose& projector_from_camera, const calib::Pose& camera_from_sample,
+                           double z, Setup setup) {
+  const cv::Vec3d projector_in_sample = camera_from_sample.Inverse().Apply(projector_from_camera.Inverse().t);
+  return (projector_in_sample[2] - z) * (setup == Setup::kBack ? 1.0 : -1.0) > 0;
 }
 
 }  // namespace
@@ -350,12 +360,7 @@ std::vector<float> ProjectPatternOnFace(const cv::Mat& pattern, const DeviceIntr
   const double z = LitFaceZ(g, h, setup);
   const std::vector<cv::Point3d> cam = Transform(camera_from_sample, FaceBoxPoints(g, h, z, samples));
   const auto px = projector.Project(Transform(projector_from_camera, cam));
-  // Is the lit face turned towards the projector? (Its outward normal: +z back, -z front.)
-  const calib::Pose sample_from_camera = camera_from_sample.Inverse();
-  const cv::Vec3d projector_in_sample =
-      sample_from_camera.Apply(projector_from_camera.Inverse().t);
-  const double outward = setup == Setup::kBack ? 1.0 : -1.0;
-  const bool faces = (projector_in_sample[2] - z) * outward > 0;
+  const bool faces = LitFaceFacesProjector(projector_from_camera, camera_from_sample, z, setup);
   const int64_t F = g.face_size();
   const size_t S = size_t(samples * samples);
   std::vector<float> q(size_t(F), 0.0f);
@@ -418,7 +423,7 @@ cv::Mat PatternForFaceRect(const DeviceIntrinsics& projector, const calib::Pose&
 bool LitFaceInsideProjector(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
                             const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
                             Setup setup) {
-  const double z = setup == Setup::kBack ? size_mm[2] : 0.0;
+  const double z = LitFaceZ(size_mm, setup);
   const std::vector<cv::Point3d> corners = {{0, 0, z}, {size_mm[0], 0, z}, {size_mm[0], size_mm[1], z}, {0, size_mm[1], z}};
   const std::vector<cv::Point3d> in_projector = Transform(projector_from_camera, Transform(camera_from_sample, corners));
   for (const cv::Point3d& p : in_projector)
@@ -433,11 +438,8 @@ std::vector<cv::Mat> RegionPatterns(const DeviceIntrinsics& projector, const cal
                                     const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
                                     Setup setup, int n) {
   TL_CHECK(n >= 1);
-  const double z = setup == Setup::kBack ? size_mm[2] : 0.0;
-  // The lit face must be turned towards the projector (its outward normal: +z back, -z front).
-  const cv::Vec3d projector_in_sample =
-      camera_from_sample.Inverse().Apply(projector_from_camera.Inverse().t);
-  if ((projector_in_sample[2] - z) * (setup == Setup::kBack ? 1.0 : -1.0) <= 0)
+  const double z = LitFaceZ(size_mm, setup);
+  if (!LitFaceFacesProjector(projector_from_camera, camera_from_sample, z, setup))
     throw InputError(fmt::format("the projector is on the {} side of the sample, so it cannot light its {} face: "
                                  "is the setup {}?", setup == Setup::kBack ? "front" : "back",
                                  setup == Setup::kBack ? "back" : "front", setup == Setup::kBack ? "front" : "back"));

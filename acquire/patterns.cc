@@ -65,12 +65,15 @@ PatternSet MakeRegionPatterns(const PatternJob& job) {
   return set;
 }
 
+std::string PatternFolderProblem(const std::string& dir) {
+  if (!fs::exists(dir) || (fs::is_directory(dir) && fs::is_empty(dir))) return "";
+  return fmt::format("{}: {} (a new folder of patterns is written)", dir,
+                     fs::is_directory(dir) ? "exists and is not empty" : "is a file");
+}
+
 void WritePatternFolder(const PatternSet& set, const std::string& dir) {
   TL_CHECK(set.images.size() == set.names.size());
-  if (fs::exists(dir) && !fs::is_directory(dir))
-    throw InputError(fmt::format("{}: is a file (a new folder of patterns is written)", dir));
-  if (fs::exists(dir) && !fs::is_empty(dir))
-    throw InputError(fmt::format("{}: exists and is not empty (a new folder of patterns is written)", dir));
+  if (std::string why = PatternFolderProblem(dir); !why.empty()) throw InputError(why);
   // The folder's own name, also for "DIR/" and "DIR/.".
   fs::path path = fs::absolute(dir).lexically_normal();
   if (path.filename().empty()) path = path.parent_path();

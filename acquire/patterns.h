@@ -43,9 +43,13 @@ struct PatternSet {
 // the pose cannot fit (EstimateSamplePose), and RegionPatterns' refusals.
 PatternSet MakeRegionPatterns(const PatternJob& job);
 
+// "" where `dir` may take a new folder of patterns (missing or empty), else "DIR: is a file (...)"
+// or "DIR: exists and is not empty (...)".
+std::string PatternFolderProblem(const std::string& dir);
+
 // Writes `dir` (which must not exist or be empty) atomically: NAME.png per region and
 // conditions.json, the conditions list for capture.json (stacks lighting/NAME, patterns under
-// the folder's own name). Throws InputError where `dir` is a file or holds files.
+// the folder's own name). Throws InputError with PatternFolderProblem's message.
 void WritePatternFolder(const PatternSet& set, const std::string& dir);
 
 }  // namespace translume::acquire

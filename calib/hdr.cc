@@ -586,8 +586,7 @@ ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
 }
 
 std::string ResponseCurve::ShutterReport() const {
-  const std::string how = shutter == ShutterTimes::kApex ? "read as APEX shutter speeds (1/30 as 1/32 s)"
-                                                         : "as labelled";
+  const std::string how = Describe(shutter);
   if (!(other_fit_rms > 0)) return fmt::format("exposure times {}", how);
   return fmt::format("exposure times {}: fit residual {:.2f} %, {:.2f} % {}", how, 100 * fit_rms,
                      100 * other_fit_rms,
@@ -662,8 +661,7 @@ std::string FileName(const Exposure& e) { return fs::path(e.path).filename().str
 }  // namespace
 
 std::string ShutterChoice::BriefReport() const {
-  const std::string how = times == ShutterTimes::kApex ? "read as APEX shutter speeds (1/30 as 1/32 s)"
-                                                       : "as labelled";
+  const std::string how = Describe(times);
   if (pairs == 0) return fmt::format("exposure times {}", how);
   if (!decisive)
     return fmt::format("exposure times {}: no well-exposed pair of photos tells the labels from APEX times ({} "

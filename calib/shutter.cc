@@ -49,6 +49,12 @@ const char* ToString(ShutterTimes times) {
   return "?";
 }
 
+const char* Describe(ShutterTimes times) {
+  return times == ShutterTimes::kApex ? "read as APEX shutter speeds (1/30 as 1/32 s)"
+         : times == ShutterTimes::kLabelled ? "as labelled"
+                                            : "auto";
+}
+
 double ApexSeconds(double seconds) {
   for (const Label& l : kLabels)
     if (std::abs(seconds / l.seconds - 1) < 0.005) return std::exp2(-l.stops);

@@ -20,6 +20,8 @@ enum class ShutterTimes {
 // "auto", "labelled", "apex"; throws CalibError naming `what` (a flag or a file) otherwise.
 ShutterTimes ParseShutterTimes(const std::string& text, const std::string& what);
 const char* ToString(ShutterTimes times);
+// For messages: "read as APEX shutter speeds (1/30 as 1/32 s)", "as labelled" ("auto" for kAuto).
+const char* Describe(ShutterTimes times);
 
 // The APEX time of a standard shutter-speed label within 0.5 % of `seconds` (1/8000 s .. 30 s in
 // third stops; 1/6000, 1/3000, 1/1500, 1/750, 1/350, 1/180, 1/90, 1/45, 1/3, 0.7, 1.5, 3, 11

@@ -109,9 +109,7 @@ int RunPatterns(int argc, char** argv) {
     const std::vector<double> c = ParseNumbers(corners_text, "--corners", 8, 8);
     for (int k = 0; k < 4; ++k) corners.emplace_back(c[size_t(2 * k)], c[size_t(2 * k + 1)]);
   }
-  if (fs::exists(out) && (!fs::is_directory(out) || !fs::is_empty(out)))
-    throw InputError(fmt::format("-o {}: {} (a new folder of patterns is written)", out,
-                                 fs::is_directory(out) ? "exists and is not empty" : "is a file"));
+  if (std::string why = acquire::PatternFolderProblem(out); !why.empty()) throw InputError("-o " + why);
   auto flagged = [](const char* flag, const auto& read) {
     try {
       return read();

@@ -236,9 +236,9 @@ int RunCalibrateWhite(int argc, char** argv) {
     calib::WriteWhiteBalance(tmp, w, black_mean, black_image);
   });
   std::printf("wrote %s: %s%s\n", out.c_str(), w.BriefReport().c_str(),
-              w.exposure_times.empty() ? ""
-              : w.exposure_times == "apex" ? "; exposure times read as APEX shutter speeds"
-                                           : "; exposure times as labelled");
+              white_times == calib::ShutterTimes::kAuto
+                  ? ""
+                  : ("; exposure times " + std::string(calib::Describe(white_times))).c_str());
   return 0;
 }
 
@@ -325,7 +325,7 @@ int RunHdr(int argc, char** argv) {
                 h.BriefReport().c_str());
     if (stack.IsEightBit() && calib::HasApexLabels(stack))
       std::printf("hdr: exposure times %s, %s\n",
-                  h.shutter == calib::ShutterTimes::kApex ? "read as APEX shutter speeds (1/30 as 1/32 s)" : "as labelled",
+                  calib::Describe(h.shutter),
                   times != "auto" ? "as --exposure-times says" : "as the response was fitted");
     if (!h.time_warning.empty()) std::printf("hdr: warning: %s\n", h.time_warning.c_str());
     return 0;
