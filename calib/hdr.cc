@@ -298,21 +298,7 @@ namespace {
 // speed as cameras show it ("1/30"); 0 if it is neither.
 double SecondsOf(const nlohmann::json& value) {
   if (value.is_number()) return value.get<double>();
-  if (!value.is_string()) return 0;
-  const std::string text = value.get<std::string>();
-  // Decimal only: strtod also takes "0x10", "inf" and "nan".
-  if (text.find_first_not_of("0123456789.eE+-/ ") != std::string::npos) return 0;
-  double num = 0, den = 1;
-  char* end = nullptr;
-  num = std::strtod(text.c_str(), &end);
-  if (end == text.c_str()) return 0;
-  if (*end == '/') {
-    const char* start = end + 1;
-    den = std::strtod(start, &end);
-    if (end == start) return 0;
-  }
-  if (*end != '\0' || !(den > 0)) return 0;
-  return num / den;
+  return value.is_string() ? SecondsFromText(value.get<std::string>()) : 0;
 }
 
 }  // namespace
@@ -666,8 +652,14 @@ std::string ShutterChoice::BriefReport() const {
   if (!decisive)
     return fmt::format("exposure times {}: no well-exposed pair of photos tells the labels from APEX times ({} "
                        "pair{} judged; force a reading where you know it)", how, pairs, pairs == 1 ? "" : "s");
-  return fmt::format("exposure times {}: brightness steps {:.2f} % RMS off the labels, {:.2f} % off the "
-                     "APEX times ({} pairs)", how, 100 * labelled_rms, 100 * apex_rms, pairs);
+  std::string report = fmt::format("exposure times {}: brightness steps {:.2f} % RMS off the labels, {:.2f} % off "
+                                   "the APEX times ({} pairs", how, 100 * labelled_rms, 100 * apex_rms, pairs);
+  // A black level left in the photos lowers every step (an offset o makes (2x + o) / (x + o) < 2).
+  if (std::abs(step_bias) > 0.01)
+    report += fmt::format(", after their common {:+.1f} %: {}", 100 * (std::exp(step_bias) - 1),
+                          step_bias < 0 ? "a black level left in the photos? Subtract it or give a black stack"
+                                        : "the photos brighten more than their times say");
+  return report + ")";
 }
 
 void ShutterJudge::Add(const ExposureStack& stack, const ExposureStack* black) {
@@ -691,10 +683,7 @@ void ShutterJudge::Add(const ExposureStack& stack, const ExposureStack* black) {
     if (telling && std::find(telling_.begin(), telling_.end(), key) == telling_.end()) telling_.push_back(key);
     if (p.samples < kMinPairSamplesForPercent) continue;
     if (telling && std::find(judged_.begin(), judged_.end(), key) == judged_.end()) judged_.push_back(key);
-    const double labelled = std::log(p.measured / labelled_ratio), as_apex = std::log(p.measured / apex_ratio);
-    sum_labelled_ += labelled * labelled;
-    sum_apex_ += as_apex * as_apex;
-    ++pairs_;
+    steps_.push_back({key, std::log(p.measured / labelled_ratio), std::log(p.measured / apex_ratio)});
   }
 }
 
@@ -702,12 +691,31 @@ bool ShutterJudge::Decisive() const { return !telling_.empty() && judged_.size()
 
 ShutterChoice ShutterJudge::Choice() const {
   ShutterChoice choice;
-  if (!apex_labels_ || pairs_ == 0) return choice;
+  if (!apex_labels_ || steps_.empty()) return choice;
   choice.decisive = !judged_.empty();
-  choice.pairs = pairs_;
-  choice.labelled_rms = std::sqrt(sum_labelled_ / pairs_);
-  choice.apex_rms = std::sqrt(sum_apex_ / pairs_);
-  if (choice.apex_rms < 0.8 * choice.labelled_rms) choice.times = ShutterTimes::kApex;
+  choice.pairs = int(steps_.size());
+  std::vector<std::pair<double, double>> keys;
+  for (const Step& s : steps_)
+    if (std::find(keys.begin(), keys.end(), s.key) == keys.end()) keys.push_back(s.key);
+  double mean_labelled = 0, mean_apex = 0;
+  if (keys.size() >= 3) {
+    for (const Step& s : steps_) {
+      mean_labelled += s.labelled / double(steps_.size());
+      mean_apex += s.apex / double(steps_.size());
+    }
+  }
+  double sum_labelled = 0, sum_apex = 0;
+  for (const Step& s : steps_) {
+    sum_labelled += (s.labelled - mean_labelled) * (s.labelled - mean_labelled);
+    sum_apex += (s.apex - mean_apex) * (s.apex - mean_apex);
+  }
+  choice.labelled_rms = std::sqrt(sum_labelled / double(steps_.size()));
+  choice.apex_rms = std::sqrt(sum_apex / double(steps_.size()));
+  choice.step_bias = mean_labelled;
+  if (choice.apex_rms < 0.8 * choice.labelled_rms) {
+    choice.times = ShutterTimes::kApex;
+    choice.step_bias = mean_apex;
+  }
   return choice;
 }
 

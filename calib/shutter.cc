@@ -2,6 +2,7 @@
 #include "calib/shutter.h"
 
 #include <cmath>
+#include <cstdlib>
 
 #include "calib/error.h"
 
@@ -65,6 +66,22 @@ double ShutterLabel(double seconds) {
   for (const Label& l : kLabels)
     if (std::abs(seconds / std::exp2(-l.stops) - 1) < 0.005) return l.seconds;
   return seconds;
+}
+
+double SecondsFromText(const std::string& text) {
+  // Decimal only: strtod also takes "0x10", "inf" and "nan".
+  if (text.find_first_not_of("0123456789.eE+-/ ") != std::string::npos) return 0;
+  double den = 1;
+  char* end = nullptr;
+  const double num = std::strtod(text.c_str(), &end);
+  if (end == text.c_str()) return 0;
+  if (*end == '/') {
+    const char* start = end + 1;
+    den = std::strtod(start, &end);
+    if (end == start) return 0;
+  }
+  if (*end != '\0' || !(den > 0)) return 0;
+  return num / den;
 }
 
 }  // namespace translume::calib

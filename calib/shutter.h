@@ -29,6 +29,10 @@ const char* Describe(ShutterTimes times);
 // Any other time (0.03125, 0.0417) is returned unchanged.
 double ApexSeconds(double seconds);
 
+// A time written as a decimal number of seconds ("0.5", "15") or as cameras show shutter speeds
+// ("1/30"); 0 if it is neither (also "0x10", "inf", "1/0").
+double SecondsFromText(const std::string& text);
+
 // The inverse: the label a camera shows for an APEX time within 0.5 % (1/32 -> 1/30, 16 -> 15),
 // else `seconds` unchanged. Simulated captures write their times so.
 double ShutterLabel(double seconds);

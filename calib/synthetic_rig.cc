@@ -390,6 +390,7 @@ std::vector<cv::Mat> SyntheticRig::RenderExposureStack(const cv::Mat& radiance,
         cv::sqrt(V, V);
         cv::multiply(V, G, V);
         V += S;
+        if (o.offset != 0) V += o.offset;
         cv::max(V, 0.0, V);
         cv::min(V, 1.0, V);
         V.convertTo(level, CV_32S, kLevels - 1);
@@ -407,6 +408,25 @@ std::vector<cv::Mat> SyntheticRig::RenderExposureStack(const cv::Mat& radiance,
     out.push_back(img);
   }
   return out;
+}
+
+cv::Mat SyntheticHdrScene(cv::Size size, double decades, uint64_t seed) {
+  cv::Mat E(size, CV_32FC3);
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> U(0, 1);
+  for (int y = 0; y < E.rows; ++y)
+    for (int x = 0; x < E.cols; ++x)
+      for (int c = 0; c < 3; ++c) {
+        const double l = -decades + decades * (x + 0.5) / E.cols - 0.15 * c * (y % 7) / 7.0;
+        E.at<cv::Vec3f>(y, x)[c] = float(std::pow(10.0, std::clamp(l, -decades, 0.0)));
+      }
+  for (int k = 0; k < 40; ++k) {
+    const cv::Rect r(int(U(rng) * (E.cols - 20)), int(U(rng) * (E.rows - 20)), 12, 12);
+    const cv::Vec3f v(float(std::pow(10.0, -decades + decades * U(rng))), float(std::pow(10.0, -decades + decades * U(rng))),
+                      float(std::pow(10.0, -decades + decades * U(rng))));
+    E(r).setTo(cv::Scalar(v[0], v[1], v[2]));
+  }
+  return E;
 }
 
 }  // namespace translume::calib

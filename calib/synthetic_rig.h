@@ -59,8 +59,14 @@ struct StackOptions {
   int bits = 8;                 // 8: through `response`; 16: linear codes
   double read_noise = 0.0005;   // std of additive noise, linear units of full scale
   double shot_noise = 0.0001;   // variance per unit linear signal (Poisson-like)
+  double offset = 0;            // sensor black level left in the codes, fraction of full scale
   uint64_t seed = 1;
 };
+
+// A linear radiance image (CV_32FC3, RGB) spanning `decades` below 1 per second: a log ramp along
+// x with per-channel offsets and 40 random constant 12x12 patches (the 8-bit merge and response
+// tests' scene and `bench exposure-times`'). Deterministic for a seed.
+cv::Mat SyntheticHdrScene(cv::Size size, double decades, uint64_t seed);
 
 // A ColorChecker-like chart: 4 rows x 6 columns of square patches on a black frame.
 struct SyntheticChart {

@@ -382,6 +382,20 @@ TEST_F(Cli, BenchRecoverySmoke) {
   ExpectOneLineError(Translume("bench recovery --grid 8x6"), "--grid");
 }
 
+TEST_F(Cli, BenchExposureTimesSmoke) {
+  const CommandRun r = Translume("bench exposure-times --bits 16 --brackets 1/60:1/30:1/15:1/8 --cameras apex "
+                                 "--offsets 0 --seeds 1 --size 96x64 --json");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output.substr(r.output.find('[')));
+  ASSERT_EQ(j.size(), 1u);
+  EXPECT_EQ(j[0]["bracket"], "1/60:1/30:1/15:1/8");
+  EXPECT_EQ(j[0]["right"].get<int>(), 1);
+  ExpectOneLineError(Translume("bench exposure-times --brackets slow"), "bracket 'slow': not one of full");
+  ExpectOneLineError(Translume("bench exposure-times --bits 12"), "--bits: 12 is neither 8 nor 16");
+  ExpectOneLineError(Translume("bench exposure-times --size 10x"), "--size 10x: expected WxH");
+  EXPECT_EQ(Translume("bench exposure-times --help").status, 0);
+}
+
 TEST_F(Cli, BenchRecoveryOneCaseWithTimeLimit) {
   // One case (front-lit, 1 % noise), no optimiser comparison; the time limit stops the
   // recovery after its first iteration.

@@ -30,6 +30,8 @@ int RunAcquire(int argc, char** argv);
 void AddBenchForward(CLI::App& bench);
 void AddBenchRecovery(CLI::App& bench);
 void PrintBenchProgress(const std::string& line);
+// `bench exposure-times` (tools/bench_capture_commands.cc; links calib).
+void AddBenchExposureTimes(CLI::App& bench);
 int RunRender(int argc, char** argv);
 int RunEdit(int argc, char** argv);
 

@@ -182,9 +182,11 @@ int RunBench(int argc, char** argv) {
   app.require_subcommand(1);
   AddBenchForward(app);
   AddBenchRecovery(app);
+  AddBenchExposureTimes(app);
   AddCommonOptions(app);
-  if (argc >= 2 && argv[1][0] != '-' && std::string(argv[1]) != "forward" && std::string(argv[1]) != "recovery")
-    throw InputError(fmt::format("unknown benchmark '{}' (forward, recovery)", argv[1]));
+  if (argc >= 2 && argv[1][0] != '-' && std::string(argv[1]) != "forward" && std::string(argv[1]) != "recovery" &&
+      std::string(argv[1]) != "exposure-times")
+    throw InputError(fmt::format("unknown benchmark '{}' (forward, recovery, exposure-times)", argv[1]));
   ParseOrHelp(app, argc, argv);
   return 0;
 }
