@@ -383,7 +383,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
           if (!std::isfinite((*it)[c])) (*it)[c] = 0;
       sum += finite;
     }
-    corners = DetectFaceCorners(sum);
+    corners = DetectFaceCorners(sum, &cam);
     if (corners.empty())
       throw InputError(fmt::format("{}: face_corners_px is \"auto\" but no four-sided sample was "
                                    "found in the images; give the corners", cap.file));

@@ -183,7 +183,8 @@ namespace {
 
 // The corners of `quad` (the outline of a bright blob in `lin`, luminance) to sub-pixel
 // accuracy, in DetectFaceCorners' order; empty where an edge does not show along a side.
-std::vector<cv::Point2d> RefineQuadrilateral(const cv::Mat& lin, const std::vector<cv::Point>& quad) {
+std::vector<cv::Point2d> RefineQuadrilateral(const cv::Mat& lin, const std::vector<cv::Point>& quad,
+                                             const DeviceIntrinsics* camera) {
   // Order: top-left (smallest x + y) first, then clockwise in the image.
   std::vector<cv::Point2d> c(quad.begin(), quad.end());
   if ((c[1] - c[0]).cross(c[2] - c[1]) < 0) std::reverse(c.begin(), c.end());
@@ -213,19 +214,32 @@ std::vector<cv::Point2d> RefineQuadrilateral(const cv::Mat& lin, const std::vect
       };
       const double in = 0.5 * (at(-4) + at(-3)), out = 0.5 * (at(3) + at(4));
       if (!(in > 2 * out)) continue;
-      const double half = 0.5 * (in + out);
-      double prev = at(-3);
-      for (double t = -2.95; t <= 3; t += 0.05) {
-        const double v = at(t);
-        if (prev >= half && v < half) {
-          const double tt = t - 0.05 * (half - v) / (prev - v);
-          edge.emplace_back(p + (tt) * n);
-          break;
+      // Where the profile first falls below `level` between -3 and 3 px; NaN where it does not.
+      auto crossing = [&](double level) {
+        double prev = at(-3);
+        for (double t = -2.95; t <= 3; t += 0.05) {
+          const double v = at(t);
+          if (prev >= level && v < level) return t - 0.05 * (level - v) / (prev - v);
+          prev = v;
         }
-        prev = v;
+        return std::numeric_limits<double>::quiet_NaN();
+      };
+      double tt = crossing(0.5 * (in + out));
+      // Half-way between the inside's level at the edge and the outside's: a translucent sample
+      // dims towards its edges (light leaves through them), and half-way down from its level a
+      // few pixels inside lies inside the edge (0.1-0.2 px here). The inside's profile from 4 to
+      // 2 px within the first estimate, extrapolated to it, gives that level.
+      if (std::isfinite(tt)) {
+        const double near = at(tt - 2), far = at(tt - 4);
+        const double at_edge = near + (near - far);
+        if (at_edge > 2 * out) tt = crossing(0.5 * (at_edge + out));
       }
+      if (std::isfinite(tt)) edge.emplace_back(p + tt * n);
     }
     if (edge.size() < 4 || edge.size() < size_t(count) / 2) return {};  // no edge along most of the side
+    // The face's sides are straight in the ideal pinhole image, not in a distorted one (barrel
+    // distortion bows them outwards, and lines through their middles meet outside the corners).
+    if (camera) cv::undistortPoints(std::vector<cv::Point2f>(edge), edge, camera->K, camera->dist, cv::noArray(), camera->K);
     cv::Vec4f l;
     cv::fitLine(edge, l, cv::DIST_HUBER, 0, 0.01, 0.01);
     // Line as a x + b y = c.
@@ -239,12 +253,18 @@ std::vector<cv::Point2d> RefineQuadrilateral(const cv::Mat& lin, const std::vect
     if (std::abs(det) < 1e-9) return {};
     out.emplace_back((p[2] * q[1] - p[1] * q[2]) / det, (p[0] * q[2] - p[2] * q[0]) / det);
   }
+  if (camera) {  // back into the distorted image
+    std::vector<cv::Point3d> rays;
+    for (const cv::Point2d& u : out)
+      rays.emplace_back((u.x - camera->K(0, 2)) / camera->K(0, 0), (u.y - camera->K(1, 2)) / camera->K(1, 1), 1.0);
+    out = camera->Project(rays);
+  }
   return out;
 }
 
 }  // namespace
 
-std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb) {
+std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb, const DeviceIntrinsics* camera) {
   CV_Assert(rgb.type() == CV_32FC3);
   // Luminance (R + G + B), saturated pixels at the brightest finite value, negatives at 0.
   cv::Mat lin(rgb.size(), CV_32F);
@@ -298,7 +318,7 @@ std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb) {
   for (float floor_fraction : {1e-6f, 1e-4f, 1e-2f, 1e-1f}) {
     const std::vector<cv::Point> quad = quadrilateral(floor_fraction);
     if (quad.empty()) continue;
-    std::vector<cv::Point2d> corners = RefineQuadrilateral(lin, quad);
+    std::vector<cv::Point2d> corners = RefineQuadrilateral(lin, quad, camera);
     if (!corners.empty()) return corners;
   }
   return {};

@@ -55,12 +55,16 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
 // Finds the front face's four corners in a linear image of the lit sample on a dark background
 // (e.g. the sum of every condition's HDR, or a photo whose background is clipped at 0): a
 // log-domain Otsu threshold after a 5x5 median, the largest blob, its four-sided outline, each
-// side refined by a line fit to sub-pixel edge points. The log scale spans 6 decades below the
+// side refined by a line fit to sub-pixel edge points (where the profile across the side falls
+// half-way from the inside's level, extrapolated to the edge, to the outside's). The log scale spans 6 decades below the
 // brightest pixel, then 4, 2 and 1 until the blob is solid (97 % of its outline's inside) and an
 // edge shows along most of each side. Corners are returned in image order top-left, top-right,
 // bottom-right, bottom-left (the sample seen upright: node (0, 0) top-left). Empty when no
-// convex quadrilateral is found.
-std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& linear_rgb);
+// convex quadrilateral is found. With the `camera` that took the image, the sides are fitted
+// as straight lines after undistortion (the corners of a face seen through the simulated rig's
+// barrel distortion were found 0.33 px outside without it: docs/benchmarks.md, "Corners of a
+// distorted face").
+std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& linear_rgb, const DeviceIntrinsics* camera = nullptr);
 
 // Node-space front-face radiance from a linear RGB image (CV_32FC3; +inf = saturated): every
 // front-face node's value is the mean of the image over the node's dual box on the face (the

@@ -34,7 +34,7 @@ PatternSet MakeRegionPatterns(const PatternJob& job) {
       throw InputError(fmt::format("{}: the image is {}x{} but the camera calibration is {}x{}", job.corners_source,
                                    job.photo.cols, job.photo.rows, job.camera.image_size.width,
                                    job.camera.image_size.height));
-    set.corners = DetectFaceCorners(job.photo);
+    set.corners = DetectFaceCorners(job.photo, &cam);
     if (set.corners.empty())
       throw InputError(job.corners_source + ": no four-sided sample found on a dark background; give the corners");
   }
