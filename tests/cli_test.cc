@@ -396,6 +396,20 @@ TEST_F(Cli, BenchExposureTimesSmoke) {
   EXPECT_EQ(Translume("bench exposure-times --help").status, 0);
 }
 
+TEST_F(Cli, BenchPatternsSmoke) {
+  const CommandRun r = Translume("bench patterns --setups back --seeds 1 --lights 2x2 --json");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto j = nlohmann::json::parse(r.output.substr(r.output.find('[')));
+  ASSERT_EQ(j.size(), 1u);
+  EXPECT_EQ(j[0]["regions"].get<int>(), 4);
+  EXPECT_GT(j[0]["iou_min"].get<double>(), 0.98);
+  EXPECT_GT(j[0]["photo_iou_min"].get<double>(), 0.95);
+  EXPECT_LT(j[0]["photo_corner_px"].get<double>(), 1.0);
+  ExpectOneLineError(Translume("bench patterns --setups side"), "side");
+  ExpectOneLineError(Translume("bench patterns --lights 0x0"), "--lights");
+  ExpectOneLineError(Translume("bench patterns --lights 17x17"), "--lights must be within 1..16");
+}
+
 TEST_F(Cli, BenchRecoveryOneCaseWithTimeLimit) {
   // One case (front-lit, 1 % noise), no optimiser comparison; the time limit stops the
   // recovery after its first iteration.

@@ -1,13 +1,16 @@
 // SPDX-License-Identifier: MIT
-// `translume bench exposure-times`: the capture side's benchmarks, which need the calib library
-// (so they stay out of the self-contained GPU benchmark binary).
+// `translume bench exposure-times` and `bench patterns`: the capture side's benchmarks, which
+// need the calib and acquire libraries (so they stay out of the self-contained GPU benchmark
+// binary).
 #include <cstdio>
 #include <fmt/format.h>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "acquire/bench_patterns.h"
 #include "calib/bench_exposure_times.h"
+#include "solver/light.h"
 #include "solver/status.h"
 #include "solver/threads.h"
 #include "tools/commands.h"
@@ -53,6 +56,35 @@ void AddBenchExposureTimes(CLI::App& bench) {
                  NumThreads());
     const auto rows = calib::RunExposureTimesBench(o, PrintBenchProgress);
     std::printf("%s\n", (f->json ? calib::ExposureTimesBenchJson(rows) : calib::ExposureTimesBenchTable(rows)).c_str());
+  });
+}
+
+void AddBenchPatterns(CLI::App& bench) {
+  struct Flags {
+    acquire::PatternsBenchOptions o;
+    std::vector<std::string> setups = {"back", "front"};
+    std::string lights = "4x4";
+    bool json = false;
+  };
+  auto f = std::make_shared<Flags>();
+  auto* cmd = bench.add_subcommand(
+      "patterns", "Region patterns (translume patterns) from simulated captures' calibrations against the true "
+                  "rig's: intersection over union and edge shift, from true and from found face corners");
+  cmd->fallthrough();
+  cmd->add_option("--setups", f->setups, "Lit faces: back, front")->delimiter(',')->capture_default_str();
+  cmd->add_option("--seeds", f->o.seeds, "Simulated captures per setup (seeds 1..N)")->capture_default_str();
+  cmd->add_option("--lights", f->lights, "NxN regions of the lit face")->capture_default_str();
+  cmd->add_flag("--json", f->json, "Print JSON instead of a table");
+  cmd->callback([f] {
+    acquire::PatternsBenchOptions o = f->o;
+    o.setups.clear();
+    for (const auto& s : f->setups) o.setups.push_back(ParseSetup(s, "--setups"));
+    o.lights = RegionLights(f->lights).front().region_n;  // validates NxN
+    if (std::string why = o.Validate(); !why.empty()) throw InputError("bench patterns: " + why);
+    std::fprintf(stderr, "bench patterns: %d captures per setup, %dx%d regions, %d threads\n", o.seeds, o.lights,
+                 o.lights, NumThreads());
+    const auto rows = acquire::RunPatternsBench(o, PrintBenchProgress);
+    std::printf("%s\n", (f->json ? acquire::PatternsBenchJson(rows) : acquire::PatternsBenchTable(rows)).c_str());
   });
 }
 

@@ -30,8 +30,10 @@ int RunAcquire(int argc, char** argv);
 void AddBenchForward(CLI::App& bench);
 void AddBenchRecovery(CLI::App& bench);
 void PrintBenchProgress(const std::string& line);
-// `bench exposure-times` (tools/bench_capture_commands.cc; links calib).
+// `bench exposure-times` and `bench patterns` (tools/bench_capture_commands.cc; link calib and
+// acquire).
 void AddBenchExposureTimes(CLI::App& bench);
+void AddBenchPatterns(CLI::App& bench);
 int RunRender(int argc, char** argv);
 int RunEdit(int argc, char** argv);
 

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "solver/forward.h"
 #include "solver/dataset.h"
@@ -183,10 +184,11 @@ int RunBench(int argc, char** argv) {
   AddBenchForward(app);
   AddBenchRecovery(app);
   AddBenchExposureTimes(app);
+  AddBenchPatterns(app);
   AddCommonOptions(app);
-  if (argc >= 2 && argv[1][0] != '-' && std::string(argv[1]) != "forward" && std::string(argv[1]) != "recovery" &&
-      std::string(argv[1]) != "exposure-times")
-    throw InputError(fmt::format("unknown benchmark '{}' (forward, recovery, exposure-times)", argv[1]));
+  const std::vector<std::string> names = {"forward", "recovery", "exposure-times", "patterns"};
+  if (argc >= 2 && argv[1][0] != '-' && std::find(names.begin(), names.end(), argv[1]) == names.end())
+    throw InputError(fmt::format("unknown benchmark '{}' ({})", argv[1], fmt::join(names, ", ")));
   ParseOrHelp(app, argc, argv);
   return 0;
 }

@@ -34,7 +34,7 @@ const Command kCommands[] = {
     {"evaluate", translume::RunEvaluate, "Held-out relighting and parameter errors of a recovery"},
     {"calibrate", translume::RunCalibrate, "Calibrate camera, projector, response, white balance"},
     {"hdr", translume::RunHdr, "Merge an exposure stack into a linear HDR image (.exr)"},
-    {"bench", translume::RunBench, "Benchmarks: bench forward, bench recovery, bench exposure-times"},
+    {"bench", translume::RunBench, "Benchmarks: bench forward, recovery, exposure-times, patterns"},
     {"render", translume::RunRender, "Render a material on a shape (polygrid diffusion, Section 5)"},
     {"edit", translume::RunEdit, "Edit a material: scale/add kappa, mu in a mask and depth range"},
     {"info", translume::RunInfo, "Version, build, backends, threads, memory estimates"},
