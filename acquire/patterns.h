@@ -30,7 +30,7 @@ struct PatternJob {
 
 struct PatternSet {
   std::vector<cv::Mat> images;     // CV_8UC1, 255 lit; region m = I + N J (RegionPatterns)
-  std::vector<std::string> names;  // "00".."15"; "000".. from 10 x 10 regions on
+  std::vector<std::string> names;  // "00".."15"; "000".. from 11 x 11 regions on
   std::vector<cv::Point2d> corners;
   double pose_rms_px = 0;
   bool face_inside_projector = true;

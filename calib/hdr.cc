@@ -597,8 +597,9 @@ ResponseCurve ReadResponse(const std::string& path) {
     if (!f["exposure_times"].empty()) {
       std::string times;
       f["exposure_times"] >> times;
+      if (times != "labelled" && times != "apex")
+        throw CalibError(path + ": exposure_times must be \"labelled\" or \"apex\", not \"" + times + "\"");
       c.shutter = ParseShutterTimes(times, path);
-      if (c.shutter == ShutterTimes::kAuto) throw CalibError(path + ": exposure_times must be \"labelled\" or \"apex\"");
     }
   } catch (const cv::Exception&) {
     throw CalibError(path + ": not an OpenCV YAML/XML file");

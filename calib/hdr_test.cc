@@ -613,7 +613,14 @@ TEST_F(HdrFiles, ResponseAndExrRoundTrip) {
     cv::FileStorage f(P("bad.yml"), cv::FileStorage::WRITE);
     f << "response" << c.lut << "exposure_times" << "auto";
   }
-  EXPECT_NE(CalibErrorOf([&] { ReadResponse(P("bad.yml")); }).find("bad.yml: exposure_times must be"), std::string::npos);
+  EXPECT_NE(CalibErrorOf([&] { ReadResponse(P("bad.yml")); }).find("bad.yml: exposure_times must be \"labelled\" or "
+                                                                   "\"apex\", not \"auto\""), std::string::npos);
+  {
+    cv::FileStorage f(P("bad.yml"), cv::FileStorage::WRITE);
+    f << "response" << c.lut << "exposure_times" << "APEX";
+  }
+  EXPECT_NE(CalibErrorOf([&] { ReadResponse(P("bad.yml")); }).find("bad.yml: exposure_times must be \"labelled\" or "
+                                                                   "\"apex\", not \"APEX\""), std::string::npos);
   cv::Mat img(5, 7, CV_32FC3, cv::Scalar(0.5, 2.0, 1e-4));
   img.at<cv::Vec3f>(1, 1)[0] = std::numeric_limits<float>::infinity();
   WriteExr(P("a.exr"), img);
