@@ -374,14 +374,16 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   if (!cap.face_corners_px.empty()) {
     for (const auto& p : cap.face_corners_px) corners.emplace_back(p[0], p[1]);
   } else {
+    // Saturated pixels (+inf) stay +inf, the brightest (DetectFaceCorners): a front-lit region
+    // saturates where its own condition lights it, and those pixels are the face's too.
     cv::Mat sum = cv::Mat::zeros(camera.image_size, CV_32FC3);
     for (const cv::Mat& img : hdr) {
-      cv::Mat finite = img.clone();
-      cv::patchNaNs(finite, 0);
-      for (auto it = finite.begin<cv::Vec3f>(); it != finite.end<cv::Vec3f>(); ++it)
+      cv::Mat known = img.clone();
+      cv::patchNaNs(known, 0);
+      for (auto it = known.begin<cv::Vec3f>(); it != known.end<cv::Vec3f>(); ++it)
         for (int c = 0; c < 3; ++c)
-          if (!std::isfinite((*it)[c])) (*it)[c] = 0;
-      sum += finite;
+          if ((*it)[c] == -std::numeric_limits<float>::infinity()) (*it)[c] = 0;
+      sum += known;
     }
     corners = DetectFaceCorners(sum, &cam);
     if (corners.empty())

@@ -152,19 +152,26 @@ TEST_F(AcquireTest, FrontLitMappingWithinTwoPercent) {
 }
 
 TEST_F(AcquireTest, AutomaticCornersWithinTwoPercent) {
-  const std::string c = Copy(Setup::kBack);
-  const auto given = ReadCapture(c).face_corners_px;
-  EditJson(c, [](nlohmann::json& j) { j["face_corners_px"] = "auto"; });
-  CheckMapping(Setup::kBack, true, c, Out());
-  const nlohmann::json rep = nlohmann::json::parse(std::ifstream(WorkDir(Out()) + "/report.json"));
-  // 0.01-0.06 px: the sides fitted straight after undistortion, each at half its step from the
-  // sample's level at the edge (0.14-0.26 px inwards from its level 3 px inside; the two biases
-  // had cancelled to 0.02-0.10 px while the distortion was ignored).
-  for (size_t k = 0; k < 4; ++k) {
-    const double dx = rep["face_corners_px"][k][0].get<double>() - given[k][0];
-    const double dy = rep["face_corners_px"][k][1].get<double>() - given[k][1];
-    std::printf("corner %zu found %.3f px from the truth (%+.3f, %+.3f)\n", k, std::hypot(dx, dy), dx, dy);
-    EXPECT_LT(std::hypot(dx, dy), 0.15) << "corner " << k;
+  for (translume::Setup setup : {Setup::kBack, Setup::kFront}) {
+    SCOPED_TRACE(SetupName(setup));
+    const std::string c = Copy(setup);
+    const auto given = ReadCapture(c).face_corners_px;
+    EditJson(c, [](nlohmann::json& j) { j["face_corners_px"] = "auto"; });
+    fs::remove_all(WorkDir(Out()));
+    CheckMapping(setup, true, c, Out());
+    const nlohmann::json rep = nlohmann::json::parse(std::ifstream(WorkDir(Out()) + "/report.json"));
+    // Back-lit 0.01-0.06 px: the sides fitted straight after undistortion, each at half its step
+    // from the sample's level at the edge (0.14-0.26 px inwards from its level 3 px inside; the
+    // two biases had cancelled to 0.02-0.10 px while the distortion was ignored). Front-lit
+    // 0.09-0.19 px, inwards: the directly lit regions saturate, and stand in at the brightest
+    // finite value (no corners were found before the simulator lit them: see simulate_capture).
+    const double tolerance = setup == Setup::kBack ? 0.15 : 0.3;
+    for (size_t k = 0; k < 4; ++k) {
+      const double dx = rep["face_corners_px"][k][0].get<double>() - given[k][0];
+      const double dy = rep["face_corners_px"][k][1].get<double>() - given[k][1];
+      std::printf("corner %zu found %.3f px from the truth (%+.3f, %+.3f)\n", k, std::hypot(dx, dy), dx, dy);
+      EXPECT_LT(std::hypot(dx, dy), tolerance) << "corner " << k;
+    }
   }
 }
 

@@ -232,7 +232,10 @@ std::vector<cv::Point2d> RefineQuadrilateral(const cv::Mat& lin, const std::vect
       if (std::isfinite(tt)) {
         const double near = at(tt - 2), far = at(tt - 4);
         const double at_edge = near + (near - far);
-        if (at_edge > 2 * out) tt = crossing(0.5 * (at_edge + out));
+        if (at_edge > 2 * out) {
+          const double again = crossing(0.5 * (at_edge + out));
+          if (std::isfinite(again)) tt = again;
+        }
       }
       if (std::isfinite(tt)) edge.emplace_back(p + tt * n);
     }

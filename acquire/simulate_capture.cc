@@ -449,7 +449,12 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
         cv::Vec3d v;
         for (int c = 0; c < 3; ++c) {
           double L = black_scale * FaceBilinear(fine_L[size_t(M)][size_t(c)], fs_, hf, x, y);
-          if (m >= 0) L += FaceBilinear(fine_L[size_t(m)][size_t(c)], fs_, hf, x, y);
+          // (phi - q) / (2 pi) models the light leaving unlit points; at points the condition
+          // lights it can fall below 0 (phi < q where the material absorbs), which photographed
+          // a front-lit region black around a bright core. Clamped there: a lit point shows
+          // at least its surface reflection. (The black level's part stays as modelled: it
+          // cancels against the black stack.)
+          if (m >= 0) L += std::max(0.0, FaceBilinear(fine_L[size_t(m)][size_t(c)], fs_, hf, x, y));
           if (o.setup == Setup::kFront) {
             double qf = black_scale * FaceBilinear(fine_q[size_t(M)][0], fs_, hf, x, y);
             if (m >= 0) qf += FaceBilinear(fine_q[size_t(m)][0], fs_, hf, x, y);
