@@ -52,7 +52,7 @@ Agreement Compare(const std::vector<cv::Mat>& ours, const std::vector<cv::Mat>& 
   return a;
 }
 
-PatternsBenchRow RunCase(Setup setup, int seed, int lights, const fs::path& dir,
+PatternsBenchRow RunCase(Setup setup, int seed, int lights, const std::string& rig_file, const fs::path& dir,
                          const std::function<void(const std::string&)>& progress) {
   PatternsBenchRow row;
   row.setup = setup;
@@ -62,7 +62,8 @@ PatternsBenchRow RunCase(Setup setup, int seed, int lights, const fs::path& dir,
   so.preset = "marble";
   so.shape = {24, 18, setup == Setup::kBack ? 6 : 10};
   const Material m = SynthesizeMaterial(so);
-  const CaptureRig rig = DefaultCaptureRig(m.shape, m.spacing_mm, setup);
+  const CaptureRig rig = rig_file == "default" ? DefaultCaptureRig(m.shape, m.spacing_mm, setup)
+                                               : ReadCaptureRig(rig_file, m.shape, m.spacing_mm, setup);
   SimulateCaptureOptions sco;
   sco.setup = setup;
   // The fewest conditions a capture takes: front-lit, one region lighting the whole face would
@@ -137,7 +138,7 @@ std::vector<PatternsBenchRow> RunPatternsBench(const PatternsBenchOptions& o,
       for (int seed = 1; seed <= o.seeds; ++seed) {
         const fs::path dir = root / fmt::format("{}_{}", SetupName(setup), seed);
         fs::remove_all(dir);
-        rows.push_back(RunCase(setup, seed, o.lights, dir, progress));
+        rows.push_back(RunCase(setup, seed, o.lights, o.rig_file, dir, progress));
         fs::remove_all(dir);
         const PatternsBenchRow& r = rows.back();
         if (progress)

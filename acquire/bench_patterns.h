@@ -10,7 +10,7 @@
 namespace translume::acquire {
 
 // `translume bench patterns`: how closely `translume patterns` lights what the true rig lights.
-// Each case simulates a capture of a marble block through the default rig (simulate-capture
+// Each case simulates a capture of a marble block through the default rig or `rig_file` (simulate-capture
 // with the fewest conditions and `seed`: its board, plane and white-card photos), calibrates it
 // as acquire does, and makes the N x N region patterns (MakeRegionPatterns) from the sample's
 // true face corners and from the corners found in the white card's photo; the reference is the
@@ -19,6 +19,7 @@ struct PatternsBenchOptions {
   std::vector<Setup> setups = {Setup::kBack, Setup::kFront};
   int seeds = 3;   // cases per setup (seeds 1..seeds)
   int lights = 4;  // N: N x N regions
+  std::string rig_file = "default";  // or a rig file (.json, ReadCaptureRig: docs/capture.md)
   std::string Validate() const;  // "" or the broken constraint, named as the flag
 };
 

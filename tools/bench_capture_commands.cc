@@ -74,6 +74,8 @@ void AddBenchPatterns(CLI::App& bench) {
   cmd->add_option("--setups", f->setups, "Lit faces: back, front")->delimiter(',')->capture_default_str();
   cmd->add_option("--seeds", f->o.seeds, "Simulated captures per setup (seeds 1..N)")->capture_default_str();
   cmd->add_option("--lights", f->lights, "NxN regions of the lit face")->capture_default_str();
+  cmd->add_option("--rig", f->o.rig_file, "default, or a rig file (.json, as simulate-capture's: your camera's and "
+                                          "projector's intrinsics, distances, tilt)")->capture_default_str();
   cmd->add_flag("--json", f->json, "Print JSON instead of a table");
   cmd->callback([f] {
     acquire::PatternsBenchOptions o = f->o;
