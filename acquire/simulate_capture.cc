@@ -444,17 +444,23 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     // Surface reflection of directly lit front-face points (front-lit setup only): masked out
     // by the acquisition, but it is what the camera sees there (and it saturates).
     const double surface_albedo = 0.2;
+    // (phi - q) / (2 pi) models the light leaving unlit points; at lit points it can fall below
+    // 0 (phi < q where the light leaks away), which photographed a front-lit region black
+    // around a bright core, and the front-lit black frame black along the face's border (the
+    // projector's black level lights every point) while the condition photos kept that negative
+    // part: their difference lost 17-89 % of the border nodes' signal. The photos take it
+    // clamped at 0 per fine node (a lit point shows at least its surface reflection), so that
+    // condition minus black frame is the truth's L wherever the condition does not light.
+    std::vector<FacePattern> photo_L = fine_L;
+    for (FacePattern& pattern : photo_L)
+      for (auto& channel : pattern)
+        for (float& v : channel) v = std::max(v, 0.0f);
     auto photo = [&](int m, double black_scale) {
       return RenderFace(rig, srig, g, [&](double x, double y) {
         cv::Vec3d v;
         for (int c = 0; c < 3; ++c) {
-          double L = black_scale * FaceBilinear(fine_L[size_t(M)][size_t(c)], fs_, hf, x, y);
-          // (phi - q) / (2 pi) models the light leaving unlit points; at points the condition
-          // lights it can fall below 0 (phi < q where the material absorbs), which photographed
-          // a front-lit region black around a bright core. Clamped there: a lit point shows
-          // at least its surface reflection. (The black level's part stays as modelled: it
-          // cancels against the black stack.)
-          if (m >= 0) L += std::max(0.0, FaceBilinear(fine_L[size_t(m)][size_t(c)], fs_, hf, x, y));
+          double L = black_scale * FaceBilinear(photo_L[size_t(M)][size_t(c)], fs_, hf, x, y);
+          if (m >= 0) L += FaceBilinear(photo_L[size_t(m)][size_t(c)], fs_, hf, x, y);
           if (o.setup == Setup::kFront) {
             double qf = black_scale * FaceBilinear(fine_q[size_t(M)][0], fs_, hf, x, y);
             if (m >= 0) qf += FaceBilinear(fine_q[size_t(m)][0], fs_, hf, x, y);
