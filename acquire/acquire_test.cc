@@ -184,7 +184,7 @@ TEST_F(AcquireTest, AutomaticCornersWithinTwoPercent) {
     // Back-lit 0.01-0.06 px: the sides fitted straight after undistortion, each at half its step
     // from the sample's level at the edge (0.14-0.26 px inwards from its level 3 px inside; the
     // two biases had cancelled to 0.02-0.10 px while the distortion was ignored). Front-lit
-    // 0.09-0.19 px, inwards: the directly lit regions saturate, and stand in at the brightest
+    // 0.06-0.22 px, inwards: the directly lit regions saturate, and stand in at the brightest
     // finite value (no corners were found before the simulator lit them: see simulate_capture).
     const double tolerance = setup == Setup::kBack ? 0.15 : 0.3;
     for (size_t k = 0; k < 4; ++k) {
