@@ -331,6 +331,32 @@ TEST_F(AcquireTest, RegionPatternsFromCalibrationsMatchTheTrueRig) {
                InputError);
 }
 
+// A rig file's fields over the default rig, and its errors naming the file and the field.
+TEST_F(AcquireTest, RigFileFieldsAndErrors) {
+  const GridShape g{24, 18, 6};
+  const std::string file = (dir_ / "rig.json").string();
+  auto read = [&](const std::string& text) {
+    std::ofstream(file) << text;
+    return ReadCaptureRig(file, g, 0.5, Setup::kBack);
+  };
+  const CaptureRig rig = read(R"({"bits": 16, "black_offset": 0.02, "read_noise": 0.001})");
+  EXPECT_EQ(rig.bits, 16);
+  EXPECT_EQ(rig.noise.offset, 0.02);
+  EXPECT_EQ(rig.noise.read_noise, 0.001);
+  EXPECT_EQ(DefaultCaptureRig(g, 0.5, Setup::kBack).noise.offset, 0);
+  for (const auto& [text, error] : std::vector<std::pair<std::string, std::string>>{
+           {R"({"black_offset": -0.1})", "black_offset: expected a number in [0, 0.5)"},
+           {R"({"black_offset": "1 %"})", "black_offset: expected a number in [0, 0.5)"},
+           {R"({"black_ofset": 0.01})", "black_ofset: unknown field"}}) {
+    try {
+      read(text);
+      ADD_FAILURE() << text;
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()), file + ": " + error);
+    }
+  }
+}
+
 // Conditions given as light specs on the lit face (a rig whose projector is aligned to the
 // regions by hand) need no projector calibration; q is then the ideal region light.
 TEST_F(AcquireTest, LightSpecConditionsNeedNoProjector) {

@@ -228,7 +228,7 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
   for (const auto& [k, v] : j.items())
     if (k != "camera" && k != "projector" && k != "distance_scale" && k != "tilt_deg" &&
         k != "camera_gain" && k != "projector_black" && k != "bits" && k != "read_noise" &&
-        k != "shot_noise" && k != "shutter_labels" && k != "comment")
+        k != "shot_noise" && k != "black_offset" && k != "shutter_labels" && k != "comment")
       fail(k, "unknown field");
   device("camera", &r.camera);
   const bool projector_K = device("projector", &r.projector);
@@ -263,6 +263,11 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
       if (!j[k].is_number() || !(j[k].get<double>() >= 0)) fail(k, "expected a number >= 0");
       (std::string(k) == "read_noise" ? r.noise.read_noise : r.noise.shot_noise) = j[k].get<double>();
     }
+  if (j.contains("black_offset")) {
+    if (!j["black_offset"].is_number() || !(j["black_offset"].get<double>() >= 0 && j["black_offset"].get<double>() < 0.5))
+      fail("black_offset", "expected a number in [0, 0.5)");
+    r.noise.offset = j["black_offset"].get<double>();
+  }
   if (j.contains("shutter_labels")) {
     if (!j["shutter_labels"].is_boolean()) fail("shutter_labels", "expected true or false");
     r.shutter_labels = j["shutter_labels"].get<bool>();

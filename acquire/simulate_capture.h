@@ -38,8 +38,8 @@ CaptureRig DefaultCaptureRig(const GridShape& grid, double h, Setup setup);
 
 // Reads a rig file (JSON; docs/capture.md "Simulated captures"): any of camera / projector
 // {size [w, h], K [9], dist [5]}, distance_scale, tilt_deg [3], camera_gain [3],
-// projector_black, bits, read_noise, shot_noise, shutter_labels, over DefaultCaptureRig. Throws
-// InputError.
+// projector_black, bits, read_noise, shot_noise, black_offset, shutter_labels, over
+// DefaultCaptureRig. Throws InputError.
 CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double h, Setup setup);
 
 struct SimulateCaptureOptions {

@@ -772,10 +772,13 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
               ? "times as a camera labels them (1/30 for 1/32 s)? Use the true times, or read them as APEX shutter "
                 "speeds"
               : "use the true times";
+      // A black level left in the photos makes every step smaller ((2x + o) / (x + o) < 2).
+      const std::string black_hint =
+          off < 0 && !eight && !given_black ? "; or a black level left in the photos (subtract it, or give a black stack)" : "";
       h.time_warning = fmt::format(
-          "{}: {} is {:.3f}x as bright as {}, but its exposure time is {:.3f}x as long ({:+.1f} %): {} "
+          "{}: {} is {:.3f}x as bright as {}, but its exposure time is {:.3f}x as long ({:+.1f} %): {}{} "
           "(docs/capture.md, \"Exposure times\")",
-          stack.dir, FileName(eb), p.measured, FileName(ea), expected, 100 * off, hint);
+          stack.dir, FileName(eb), p.measured, FileName(ea), expected, 100 * off, hint, black_hint);
     }
     if (p.measured > 2 * expected || p.measured < 0.5 * expected)
       throw CalibError(fmt::format("{}: {} ({:g} s) is {:.2f}x as bright as {} ({:g} s), but its exposure time is "

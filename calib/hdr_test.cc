@@ -308,6 +308,9 @@ TEST(Hdr, LinearShutterLabelsReadAsApexTimes) {
   EXPECT_LT(pc.step_bias, -0.01);
   EXPECT_NE(pc.BriefReport().find("a black level left in the photos? Subtract it or give a black stack"),
             std::string::npos);
+  EXPECT_NE(MergeHdr(pedestal, nullptr).time_warning.find("; or a black level left in the photos (subtract it, or "
+                                                          "give a black stack)"), std::string::npos)
+      << MergeHdr(pedestal, nullptr).time_warning;
   so.offset = 0;
   so.seed = 45;
   const ExposureStack exact = MakeStack(SyntheticRig::RenderExposureStack(truth, labels, {}, so), labels);
