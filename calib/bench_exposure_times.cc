@@ -76,8 +76,8 @@ double Seconds(F&& f) {
 }
 
 struct CaseResult {
-  bool right = false, decisive = false;
-  double error_auto = 0, error_labelled = 0, error_apex = 0, error_true = 0, p95_auto = 0;
+  bool right = false, decisive = false, right_black = false;
+  double error_auto = 0, error_labelled = 0, error_apex = 0, error_true = 0, p95_auto = 0, error_black = -1;
   double seconds_auto = 0, seconds_forced = 0;
 };
 
@@ -137,6 +137,11 @@ CaseResult RunCase(int bits, const std::vector<double>& labels, bool apex_camera
     r.error_true = error(MergeHdr(true_stack, &true_curve, nullptr, mo));
     return r;
   }
+  so.seed = seed * 2 + 1;
+  const ExposureStack black = StackOf(
+      SyntheticRig::RenderExposureStack(cv::Mat::zeros(truth.size(), CV_32FC3), exposed, response, so), labels);
+  r.right_black = ChooseShutterTimes(stack, &black).times == camera;
+  r.error_black = Median(RelativeErrors(truth, MergeHdr(stack, nullptr, &black)));
   const ShutterChoice choice = ChooseShutterTimes(stack);
   r.right = choice.times == camera;
   r.decisive = choice.decisive;
@@ -222,12 +227,14 @@ std::vector<ExposureTimesBenchRow> RunExposureTimesBench(const ExposureTimesBenc
           row.bracket = o.brackets[b];
           row.camera = camera;
           row.offset = bits == 8 ? 0 : offset;
-          std::vector<double> ea, el, ex, et, p95, sa, sf;
+          std::vector<double> ea, el, ex, et, p95, sa, sf, eb;
           for (int s = 0; s < o.seeds; ++s) {
             const CaseResult r = RunCase(bits, labels[b], camera == "apex", row.offset, o.size, uint64_t(11 + s));
             ++row.cases;
             row.right += r.right;
             row.decisive += r.decisive;
+            row.right_black += r.right_black;
+            eb.push_back(r.error_black);
             ea.push_back(r.error_auto);
             el.push_back(r.error_labelled);
             ex.push_back(r.error_apex);
@@ -243,6 +250,7 @@ std::vector<ExposureTimesBenchRow> RunExposureTimesBench(const ExposureTimesBenc
           row.p95_auto = Median(p95);
           row.seconds_auto = Median(sa);
           row.seconds_forced = Median(sf);
+          row.error_black = bits == 8 ? -1 : Median(eb);
           if (progress)
             progress(fmt::format("{}-bit {} {} camera, offset {:g}: auto right {} of {}", bits, row.bracket, camera,
                                  row.offset, row.right, row.cases));
@@ -252,20 +260,24 @@ std::vector<ExposureTimesBenchRow> RunExposureTimesBench(const ExposureTimesBenc
 }
 
 std::string ExposureTimesBenchTable(const std::vector<ExposureTimesBenchRow>& rows) {
-  std::string s = fmt::format("{:>4} {:>8} {:>6} {:>6} {:>7} {:>8}  {:>8} {:>8} {:>8} {:>8} {:>8}  {:>9} {:>9} {:>6}\n",
+  std::string s = fmt::format("{:>4} {:>8} {:>6} {:>6} {:>7} {:>8}  {:>8} {:>8} {:>8} {:>8} {:>8}  {:>7} {:>8}  {:>9} "
+                              "{:>9} {:>6}\n",
                               "bits", "bracket", "camera", "offset", "right", "decisive", "auto %", "label %",
-                              "apex %", "true %", "p95 %", "auto s", "forced s", "ratio");
+                              "apex %", "true %", "p95 %", "+black", "black %", "auto s", "forced s", "ratio");
   for (const ExposureTimesBenchRow& r : rows)
-    s += fmt::format("{:>4} {:>8} {:>6} {:>6g} {:>7} {:>8}  {:>8.3f} {:>8.3f} {:>8.3f} {:>8.3f} {:>8.3f}  {:>9.4f} "
-                     "{:>9.4f} {:>6.2f}\n",
+    s += fmt::format("{:>4} {:>8} {:>6} {:>6g} {:>7} {:>8}  {:>8.3f} {:>8.3f} {:>8.3f} {:>8.3f} {:>8.3f}  {:>7} {:>8}  "
+                     "{:>9.4f} {:>9.4f} {:>6.2f}\n",
                      r.bits, r.bracket, r.camera, r.offset, fmt::format("{}/{}", r.right, r.cases),
                      fmt::format("{}/{}", r.decisive, r.cases), 100 * r.error_auto, 100 * r.error_labelled,
-                     100 * r.error_apex, 100 * r.error_true, 100 * r.p95_auto, r.seconds_auto, r.seconds_forced,
-                     r.seconds_forced > 0 ? r.seconds_auto / r.seconds_forced : 0.0);
+                     100 * r.error_apex, 100 * r.error_true, 100 * r.p95_auto,
+                     r.bits == 8 ? std::string("-") : fmt::format("{}/{}", r.right_black, r.cases),
+                     r.bits == 8 ? std::string("-") : fmt::format("{:.3f}", 100 * r.error_black), r.seconds_auto,
+                     r.seconds_forced, r.seconds_forced > 0 ? r.seconds_auto / r.seconds_forced : 0.0);
   s += "(right: auto read the times as the camera exposed them; errors: median relative error of the merged\n"
        " radiance after one scale per channel, valid pixels, read as auto chose / as labelled / as APEX / with\n"
-       " the true times; auto s / forced s: the response fit (8-bit) or the merge (linear) under auto and\n"
-       " forced as labelled, medians, timed alternately in this run)";
+       " the true times; +black / black %: linear rows, auto right and its error with a black stack given,\n"
+       " subtracted exposure by exposure; auto s / forced s: the response fit (8-bit) or the merge (linear)\n"
+       " under auto and forced as labelled, medians, timed alternately in this run)";
   return s;
 }
 
@@ -275,7 +287,8 @@ std::string ExposureTimesBenchJson(const std::vector<ExposureTimesBenchRow>& row
     j.push_back({{"bits", r.bits}, {"bracket", r.bracket}, {"camera", r.camera}, {"offset", r.offset},
                  {"cases", r.cases}, {"right", r.right}, {"decisive", r.decisive},
                  {"error_auto", r.error_auto}, {"error_labelled", r.error_labelled}, {"error_apex", r.error_apex},
-                 {"error_true", r.error_true}, {"p95_auto", r.p95_auto}, {"seconds_auto", r.seconds_auto},
+                 {"error_true", r.error_true}, {"p95_auto", r.p95_auto}, {"error_black", r.error_black},
+                 {"right_black", r.right_black}, {"seconds_auto", r.seconds_auto},
                  {"seconds_forced", r.seconds_forced}});
   return j.dump(2);
 }

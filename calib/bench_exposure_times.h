@@ -53,6 +53,11 @@ struct ExposureTimesBenchRow {
   double error_auto = 0, error_labelled = 0, error_apex = 0, error_true = 0;
   // The same at the 95th percentile, auto's reading.
   double p95_auto = 0;
+  // Linear rows: read as auto chose with a black stack given (the same times, the sensor's black
+  // level and noise, no light), subtracted exposure by exposure; how often auto was right then.
+  // -1 for 8-bit rows.
+  double error_black = -1;
+  int right_black = 0;
   // Median seconds of the reading under auto and forced as labelled, timed alternately in the
   // same process: 8-bit the response fit (auto fits twice where labels are APEX-like), linear
   // the merge (auto judges the stack first).
