@@ -68,6 +68,12 @@ bool Bilinear(const cv::Mat& img, const cv::Point2d& p, cv::Vec3f* v) {
   return true;
 }
 
+// The corners of a face of the block at depth z (sample frame, mm), in CaptureSpec's order:
+// (0, 0, z), (X, 0, z), (X, Y, z), (0, Y, z).
+std::vector<cv::Point3d> FaceCorners(const std::array<double, 3>& size_mm, double z) {
+  return {{0, 0, z}, {size_mm[0], 0, z}, {size_mm[0], size_mm[1], z}, {0, size_mm[1], z}};
+}
+
 // The lit face's plane z (sample frame, mm): the back face back-lit, the front face front-lit.
 double LitFaceZ(const std::array<double, 3>& size_mm, Setup setup) {
   return setup == Setup::kBack ? size_mm[2] : 0.0;
@@ -91,10 +97,7 @@ std::vector<cv::Point2d> DeviceIntrinsics::Project(const std::vector<cv::Point3d
   return px;
 }
 
-std::vector<cv::Point3d> FrontFaceCorners(const GridShape& g, double h) {
-  const double X = double(g.nx - 1) * h, Y = double(g.ny - 1) * h;
-  return {{0, 0, 0}, {X, 0, 0}, {X, Y, 0}, {0, Y, 0}};
-}
+std::vector<cv::Point3d> FrontFaceCorners(const GridShape& g, double h) { return FaceCorners(SampleSize(g, h), 0); }
 
 DeviceIntrinsics DeviceIntrinsics::From(const cv::Size& size, const cv::Matx33d& K, const cv::Mat& dist) {
   DeviceIntrinsics d;
@@ -144,7 +147,7 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
                                    k, corners[k].x, corners[k].y, camera.size.width,
                                    camera.size.height));
   if (std::string why = QuadrilateralProblem(corners); !why.empty()) throw InputError(what + ": " + why);
-  const std::vector<cv::Point3d> obj = {{0, 0, 0}, {size_mm[0], 0, 0}, {size_mm[0], size_mm[1], 0}, {0, size_mm[1], 0}};
+  const std::vector<cv::Point3d> obj = FaceCorners(size_mm, 0);
   cv::Vec3d rvec, tvec;
   if (!cv::solvePnP(obj, corners, camera.K, camera.dist, rvec, tvec, false, cv::SOLVEPNP_IPPE))
     throw InputError(fmt::format("{}: no sample pose fits the four corners", what));
@@ -446,9 +449,8 @@ cv::Mat PatternForFaceRect(const DeviceIntrinsics& projector, const calib::Pose&
 bool LitFaceInsideProjector(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
                             const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
                             Setup setup) {
-  const double z = LitFaceZ(size_mm, setup);
-  const std::vector<cv::Point3d> corners = {{0, 0, z}, {size_mm[0], 0, z}, {size_mm[0], size_mm[1], z}, {0, size_mm[1], z}};
-  const std::vector<cv::Point3d> in_projector = Transform(projector_from_camera, Transform(camera_from_sample, corners));
+  const std::vector<cv::Point3d> in_projector =
+      Transform(projector_from_camera, Transform(camera_from_sample, FaceCorners(size_mm, LitFaceZ(size_mm, setup))));
   for (const cv::Point3d& p : in_projector)
     if (p.z <= 0) return false;
   for (const cv::Point2d& uv : projector.Project(in_projector))
@@ -462,10 +464,10 @@ std::vector<cv::Mat> RegionPatterns(const DeviceIntrinsics& projector, const cal
                                     Setup setup, int n) {
   TL_CHECK(n >= 1);
   const double z = LitFaceZ(size_mm, setup);
+  const Setup other = setup == Setup::kBack ? Setup::kFront : Setup::kBack;
   if (!LitFaceFacesProjector(projector_from_camera, camera_from_sample, z, setup))
     throw InputError(fmt::format("the projector is on the {} side of the sample, so it cannot light its {} face: "
-                                 "is the setup {}?", setup == Setup::kBack ? "front" : "back",
-                                 setup == Setup::kBack ? "back" : "front", setup == Setup::kBack ? "front" : "back"));
+                                 "is the setup {}?", SetupName(other), SetupName(setup), SetupName(other)));
   const cv::Mat hits = PlaneHits(projector, projector_from_camera, camera_from_sample, z);
   // Region I covers [I X / n, (I + 1) X / n]; a pixel on a shared edge lights both. Counted
   // first, so that regions no pixel lights are named before n^2 images are made.
@@ -489,7 +491,7 @@ std::vector<cv::Mat> RegionPatterns(const DeviceIntrinsics& projector, const cal
     if (count[size_t(m)] == 0)
       throw InputError(fmt::format("no projector pixel lights region {} ({}, {}) of the {} face: the face lies partly "
                                    "outside the projector's image, or the regions are smaller than its pixels",
-                                   m, m % n, m / n, setup == Setup::kBack ? "back" : "front"));
+                                   m, m % n, m / n, SetupName(setup)));
   std::vector<cv::Mat> out;
   for (int m = 0; m < n * n; ++m) out.emplace_back(projector.size, CV_8UC1, cv::Scalar(0));
   for_regions([&](int m, int x, int y) { out[size_t(m)].at<uint8_t>(y, x) = 255; });

@@ -52,7 +52,7 @@ PatternSet MakeRegionPatterns(const PatternJob& job) {
                                                      job.setup);
   if (!set.face_inside_projector)
     set.warnings.push_back(fmt::format("the {} face reaches outside the projector's image: the regions at its edge are "
-                                       "lit only in part", job.setup == Setup::kBack ? "back" : "front"));
+                                       "lit only in part", SetupName(job.setup)));
   // Names of one width that sort in order: 00..15, 000..999, 0000..4095.
   const int width = std::max<int>(2, int(std::to_string(set.images.size() - 1).size()));
   set.fewest_pixels = std::numeric_limits<int64_t>::max();

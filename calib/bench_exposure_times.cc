@@ -68,6 +68,12 @@ ExposureStack StackOf(const std::vector<cv::Mat>& photos, const std::vector<doub
   return s;
 }
 
+// `stack` with the times the camera exposed, read as given.
+ExposureStack WithSeconds(ExposureStack stack, const std::vector<double>& seconds) {
+  for (size_t j = 0; j < seconds.size(); ++j) stack.exposures[j].seconds = seconds[j];
+  return stack;
+}
+
 template <typename F>
 double Seconds(F&& f) {
   const auto start = std::chrono::steady_clock::now();
@@ -105,6 +111,12 @@ CaseResult RunCase(int bits, const std::vector<double>& labels, bool apex_camera
     return MergeHdr(stack, curve, nullptr, mo);
   };
   auto error = [&](const HdrImage& h) { return Median(RelativeErrors(truth, h)); };
+  // The merge with the times the camera exposed (8-bit: through a curve fitted to such times).
+  auto true_error = [&](const ResponseCurve* curve) {
+    MergeOptions mo;
+    mo.shutter = ShutterTimes::kLabelled;
+    return error(MergeHdr(WithSeconds(stack, exposed), curve, nullptr, mo));
+  };
   if (bits == 8) {
     so.seed = seed * 2 + 1;
     const ExposureStack calibration =
@@ -117,10 +129,8 @@ CaseResult RunCase(int bits, const std::vector<double>& labels, bool apex_camera
     r.seconds_forced = Seconds([&] { labelled = CalibrateResponse({calibration}, ro); });
     ro.shutter = ShutterTimes::kApex;
     const ResponseCurve apex = CalibrateResponse({calibration}, ro);
-    ExposureStack exposed_calibration = calibration;
-    for (size_t j = 0; j < exposed.size(); ++j) exposed_calibration.exposures[j].seconds = exposed[j];
     ro.shutter = ShutterTimes::kLabelled;
-    const ResponseCurve true_curve = CalibrateResponse({exposed_calibration}, ro);
+    const ResponseCurve true_curve = CalibrateResponse({WithSeconds(calibration, exposed)}, ro);
     r.right = curve.shutter == camera;
     r.decisive = curve.other_fit_rms > 0 &&
                  std::min(curve.fit_rms, curve.other_fit_rms) < 0.98 * std::max(curve.fit_rms, curve.other_fit_rms);
@@ -130,11 +140,7 @@ CaseResult RunCase(int bits, const std::vector<double>& labels, bool apex_camera
     r.p95_auto = Quantile(e, 0.95);
     r.error_labelled = error(merge(ShutterTimes::kLabelled, &labelled));
     r.error_apex = error(merge(ShutterTimes::kApex, &apex));
-    ExposureStack true_stack = stack;
-    for (size_t j = 0; j < exposed.size(); ++j) true_stack.exposures[j].seconds = exposed[j];
-    MergeOptions mo;
-    mo.shutter = ShutterTimes::kLabelled;
-    r.error_true = error(MergeHdr(true_stack, &true_curve, nullptr, mo));
+    r.error_true = true_error(&true_curve);
     return r;
   }
   so.seed = seed * 2 + 1;
@@ -154,11 +160,7 @@ CaseResult RunCase(int bits, const std::vector<double>& labels, bool apex_camera
   r.p95_auto = Quantile(e, 0.95);
   r.error_labelled = error(labelled);
   r.error_apex = error(merge(ShutterTimes::kApex, nullptr));
-  ExposureStack true_stack = stack;
-  for (size_t j = 0; j < exposed.size(); ++j) true_stack.exposures[j].seconds = exposed[j];
-  MergeOptions mo;
-  mo.shutter = ShutterTimes::kLabelled;
-  r.error_true = error(MergeHdr(true_stack, nullptr, nullptr, mo));
+  r.error_true = true_error(nullptr);
   return r;
 }
 

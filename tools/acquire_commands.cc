@@ -140,7 +140,7 @@ int RunPatterns(int argc, char** argv) {
               c[0].x, c[0].y, c[1].x, c[1].y, c[2].x, c[2].y, c[3].x, c[3].y, set.pose_rms_px);
   std::printf("wrote %s: %zu pattern%s (%dx%d regions of the %s face, %lld to %lld projector pixels each) and "
               "conditions.json for capture.json\n", out.c_str(), set.images.size(), set.images.size() == 1 ? "" : "s",
-              n, n, s == Setup::kBack ? "back" : "front", (long long)set.fewest_pixels, (long long)set.most_pixels);
+              n, n, SetupName(s), (long long)set.fewest_pixels, (long long)set.most_pixels);
   return 0;
 }
 
