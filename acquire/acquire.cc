@@ -261,6 +261,11 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   // stack's scale differs from another's by a label's rounding.
   calib::MergeOptions merge_options;
   merge_options.shutter = cap.exposure_times;
+  merge_options.sensor_black = {cap.sensor_black[0], cap.sensor_black[1], cap.sensor_black[2]};
+  // Stages whose merges the sensor black level changes depend on it.
+  const std::string black_sig = cap.sensor_black == std::array<double, 3>{}
+                                    ? ""
+                                    : fmt::format(" sensor_black {}", nlohmann::json(cap.sensor_black).dump());
   if (merge_options.shutter == calib::ShutterTimes::kAuto && curve) merge_options.shutter = curve->shutter;
   if (merge_options.shutter == calib::ShutterTimes::kAuto) {
     // Linear photos: their brightness steps decide, pooled over the white and lighting stacks
@@ -269,12 +274,12 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     if (fs::is_directory(cap.white.white)) judged.push_back(cap.white.white);
     for (const auto& c : cap.conditions) judged.push_back(c.stack);
     const std::string txt = (work / "exposure_times.txt").string();
-    const std::string sig = Signature(judged);
+    const std::string sig = Signature(judged, black_sig);
     std::string reading;
     if (log.Done("exposure_times", sig, {txt})) {
       std::ifstream(txt) >> reading;
     } else {
-      calib::ShutterJudge judge;
+      calib::ShutterJudge judge(merge_options);
       for (const std::string& d : judged) {
         const calib::ExposureStack stack = calib::ReadExposureStack(d);
         if (stack.IsEightBit()) continue;  // refused in the merge, which names the response
@@ -305,7 +310,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     const std::string yml = (work / "white.yml").string();
     const std::string sig = Signature({cap.white.white, cap.white.black, response_file},
                                       fmt::format("{}{}{}", nlohmann::json(cap.white.patch).dump(),
-                                                  nlohmann::json(cap.white.albedo).dump(), times_sig));
+                                                  nlohmann::json(cap.white.albedo).dump(), times_sig + black_sig));
     if (log.Done("white", sig, {yml})) {
       white = calib::ReadWhiteBalance(yml);
     } else {
@@ -342,7 +347,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   // key: the stage log's; exr: where the merged image is kept.
   auto merge = [&](const std::string& key, const fs::path& exr_path, const std::string& stack) {
     const std::string exr = exr_path.string();
-    const std::string sig = Signature({stack, response_file}, times_sig);
+    const std::string sig = Signature({stack, response_file}, times_sig + black_sig);
     if (log.Done(key, sig, {exr})) return calib::ReadLinearRgb(exr);
     const calib::ExposureStack s = calib::ReadExposureStack(stack);
     if (s.Size() != camera.image_size)

@@ -247,6 +247,38 @@ TEST_F(AcquireTest, CameraShutterLabelsAreReadAsApexTimes) {
   }
 }
 
+// A sensor black level left in 16-bit photos (5 % of full scale, as dcraw -D or a raw dump
+// leaves it): capture.json's sensor_black removes it from every photo; without it the white
+// calibration's stack (exposed ~1000x shorter than its black stack) takes most of it as a
+// scale error. 8-bit captures and values out of range are refused, naming the field.
+TEST_F(AcquireTest, SensorBlackLevelIsRemoved) {
+  const std::string c = CopyOf(SmallCapture(Setup::kBack, "_black5", R"(, "bits": 16, "black_offset": 0.05)"));
+  const CaptureSpec cap = ReadCapture(c);
+  EXPECT_EQ(cap.sensor_black, (std::array<double, 3>{0.05, 0.05, 0.05}));
+  AcquireOptions o;
+  o.solve = false;
+  const Dataset truth = ReadDataset(c + "/truth/dataset");
+  const DatasetMismatch given = CompareDatasets(ReadDataset(Acquire(cap, Out(), o).dataset_dir), truth);
+  EditJson(c, [](nlohmann::json& j) { j.erase("sensor_black"); });
+  const DatasetMismatch left =
+      CompareDatasets(ReadDataset(Acquire(ReadCapture(c), (dir_ / "left" / "m.vdb").string(), o).dataset_dir), truth);
+  std::printf("16-bit, black level 5 %%: L relative RMS %.3f %% with sensor_black, %.3f %% without; q %.3f %%\n",
+              100 * given.L_rms, 100 * left.L_rms, 100 * given.q_rms);
+  EXPECT_LE(given.L_rms, 0.01);
+  EXPECT_LE(given.q_rms, 0.02);
+  EXPECT_GT(left.L_rms, 4 * given.L_rms);
+  for (const auto& [value, error] : std::vector<std::pair<nlohmann::json, std::string>>{
+           {0.5, "sensor_black: expected fractions of full scale in [0, 0.5)"},
+           {nlohmann::json::array({0.01, 0.02}), "sensor_black: expected 3 numbers"},
+           {"2048", "sensor_black: expected a number or 3 numbers (fractions of full scale)"}}) {
+    EditJson(c, [&](nlohmann::json& j) { j["sensor_black"] = value; });
+    ExpectError(c, "capture.json: " + error);
+  }
+  const std::string eight = Copy(Setup::kBack);
+  EditJson(eight, [](nlohmann::json& j) { j["sensor_black"] = 0.01; });
+  ExpectError(eight, "capture.json: sensor_black: applies to linear photos (\"response\": \"linear\")");
+}
+
 // `translume patterns` for a real rig: the region patterns computed from the calibrations that
 // acquire makes of the simulated capture's photos, and the face corners, light what the
 // simulator's true rig lights (the capture's patterns/NN.png) up to the calibration's error.

@@ -118,7 +118,7 @@ CaptureSpec ReadCapture(const std::string& path) {
   if (!j.is_object()) r.Fail("(top level)", "expected an object");
   r.CheckKeys(j, "", {"format", "setup", "sample_mm", "spacing_mm", "grid", "eta", "C",
                       "face_corners_px", "camera", "projector", "response", "white", "black",
-                      "conditions", "exposure_times", "comment"});
+                      "conditions", "exposure_times", "sensor_black", "comment"});
   if (r.String(r.Get(j, "format", ""), "format") != kFormat)
     r.Fail("format", fmt::format("expected \"{}\"", kFormat));
   const std::string setup = r.String(r.Get(j, "setup", ""), "setup");
@@ -253,6 +253,17 @@ CaptureSpec ReadCapture(const std::string& path) {
       r.Fail("exposure_times", "expected \"auto\", \"labelled\" or \"apex\"");
     s.exposure_times = calib::ParseShutterTimes(times, s.file);
   }
+  if (j.contains("sensor_black")) {
+    const json& b = j["sensor_black"];
+    if (b.is_number()) s.sensor_black.fill(b.get<double>());
+    else if (b.is_array()) s.sensor_black = r.Numbers<3>(b, "sensor_black");
+    else r.Fail("sensor_black", "expected a number or 3 numbers (fractions of full scale)");
+    for (double v : s.sensor_black)
+      if (!(v >= 0 && v < 0.5)) r.Fail("sensor_black", "expected fractions of full scale in [0, 0.5)");
+    if (!s.response.linear && s.sensor_black != std::array<double, 3>{})
+      r.Fail("sensor_black", "applies to linear photos (\"response\": \"linear\"); an 8-bit camera's response "
+                             "curve holds its black level");
+  }
 
   const json& cs = r.Get(j, "conditions", "");
   if (!cs.is_array() || cs.empty()) r.Fail("conditions", "expected a non-empty list");
@@ -331,6 +342,10 @@ std::string CaptureJson(const CaptureSpec& s) {
   }
   if (!s.black.empty()) j["black"] = rel(s.black);
   if (s.exposure_times != calib::ShutterTimes::kAuto) j["exposure_times"] = calib::ToString(s.exposure_times);
+  if (s.sensor_black != std::array<double, 3>{}) {
+    if (s.sensor_black[0] == s.sensor_black[1] && s.sensor_black[1] == s.sensor_black[2]) j["sensor_black"] = s.sensor_black[0];
+    else j["sensor_black"] = s.sensor_black;
+  }
   json cs = json::array();
   for (const auto& c : s.conditions) {
     json e = {{"name", c.name}, {"stack", rel(c.stack)}};

@@ -58,6 +58,10 @@ struct CaptureSpec {
     std::array<double, 3> albedo{};   // the patch's RGB albedo
   } white;
   std::string black;  // optional: stack of the sample under projector black, subtracted
+  // The camera's black level left in linear photos (16-bit or float files that were not
+  // black-subtracted), fraction of full scale, RGB; subtracted from every photo of every stack
+  // (calib::MergeOptions::sensor_black). 0: none.
+  std::array<double, 3> sensor_black{};
   // How the photos' exposure times are read (docs/capture.md, "Exposure times"): "auto" (the
   // response fit, or the linear stacks' brightness steps, decides), "labelled" or "apex".
   calib::ShutterTimes exposure_times = calib::ShutterTimes::kAuto;

@@ -544,6 +544,8 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     for (const auto& p : patch_px) spec.white.patch.push_back({p.x, p.y});
     spec.white.albedo = {albedo, albedo, albedo};
     spec.black = (tmp / "lighting/black").string();
+    // As a camera's raw metadata states it; 8-bit photos carry it through their response.
+    if (rig.bits == 16) spec.sensor_black.fill(rig.noise.offset);
     std::ofstream(tmp / "capture.json") << CaptureJson(spec);
     sum.conditions = M;
   });

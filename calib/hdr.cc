@@ -69,13 +69,16 @@ double HatWeight(int z) { return z <= 127 ? z + 1.0 : 256.0 - z; }
 
 // A stack's samples as linear values: codes (8-bit, 16-bit scaled to full scale 1, float) and
 // their linearisation (8-bit through `response`).
+// Linear stacks' values have MergeOptions::sensor_black subtracted.
 struct Linearizer {
   const ResponseCurve* response = nullptr;
   bool eight = false;
   float full = 1.f;
-  Linearizer(const ExposureStack& stack, const ResponseCurve* r)
+  cv::Vec3d black{0, 0, 0};
+  Linearizer(const ExposureStack& stack, const ResponseCurve* r, const MergeOptions& o)
       : response(r), eight(stack.IsEightBit()),
-        full(!stack.exposures.empty() && stack.exposures[0].pixels.depth() == CV_16U ? 65535.f : 1.f) {}
+        full(!stack.exposures.empty() && stack.exposures[0].pixels.depth() == CV_16U ? 65535.f : 1.f),
+        black(eight ? cv::Vec3d(0, 0, 0) : o.sensor_black) {}
   float Code(const cv::Mat& m, int y, int x, int c) const {
     switch (m.depth()) {
       case CV_8U: return m.at<cv::Vec3b>(y, x)[c];
@@ -83,7 +86,10 @@ struct Linearizer {
       default: return m.at<cv::Vec3f>(y, x)[c];
     }
   }
-  double Linear(float v, int c) const { return eight ? response->lut.at<cv::Vec3f>(int(v))[c] : v; }
+  double Linear(float v, int c) const { return eight ? response->lut.at<cv::Vec3f>(int(v))[c] : v - black[c]; }
+  // The lowest code that is not under-exposed is above this (`lo`: the options' low_code or
+  // low_linear).
+  double Low(double lo, int c) const { return lo + black[c]; }
 };
 
 // Per exposure of `stack`, the black stack's exposure of the same time (null without `black`).
@@ -129,7 +135,11 @@ std::vector<PairRatio> MeasurePairRatios(const ExposureStack& stack, const Linea
   const std::vector<size_t> order = TimeOrder(stack);
   const cv::Size size = stack.Size();
   const int step = std::max(1, int(std::sqrt(double(size.area()) / 1e4)));
-  const double well_lo = lo + 0.1 * (hi - lo), well_hi = hi - 0.1 * (hi - lo);
+  double well_lo[3], well_hi[3];
+  for (int c = 0; c < 3; ++c) {
+    well_lo[c] = lin.Low(lo, c) + 0.1 * (hi - lin.Low(lo, c));
+    well_hi[c] = hi - 0.1 * (hi - lin.Low(lo, c));
+  }
   std::vector<PairRatio> pairs;
   for (size_t k = 0; k + 1 < order.size(); ++k) {
     const size_t a = order[k], b = order[k + 1];
@@ -138,7 +148,7 @@ std::vector<PairRatio> MeasurePairRatios(const ExposureStack& stack, const Linea
       for (int x = 0; x < size.width; x += step)
         for (int c = 0; c < 3; ++c) {
           const float va = lin.Code(stack.exposures[a].pixels, y, x, c), vb = lin.Code(stack.exposures[b].pixels, y, x, c);
-          if (!(va > well_lo && va < well_hi && vb > well_lo && vb < well_hi)) continue;
+          if (!(va > well_lo[c] && va < well_hi[c] && vb > well_lo[c] && vb < well_hi[c])) continue;
           double xa = lin.Linear(va, c), xb = lin.Linear(vb, c);
           if (blacks[a]) xa -= lin.Linear(lin.Code(blacks[a]->pixels, y, x, c), c);
           if (blacks[b]) xb -= lin.Linear(lin.Code(blacks[b]->pixels, y, x, c), c);
@@ -613,6 +623,9 @@ std::string MergeOptions::Validate() const {
     return "need 0 <= low_code (--low), high_code (--high) <= 255 and high_code - low_code >= 10";
   if (!(low_linear >= 0 && high_linear <= 1 && high_linear > low_linear))
     return "need 0 <= low_linear < high_linear <= 1";
+  for (int c = 0; c < 3; ++c)
+    if (!(sensor_black[c] >= 0 && sensor_black[c] < 0.5))
+      return fmt::format("sensor_black must be in [0, 0.5) of full scale, not {:g}", sensor_black[c]);
   return "";
 }
 
@@ -658,7 +671,7 @@ std::string ShutterChoice::BriefReport() const {
   // A black level left in the photos lowers every step (an offset o makes (2x + o) / (x + o) < 2).
   if (std::abs(step_bias) > 0.01)
     report += fmt::format(", after their common {:+.1f} %: {}", 100 * (std::exp(step_bias) - 1),
-                          step_bias < 0 ? "a black level left in the photos? Subtract it or give a black stack"
+                          step_bias < 0 ? "a black level left in the photos? Give it (sensor black) or a black stack"
                                         : "the photos brighten more than their times say");
   return report + ")";
 }
@@ -674,7 +687,7 @@ void ShutterJudge::Add(const ExposureStack& stack, const ExposureStack* black) {
   std::optional<ExposureStack> apex_black;
   if (black) apex_black = WithShutterTimes(*black, ShutterTimes::kApex);
   const std::vector<PairRatio> pairs =
-      MeasurePairRatios(apex, Linearizer(apex, nullptr), MatchBlacks(apex, apex_black ? &*apex_black : nullptr, stack),
+      MeasurePairRatios(apex, Linearizer(apex, nullptr, options_), MatchBlacks(apex, apex_black ? &*apex_black : nullptr, stack),
                         options_.low_linear, options_.high_linear);
   for (const PairRatio& p : pairs) {
     const std::pair<double, double> key{stack.exposures[p.a].seconds, stack.exposures[p.b].seconds};
@@ -737,6 +750,9 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
                      "response)");
   if (eight) {
     if (std::string why = response->Validate(); !why.empty()) throw CalibError("response: " + why);
+    if (o.sensor_black != cv::Vec3d(0, 0, 0))
+      throw CalibError(given_stack.dir + ": a sensor black level applies to linear photos (16-bit, float); an 8-bit "
+                       "camera's response curve holds its black level");
   }
   ShutterTimes times = o.shutter;
   if (times == ShutterTimes::kAuto)
@@ -747,7 +763,7 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
   const ExposureStack* black = black_read ? &*black_read : nullptr;
   const size_t P = stack.exposures.size();
   const std::vector<const Exposure*> blacks = MatchBlacks(stack, black, given_stack);
-  const Linearizer lin(stack, response);
+  const Linearizer lin(stack, response, o);
   auto code = [&](const cv::Mat& m, int y, int x, int c) { return lin.Code(m, y, x, c); };
   auto linear = [&](float v, int c) { return lin.Linear(v, c); };
   const std::vector<size_t> order = TimeOrder(stack);
@@ -774,7 +790,7 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
               : "use the true times";
       // A black level left in the photos makes every step smaller ((2x + o) / (x + o) < 2).
       const std::string black_hint =
-          off < 0 && !eight && !given_black ? "; or a black level left in the photos (subtract it, or give a black stack)" : "";
+          off < 0 && !eight && !given_black && o.sensor_black == cv::Vec3d(0, 0, 0) ? "; or a black level left in the photos (give it as the sensor black, or a black stack)" : "";
       h.time_warning = fmt::format(
           "{}: {} is {:.3f}x as bright as {}, but its exposure time is {:.3f}x as long ({:+.1f} %): {}{} "
           "(docs/capture.md, \"Exposure times\")",
@@ -795,9 +811,10 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
           for (size_t j = 0; j < P; ++j) {
             const Exposure& e = stack.exposures[j];
             const float v = code(e.pixels, y, x, c);
-            if (v <= lo || v >= hi) continue;
+            const double low = lin.Low(lo, c);
+            if (v <= low || v >= hi) continue;
             // Hat weight over the valid range, never quite 0 for a valid sample.
-            const double u = (v - lo) / (hi - lo);
+            const double u = (v - low) / (hi - low);
             const double w = std::max(1.0 - std::abs(2 * u - 1), 0.02);
             double xl = linear(v, c);
             if (blacks[j]) xl -= linear(code(blacks[j]->pixels, y, x, c), c);

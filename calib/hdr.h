@@ -119,6 +119,12 @@ struct MergeOptions {
   double low_linear = 0.0005;   // linear inputs: values <= this fraction of full scale are
                                 // under-exposed
   double high_linear = 0.97;    // linear inputs: values >= this fraction are saturated
+  // Linear inputs: the camera's black level left in the photos (16-bit or float files that
+  // were not black-subtracted), a fraction of full scale per channel (RGB), in [0, 0.5). It is
+  // subtracted from every photo (and black-stack photo) before its time divides it; a value is
+  // under-exposed at or below sensor_black + low_linear. 8-bit stacks take none (their
+  // response curve holds their black level): MergeHdr refuses one.
+  cv::Vec3d sensor_black{0, 0, 0};
   // How the stack's (and the black stack's) times are read. kAuto: 8-bit stacks as their
   // response was fitted (ResponseCurve::shutter); linear stacks as ChooseShutterTimes judges
   // this stack.

@@ -142,6 +142,11 @@ TEST(Hdr, EightBitResponseAndMergeMeetTargets) {
   EXPECT_NE(warning.find("synthetic: e3.png is"), std::string::npos) << warning;
   EXPECT_NE(warning.find("as bright as e2.png, but its exposure time is"), std::string::npos) << warning;
   EXPECT_NE(warning.find("is 2.350x as long (+6."), std::string::npos) << warning;  // 2.5 / 2.35
+  MergeOptions sensor_black;
+  sensor_black.sensor_black = cv::Vec3d(0.01, 0, 0);
+  EXPECT_EQ(CalibErrorOf([&] { MergeHdr(stack, &curve, nullptr, sensor_black); }),
+            "synthetic: a sensor black level applies to linear photos (16-bit, float); an 8-bit camera's response "
+            "curve holds its black level");
   // OpenCV's stock MergeDebevec with the same curve, for comparison (SPEC section 8): its
   // weights do not exclude clipped samples.
   std::vector<cv::Mat> images;
@@ -306,11 +311,32 @@ TEST(Hdr, LinearShutterLabelsReadAsApexTimes) {
   std::printf("black level 2 %%: %s\n", pc.BriefReport().c_str());
   EXPECT_EQ(pc.times, ShutterTimes::kApex);
   EXPECT_LT(pc.step_bias, -0.01);
-  EXPECT_NE(pc.BriefReport().find("a black level left in the photos? Subtract it or give a black stack"),
+  EXPECT_NE(pc.BriefReport().find("a black level left in the photos? Give it (sensor black) or a black stack"),
             std::string::npos);
-  EXPECT_NE(MergeHdr(pedestal, nullptr).time_warning.find("; or a black level left in the photos (subtract it, or "
-                                                          "give a black stack)"), std::string::npos)
+  EXPECT_NE(MergeHdr(pedestal, nullptr).time_warning.find("; or a black level left in the photos (give it as the "
+                                                          "sensor black, or a black stack)"), std::string::npos)
       << MergeHdr(pedestal, nullptr).time_warning;
+  // Given as the sensor black level, it is removed before anything is judged or merged: the
+  // steps are even again, no warning, and the radiance is as accurate as with no black level.
+  MergeOptions with_black;
+  with_black.sensor_black = cv::Vec3d::all(0.02);
+  const ShutterChoice wc = ChooseShutterTimes(pedestal, nullptr, with_black);
+  EXPECT_EQ(wc.times, ShutterTimes::kApex);
+  EXPECT_LT(std::abs(wc.step_bias), 0.003) << wc.BriefReport();
+  EXPECT_EQ(wc.BriefReport().find("black level"), std::string::npos) << wc.BriefReport();
+  const HdrImage hb = MergeHdr(pedestal, nullptr, nullptr, with_black), hp = MergeHdr(pedestal, nullptr);
+  EXPECT_EQ(hb.time_warning, "");
+  const ErrorStats eb = Errors(truth, hb, true, 10), ep = Errors(truth, hp, true, 10);
+  std::printf("black level 2 %% given as sensor_black: scale %.4f, median %.3f%%, p95 %.3f%%; not given: scale %.4f, "
+              "median %.3f%%, p95 %.3f%%\n", eb.scale[0], 100 * eb.median, 100 * eb.p95, ep.scale[0],
+              100 * ep.median, 100 * ep.p95);
+  EXPECT_NEAR(eb.scale[0], 1.0, 0.005);
+  EXPECT_LE(eb.median, 0.015);
+  EXPECT_LE(eb.p95, 0.06);
+  EXPECT_GT(ep.p95, 2 * eb.p95);
+  with_black.sensor_black[1] = 0.5;
+  EXPECT_NE(CalibErrorOf([&] { MergeHdr(pedestal, nullptr, nullptr, with_black); })
+                .find("sensor_black must be in [0, 0.5) of full scale, not 0.5"), std::string::npos);
   so.offset = 0;
   so.seed = 45;
   const ExposureStack exact = MakeStack(SyntheticRig::RenderExposureStack(truth, labels, {}, so), labels);

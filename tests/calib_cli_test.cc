@@ -245,6 +245,15 @@ TEST_F(CalibCli, ResponseThenHdr) {
   ASSERT_EQ(r.status, 0) << r.output;
   const cv::Rect block(0, 0, 8, 8);
   EXPECT_NEAR(cv::mean(ReadLinearRgb(P("lin.exr"))(block))[0] / cv::mean(Ramp(40, 30)(block))[0], 1.0, 0.02);
+  // With a sensor black level of 3 % of full scale left in them: --sensor-black removes it.
+  so.offset = 0.03;
+  WriteStack("lin_black", SyntheticRig::RenderExposureStack(Ramp(40, 30), t, f, so), t);
+  r = Translume("hdr " + P("lin_black") + " --sensor-black 0.03 -o " + P("lin_black.exr"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NEAR(cv::mean(ReadLinearRgb(P("lin_black.exr"))(block))[0] / cv::mean(Ramp(40, 30)(block))[0], 1.0, 0.02);
+  r = Translume("hdr " + P("lin_black") + " -o " + P("lin_left.exr"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_GT(cv::mean(ReadLinearRgb(P("lin_left.exr"))(block))[0] / cv::mean(Ramp(40, 30)(block))[0], 1.1);
 }
 
 TEST_F(CalibCli, HdrBadInputs) {
@@ -256,6 +265,10 @@ TEST_F(CalibCli, HdrBadInputs) {
                      P("s/e0.png") + ": no exposure time");
   WriteStack("s", images, t);
   ExpectOneLineError(Translume("hdr " + P("s") + " -o " + P("out.exr")), "8-bit photos need --response");
+  ExpectOneLineError(Translume("hdr " + P("s") + " --sensor-black 0.5 -o " + P("out.exr")),
+                     "--sensor-black 0.5: expected fractions of full scale in [0, 0.5)");
+  ExpectOneLineError(Translume("hdr " + P("s") + " --sensor-black 0.01,0.02 -o " + P("out.exr")),
+                     "--sensor-black 0.01,0.02: expected 1 or 3 comma-separated numbers");
   ExpectOneLineError(Translume("hdr " + P("s") + " --response " + P("none.yml") + " -o " + P("out.exr")),
                      P("none.yml") + ": no such file");
   // A PNG cut short: our line only, not libpng's own "libpng error:" line too.

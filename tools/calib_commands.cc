@@ -37,6 +37,22 @@ void AddExposureTimesOption(CLI::App& app, std::string& times, const std::string
       ->capture_default_str();
 }
 
+// --sensor-black (calib::MergeOptions::sensor_black; docs/capture.md, "A sensor black level").
+void AddSensorBlackOption(CLI::App& app, std::string& text) {
+  app.add_option("--sensor-black", text,
+                 "Linear photos: the camera's black level left in them, a fraction of full scale, B or R,G,B "
+                 "(2048 in 16-bit codes: 0.03125); subtracted from every photo");
+}
+
+cv::Vec3d ParseSensorBlack(const std::string& text) {
+  if (text.empty()) return {0, 0, 0};
+  const std::vector<double> v = ParseNumbers(text, "--sensor-black", 1, 3);
+  for (double b : v)
+    if (!(b >= 0 && b < 0.5))
+      throw calib::CalibError(fmt::format("--sensor-black {}: expected fractions of full scale in [0, 0.5)", text));
+  return v.size() == 1 ? cv::Vec3d::all(v[0]) : cv::Vec3d(v[0], v[1], v[2]);
+}
+
 // OpenCV exceptions carry multi-line messages: keep the first meaningful line.
 template <typename F>
 int OneLineErrors(F&& f) {
@@ -187,11 +203,14 @@ int RunCalibrateWhite(int argc, char** argv) {
   std::string times = "auto";
   AddExposureTimesOption(app, times, "8-bit photos as the response was fitted, linear ones as each stack's "
                                      "brightness steps say; give the reading the lighting stacks take");
+  std::string sensor_black;
+  AddSensorBlackOption(app, sensor_black);
   app.add_option("-o,--output", out, "Output white balance (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   calib::MergeOptions merge;
   merge.shutter = calib::ParseShutterTimes(times, "--exposure-times");
+  merge.sensor_black = ParseSensorBlack(sensor_black);
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
   const std::vector<std::string> inputs{white_path, black_path, response_path};
   RequireNotInput("-o", out, inputs);
@@ -295,11 +314,14 @@ int RunHdr(int argc, char** argv) {
   std::string times = "auto";
   AddExposureTimesOption(app, times, "8-bit photos as the response was fitted, linear ones as "
                                      "this stack's brightness steps say");
+  std::string sensor_black;
+  AddSensorBlackOption(app, sensor_black);
   app.add_option("-o,--output", out, "Output HDR image (.exr)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   return OneLineErrors([&] {
     o.shutter = calib::ParseShutterTimes(times, "--exposure-times");
+    o.sensor_black = ParseSensorBlack(sensor_black);
     RequireExtension(out, {".exr"}, "-o");
     const std::vector<std::string> inputs{dir, black_dir, response_path};
     RequireNotInput("-o", out, inputs);
