@@ -300,6 +300,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   rep.exposure_times = times_sig;
 
   calib::WhiteBalance white;
+  const std::string flat_exr = (work / "flat_field.exr").string();
   if (!cap.white.file.empty()) {
     white = calib::ReadWhiteBalance(cap.white.file);
     if (!white.exposure_times.empty() && white.exposure_times != times_sig)
@@ -309,9 +310,12 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   } else {
     const std::string yml = (work / "white.yml").string();
     const std::string sig = Signature({cap.white.white, cap.white.black, response_file},
-                                      fmt::format("{}{}{}", nlohmann::json(cap.white.patch).dump(),
-                                                  nlohmann::json(cap.white.albedo).dump(), times_sig + black_sig));
-    if (log.Done("white", sig, {yml})) {
+                                      fmt::format("{}{}{}{}", nlohmann::json(cap.white.patch).dump(),
+                                                  nlohmann::json(cap.white.albedo).dump(), times_sig + black_sig,
+                                                  cap.white.flat_field ? " flat_field" : ""));
+    std::vector<std::string> outputs{yml};
+    if (cap.white.flat_field) outputs.push_back(flat_exr);
+    if (log.Done("white", sig, outputs)) {
       white = calib::ReadWhiteBalance(yml);
     } else {
       progress("white balance ...");
@@ -333,6 +337,18 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       WriteAtomically(yml, [&](const std::string& tmp) {
         calib::WriteWhiteBalance(tmp, white, b.empty() ? cv::Vec3d() : cv::Vec3d(cv::mean(b).val), cap.white.black);
       });
+      if (cap.white.flat_field) {
+        // Per channel (white - black) over its mean in the patch: 1 where the patch's
+        // irradiance falls, the unit of q.
+        const cv::Mat diff = b.empty() ? w.clone() : cv::Mat(w - b);
+        const cv::Vec3d at_patch = calib::MeanInPolygon(diff, patch);
+        cv::Mat flat(diff.size(), CV_32FC3);
+        for (int y = 0; y < diff.rows; ++y)
+          for (int x = 0; x < diff.cols; ++x)
+            for (int k = 0; k < 3; ++k)
+              flat.at<cv::Vec3f>(y, x)[k] = float(diff.at<cv::Vec3f>(y, x)[k] / at_patch[k]);
+        WriteAtomically(flat_exr, [&](const std::string& tmp) { calib::WriteExr(tmp, flat); });
+      }
       log.Record("white", sig);
       computed = true;
     }
@@ -423,6 +439,31 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     projector_from_camera.R = projector->R;
     projector_from_camera.t = projector->T;
   }
+  // The projector's irradiance on each lit-face node relative to the white patch's (1 without
+  // a flat field): the white reference's image read over the lit face's dual boxes, the mean
+  // of its channels.
+  std::vector<float> irradiance(size_t(F), 1.0f);
+  if (cap.white.flat_field) {
+    calib::Pose lit_from_sample;
+    lit_from_sample.t = {0, 0, LitFaceZ(g, h, cap.setup)};
+    const FaceSamples flat = ResampleFrontFace(calib::ReadLinearRgb(flat_exr), cam, camera_from_sample * lit_from_sample,
+                                               g, h, o.face_samples);
+    float lo = std::numeric_limits<float>::infinity(), hi = 0;
+    for (int64_t f = 0; f < F; ++f) {
+      const float v = (flat.value[0][size_t(f)] + flat.value[1][size_t(f)] + flat.value[2][size_t(f)]) / 3;
+      if (!(v > 0.05f) || !std::isfinite(v) || flat.saturated[size_t(f)] > 0)
+        throw InputError(fmt::format("{}: white.flat_field: the white reference's image {} at lit-face node ({}, {}) "
+                                     "({}): it must cover the whole lit face, unsaturated",
+                                     cap.file, std::isfinite(v) ? "is dark" : "has no value",
+                                     f % g.nx, f / g.nx, cap.white.white));
+      irradiance[size_t(f)] = v;
+      lo = std::min(lo, v);
+      hi = std::max(hi, v);
+    }
+    progress(fmt::format("flat field: the projector's irradiance on the lit face is {:.3f}-{:.3f} of the white "
+                         "patch's", lo, hi));
+    rep.flat_field = {lo, hi};
+  }
   for (size_t m = 0; m < cap.conditions.size(); ++m) {
     const auto& c = cap.conditions[m];
     cv::Mat img = hdr[m];
@@ -436,7 +477,9 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       if (grey.size() != projector->projector_size)
         throw InputError(fmt::format("{}: pattern is {}x{} but the projector is {}x{}", c.pattern, grey.cols,
                                      grey.rows, projector->projector_size.width, projector->projector_size.height));
-      dc.q = GreyPattern(ProjectPatternOnFace(grey, proj, projector_from_camera, camera_from_sample, g, h, cap.setup));
+      std::vector<float> q = ProjectPatternOnFace(grey, proj, projector_from_camera, camera_from_sample, g, h, cap.setup);
+      for (int64_t f = 0; f < F; ++f) q[size_t(f)] *= irradiance[size_t(f)];
+      dc.q = GreyPattern(q);
     } else {
       dc.q = GreyPattern(RasterizeLightFile(c.Light(cap.dir), g, h));
     }
@@ -525,6 +568,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   j["pose_rms_px"] = rep.pose_rms_px;
   j["face_corners_px"] = rep.face_corners_px;
   j["white_gains"] = rep.white_gains;
+  if (cap.white.flat_field) j["flat_field"] = rep.flat_field;
   j["exposure_times"] = rep.exposure_times;
   nlohmann::json st = nlohmann::json::object();
   for (const auto& [name, t] : rep.stage_seconds) st[name] = t;

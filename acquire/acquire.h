@@ -38,6 +38,8 @@ struct AcquireReport {
   double camera_rms_px = -1, projector_rms_px = -1, pose_rms_px = -1;
   std::vector<std::array<double, 2>> face_corners_px;
   std::array<double, 3> white_gains{};
+  // white.flat_field: the lowest and highest irradiance on the lit face, relative to the patch's.
+  std::array<float, 2> flat_field{};
   std::string exposure_times;  // how the photos' times were read: "labelled" or "apex"
   std::vector<AcquireConditionReport> conditions;
   RecoverySummary solve;

@@ -279,6 +279,51 @@ TEST_F(AcquireTest, SensorBlackLevelIsRemoved) {
   ExpectError(eight, "capture.json: sensor_black: applies to linear photos (\"response\": \"linear\")");
 }
 
+// A projector whose irradiance falls to 0.8 at its image's corners (5-7 % across the lit face
+// here): q taken as the pattern value is ~1.8 % RMS off; white.flat_field reads the white
+// reference's image over the lit face and takes q as well as from a uniform projector (whose
+// 0.7-1.3 % are the region edges through the calibrated projector). A reference that does not
+// cover the lit face is named.
+TEST_F(AcquireTest, ProjectorFalloffFromTheFlatField) {
+  for (translume::Setup setup : {Setup::kBack, Setup::kFront}) {
+    SCOPED_TRACE(SetupName(setup));
+    const std::string c = CopyOf(SmallCapture(setup, "_falloff", R"(, "projector_falloff": 0.8)"));
+    EXPECT_TRUE(ReadCapture(c).white.flat_field);
+    AcquireOptions o;
+    o.solve = false;
+    const Dataset truth = ReadDataset(c + "/truth/dataset");
+    std::string said;
+    const AcquireReport r = Acquire(ReadCapture(c), Out(), o, [&](const std::string& l) { said += l + "\n"; });
+    const DatasetMismatch flat = CompareDatasets(ReadDataset(r.dataset_dir), truth);
+    EXPECT_NE(said.find("flat field: the projector's irradiance on the lit face is 0.9"), std::string::npos) << said;
+    EXPECT_LT(r.flat_field[0], 0.97);
+    EditJson(c, [](nlohmann::json& j) { j["white"].erase("flat_field"); });
+    const DatasetMismatch uniform = CompareDatasets(
+        ReadDataset(Acquire(ReadCapture(c), (dir_ / "uniform" / "m.vdb").string(), o).dataset_dir), truth);
+    const std::string none = SmallCapture(setup);
+    const DatasetMismatch baseline = CompareDatasets(
+        ReadDataset(Acquire(ReadCapture(none), (dir_ / "none" / "m.vdb").string(), o).dataset_dir),
+        ReadDataset(none + "/truth/dataset"));
+    std::printf("%s-lit, projector fall-off 0.8: q relative RMS %.3f %% with the flat field, %.3f %% without, %.3f %% "
+                "with a uniform projector; L %.3f %%, %.3f %%, %.3f %%\n", SetupName(setup), 100 * flat.q_rms,
+                100 * uniform.q_rms, 100 * baseline.q_rms, 100 * flat.L_rms, 100 * uniform.L_rms, 100 * baseline.L_rms);
+    EXPECT_LE(flat.q_rms, baseline.q_rms + 0.001);
+    EXPECT_GT(uniform.q_rms, baseline.q_rms + 0.004);
+    EXPECT_LE(flat.L_rms, 0.02);
+  }
+  // The white reference's left quarter of the image black: the lit face's left nodes are named.
+  const std::string c = CopyOf(SmallCapture(Setup::kBack, "_falloff", R"(, "projector_falloff": 0.8)"));
+  for (const auto& e : fs::directory_iterator(c + "/calib/white")) {
+    if (e.path().extension() != ".png") continue;
+    cv::Mat img = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
+    img(cv::Rect(0, 0, img.cols / 4, img.rows)).setTo(0);
+    cv::imwrite(e.path().string(), img);
+  }
+  ExpectError(c, "capture.json: white.flat_field: the white reference's image is dark at lit-face node (0, ");
+  EditJson(c, [](nlohmann::json& j) { j["white"]["flat_field"] = "yes"; });
+  ExpectError(c, "capture.json: white.flat_field: expected true or false");
+}
+
 // `translume patterns` for a real rig: the region patterns computed from the calibrations that
 // acquire makes of the simulated capture's photos, and the face corners, light what the
 // simulator's true rig lights (the capture's patterns/NN.png) up to the calibration's error.
@@ -305,8 +350,8 @@ TEST_F(AcquireTest, RegionPatternsFromCalibrationsMatchTheTrueRig) {
   std::vector<cv::Point2d> corners;
   for (const auto& p : cap.face_corners_px) corners.emplace_back(p[0], p[1]);
   const calib::Pose camera_from_sample = EstimateSamplePose(cam, corners, cap.size_mm, "test");
-  // What `translume patterns` does, from the corners and from a photo of the white card that
-  // lies where the sample goes.
+  // What `translume patterns` does, from the corners and from a photo of the sample under
+  // projector white (the capture's calib/sample_lit).
   PatternJob job;
   job.camera = camera;
   job.projector = projector;
@@ -322,7 +367,7 @@ TEST_F(AcquireTest, RegionPatternsFromCalibrationsMatchTheTrueRig) {
   EXPECT_TRUE(set.warnings.empty());
   job.corners.clear();
   const calib::ResponseCurve response = calib::ReadResponse(r.work_dir + "/response.yml");
-  job.photo = calib::ReadHdrOrStack(c + "/calib/white", &response);
+  job.photo = calib::ReadHdrOrStack(c + "/calib/sample_lit", &response);
   const PatternSet from_photo = MakeRegionPatterns(job);
   // Sides fitted straight after undistortion: 0.02-0.06 px from the truth (0.33 px, outwards, as
   // straight lines in the distorted image).
@@ -376,9 +421,19 @@ TEST_F(AcquireTest, RigFileFieldsAndErrors) {
   EXPECT_EQ(rig.noise.offset, 0.02);
   EXPECT_EQ(rig.noise.read_noise, 0.001);
   EXPECT_EQ(DefaultCaptureRig(g, 0.5, Setup::kBack).noise.offset, 0);
+  EXPECT_EQ(read(R"({"projector_falloff": 0.8})").projector_falloff, 0.8);
+  // 1 - 0.2 r^2: 1 at the principal point, 0.8 at the farthest corner.
+  CaptureRig falloff_rig = DefaultCaptureRig(g, 0.5, Setup::kBack);
+  falloff_rig.projector_falloff = 0.8;
+  const cv::Mat f = ProjectorFalloff(falloff_rig);
+  double lo = 0, hi = 0;
+  cv::minMaxLoc(f, &lo, &hi);
+  EXPECT_NEAR(hi, 1.0, 1e-4);
+  EXPECT_NEAR(lo, 0.8, 0.01);
   for (const auto& [text, error] : std::vector<std::pair<std::string, std::string>>{
            {R"({"black_offset": -0.1})", "black_offset: expected a number in [0, 0.5)"},
            {R"({"black_offset": "1 %"})", "black_offset: expected a number in [0, 0.5)"},
+           {R"({"projector_falloff": 0})", "projector_falloff: expected a number in (0, 1]"},
            {R"({"black_ofset": 0.01})", "black_ofset: unknown field"}}) {
     try {
       read(text);

@@ -108,7 +108,7 @@ PatternsBenchRow RunCase(Setup setup, int seed, int lights, const std::string& r
 
   const calib::ResponseCurve response = calib::ReadResponse(report.work_dir + "/response.yml");
   job.corners.clear();
-  job.photo = calib::ReadHdrOrStack((capture / "calib" / "white").string(), &response);
+  job.photo = calib::ReadHdrOrStack((capture / "calib" / "sample_lit").string(), &response);
   const PatternSet from_photo = MakeRegionPatterns(job);
   for (size_t k = 0; k < true_corners.size(); ++k)
     row.photo_corner_px = std::max(row.photo_corner_px, cv::norm(from_photo.corners[k] - true_corners[k]));
@@ -166,7 +166,7 @@ std::string PatternsBenchTable(const std::vector<PatternsBenchRow>& rows) {
                      r.calibration_seconds, 1e3 * r.pattern_seconds);
   s += "(each region's pattern against the true rig's: the worst and median intersection over union, and the\n"
        " edge shift in projector pixels (pixels lit in one only / the true outlines' length); first from the\n"
-       " true face corners, then from the corners found in the white card's photo (corner: their largest\n"
+       " true face corners, then from the corners found in the photo of the sample lit (corner: their largest\n"
        " distance from the true ones, camera px); cam px / proj px: the calibrations' RMS; calib s: acquire's\n"
        " calibration; ours ms: translume patterns' computation from the corners)";
   return s;

@@ -11,9 +11,10 @@ namespace translume::acquire {
 
 // `translume bench patterns`: how closely `translume patterns` lights what the true rig lights.
 // Each case simulates a capture of a marble block through the default rig or `rig_file` (simulate-capture
-// with the fewest conditions and `seed`: its board, plane and white-card photos), calibrates it
-// as acquire does, and makes the N x N region patterns (MakeRegionPatterns) from the sample's
-// true face corners and from the corners found in the white card's photo; the reference is the
+// with the fewest conditions and `seed`: its board, plane, white-card and sample-lit photos),
+// calibrates it as acquire does, and makes the N x N region patterns (MakeRegionPatterns) from
+// the sample's true face corners and from the corners found in the photo of the sample under
+// projector white (calib/sample_lit); the reference is the
 // true rig's patterns (RegionPatterns on the simulator's own intrinsics and poses).
 struct PatternsBenchOptions {
   std::vector<Setup> setups = {Setup::kBack, Setup::kFront};

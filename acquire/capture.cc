@@ -225,7 +225,7 @@ CaptureSpec ReadCapture(const std::string& path) {
   if (w.is_string()) {
     s.white.file = r.Path(w, "white", false);
   } else if (w.is_object()) {
-    r.CheckKeys(w, "white", {"white", "black", "patch", "albedo"});
+    r.CheckKeys(w, "white", {"white", "black", "patch", "albedo", "flat_field"});
     auto stack_or_exr = [&](const json& v, const std::string& field) {
       const std::string p = (fs::path(s.dir) / r.String(v, field)).string();
       if (!fs::exists(p)) r.Fail(field, fmt::format("{} not found", p));
@@ -234,6 +234,10 @@ CaptureSpec ReadCapture(const std::string& path) {
     s.white.white = stack_or_exr(r.Get(w, "white", "white."), "white.white");
     if (w.contains("black")) s.white.black = stack_or_exr(w["black"], "white.black");
     s.white.patch = r.Corners(r.Get(w, "patch", "white."), "white.patch");
+    if (w.contains("flat_field")) {
+      if (!w["flat_field"].is_boolean()) r.Fail("white.flat_field", "expected true or false");
+      s.white.flat_field = w["flat_field"].get<bool>();
+    }
     const json& a = r.Get(w, "albedo", "white.");
     if (a.is_number()) {
       const double v = r.Positive(a, "white.albedo");
@@ -339,6 +343,7 @@ std::string CaptureJson(const CaptureSpec& s) {
   } else {
     j["white"] = {{"white", rel(s.white.white)}, {"patch", s.white.patch}, {"albedo", s.white.albedo}};
     if (!s.white.black.empty()) j["white"]["black"] = rel(s.white.black);
+    if (s.white.flat_field) j["white"]["flat_field"] = true;
   }
   if (!s.black.empty()) j["black"] = rel(s.black);
   if (s.exposure_times != calib::ShutterTimes::kAuto) j["exposure_times"] = calib::ToString(s.exposure_times);

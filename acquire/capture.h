@@ -56,6 +56,11 @@ struct CaptureSpec {
                                       // white and black
     std::vector<std::array<double, 2>> patch;  // its 4 image corners (pixels)
     std::array<double, 3> albedo{};   // the patch's RGB albedo
+    // The reference covers the lit face's outline in the photos (a white card in the front
+    // face's place front-lit; back-lit, a thin diffuser in the back face's place): its image,
+    // minus its black, relative to the patch's mean, is each lit-face node's share of the
+    // projector's irradiance (its fall-off), and multiplies the patterns' q.
+    bool flat_field = false;
   } white;
   std::string black;  // optional: stack of the sample under projector black, subtracted
   // The camera's black level left in linear photos (16-bit or float files that were not

@@ -78,7 +78,6 @@ std::vector<cv::Point3d> FaceCorners(const std::array<double, 3>& size_mm, doubl
 double LitFaceZ(const std::array<double, 3>& size_mm, Setup setup) {
   return setup == Setup::kBack ? size_mm[2] : 0.0;
 }
-double LitFaceZ(const GridShape& g, double h, Setup setup) { return LitFaceZ(SampleSize(g, h), setup); }
 
 // Whether the lit face (plane z) is turned towards the projector: its outward normal is +z
 // back-lit, -z front-lit.
@@ -89,6 +88,8 @@ bool LitFaceFacesProjector(const calib::Pose& projector_from_camera, const calib
 }
 
 }  // namespace
+
+double LitFaceZ(const GridShape& g, double h, Setup setup) { return LitFaceZ(SampleSize(g, h), setup); }
 
 std::vector<cv::Point2d> DeviceIntrinsics::Project(const std::vector<cv::Point3d>& xyz) const {
   std::vector<cv::Point2d> px;

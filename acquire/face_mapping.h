@@ -34,6 +34,9 @@ std::array<double, 3> SampleSize(const GridShape& grid, double h);
 // (0, 0, 0), (X, 0, 0), (X, Y, 0), (0, Y, 0).
 std::vector<cv::Point3d> FrontFaceCorners(const GridShape& grid, double h);
 
+// The lit face's plane z (sample frame, mm): the back face Z back-lit, the front face 0 front-lit.
+double LitFaceZ(const GridShape& grid, double h, Setup setup);
+
 // "" when four image points enclose a convex quadrilateral (every turn the same way) of at
 // least 16 px^2, else "the 4 corners must enclose a convex quadrilateral of at least 16 px^2
 // (area A)": four points on a line let a pose fit them with a small error.

@@ -93,10 +93,11 @@ calib::SyntheticRig ToSyntheticRig(const CaptureRig& r) {
   return s;
 }
 
-// Linear RGB image of the front face of the sample: shade(x, y) (mm, sample frame) inside the
-// face, 0 (a dark room) outside; every pixel the mean of samples x samples rays spread over it.
+// Linear RGB image of the front face of the sample (or of the plane z = plane_z): shade(x, y)
+// (mm, sample frame) inside the face grown by margin_mm on every side, 0 (a dark room) outside; every pixel the mean of samples x samples rays spread over it.
 cv::Mat RenderFace(const CaptureRig& rig, const calib::SyntheticRig& srig, const Geometry& g,
-                   const std::function<cv::Vec3d(double, double)>& shade, int samples = 3) {
+                   const std::function<cv::Vec3d(double, double)>& shade, int samples = 3, double margin_mm = 0,
+                   double plane_z = 0) {
   const cv::Mat& rays = srig.CameraRays();
   const calib::Pose sample_from_camera = rig.camera_from_sample.Inverse();
   const cv::Vec3d o = sample_from_camera.t;  // camera centre in the sample frame
@@ -113,10 +114,10 @@ cv::Mat RenderFace(const CaptureRig& rig, const calib::SyntheticRig& srig, const
             const cv::Vec2d q = (1 - fb) * ((1 - fa) * r00 + fa * r10) + fb * ((1 - fa) * r01 + fa * r11);
             const cv::Vec3d d = sample_from_camera.R * cv::Vec3d(q[0], q[1], 1.0);
             if (std::abs(d[2]) < 1e-12) continue;
-            const double s = -o[2] / d[2];
+            const double s = (plane_z - o[2]) / d[2];
             if (s <= 0) continue;
             const double sx = o[0] + s * d[0], sy = o[1] + s * d[1];
-            if (sx < 0 || sy < 0 || sx > g.X || sy > g.Y) continue;
+            if (sx < -margin_mm || sy < -margin_mm || sx > g.X + margin_mm || sy > g.Y + margin_mm) continue;
             sum += shade(sx, sy);
           }
         const cv::Vec3d v = sum / double(samples * samples);
@@ -228,7 +229,8 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
   for (const auto& [k, v] : j.items())
     if (k != "camera" && k != "projector" && k != "distance_scale" && k != "tilt_deg" &&
         k != "camera_gain" && k != "projector_black" && k != "bits" && k != "read_noise" &&
-        k != "shot_noise" && k != "black_offset" && k != "shutter_labels" && k != "comment")
+        k != "shot_noise" && k != "black_offset" && k != "shutter_labels" && k != "projector_falloff" &&
+        k != "comment")
       fail(k, "unknown field");
   device("camera", &r.camera);
   const bool projector_K = device("projector", &r.projector);
@@ -254,6 +256,12 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
     r.projector_black = j["projector_black"].get<double>();
     if (!(r.projector_black >= 0 && r.projector_black < 0.1)) fail("projector_black", "must be in [0, 0.1)");
   }
+  if (j.contains("projector_falloff")) {
+    if (!j["projector_falloff"].is_number() ||
+        !(j["projector_falloff"].get<double>() > 0 && j["projector_falloff"].get<double>() <= 1))
+      fail("projector_falloff", "expected a number in (0, 1]");
+    r.projector_falloff = j["projector_falloff"].get<double>();
+  }
   if (j.contains("bits")) {
     if (!j["bits"].is_number_integer() || (j["bits"] != 8 && j["bits"] != 16)) fail("bits", "expected 8 or 16");
     r.bits = j["bits"].get<int>();
@@ -274,6 +282,21 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
   }
   PlaceRig(&r, Geom(grid, h), setup, scale, tilt, projector_K);
   return r;
+}
+
+cv::Mat ProjectorFalloff(const CaptureRig& rig) {
+  const cv::Size size = rig.projector.size;
+  const double cx = rig.projector.K(0, 2), cy = rig.projector.K(1, 2);
+  double far2 = 0;
+  for (double x : {0.0, double(size.width)})
+    for (double y : {0.0, double(size.height)}) far2 = std::max(far2, (x - cx) * (x - cx) + (y - cy) * (y - cy));
+  cv::Mat f(size, CV_32FC1);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) {
+      const double dx = x + 0.5 - cx, dy = y + 0.5 - cy;
+      f.at<float>(y, x) = float(1 - (1 - rig.projector_falloff) * (dx * dx + dy * dy) / far2);
+    }
+  return f;
 }
 
 std::string SimulateCaptureOptions::Validate() const {
@@ -388,6 +411,8 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     const int M = N * N;
     std::vector<cv::Mat> patterns;
     std::vector<FacePattern> fine_q;
+    // What the projector's light does on the face: its images through its fall-off.
+    const cv::Mat falloff = ProjectorFalloff(rig);
     const std::vector<cv::Mat> region_patterns = RegionPatterns(
         rig.projector, rig.projector_from_camera, rig.camera_from_sample, SampleSize(g.grid, g.h), o.setup, N);
     for (int m = 0; m < M; ++m) {
@@ -395,12 +420,11 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
       calib::WriteImage8((tmp / "patterns" / fmt::format("{:02d}.png", m)).string(), p);
       cv::Mat pf;
       p.convertTo(pf, CV_32F, 1.0 / 255);
-      patterns.push_back(pf);
-      fine_q.push_back(GreyPattern(ProjectPatternOnFace(pf, rig.projector, rig.projector_from_camera,
+      patterns.push_back(pf.mul(falloff));
+      fine_q.push_back(GreyPattern(ProjectPatternOnFace(patterns.back(), rig.projector, rig.projector_from_camera,
                                                         rig.camera_from_sample, fs_, hf, o.setup, 4)));
     }
-    const cv::Mat white_pattern(rig.projector.size, CV_32F, cv::Scalar(1.0f));
-    fine_q.push_back(GreyPattern(ProjectPatternOnFace(white_pattern, rig.projector, rig.projector_from_camera,
+    fine_q.push_back(GreyPattern(ProjectPatternOnFace(falloff, rig.projector, rig.projector_from_camera,
                                                       rig.camera_from_sample, fs_, hf, o.setup, 4)));
     MultigridOptions mg;
     mg.tolerance = o.tolerance;
@@ -418,7 +442,10 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     const std::vector<double> mtimes = exposures(1.0 / 30, o.exposures);
 
     // White calibration: a white card (albedo 0.9) where the sample goes, projector white and
-    // black; its patch corners are the face's corners pulled 15 % towards the centre.
+    // black; its patch corners are the face's corners pulled 15 % towards the centre. It covers
+    // the face and a margin of 10 % of its width (capture.json's white.flat_field) in the lit
+    // face's place (back-lit: a diffuser there, the projector behind it), and takes the lit face's
+    // irradiance (with a fall-off; beyond the face, the border's).
     const double albedo = 0.9;
     const cv::Vec3d white_radiance = gain * (albedo / kPi);
     // Stacks from 10 % of full scale for the brightest channel, one stop apart.
@@ -427,13 +454,16 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
                               btimes = exposures(0.1 / (wmax * std::max(rig.projector_black, 1e-6)), 5);
     for (int s = 0; s < 2; ++s) {
       const double q = s == 0 ? 1.0 : rig.projector_black;
-      const cv::Mat img = RenderFace(rig, srig, g, [&](double, double) { return white_radiance * q; });
+      const cv::Mat img = RenderFace(rig, srig, g, [&](double x, double y) {
+        return rig.projector_falloff < 1 ? white_radiance * (q * FaceBilinear(fine_q[size_t(M)][0], fs_, hf, x, y))
+                                         : white_radiance * q;
+      }, 3, 0.1 * g.X, LitFaceZ(g.grid, g.h, o.setup));
       sum.photos += shoot((tmp / (s == 0 ? "calib/white" : "calib/white_black")).string(), img,
                           s ? btimes : wtimes, rig.bits, o.seed * 4000 + uint64_t(s));
     }
     std::vector<cv::Point3d> patch3;
     for (const auto& c : FrontFaceCorners(g.grid, g.h))
-      patch3.emplace_back(0.85 * c.x + 0.15 * g.X / 2, 0.85 * c.y + 0.15 * g.Y / 2, 0);
+      patch3.emplace_back(0.85 * c.x + 0.15 * g.X / 2, 0.85 * c.y + 0.15 * g.Y / 2, LitFaceZ(g.grid, g.h, o.setup));
     std::vector<cv::Point3d> patch_cam, corner_cam;
     for (const auto& p : patch3) {
       const cv::Vec3d x = rig.camera_from_sample.Apply({p.x, p.y, p.z});
@@ -485,9 +515,31 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     }
     sum.photos += shoot((tmp / "lighting/black").string(), photo(-1, rig.projector_black), mtimes, rig.bits,
                         o.seed * 5000 + 999);
+    // The sample under projector white, as `translume patterns --photo` takes it to place the
+    // regions: its brightest pixel at 80 % of full scale in the shortest photo.
+    const cv::Mat lit = photo(-1, 1.0);
+    double peak = 0;
+    cv::minMaxLoc(lit.reshape(1), nullptr, &peak);
+    sum.photos += shoot((tmp / "calib/sample_lit").string(), lit, exposures(0.8 / peak, o.exposures), rig.bits,
+                        o.seed * 5000 + 998);
     progress(fmt::format("{} exposure stacks of {} photos ({:.3g} s to {:.3g} s)", M + 1,
                          o.exposures, mtimes.front(), mtimes.back()));
 
+    // q's unit is the irradiance that the white patch receives (what the white calibration ties
+    // the photos to): with a fall-off, the truth's q and L are scaled by the patch's mean.
+    double patch_irradiance = 1;
+    if (rig.projector_falloff < 1) {
+      double sum = 0;
+      int64_t n = 0;
+      for (int64_t j = 0; j < fs_.ny; ++j)
+        for (int64_t i = 0; i < fs_.nx; ++i) {
+          const double x = double(i) * hf, y = double(j) * hf;
+          if (x < 0.075 * g.X || x > 0.925 * g.X || y < 0.075 * g.Y || y > 0.925 * g.Y) continue;
+          sum += fine_q[size_t(M)][0][size_t(i + fs_.nx * j)];
+          ++n;
+        }
+      patch_irradiance = sum / double(n);
+    }
     // Ground truth: the material, the simulator's node-space data and held-out spots.
     WriteMaterial((tmp / "truth/material.vdb").string(), material);
     Dataset truth;
@@ -500,12 +552,14 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
       c.name = fmt::format("{:02d}", m);
       c.q = GreyPattern(ProjectPatternOnFace(patterns[size_t(m)], rig.projector, rig.projector_from_camera,
                                              rig.camera_from_sample, g.grid, g.h, o.setup, 8));
+      for (auto& channel : c.q)
+        for (float& v : channel) v = float(v / patch_irradiance);
       for (int ch = 0; ch < 3; ++ch) {
         c.L[size_t(ch)].resize(size_t(g.grid.face_size()));
         for (int64_t j = 0; j < g.grid.ny; ++j)
           for (int64_t i = 0; i < g.grid.nx; ++i)
             c.L[size_t(ch)][size_t(i + g.grid.nx * j)] =
-                float(DualBoxMean(fine_L[size_t(m)][size_t(ch)], fs_, K, i, j));
+                float(DualBoxMean(fine_L[size_t(m)][size_t(ch)], fs_, K, i, j) / patch_irradiance);
       }
       c.mask = MeasurementMask(g.grid, o.setup, c.q);
       truth.conditions.push_back(c);
@@ -542,6 +596,7 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     spec.white.white = (tmp / "calib/white").string();
     spec.white.black = (tmp / "calib/white_black").string();
     for (const auto& p : patch_px) spec.white.patch.push_back({p.x, p.y});
+    spec.white.flat_field = true;
     spec.white.albedo = {albedo, albedo, albedo};
     spec.black = (tmp / "lighting/black").string();
     // As a camera's raw metadata states it; 8-bit photos carry it through their response.

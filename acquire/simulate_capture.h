@@ -28,7 +28,16 @@ struct CaptureRig {
   // Exposures at APEX times (1/32 s, 1/16 s, ...: powers of two), written as a camera labels
   // them (1/30, 1/15; calib/shutter.h). Otherwise times as written (1/30 s, 1/15 s, 0.133 s).
   bool shutter_labels = false;
+  // The projector's irradiance at its image's farthest corner relative to its principal point,
+  // in (0, 1] (1: uniform; real projectors 0.7-0.9): 1 - (1 - f) r^2, r the distance from the
+  // principal point over the farthest corner's (ProjectorFalloff). The patterns, the black
+  // level and the white card are lit through it.
+  double projector_falloff = 1.0;
 };
+
+// The rig's projector irradiance per projector pixel for a full-white image (CV_32FC1, the
+// projector's size; all 1 where projector_falloff is 1).
+cv::Mat ProjectorFalloff(const CaptureRig& rig);
 
 // A rig for a sample of `grid` and spacing h: a 1024x768 camera (f = 3000 px, mild barrel
 // distortion) facing the front face, slightly tilted, so that the face spans ~60 % of the image
@@ -38,7 +47,7 @@ CaptureRig DefaultCaptureRig(const GridShape& grid, double h, Setup setup);
 
 // Reads a rig file (JSON; docs/capture.md "Simulated captures"): any of camera / projector
 // {size [w, h], K [9], dist [5]}, distance_scale, tilt_deg [3], camera_gain [3],
-// projector_black, bits, read_noise, shot_noise, black_offset, shutter_labels, over
+// projector_black, projector_falloff, bits, read_noise, shot_noise, black_offset, shutter_labels, over
 // DefaultCaptureRig. Throws InputError.
 CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double h, Setup setup);
 
