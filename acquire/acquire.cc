@@ -266,6 +266,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   const std::string black_sig = cap.sensor_black == std::array<double, 3>{}
                                     ? ""
                                     : fmt::format(" sensor_black {}", nlohmann::json(cap.sensor_black).dump());
+  std::string merge_sig;  // how every stack is merged: set below, once the times' reading is known
   if (merge_options.shutter == calib::ShutterTimes::kAuto && curve) merge_options.shutter = curve->shutter;
   if (merge_options.shutter == calib::ShutterTimes::kAuto) {
     // Linear photos: their brightness steps decide, pooled over the white and lighting stacks
@@ -298,6 +299,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   }
   const std::string times_sig = calib::ToString(merge_options.shutter);
   rep.exposure_times = times_sig;
+  merge_sig = times_sig + black_sig;
 
   calib::WhiteBalance white;
   const std::string flat_exr = (work / "flat_field.exr").string();
@@ -311,7 +313,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     const std::string yml = (work / "white.yml").string();
     const std::string sig = Signature({cap.white.white, cap.white.black, response_file},
                                       fmt::format("{}{}{}{}", nlohmann::json(cap.white.patch).dump(),
-                                                  nlohmann::json(cap.white.albedo).dump(), times_sig + black_sig,
+                                                  nlohmann::json(cap.white.albedo).dump(), merge_sig,
                                                   cap.white.flat_field ? " flat_field" : ""));
     std::vector<std::string> outputs{yml};
     if (cap.white.flat_field) outputs.push_back(flat_exr);
@@ -340,13 +342,10 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       if (cap.white.flat_field) {
         // Per channel (white - black) over its mean in the patch: 1 where the patch's
         // irradiance falls, the unit of q.
-        const cv::Mat diff = b.empty() ? w.clone() : cv::Mat(w - b);
+        const cv::Mat diff = b.empty() ? w : cv::Mat(w - b);
         const cv::Vec3d at_patch = calib::MeanInPolygon(diff, patch);
-        cv::Mat flat(diff.size(), CV_32FC3);
-        for (int y = 0; y < diff.rows; ++y)
-          for (int x = 0; x < diff.cols; ++x)
-            for (int k = 0; k < 3; ++k)
-              flat.at<cv::Vec3f>(y, x)[k] = float(diff.at<cv::Vec3f>(y, x)[k] / at_patch[k]);
+        cv::Mat flat;
+        cv::multiply(diff, cv::Scalar(1 / at_patch[0], 1 / at_patch[1], 1 / at_patch[2]), flat);
         WriteAtomically(flat_exr, [&](const std::string& tmp) { calib::WriteExr(tmp, flat); });
       }
       log.Record("white", sig);
@@ -363,7 +362,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   // key: the stage log's; exr: where the merged image is kept.
   auto merge = [&](const std::string& key, const fs::path& exr_path, const std::string& stack) {
     const std::string exr = exr_path.string();
-    const std::string sig = Signature({stack, response_file}, times_sig + black_sig);
+    const std::string sig = Signature({stack, response_file}, merge_sig);
     if (log.Done(key, sig, {exr})) return calib::ReadLinearRgb(exr);
     const calib::ExposureStack s = calib::ReadExposureStack(stack);
     if (s.Size() != camera.image_size)
@@ -442,20 +441,26 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   // The projector's irradiance on each lit-face node relative to the white patch's (1 without
   // a flat field): the white reference's image read over the lit face's dual boxes, the mean
   // of its channels.
+  // (Light-spec conditions take their q as given: without a pattern condition it is not read.)
   std::vector<float> irradiance(size_t(F), 1.0f);
-  if (cap.white.flat_field) {
-    calib::Pose lit_from_sample;
-    lit_from_sample.t = {0, 0, LitFaceZ(g, h, cap.setup)};
-    const FaceSamples flat = ResampleFrontFace(calib::ReadLinearRgb(flat_exr), cam, camera_from_sample * lit_from_sample,
-                                               g, h, o.face_samples);
+  const bool patterns = std::any_of(cap.conditions.begin(), cap.conditions.end(),
+                                    [](const CaptureSpec::Condition& c) { return !c.pattern.empty(); });
+  if (cap.white.flat_field && patterns) {
+    calib::Pose sample_from_lit_plane;  // (x, y, 0) -> (x, y, Z): the lit face as a front face
+    sample_from_lit_plane.t = {0, 0, LitFaceZ(g, h, cap.setup)};
+    const FaceSamples flat = ResampleFrontFace(calib::ReadLinearRgb(flat_exr), cam,
+                                               camera_from_sample * sample_from_lit_plane, g, h, o.face_samples);
     float lo = std::numeric_limits<float>::infinity(), hi = 0;
     for (int64_t f = 0; f < F; ++f) {
       const float v = (flat.value[0][size_t(f)] + flat.value[1][size_t(f)] + flat.value[2][size_t(f)]) / 3;
-      if (!(v > 0.05f) || !std::isfinite(v) || flat.saturated[size_t(f)] > 0)
+      const char* problem = flat.saturated[size_t(f)] > 0 ? "is saturated"
+                            : !std::isfinite(v)            ? "has no value"
+                            : !(v > 0.05f)                 ? "is dark"
+                                                           : nullptr;
+      if (problem)
         throw InputError(fmt::format("{}: white.flat_field: the white reference's image {} at lit-face node ({}, {}) "
                                      "({}): it must cover the whole lit face, unsaturated",
-                                     cap.file, std::isfinite(v) ? "is dark" : "has no value",
-                                     f % g.nx, f / g.nx, cap.white.white));
+                                     cap.file, problem, f % g.nx, f / g.nx, cap.white.white));
       irradiance[size_t(f)] = v;
       lo = std::min(lo, v);
       hi = std::max(hi, v);
@@ -568,7 +573,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   j["pose_rms_px"] = rep.pose_rms_px;
   j["face_corners_px"] = rep.face_corners_px;
   j["white_gains"] = rep.white_gains;
-  if (cap.white.flat_field) j["flat_field"] = rep.flat_field;
+  if (cap.white.flat_field && rep.flat_field[1] > 0) j["flat_field"] = rep.flat_field;
   j["exposure_times"] = rep.exposure_times;
   nlohmann::json st = nlohmann::json::object();
   for (const auto& [name, t] : rep.stage_seconds) st[name] = t;

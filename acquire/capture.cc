@@ -12,6 +12,7 @@
 #include "acquire/face_mapping.h"
 #include "calib/board.h"
 #include "calib/error.h"
+#include "calib/hdr.h"
 #include "calib/photo_io.h"
 #include "solver/dataset.h"
 #include "solver/json_file.h"
@@ -262,8 +263,9 @@ CaptureSpec ReadCapture(const std::string& path) {
     if (b.is_number()) s.sensor_black.fill(b.get<double>());
     else if (b.is_array()) s.sensor_black = r.Numbers<3>(b, "sensor_black");
     else r.Fail("sensor_black", "expected a number or 3 numbers (fractions of full scale)");
-    for (double v : s.sensor_black)
-      if (!(v >= 0 && v < 0.5)) r.Fail("sensor_black", "expected fractions of full scale in [0, 0.5)");
+    if (std::string why = calib::SensorBlackProblem({s.sensor_black[0], s.sensor_black[1], s.sensor_black[2]});
+        !why.empty())
+      r.Fail("sensor_black", why);
     if (!s.response.linear && s.sensor_black != std::array<double, 3>{})
       r.Fail("sensor_black", "applies to linear photos (\"response\": \"linear\"); an 8-bit camera's response "
                              "curve holds its black level");

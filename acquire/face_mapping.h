@@ -87,8 +87,9 @@ FaceSamples ResampleFrontFace(const cv::Mat& linear_rgb, const DeviceIntrinsics&
 // dual box, sampled at `samples` x `samples` points mapped through camera_from_sample,
 // projector_from_camera and the projector's intrinsics; each projector pixel is a sharp square
 // (a DLP), so the pattern is read at the nearest pixel. Points outside the projector image or
-// on a face turned away from the projector get 0. The projector's irradiance fall-off over the
-// sample is not modelled (q = pattern value; the white calibration fixes q = 1 for full white).
+// on a face turned away from the projector get 0. q = the pattern value (the white calibration
+// fixes q = 1 for full white); acquire multiplies it by the projector's fall-off where the white
+// reference gives one (white.flat_field).
 std::vector<float> ProjectPatternOnFace(const cv::Mat& pattern, const DeviceIntrinsics& projector,
                                         const calib::Pose& projector_from_camera,
                                         const calib::Pose& camera_from_sample, const GridShape& grid,

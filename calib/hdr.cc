@@ -618,14 +618,19 @@ ResponseCurve ReadResponse(const std::string& path) {
   return c;
 }
 
+std::string SensorBlackProblem(const cv::Vec3d& sensor_black) {
+  for (int c = 0; c < 3; ++c)
+    if (!(sensor_black[c] >= 0 && sensor_black[c] < 0.5)) return "expected fractions of full scale in [0, 0.5)";
+  return "";
+}
+
 std::string MergeOptions::Validate() const {
   if (low_code < 0 || high_code > 255 || high_code - low_code < 10)
     return "need 0 <= low_code (--low), high_code (--high) <= 255 and high_code - low_code >= 10";
   if (!(low_linear >= 0 && high_linear <= 1 && high_linear > low_linear))
     return "need 0 <= low_linear < high_linear <= 1";
-  for (int c = 0; c < 3; ++c)
-    if (!(sensor_black[c] >= 0 && sensor_black[c] < 0.5))
-      return fmt::format("sensor_black must be in [0, 0.5) of full scale, not {:g}", sensor_black[c]);
+  if (std::string why = SensorBlackProblem(sensor_black); !why.empty())
+    return fmt::format("sensor_black {:g},{:g},{:g}: {}", sensor_black[0], sensor_black[1], sensor_black[2], why);
   return "";
 }
 
@@ -658,6 +663,15 @@ void CheckMergeInput(const ExposureStack& stack) {
 
 std::string FileName(const Exposure& e) { return fs::path(e.path).filename().string(); }
 
+// A sensor black level is for linear files that keep it: not for camera RAW files.
+void CheckSensorBlack(const ExposureStack& stack, const MergeOptions& o) {
+  if (o.sensor_black == cv::Vec3d(0, 0, 0)) return;
+  for (const Exposure& e : stack.exposures)
+    if (IsRaw(e.path))
+      throw CalibError(e.path + ": camera RAW files are decoded with their black level removed; a sensor black level "
+                       "is for 16-bit or float files that keep it");
+}
+
 }  // namespace
 
 std::string ShutterChoice::BriefReport() const {
@@ -681,6 +695,7 @@ void ShutterJudge::Add(const ExposureStack& stack, const ExposureStack* black) {
   CheckMergeInput(stack);
   if (stack.IsEightBit())
     throw CalibError(stack.dir + ": the exposure times of 8-bit photos are judged by the response fit");
+  CheckSensorBlack(stack, options_);
   if (!HasApexLabels(stack)) return;
   apex_labels_ = true;
   const ExposureStack apex = WithShutterTimes(stack, ShutterTimes::kApex);
@@ -754,6 +769,7 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
       throw CalibError(given_stack.dir + ": a sensor black level applies to linear photos (16-bit, float); an 8-bit "
                        "camera's response curve holds its black level");
   }
+  CheckSensorBlack(given_stack, o);
   ShutterTimes times = o.shutter;
   if (times == ShutterTimes::kAuto)
     times = eight ? response->shutter : ChooseShutterTimes(given_stack, given_black, o).times;
@@ -850,7 +866,12 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
 
 cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response, const MergeOptions& options,
                        ShutterTimes* times_read) {
-  if (!fs::is_directory(path)) return ReadLinearRgb(path);
+  if (!fs::is_directory(path)) {
+    if (options.sensor_black != cv::Vec3d(0, 0, 0))
+      throw CalibError(path + ": an HDR image is merged already; give the sensor black level where it is merged "
+                       "(translume hdr --sensor-black), or give the stack folder");
+    return ReadLinearRgb(path);
+  }
   HdrImage h = MergeHdr(ReadExposureStack(path), response, nullptr, options);
   if (times_read) *times_read = h.shutter;
   return h.radiance;

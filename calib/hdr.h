@@ -113,6 +113,10 @@ ResponseCurve CalibrateResponse(const std::vector<ExposureStack>& stacks,
 void WriteResponse(const std::string& path, const ResponseCurve& curve);
 ResponseCurve ReadResponse(const std::string& path);
 
+// "" where each of a sensor black level's channels (fractions of full scale) lies in [0, 0.5);
+// else "expected fractions of full scale in [0, 0.5)".
+std::string SensorBlackProblem(const cv::Vec3d& sensor_black);
+
 struct MergeOptions {
   int low_code = 3;             // 8-bit: codes <= low_code are under-exposed
   int high_code = 250;          // 8-bit: codes >= high_code are saturated
@@ -123,7 +127,9 @@ struct MergeOptions {
   // were not black-subtracted), a fraction of full scale per channel (RGB), in [0, 0.5). It is
   // subtracted from every photo (and black-stack photo) before its time divides it; a value is
   // under-exposed at or below sensor_black + low_linear. 8-bit stacks take none (their
-  // response curve holds their black level): MergeHdr refuses one.
+  // response curve holds their black level), nor do camera RAW files (decoded with theirs
+  // removed): MergeHdr and ShutterJudge refuse one, and ReadHdrOrStack refuses one for an HDR
+  // image (merged already).
   cv::Vec3d sensor_black{0, 0, 0};
   // How the stack's (and the black stack's) times are read. kAuto: 8-bit stacks as their
   // response was fitted (ResponseCurve::shutter); linear stacks as ChooseShutterTimes judges

@@ -334,9 +334,22 @@ TEST(Hdr, LinearShutterLabelsReadAsApexTimes) {
   EXPECT_LE(eb.median, 0.015);
   EXPECT_LE(eb.p95, 0.06);
   EXPECT_GT(ep.p95, 2 * eb.p95);
+  // With a black stack that carries the same black level, the two cancel (no double subtraction).
+  const ExposureStack black_frames = MakeStack(
+      SyntheticRig::RenderExposureStack(cv::Mat::zeros(truth.size(), CV_32FC3), apex, {}, so), labels);
+  const HdrImage hs = MergeHdr(pedestal, nullptr, &black_frames, with_black);
+  const ErrorStats es = Errors(truth, hs, true, 10);
+  EXPECT_NEAR(es.scale[0], 1.0, 0.005);
+  EXPECT_LE(es.median, 0.015);
+  // An HDR image is merged already: its black level cannot be taken off again.
+  const std::string exr = (fs::temp_directory_path() / "translume_hdr_test_sensor_black.exr").string();
+  WriteExr(exr, hb.radiance);
+  EXPECT_NE(CalibErrorOf([&] { ReadHdrOrStack(exr, nullptr, with_black); }).find(": an HDR image is merged already"),
+            std::string::npos);
+  fs::remove(exr);
   with_black.sensor_black[1] = 0.5;
   EXPECT_NE(CalibErrorOf([&] { MergeHdr(pedestal, nullptr, nullptr, with_black); })
-                .find("sensor_black must be in [0, 0.5) of full scale, not 0.5"), std::string::npos);
+                .find("sensor_black 0.02,0.5,0.02: expected fractions of full scale in [0, 0.5)"), std::string::npos);
   so.offset = 0;
   so.seed = 45;
   const ExposureStack exact = MakeStack(SyntheticRig::RenderExposureStack(truth, labels, {}, so), labels);

@@ -205,6 +205,9 @@ TEST_F(CalibCli, CalibrateWhite) {
                      "--patch 1,2,3: expected 8");
   ExpectOneLineError(Translume(base + "--patch " + corners + " -o " + P("out.yml")), "--patch needs --albedo");
   ExpectOneLineError(Translume(base + "--chart macbeth -o " + P("out.yml")), "--chart macbeth");
+  ExpectOneLineError(Translume(base + "--sensor-black 0.01 --chart colorchecker -o " + P("out.yml")),
+                     P("white.exr") + ": an HDR image is merged already; give the sensor black level where it is "
+                                      "merged (translume hdr --sensor-black), or give the stack folder");
   ExpectOneLineError(Translume("calibrate white " + P("missing.exr") + " --chart colorchecker -o " +
                                P("out.yml")), P("missing.exr") + ": no such file");
   ExpectOneLineError(Translume(base + "--black " + P("out.exr") + " --chart colorchecker -o " + P("out.yml")),

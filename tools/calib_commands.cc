@@ -47,10 +47,10 @@ void AddSensorBlackOption(CLI::App& app, std::string& text) {
 cv::Vec3d ParseSensorBlack(const std::string& text) {
   if (text.empty()) return {0, 0, 0};
   const std::vector<double> v = ParseNumbers(text, "--sensor-black", 1, 3);
-  for (double b : v)
-    if (!(b >= 0 && b < 0.5))
-      throw calib::CalibError(fmt::format("--sensor-black {}: expected fractions of full scale in [0, 0.5)", text));
-  return v.size() == 1 ? cv::Vec3d::all(v[0]) : cv::Vec3d(v[0], v[1], v[2]);
+  const cv::Vec3d black = v.size() == 1 ? cv::Vec3d::all(v[0]) : cv::Vec3d(v[0], v[1], v[2]);
+  if (std::string why = calib::SensorBlackProblem(black); !why.empty())
+    throw calib::CalibError(fmt::format("--sensor-black {}: {}", text, why));
+  return black;
 }
 
 // OpenCV exceptions carry multi-line messages: keep the first meaningful line.
