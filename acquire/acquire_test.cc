@@ -259,13 +259,12 @@ TEST_F(AcquireTest, SensorBlackLevelIsRemoved) {
   o.solve = false;
   const Dataset truth = ReadDataset(c + "/truth/dataset");
   const DatasetMismatch given = CompareDatasets(ReadDataset(Acquire(cap, Out(), o).dataset_dir), truth);
+  // Into the same work folder: the white and HDR stages must see that the merge changed.
   EditJson(c, [](nlohmann::json& j) { j.erase("sensor_black"); });
-  const DatasetMismatch left =
-      CompareDatasets(ReadDataset(Acquire(ReadCapture(c), (dir_ / "left" / "m.vdb").string(), o).dataset_dir), truth);
+  const DatasetMismatch left = CompareDatasets(ReadDataset(Acquire(ReadCapture(c), Out(), o).dataset_dir), truth);
   std::printf("16-bit, black level 5 %%: L relative RMS %.3f %% with sensor_black, %.3f %% without; q %.3f %%\n",
               100 * given.L_rms, 100 * left.L_rms, 100 * given.q_rms);
   EXPECT_LE(given.L_rms, 0.01);
-  EXPECT_LE(given.q_rms, 0.02);
   EXPECT_GT(left.L_rms, 4 * given.L_rms);
   for (const auto& [value, error] : std::vector<std::pair<nlohmann::json, std::string>>{
            {0.5, "sensor_black: expected fractions of full scale in [0, 0.5)"},
@@ -294,12 +293,38 @@ TEST_F(AcquireTest, ProjectorFalloffFromTheFlatField) {
     const Dataset truth = ReadDataset(c + "/truth/dataset");
     std::string said;
     const AcquireReport r = Acquire(ReadCapture(c), Out(), o, [&](const std::string& l) { said += l + "\n"; });
-    const DatasetMismatch flat = CompareDatasets(ReadDataset(r.dataset_dir), truth);
+    const Dataset flat_data = ReadDataset(r.dataset_dir);
+    const DatasetMismatch flat = CompareDatasets(flat_data, truth);
     EXPECT_NE(said.find("flat field: the projector's irradiance on the lit face is 0.9"), std::string::npos) << said;
     EXPECT_LT(r.flat_field[0], 0.97);
+    // Into the same work folder: the white stage must see that flat_field changed.
     EditJson(c, [](nlohmann::json& j) { j["white"].erase("flat_field"); });
-    const DatasetMismatch uniform = CompareDatasets(
-        ReadDataset(Acquire(ReadCapture(c), (dir_ / "uniform" / "m.vdb").string(), o).dataset_dir), truth);
+    const Dataset uniform_data = ReadDataset(Acquire(ReadCapture(c), Out(), o).dataset_dir);
+    const DatasetMismatch uniform = CompareDatasets(uniform_data, truth);
+    // Node by node inside the regions (q = 1 without the flat field at the node and its four
+    // neighbours, so that the calibration's region edges do not enter): the flat field's q
+    // against the truth's fall-off. (Read on the wrong plane, back-lit, it was 0.3 % RMS off.)
+    const int64_t nx = truth.shape.nx, ny = truth.shape.ny;
+    double sum2 = 0, worst = 0;
+    int64_t nodes = 0;
+    for (size_t m = 0; m < truth.conditions.size(); ++m)
+      for (size_t f = 0; f < truth.conditions[m].q[0].size(); ++f) {
+        const int64_t i = int64_t(f) % nx, j = int64_t(f) / nx;
+        if (i == 0 || j == 0 || i == nx - 1 || j == ny - 1) continue;
+        const std::vector<float>& u = uniform_data.conditions[m].q[0];
+        if (u[f] != 1.0f || u[f - 1] != 1.0f || u[f + 1] != 1.0f || u[f - size_t(nx)] != 1.0f ||
+            u[f + size_t(nx)] != 1.0f)
+          continue;
+        const double e = flat_data.conditions[m].q[0][f] / truth.conditions[m].q[0][f] - 1;
+        sum2 += e * e;
+        worst = std::max(worst, std::abs(e));
+        ++nodes;
+      }
+    std::printf("%lld nodes inside the regions: the flat field's q %.3f %% RMS off the truth, worst %.3f %%\n",
+                (long long)nodes, 100 * std::sqrt(sum2 / double(nodes)), 100 * worst);
+    EXPECT_GT(nodes, 50);
+    EXPECT_LT(std::sqrt(sum2 / double(std::max<int64_t>(nodes, 1))), 0.001);
+    EXPECT_LT(worst, 0.004);
     const std::string none = SmallCapture(setup);
     const DatasetMismatch baseline = CompareDatasets(
         ReadDataset(Acquire(ReadCapture(none), (dir_ / "none" / "m.vdb").string(), o).dataset_dir),
@@ -422,10 +447,11 @@ TEST_F(AcquireTest, RigFileFieldsAndErrors) {
   EXPECT_EQ(rig.noise.read_noise, 0.001);
   EXPECT_EQ(DefaultCaptureRig(g, 0.5, Setup::kBack).noise.offset, 0);
   EXPECT_EQ(read(R"({"projector_falloff": 0.8})").projector_falloff, 0.8);
+  EXPECT_EQ(read(R"({"camera_vignetting": 0.7})").camera_vignetting, 0.7);
   // 1 - 0.2 r^2: 1 at the principal point, 0.8 at the farthest corner.
   CaptureRig falloff_rig = DefaultCaptureRig(g, 0.5, Setup::kBack);
   falloff_rig.projector_falloff = 0.8;
-  const cv::Mat f = ProjectorFalloff(falloff_rig);
+  const cv::Mat f = RadialFalloff(falloff_rig.projector, falloff_rig.projector_falloff);
   double lo = 0, hi = 0;
   cv::minMaxLoc(f, &lo, &hi);
   EXPECT_NEAR(hi, 1.0, 1e-4);
@@ -434,6 +460,7 @@ TEST_F(AcquireTest, RigFileFieldsAndErrors) {
            {R"({"black_offset": -0.1})", "black_offset: expected a number in [0, 0.5)"},
            {R"({"black_offset": "1 %"})", "black_offset: expected a number in [0, 0.5)"},
            {R"({"projector_falloff": 0})", "projector_falloff: expected a number in (0, 1]"},
+           {R"({"camera_vignetting": 1.5})", "camera_vignetting: expected a number in (0, 1]"},
            {R"({"black_ofset": 0.01})", "black_ofset: unknown field"}}) {
     try {
       read(text);

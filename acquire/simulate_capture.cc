@@ -93,8 +93,9 @@ calib::SyntheticRig ToSyntheticRig(const CaptureRig& r) {
   return s;
 }
 
-// Linear RGB image of the front face of the sample (or of the plane z = plane_z): shade(x, y)
-// (mm, sample frame) inside the face grown by margin_mm on every side, 0 (a dark room) outside; every pixel the mean of samples x samples rays spread over it.
+// Linear RGB image of the front face of the sample (or of the plane z = plane_z) through the
+// lens's vignetting: shade(x, y) (mm, sample frame) inside the face grown by margin_mm on every
+// side, 0 (a dark room) outside; every pixel the mean of samples x samples rays spread over it.
 cv::Mat RenderFace(const CaptureRig& rig, const calib::SyntheticRig& srig, const Geometry& g,
                    const std::function<cv::Vec3d(double, double)>& shade, int samples = 3, double margin_mm = 0,
                    double plane_z = 0) {
@@ -124,8 +125,17 @@ cv::Mat RenderFace(const CaptureRig& rig, const calib::SyntheticRig& srig, const
         img.at<cv::Vec3f>(y, x) = cv::Vec3f(float(v[0]), float(v[1]), float(v[2]));
       }
   });
+  if (rig.camera_vignetting < 1) {
+    const cv::Mat v = RadialFalloff(rig.camera, rig.camera_vignetting);
+    for (int y = 0; y < img.rows; ++y)
+      for (int x = 0; x < img.cols; ++x) img.at<cv::Vec3f>(y, x) *= v.at<float>(y, x);
+  }
   return img;
 }
+
+// The white patch: the face's corners pulled 15 % towards its centre, so the patch spans
+// [kPatchInset, 1 - kPatchInset] of the face's width and height.
+constexpr double kPatchInset = 0.075;
 
 // Bilinear interpolation of a node field (nx * ny, i + nx j) of the face at (x, y) mm.
 double FaceBilinear(const std::vector<float>& f, const GridShape& s, double hf, double x, double y) {
@@ -230,7 +240,7 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
     if (k != "camera" && k != "projector" && k != "distance_scale" && k != "tilt_deg" &&
         k != "camera_gain" && k != "projector_black" && k != "bits" && k != "read_noise" &&
         k != "shot_noise" && k != "black_offset" && k != "shutter_labels" && k != "projector_falloff" &&
-        k != "comment")
+        k != "camera_vignetting" && k != "comment")
       fail(k, "unknown field");
   device("camera", &r.camera);
   const bool projector_K = device("projector", &r.projector);
@@ -256,12 +266,12 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
     r.projector_black = j["projector_black"].get<double>();
     if (!(r.projector_black >= 0 && r.projector_black < 0.1)) fail("projector_black", "must be in [0, 0.1)");
   }
-  if (j.contains("projector_falloff")) {
-    if (!j["projector_falloff"].is_number() ||
-        !(j["projector_falloff"].get<double>() > 0 && j["projector_falloff"].get<double>() <= 1))
-      fail("projector_falloff", "expected a number in (0, 1]");
-    r.projector_falloff = j["projector_falloff"].get<double>();
-  }
+  for (const char* k : {"projector_falloff", "camera_vignetting"})
+    if (j.contains(k)) {
+      if (!j[k].is_number() || !(j[k].get<double>() > 0 && j[k].get<double>() <= 1))
+        fail(k, "expected a number in (0, 1]");
+      (std::string(k) == "projector_falloff" ? r.projector_falloff : r.camera_vignetting) = j[k].get<double>();
+    }
   if (j.contains("bits")) {
     if (!j["bits"].is_number_integer() || (j["bits"] != 8 && j["bits"] != 16)) fail("bits", "expected 8 or 16");
     r.bits = j["bits"].get<int>();
@@ -284,9 +294,9 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
   return r;
 }
 
-cv::Mat ProjectorFalloff(const CaptureRig& rig) {
-  const cv::Size size = rig.projector.size;
-  const double cx = rig.projector.K(0, 2), cy = rig.projector.K(1, 2);
+cv::Mat RadialFalloff(const DeviceIntrinsics& device, double at_corner) {
+  const cv::Size size = device.size;
+  const double cx = device.K(0, 2), cy = device.K(1, 2);
   double far2 = 0;
   for (double x : {0.0, double(size.width)})
     for (double y : {0.0, double(size.height)}) far2 = std::max(far2, (x - cx) * (x - cx) + (y - cy) * (y - cy));
@@ -294,7 +304,7 @@ cv::Mat ProjectorFalloff(const CaptureRig& rig) {
   for (int y = 0; y < size.height; ++y)
     for (int x = 0; x < size.width; ++x) {
       const double dx = x + 0.5 - cx, dy = y + 0.5 - cy;
-      f.at<float>(y, x) = float(1 - (1 - rig.projector_falloff) * (dx * dx + dy * dy) / far2);
+      f.at<float>(y, x) = float(1 - (1 - at_corner) * (dx * dx + dy * dy) / far2);
     }
   return f;
 }
@@ -412,7 +422,7 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     std::vector<cv::Mat> patterns;
     std::vector<FacePattern> fine_q;
     // What the projector's light does on the face: its images through its fall-off.
-    const cv::Mat falloff = ProjectorFalloff(rig);
+    const cv::Mat falloff = RadialFalloff(rig.projector, rig.projector_falloff);
     const std::vector<cv::Mat> region_patterns = RegionPatterns(
         rig.projector, rig.projector_from_camera, rig.camera_from_sample, SampleSize(g.grid, g.h), o.setup, N);
     for (int m = 0; m < M; ++m) {
@@ -463,7 +473,8 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     }
     std::vector<cv::Point3d> patch3;
     for (const auto& c : FrontFaceCorners(g.grid, g.h))
-      patch3.emplace_back(0.85 * c.x + 0.15 * g.X / 2, 0.85 * c.y + 0.15 * g.Y / 2, LitFaceZ(g.grid, g.h, o.setup));
+      patch3.emplace_back(kPatchInset * g.X + (1 - 2 * kPatchInset) * c.x, kPatchInset * g.Y + (1 - 2 * kPatchInset) * c.y,
+                          LitFaceZ(g.grid, g.h, o.setup));
     std::vector<cv::Point3d> patch_cam, corner_cam;
     for (const auto& p : patch3) {
       const cv::Vec3d x = rig.camera_from_sample.Apply({p.x, p.y, p.z});
@@ -534,7 +545,9 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
       for (int64_t j = 0; j < fs_.ny; ++j)
         for (int64_t i = 0; i < fs_.nx; ++i) {
           const double x = double(i) * hf, y = double(j) * hf;
-          if (x < 0.075 * g.X || x > 0.925 * g.X || y < 0.075 * g.Y || y > 0.925 * g.Y) continue;
+          if (x < kPatchInset * g.X || x > (1 - kPatchInset) * g.X || y < kPatchInset * g.Y ||
+              y > (1 - kPatchInset) * g.Y)
+            continue;
           sum += fine_q[size_t(M)][0][size_t(i + fs_.nx * j)];
           ++n;
         }

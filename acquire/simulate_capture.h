@@ -30,14 +30,19 @@ struct CaptureRig {
   bool shutter_labels = false;
   // The projector's irradiance at its image's farthest corner relative to its principal point,
   // in (0, 1] (1: uniform; real projectors 0.7-0.9): 1 - (1 - f) r^2, r the distance from the
-  // principal point over the farthest corner's (ProjectorFalloff). The patterns, the black
+  // principal point over the farthest corner's (RadialFalloff). The patterns, the black
   // level and the white card are lit through it.
   double projector_falloff = 1.0;
+  // The lens's relative illumination at the camera image's farthest corner, in (0, 1] (1: none;
+  // lenses wide open 0.5-0.8, stopped down 0.8-0.95), falling alike: the sample, white and
+  // sample-lit photos are taken through it (not the board photos).
+  double camera_vignetting = 1.0;
 };
 
-// The rig's projector irradiance per projector pixel for a full-white image (CV_32FC1, the
-// projector's size; all 1 where projector_falloff is 1).
-cv::Mat ProjectorFalloff(const CaptureRig& rig);
+// 1 - (1 - at_corner) r^2 per pixel of a device's image (CV_32FC1, its size), r the distance of
+// the pixel's centre from the principal point over the farthest image corner's: a projector's
+// irradiance for a full-white image, or a lens's relative illumination.
+cv::Mat RadialFalloff(const DeviceIntrinsics& device, double at_corner);
 
 // A rig for a sample of `grid` and spacing h: a 1024x768 camera (f = 3000 px, mild barrel
 // distortion) facing the front face, slightly tilted, so that the face spans ~60 % of the image
@@ -47,7 +52,7 @@ CaptureRig DefaultCaptureRig(const GridShape& grid, double h, Setup setup);
 
 // Reads a rig file (JSON; docs/capture.md "Simulated captures"): any of camera / projector
 // {size [w, h], K [9], dist [5]}, distance_scale, tilt_deg [3], camera_gain [3],
-// projector_black, projector_falloff, bits, read_noise, shot_noise, black_offset, shutter_labels, over
+// projector_black, projector_falloff, camera_vignetting, bits, read_noise, shot_noise, black_offset, shutter_labels, over
 // DefaultCaptureRig. Throws InputError.
 CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double h, Setup setup);
 
