@@ -301,6 +301,45 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   rep.exposure_times = times_sig;
   merge_sig = times_sig + black_sig;
 
+  // The lens's vignetting: every HDR image is divided by the camera flat, normalised to its mean
+  // (a constant factor that the white gains take back).
+  cv::Mat camera_flat;
+  if (!cap.camera_flat.empty()) {
+    const std::string exr = (work / "camera_flat.exr").string();
+    const std::string sig = Signature({cap.camera_flat, response_file}, merge_sig);
+    if (log.Done("camera_flat", sig, {exr})) {
+      camera_flat = calib::ReadLinearRgb(exr);
+    } else {
+      progress("camera flat ...");
+      camera_flat = calib::ReadHdrOrStack(cap.camera_flat, curve, merge_options);
+      if (camera_flat.size() != camera.image_size)
+        throw InputError(fmt::format("{}: images are {}x{} but the camera calibration is {}x{}", cap.camera_flat,
+                                     camera_flat.cols, camera_flat.rows, camera.image_size.width,
+                                     camera.image_size.height));
+      const cv::Scalar mean = cv::mean(camera_flat);
+      cv::multiply(camera_flat, cv::Scalar(1 / mean[0], 1 / mean[1], 1 / mean[2]), camera_flat);
+      for (int y = 0; y < camera_flat.rows; ++y)
+        for (int x = 0; x < camera_flat.cols; ++x)
+          for (int k = 0; k < 3; ++k) {
+            const float v = camera_flat.at<cv::Vec3f>(y, x)[k];
+            if (!(v > 0.1f) || !std::isfinite(v))
+              throw InputError(fmt::format("{}: camera_flat: {} is {} at pixel ({}, {}): it must fill the view "
+                                           "evenly, unsaturated", cap.file, cap.camera_flat,
+                                           std::isfinite(v) ? "dark" : "saturated", x, y));
+          }
+      WriteAtomically(exr, [&](const std::string& tmp) { calib::WriteExr(tmp, camera_flat); });
+      log.Record("camera_flat", sig);
+      computed = true;
+    }
+  }
+  // An HDR image of the capture's photos through the camera flat (+inf stays +inf).
+  auto flatten = [&](const cv::Mat& img) {
+    if (camera_flat.empty() || img.empty()) return img;
+    cv::Mat out;
+    cv::divide(img, camera_flat, out);
+    return out;
+  };
+
   calib::WhiteBalance white;
   const std::string flat_exr = (work / "flat_field.exr").string();
   if (!cap.white.file.empty()) {
@@ -311,7 +350,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
                            cap.white.file, white.exposure_times, times_sig, times_sig));
   } else {
     const std::string yml = (work / "white.yml").string();
-    const std::string sig = Signature({cap.white.white, cap.white.black, response_file},
+    const std::string sig = Signature({cap.white.white, cap.white.black, response_file, cap.camera_flat},
                                       fmt::format("{}{}{}{}", nlohmann::json(cap.white.patch).dump(),
                                                   nlohmann::json(cap.white.albedo).dump(), merge_sig,
                                                   cap.white.flat_field ? " flat_field" : ""));
@@ -321,9 +360,9 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       white = calib::ReadWhiteBalance(yml);
     } else {
       progress("white balance ...");
-      const cv::Mat w = calib::ReadHdrOrStack(cap.white.white, curve, merge_options);
+      const cv::Mat w = flatten(calib::ReadHdrOrStack(cap.white.white, curve, merge_options));
       const cv::Mat b =
-          cap.white.black.empty() ? cv::Mat() : calib::ReadHdrOrStack(cap.white.black, curve, merge_options);
+          cap.white.black.empty() ? cv::Mat() : flatten(calib::ReadHdrOrStack(cap.white.black, curve, merge_options));
       if (w.size() != camera.image_size)
         throw InputError(fmt::format("{}: images are {}x{} but the camera calibration is {}x{}",
                                      cap.white.white, w.cols, w.rows, camera.image_size.width,
@@ -363,7 +402,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   auto merge = [&](const std::string& key, const fs::path& exr_path, const std::string& stack) {
     const std::string exr = exr_path.string();
     const std::string sig = Signature({stack, response_file}, merge_sig);
-    if (log.Done(key, sig, {exr})) return calib::ReadLinearRgb(exr);
+    if (log.Done(key, sig, {exr})) return flatten(calib::ReadLinearRgb(exr));
     const calib::ExposureStack s = calib::ReadExposureStack(stack);
     if (s.Size() != camera.image_size)
       throw InputError(fmt::format("{}: photos are {}x{} but the camera calibration is {}x{}", stack,
@@ -376,7 +415,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     WriteAtomically(exr, [&](const std::string& tmp) { calib::WriteExr(tmp, hdr.radiance); });
     log.Record(key, sig);
     computed = true;
-    return hdr.radiance;
+    return flatten(hdr.radiance);
   };
   std::vector<cv::Mat> hdr;
   for (size_t m = 0; m < cap.conditions.size(); ++m) {

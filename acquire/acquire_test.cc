@@ -112,6 +112,13 @@ class AcquireTest : public ::testing::Test {
       EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
     }
   }
+  // acquire --no-solve of `capture` into `out`, against the capture's truth.
+  static DatasetMismatch MappingOf(const std::string& capture, const std::string& out) {
+    AcquireOptions o;
+    o.solve = false;
+    return CompareDatasets(ReadDataset(Acquire(ReadCapture(capture), out, o).dataset_dir),
+                           ReadDataset(capture + "/truth/dataset"));
+  }
   fs::path dir_;
 };
 
@@ -325,10 +332,7 @@ TEST_F(AcquireTest, ProjectorFalloffFromTheFlatField) {
     EXPECT_GT(nodes, 50);
     EXPECT_LT(std::sqrt(sum2 / double(std::max<int64_t>(nodes, 1))), 0.001);
     EXPECT_LT(worst, 0.004);
-    const std::string none = SmallCapture(setup);
-    const DatasetMismatch baseline = CompareDatasets(
-        ReadDataset(Acquire(ReadCapture(none), (dir_ / "none" / "m.vdb").string(), o).dataset_dir),
-        ReadDataset(none + "/truth/dataset"));
+    const DatasetMismatch baseline = MappingOf(SmallCapture(setup), (dir_ / "none" / "m.vdb").string());
     std::printf("%s-lit, projector fall-off 0.8: q relative RMS %.3f %% with the flat field, %.3f %% without, %.3f %% "
                 "with a uniform projector; L %.3f %%, %.3f %%, %.3f %%\n", SetupName(setup), 100 * flat.q_rms,
                 100 * uniform.q_rms, 100 * baseline.q_rms, 100 * flat.L_rms, 100 * uniform.L_rms, 100 * baseline.L_rms);
@@ -347,6 +351,41 @@ TEST_F(AcquireTest, ProjectorFalloffFromTheFlatField) {
   ExpectError(c, "capture.json: white.flat_field: the white reference's image is dark at lit-face node (0, ");
   EditJson(c, [](nlohmann::json& j) { j["white"]["flat_field"] = "yes"; });
   ExpectError(c, "capture.json: white.flat_field: expected true or false");
+}
+
+// A lens whose corners get 0.6 of the centre's light, with the projector's fall-off of 0.8:
+// through the camera flat (calib/camera_flat) L and q map as from a rig without either;
+// without it L carries the vignetting. A camera flat that does not fill the view is named.
+TEST_F(AcquireTest, CameraVignettingFromTheCameraFlat) {
+  for (translume::Setup setup : {Setup::kBack, Setup::kFront}) {
+    SCOPED_TRACE(SetupName(setup));
+    const std::string c =
+        CopyOf(SmallCapture(setup, "_vignetting", R"(, "camera_vignetting": 0.6, "projector_falloff": 0.8)"));
+    EXPECT_EQ(ReadCapture(c).camera_flat, c + "/calib/camera_flat");
+    const DatasetMismatch flat = MappingOf(c, Out());
+    // Into the same work folder: the white stage must see that the camera flat went.
+    EditJson(c, [](nlohmann::json& j) { j.erase("camera_flat"); });
+    const DatasetMismatch vignetted = MappingOf(c, Out());
+    const DatasetMismatch baseline = MappingOf(SmallCapture(setup), (dir_ / "none" / "m.vdb").string());
+    std::printf("%s-lit, vignetting 0.6 and fall-off 0.8: L %.3f %% RMS with the camera flat, %.3f %% without, %.3f %% "
+                "on a rig without either; q %.3f %%, %.3f %%, %.3f %%\n", SetupName(setup), 100 * flat.L_rms,
+                100 * vignetted.L_rms, 100 * baseline.L_rms, 100 * flat.q_rms, 100 * vignetted.q_rms,
+                100 * baseline.q_rms);
+    EXPECT_LE(flat.L_rms, baseline.L_rms + 0.002);
+    EXPECT_LE(flat.q_rms, baseline.q_rms + 0.002);
+    EXPECT_GT(vignetted.L_rms, baseline.L_rms + 0.01);
+  }
+  const std::string c =
+      CopyOf(SmallCapture(Setup::kBack, "_vignetting", R"(, "camera_vignetting": 0.6, "projector_falloff": 0.8)"));
+  for (const auto& e : fs::directory_iterator(c + "/calib/camera_flat")) {
+    if (e.path().extension() != ".png") continue;
+    cv::Mat img = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
+    img(cv::Rect(0, 0, img.cols / 4, img.rows / 4)).setTo(0);
+    cv::imwrite(e.path().string(), img);
+  }
+  ExpectError(c, "capture.json: camera_flat: " + c + "/calib/camera_flat is dark at pixel (0, 0): it must fill the view");
+  EditJson(c, [](nlohmann::json& j) { j["camera_flat"] = "calib/no_flat"; });
+  ExpectError(c, "capture.json: camera_flat: " + c + "/calib/no_flat not found");
 }
 
 // `translume patterns` for a real rig: the region patterns computed from the calibrations that

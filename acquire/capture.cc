@@ -119,7 +119,7 @@ CaptureSpec ReadCapture(const std::string& path) {
   if (!j.is_object()) r.Fail("(top level)", "expected an object");
   r.CheckKeys(j, "", {"format", "setup", "sample_mm", "spacing_mm", "grid", "eta", "C",
                       "face_corners_px", "camera", "projector", "response", "white", "black",
-                      "conditions", "exposure_times", "sensor_black", "comment"});
+                      "conditions", "exposure_times", "sensor_black", "camera_flat", "comment"});
   if (r.String(r.Get(j, "format", ""), "format") != kFormat)
     r.Fail("format", fmt::format("expected \"{}\"", kFormat));
   const std::string setup = r.String(r.Get(j, "setup", ""), "setup");
@@ -252,6 +252,10 @@ CaptureSpec ReadCapture(const std::string& path) {
     r.Fail("white", "expected a calibration file or {\"white\", \"patch\", \"albedo\", ...}");
   }
   if (j.contains("black")) s.black = r.Path(j["black"], "black", true);
+  if (j.contains("camera_flat")) {
+    s.camera_flat = (fs::path(s.dir) / r.String(j["camera_flat"], "camera_flat")).string();
+    if (!fs::exists(s.camera_flat)) r.Fail("camera_flat", fmt::format("{} not found", s.camera_flat));
+  }
   if (j.contains("exposure_times")) {
     const std::string times = r.String(j["exposure_times"], "exposure_times");
     if (times != "auto" && times != "labelled" && times != "apex")
@@ -348,6 +352,7 @@ std::string CaptureJson(const CaptureSpec& s) {
     if (s.white.flat_field) j["white"]["flat_field"] = true;
   }
   if (!s.black.empty()) j["black"] = rel(s.black);
+  if (!s.camera_flat.empty()) j["camera_flat"] = rel(s.camera_flat);
   if (s.exposure_times != calib::ShutterTimes::kAuto) j["exposure_times"] = calib::ToString(s.exposure_times);
   if (s.sensor_black != std::array<double, 3>{}) {
     if (s.sensor_black[0] == s.sensor_black[1] && s.sensor_black[1] == s.sensor_black[2]) j["sensor_black"] = s.sensor_black[0];

@@ -63,6 +63,10 @@ struct CaptureSpec {
     bool flat_field = false;
   } white;
   std::string black;  // optional: stack of the sample under projector black, subtracted
+  // Optional: a stack (or HDR .exr) of an evenly lit, featureless field filling the camera's view
+  // through the same lens, aperture and focus (the lens's vignetting): every HDR image the
+  // capture's photos make is divided by it, normalised to its mean.
+  std::string camera_flat;
   // The camera's black level left in linear photos (16-bit or float files that were not
   // black-subtracted), fraction of full scale, RGB; subtracted from every photo of every stack
   // (calib::MergeOptions::sensor_black). 0: none.

@@ -486,6 +486,15 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     }
     const auto patch_px = rig.camera.Project(patch_cam), corners_px = rig.camera.Project(corner_cam);
     progress("white and black reference stacks");
+    // A lens with vignetting: a camera flat (an evenly lit field filling the view, through the
+    // lens), from 10 % of full scale at the principal point.
+    if (rig.camera_vignetting < 1) {
+      const cv::Mat v = RadialFalloff(rig.camera, rig.camera_vignetting);
+      cv::Mat field;
+      cv::merge(std::vector<cv::Mat>{v, v, v}, field);
+      sum.photos += shoot((tmp / "calib/camera_flat").string(), field, exposures(0.1, 4), rig.bits,
+                          o.seed * 4000 + 7);
+    }
 
     // Surface reflection of directly lit front-face points (front-lit setup only): masked out
     // by the acquisition, but it is what the camera sees there (and it saturates).
@@ -612,6 +621,7 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     spec.white.flat_field = true;
     spec.white.albedo = {albedo, albedo, albedo};
     spec.black = (tmp / "lighting/black").string();
+    if (rig.camera_vignetting < 1) spec.camera_flat = (tmp / "calib/camera_flat").string();
     // As a camera's raw metadata states it; 8-bit photos carry it through their response.
     if (rig.bits == 16) spec.sensor_black.fill(rig.noise.offset);
     std::ofstream(tmp / "capture.json") << CaptureJson(spec);

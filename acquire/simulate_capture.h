@@ -34,8 +34,9 @@ struct CaptureRig {
   // level and the white card are lit through it.
   double projector_falloff = 1.0;
   // The lens's relative illumination at the camera image's farthest corner, in (0, 1] (1: none;
-  // lenses wide open 0.5-0.8, stopped down 0.8-0.95), falling alike: the sample, white and
-  // sample-lit photos are taken through it (not the board photos).
+  // lenses wide open 0.5-0.8, stopped down 0.8-0.95), falling alike: the sample, white,
+  // sample-lit and camera-flat photos are taken through it (not the board photos). Below 1 the
+  // capture has a camera flat (calib/camera_flat, capture.json's camera_flat).
   double camera_vignetting = 1.0;
 };
 
