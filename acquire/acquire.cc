@@ -311,30 +311,26 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       camera_flat = calib::ReadLinearRgb(exr);
     } else {
       progress("camera flat ...");
-      camera_flat = calib::ReadHdrOrStack(cap.camera_flat, curve, merge_options);
-      if (camera_flat.size() != camera.image_size)
-        throw InputError(fmt::format("{}: images are {}x{} but the camera calibration is {}x{}", cap.camera_flat,
-                                     camera_flat.cols, camera_flat.rows, camera.image_size.width,
-                                     camera.image_size.height));
-      const cv::Scalar mean = cv::mean(camera_flat);
-      cv::multiply(camera_flat, cv::Scalar(1 / mean[0], 1 / mean[1], 1 / mean[2]), camera_flat);
-      for (int y = 0; y < camera_flat.rows; ++y)
-        for (int x = 0; x < camera_flat.cols; ++x)
-          for (int k = 0; k < 3; ++k) {
-            const float v = camera_flat.at<cv::Vec3f>(y, x)[k];
-            if (!(v > 0.1f) || !std::isfinite(v))
-              throw InputError(fmt::format("{}: camera_flat: {} is {} at pixel ({}, {}): it must fill the view "
-                                           "evenly, unsaturated", cap.file, cap.camera_flat,
-                                           std::isfinite(v) ? "dark" : "saturated", x, y));
-          }
+      try {
+        const cv::Mat merged = calib::ReadHdrOrStack(cap.camera_flat, curve, merge_options);
+        if (merged.size() != camera.image_size)
+          throw calib::CalibError(fmt::format("{}: images are {}x{} but the camera calibration is {}x{}",
+                                              cap.camera_flat, merged.cols, merged.rows, camera.image_size.width,
+                                              camera.image_size.height));
+        camera_flat = calib::NormalizedCameraFlat(merged, cap.camera_flat);
+      } catch (const calib::CalibError& e) {
+        throw InputError(fmt::format("{}: camera_flat: {}", cap.file, e.what()));
+      }
       WriteAtomically(exr, [&](const std::string& tmp) { calib::WriteExr(tmp, camera_flat); });
       log.Record("camera_flat", sig);
       computed = true;
     }
   }
-  // An HDR image of the capture's photos through the camera flat (+inf stays +inf).
+  // An HDR image of the capture's photos through the camera flat (+inf stays +inf); its size is
+  // checked first.
   auto flatten = [&](const cv::Mat& img) {
     if (camera_flat.empty() || img.empty()) return img;
+    TL_CHECK(img.size() == camera_flat.size());
     cv::Mat out;
     cv::divide(img, camera_flat, out);
     return out;
@@ -344,6 +340,17 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   const std::string flat_exr = (work / "flat_field.exr").string();
   if (!cap.white.file.empty()) {
     white = calib::ReadWhiteBalance(cap.white.file);
+    const bool flat = !cap.camera_flat.empty();
+    if (white.camera_flat != flat)
+      progress(fmt::format("warning: {}: its white reference was {}divided by a camera flat, this capture's images "
+                           "are {}: the gains may be off by the vignetting over its patch (calibrate white {})",
+                           cap.white.file, white.camera_flat ? "" : "not ", flat ? "" : "not",
+                           flat ? "--camera-flat " + cap.camera_flat : "without --camera-flat"));
+    if (white.sensor_black != merge_options.sensor_black)
+      progress(fmt::format("warning: {}: its stacks were merged with a sensor black level of {:g},{:g},{:g}, this "
+                           "capture's with {:g},{:g},{:g}: the gains may be off by its offset (calibrate white "
+                           "--sensor-black)", cap.white.file, white.sensor_black[0], white.sensor_black[1],
+                           white.sensor_black[2], cap.sensor_black[0], cap.sensor_black[1], cap.sensor_black[2]));
     if (!white.exposure_times.empty() && white.exposure_times != times_sig)
       progress(fmt::format("warning: {}: its white stack's exposure times were read {}, this capture's are read {}: "
                            "the gains may be off by up to 7 % (calibrate white --exposure-times {})",
@@ -360,18 +367,22 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       white = calib::ReadWhiteBalance(yml);
     } else {
       progress("white balance ...");
-      const cv::Mat w = flatten(calib::ReadHdrOrStack(cap.white.white, curve, merge_options));
-      const cv::Mat b =
-          cap.white.black.empty() ? cv::Mat() : flatten(calib::ReadHdrOrStack(cap.white.black, curve, merge_options));
-      if (w.size() != camera.image_size)
-        throw InputError(fmt::format("{}: images are {}x{} but the camera calibration is {}x{}",
-                                     cap.white.white, w.cols, w.rows, camera.image_size.width,
-                                     camera.image_size.height));
+      cv::Mat w = calib::ReadHdrOrStack(cap.white.white, curve, merge_options);
+      cv::Mat b = cap.white.black.empty() ? cv::Mat() : calib::ReadHdrOrStack(cap.white.black, curve, merge_options);
+      for (const auto& [img, path] : {std::pair<const cv::Mat&, const std::string&>{w, cap.white.white},
+                                      std::pair<const cv::Mat&, const std::string&>{b, cap.white.black}})
+        if (!img.empty() && img.size() != camera.image_size)
+          throw InputError(fmt::format("{}: images are {}x{} but the camera calibration is {}x{}", path, img.cols,
+                                       img.rows, camera.image_size.width, camera.image_size.height));
+      w = flatten(w);
+      b = flatten(b);
       std::vector<cv::Point2f> patch;
       for (const auto& p : cap.white.patch) patch.emplace_back(float(p[0]), float(p[1]));
       try {
         white = calib::WhiteFromPatch(w, b, patch, {cap.white.albedo[0], cap.white.albedo[1], cap.white.albedo[2]});
         if (fs::is_directory(cap.white.white)) white.exposure_times = times_sig;
+        white.sensor_black = merge_options.sensor_black;
+        white.camera_flat = !camera_flat.empty();
       } catch (const calib::CalibError& e) {
         throw InputError(fmt::format("{}: white: {}", cap.file, e.what()));
       }

@@ -112,12 +112,20 @@ class AcquireTest : public ::testing::Test {
       EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
     }
   }
-  // acquire --no-solve of `capture` into `out`, against the capture's truth.
-  static DatasetMismatch MappingOf(const std::string& capture, const std::string& out) {
+  // acquire --no-solve of `capture` into `out`, against the capture's truth; *report, *said:
+  // acquire's report and progress lines (optional).
+  static DatasetMismatch MappingOf(const std::string& capture, const std::string& out,
+                                   AcquireReport* report = nullptr, std::string* said = nullptr) {
     AcquireOptions o;
     o.solve = false;
-    return CompareDatasets(ReadDataset(Acquire(ReadCapture(capture), out, o).dataset_dir),
-                           ReadDataset(capture + "/truth/dataset"));
+    const AcquireReport r = Acquire(ReadCapture(capture), out, o, [&](const std::string& line) {
+      if (said) *said += line + "\n";
+    });
+    if (report) *report = r;
+    return CompareDatasets(ReadDataset(r.dataset_dir), ReadDataset(capture + "/truth/dataset"));
+  }
+  static bool Reused(const AcquireReport& r, const std::string& stage) {
+    return std::find(r.reused.begin(), r.reused.end(), stage) != r.reused.end();
   }
   fs::path dir_;
 };
@@ -254,8 +262,8 @@ TEST_F(AcquireTest, CameraShutterLabelsAreReadAsApexTimes) {
   }
 }
 
-// A sensor black level left in 16-bit photos (5 % of full scale, as dcraw -D or a raw dump
-// leaves it): capture.json's sensor_black removes it from every photo; without it the white
+// A sensor black level left in 16-bit photos (5 % of full scale, as a raw conversion told to
+// keep it would): capture.json's sensor_black removes it from every photo; without it the white
 // calibration's stack (exposed ~1000x shorter than its black stack) takes most of it as a
 // scale error. 8-bit captures and values out of range are refused, naming the field.
 TEST_F(AcquireTest, SensorBlackLevelIsRemoved) {
@@ -306,7 +314,9 @@ TEST_F(AcquireTest, ProjectorFalloffFromTheFlatField) {
     EXPECT_LT(r.flat_field[0], 0.97);
     // Into the same work folder: the white stage must see that flat_field changed.
     EditJson(c, [](nlohmann::json& j) { j["white"].erase("flat_field"); });
-    const Dataset uniform_data = ReadDataset(Acquire(ReadCapture(c), Out(), o).dataset_dir);
+    const AcquireReport ru = Acquire(ReadCapture(c), Out(), o);
+    EXPECT_FALSE(Reused(ru, "calibration"));
+    const Dataset uniform_data = ReadDataset(ru.dataset_dir);
     const DatasetMismatch uniform = CompareDatasets(uniform_data, truth);
     // Node by node inside the regions (q = 1 without the flat field at the node and its four
     // neighbours, so that the calibration's region edges do not enter): the flat field's q
@@ -363,9 +373,28 @@ TEST_F(AcquireTest, CameraVignettingFromTheCameraFlat) {
         CopyOf(SmallCapture(setup, "_vignetting", R"(, "camera_vignetting": 0.6, "projector_falloff": 0.8)"));
     EXPECT_EQ(ReadCapture(c).camera_flat, c + "/calib/camera_flat");
     const DatasetMismatch flat = MappingOf(c, Out());
-    // Into the same work folder: the white stage must see that the camera flat went.
+    // Again into the same work folder: every stage reused, the HDR images read back through the
+    // camera flat once, as they were merged.
+    AcquireReport again;
+    EXPECT_EQ(MappingOf(c, Out(), &again).L_rms, flat.L_rms);
+    EXPECT_TRUE(Reused(again, "hdr") && Reused(again, "calibration"));
+    const std::string white_file = (dir_ / "white_flat.yml").string();
+    fs::copy_file(again.work_dir + "/white.yml", white_file, fs::copy_options::overwrite_existing);
+    EXPECT_TRUE(calib::ReadWhiteBalance(white_file).camera_flat);
+    // The white stage must see that the camera flat went.
     EditJson(c, [](nlohmann::json& j) { j.erase("camera_flat"); });
-    const DatasetMismatch vignetted = MappingOf(c, Out());
+    AcquireReport without;
+    const DatasetMismatch vignetted = MappingOf(c, Out(), &without);
+    EXPECT_FALSE(Reused(without, "calibration"));
+    EXPECT_TRUE(Reused(without, "hdr"));
+    // A white balance made through a camera flat, for a capture without one, is named.
+    const nlohmann::json white = nlohmann::json::parse(std::ifstream(c + "/capture.json"))["white"];
+    EditJson(c, [&](nlohmann::json& j) { j["white"] = white_file; });
+    std::string said;
+    MappingOf(c, (dir_ / "file" / "m.vdb").string(), nullptr, &said);
+    EXPECT_NE(said.find("white_flat.yml: its white reference was divided by a camera flat, this capture's images are "
+                        "not"), std::string::npos) << said;
+    EditJson(c, [&](nlohmann::json& j) { j["white"] = white; });
     const DatasetMismatch baseline = MappingOf(SmallCapture(setup), (dir_ / "none" / "m.vdb").string());
     std::printf("%s-lit, vignetting 0.6 and fall-off 0.8: L %.3f %% RMS with the camera flat, %.3f %% without, %.3f %% "
                 "on a rig without either; q %.3f %%, %.3f %%, %.3f %%\n", SetupName(setup), 100 * flat.L_rms,
@@ -383,7 +412,16 @@ TEST_F(AcquireTest, CameraVignettingFromTheCameraFlat) {
     img(cv::Rect(0, 0, img.cols / 4, img.rows / 4)).setTo(0);
     cv::imwrite(e.path().string(), img);
   }
-  ExpectError(c, "capture.json: camera_flat: " + c + "/calib/camera_flat is dark at pixel (0, 0): it must fill the view");
+  ExpectError(c, "capture.json: camera_flat: " + c + "/calib/camera_flat: dark at pixel (0, 0): a camera flat must fill "
+                 "the view evenly");
+  for (const auto& e : fs::directory_iterator(c + "/calib/camera_flat")) {
+    if (e.path().extension() != ".png") continue;
+    cv::Mat img = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
+    img(cv::Rect(0, 0, img.cols / 4, img.rows / 4)).setTo(1);
+    img(cv::Rect(200, 100, 20, 20)).setTo(255);
+    cv::imwrite(e.path().string(), img);
+  }
+  ExpectError(c, "capture.json: camera_flat: " + c + "/calib/camera_flat: saturated at pixel (200, 100)");
   EditJson(c, [](nlohmann::json& j) { j["camera_flat"] = "calib/no_flat"; });
   ExpectError(c, "capture.json: camera_flat: " + c + "/calib/no_flat not found");
 }

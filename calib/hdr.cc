@@ -864,6 +864,27 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
   return h;
 }
 
+cv::Mat NormalizedCameraFlat(const cv::Mat& hdr, const std::string& path) {
+  CV_Assert(hdr.type() == CV_32FC3);
+  auto fail = [&](const char* what, int x, int y) {
+    throw CalibError(fmt::format("{}: {} at pixel ({}, {}): a camera flat must fill the view evenly, unsaturated",
+                                 path, what, x, y));
+  };
+  for (int y = 0; y < hdr.rows; ++y)
+    for (int x = 0; x < hdr.cols; ++x)
+      for (int k = 0; k < 3; ++k)
+        if (!std::isfinite(hdr.at<cv::Vec3f>(y, x)[k])) fail("saturated", x, y);
+  const cv::Scalar mean = cv::mean(hdr);
+  cv::Mat flat;
+  cv::multiply(hdr, cv::Scalar(1 / std::max(mean[0], 1e-30), 1 / std::max(mean[1], 1e-30), 1 / std::max(mean[2], 1e-30)),
+               flat);
+  for (int y = 0; y < flat.rows; ++y)
+    for (int x = 0; x < flat.cols; ++x)
+      for (int k = 0; k < 3; ++k)
+        if (!(flat.at<cv::Vec3f>(y, x)[k] > 0.1f)) fail("dark", x, y);
+  return flat;
+}
+
 cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response, const MergeOptions& options,
                        ShutterTimes* times_read) {
   if (!fs::is_directory(path)) {

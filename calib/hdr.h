@@ -213,6 +213,13 @@ ShutterChoice ChooseShutterTimes(const ExposureStack& stack, const ExposureStack
 HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
                   const ExposureStack* black = nullptr, const MergeOptions& options = {});
 
+// A camera flat (the HDR image of an evenly lit, featureless field filling the view through the
+// lens: its vignetting) divided by its mean per channel, for HDR images of the same camera to be
+// divided by. Throws CalibError "PATH: saturated at pixel (x, y)" for a non-finite pixel and
+// "PATH: dark at pixel (x, y)" for one under 0.1 of its channel's mean (the field does not fill
+// the view evenly).
+cv::Mat NormalizedCameraFlat(const cv::Mat& hdr, const std::string& path);
+
 // A linear HDR image from `path`: an image file read as is (ReadLinearRgb), or a stack folder
 // merged with MergeHdr (`response` for 8-bit stacks, may be null otherwise). *times_read receives
 // how a stack's times were read (HdrImage::shutter), and is left alone for an image file.

@@ -181,6 +181,9 @@ void WriteWhiteBalance(const std::string& path, const WhiteBalance& w,
   fs << "black_level_mean" << cv::Mat(cv::Matx13d(black_mean[0], black_mean[1], black_mean[2]));
   fs << "black_image" << black_image;
   if (!w.exposure_times.empty()) fs << "exposure_times" << w.exposure_times;
+  if (w.sensor_black != cv::Vec3d(0, 0, 0))
+    fs << "sensor_black" << cv::Mat(cv::Matx13d(w.sensor_black[0], w.sensor_black[1], w.sensor_black[2]));
+  if (w.camera_flat) fs << "camera_flat" << 1;
 }
 
 WhiteBalance ReadWhiteBalance(const std::string& path) {
@@ -209,6 +212,13 @@ WhiteBalance ReadWhiteBalance(const std::string& path) {
   fs["patches"] >> w.patches;
   fs["method"] >> w.method;
   if (!fs["exposure_times"].empty()) fs["exposure_times"] >> w.exposure_times;
+  cv::Mat b;
+  fs["sensor_black"] >> b;
+  if (b.total() == 3) {
+    b.convertTo(b, CV_64F);
+    w.sensor_black = cv::Vec3d(b.at<double>(0), b.at<double>(1), b.at<double>(2));
+  }
+  if (!fs["camera_flat"].empty()) w.camera_flat = int(fs["camera_flat"]) != 0;
   return w;
 }
 

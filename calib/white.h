@@ -23,6 +23,11 @@ struct WhiteBalance {
   // How the white stack's exposure times were read ("labelled" or "apex"; calib/shutter.h), so
   // that the lighting stacks can be read alike; "" for an HDR image given as is.
   std::string exposure_times;
+  // The sensor black level its stacks were merged with (MergeOptions::sensor_black), and whether
+  // its HDR images were divided by a camera flat (NormalizedCameraFlat): a capture that treats
+  // its photos otherwise gets gains off by that much.
+  cv::Vec3d sensor_black{0, 0, 0};
+  bool camera_flat = false;
   std::string BriefReport() const;
 };
 
@@ -52,7 +57,9 @@ WhiteBalance WhiteFromColorChecker(const cv::Mat& white, const cv::Mat& black,
 // (the black HDR's path, to subtract per pixel).
 void WriteWhiteBalance(const std::string& path, const WhiteBalance& w,
                        const cv::Vec3d& black_mean, const std::string& black_image);
-// Reads white_gains, residual, patches, method and exposure_times back (not the black level); throws CalibError
+// Also sensor_black (1x3) and camera_flat (0 or 1) where set.
+// Reads white_gains, residual, patches, method, exposure_times, sensor_black and camera_flat back
+// (not the black level); throws CalibError
 // naming the file when it cannot be read, lacks white_gains or a gain is not finite and positive.
 WhiteBalance ReadWhiteBalance(const std::string& path);
 

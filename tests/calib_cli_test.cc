@@ -183,6 +183,22 @@ TEST_F(CalibCli, CalibrateWhite) {
   ASSERT_EQ(r.status, 0) << r.output;
   WhiteBalance w = ReadWhiteBalance(P("white.yml"));
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(w.gains[c] * gain[c] * 0.99, 1.0, 0.01);
+  EXPECT_FALSE(w.camera_flat);
+  // Through a camera flat: an even one (twice as bright as needed) changes nothing but the record.
+  const cv::Size image = ReadLinearRgb(P("white.exr")).size();
+  WriteExr(P("flat.exr"), cv::Mat(image, CV_32FC3, cv::Scalar::all(2)));
+  r = Translume("calibrate white " + P("white.exr") + " --black " + P("black.exr") + " --camera-flat " + P("flat.exr") +
+                " --chart colorchecker -o " + P("white_flat.yml"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const WhiteBalance wf = ReadWhiteBalance(P("white_flat.yml"));
+  EXPECT_TRUE(wf.camera_flat);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(wf.gains[c] / w.gains[c], 1.0, 1e-4);
+  WriteExr(P("small_flat.exr"), cv::Mat(image / 2, CV_32FC3, cv::Scalar::all(1)));
+  WriteSentinels();
+  ExpectOneLineError(Translume("calibrate white " + P("white.exr") + " --camera-flat " + P("small_flat.exr") +
+                               " --chart colorchecker -o " + P("out.yml")),
+                     P("white.exr") + ": images are " + std::to_string(image.width) + "x" +
+                         std::to_string(image.height) + " but --camera-flat " + P("small_flat.exr") + " is");
   // The white patch (index 18) by its corners, from the chart geometry.
   const cv::Point2d ctr = chart.PatchCenter(18);
   std::vector<cv::Point3d> X;

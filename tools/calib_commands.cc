@@ -203,8 +203,11 @@ int RunCalibrateWhite(int argc, char** argv) {
   std::string times = "auto";
   AddExposureTimesOption(app, times, "8-bit photos as the response was fitted, linear ones as each stack's "
                                      "brightness steps say; give the reading the lighting stacks take");
-  std::string sensor_black;
+  std::string sensor_black, camera_flat_path;
   AddSensorBlackOption(app, sensor_black);
+  app.add_option("--camera-flat", camera_flat_path,
+                 "HDR (.exr) or stack folder of an evenly lit field through the lens (its vignetting): WHITE and "
+                 "--black are divided by it, as acquire divides a capture's images (capture.json camera_flat)");
   app.add_option("-o,--output", out, "Output white balance (.yml)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
@@ -212,7 +215,7 @@ int RunCalibrateWhite(int argc, char** argv) {
   merge.shutter = calib::ParseShutterTimes(times, "--exposure-times");
   merge.sensor_black = ParseSensorBlack(sensor_black);
   RequireExtension(out, {".yml", ".yaml", ".xml"}, "-o");
-  const std::vector<std::string> inputs{white_path, black_path, response_path};
+  const std::vector<std::string> inputs{white_path, black_path, response_path, camera_flat_path};
   RequireNotInput("-o", out, inputs);
   if (chart.empty() == patch.empty())
     throw calib::CalibError("give either --chart colorchecker or --patch (with --albedo)");
@@ -233,8 +236,20 @@ int RunCalibrateWhite(int argc, char** argv) {
   if (!response_path.empty()) curve = calib::ReadResponse(response_path);
   const calib::ResponseCurve* response = response_path.empty() ? nullptr : &curve;
   calib::ShutterTimes white_times = calib::ShutterTimes::kAuto;
-  const cv::Mat white = calib::ReadHdrOrStack(white_path, response, merge, &white_times);
-  const cv::Mat black = black_path.empty() ? cv::Mat() : calib::ReadHdrOrStack(black_path, response, merge);
+  cv::Mat white = calib::ReadHdrOrStack(white_path, response, merge, &white_times);
+  cv::Mat black = black_path.empty() ? cv::Mat() : calib::ReadHdrOrStack(black_path, response, merge);
+  if (!camera_flat_path.empty()) {
+    const cv::Mat flat = calib::NormalizedCameraFlat(calib::ReadHdrOrStack(camera_flat_path, response, merge),
+                                                     camera_flat_path);
+    for (auto [img, path] : {std::pair<cv::Mat*, const std::string*>{&white, &white_path},
+                             std::pair<cv::Mat*, const std::string*>{&black, &black_path}}) {
+      if (img->empty()) continue;
+      if (img->size() != flat.size())
+        throw calib::CalibError(fmt::format("{}: images are {}x{} but --camera-flat {} is {}x{}", *path, img->cols,
+                                            img->rows, camera_flat_path, flat.cols, flat.rows));
+      cv::divide(*img, flat, *img);
+    }
+  }
   calib::WhiteBalance w;
   try {
     w = patch.empty() ? calib::WhiteFromColorChecker(white, black)
@@ -244,6 +259,8 @@ int RunCalibrateWhite(int argc, char** argv) {
                                         e.what()));
   }
   if (white_times != calib::ShutterTimes::kAuto) w.exposure_times = calib::ToString(white_times);
+  w.sensor_black = merge.sensor_black;
+  w.camera_flat = !camera_flat_path.empty();
   cv::Vec3d black_mean(0, 0, 0);
   if (!black.empty()) {
     const cv::Scalar m = cv::mean(black);
