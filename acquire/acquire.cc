@@ -343,8 +343,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     const bool flat = !cap.camera_flat.empty();
     if (white.camera_flat != flat)
       progress(fmt::format("warning: {}: its white reference was {}divided by a camera flat, this capture's images "
-                           "are {}: the gains may be off by the vignetting over its patch (calibrate white {})",
-                           cap.white.file, white.camera_flat ? "" : "not ", flat ? "" : "not",
+                           "are{}: the gains may be off by the vignetting over its patch (calibrate white {})",
+                           cap.white.file, white.camera_flat ? "" : "not ", flat ? "" : " not",
                            flat ? "--camera-flat " + cap.camera_flat : "without --camera-flat"));
     if (white.sensor_black != merge_options.sensor_black)
       progress(fmt::format("warning: {}: its stacks were merged with a sensor black level of {:g},{:g},{:g}, this "

@@ -274,6 +274,9 @@ TEST_F(AcquireTest, SensorBlackLevelIsRemoved) {
   o.solve = false;
   const Dataset truth = ReadDataset(c + "/truth/dataset");
   const DatasetMismatch given = CompareDatasets(ReadDataset(Acquire(cap, Out(), o).dataset_dir), truth);
+  const std::string white_file = (dir_ / "white_black5.yml").string();
+  fs::copy_file(WorkDir(Out()) + "/white.yml", white_file);
+  EXPECT_EQ(calib::ReadWhiteBalance(white_file).sensor_black, cv::Vec3d::all(0.05));
   // Into the same work folder: the white and HDR stages must see that the merge changed.
   EditJson(c, [](nlohmann::json& j) { j.erase("sensor_black"); });
   const DatasetMismatch left = CompareDatasets(ReadDataset(Acquire(ReadCapture(c), Out(), o).dataset_dir), truth);
@@ -281,6 +284,14 @@ TEST_F(AcquireTest, SensorBlackLevelIsRemoved) {
               100 * given.L_rms, 100 * left.L_rms, 100 * given.q_rms);
   EXPECT_LE(given.L_rms, 0.01);
   EXPECT_GT(left.L_rms, 4 * given.L_rms);
+  // A white balance merged with the black level, for a capture without it, is named.
+  const nlohmann::json white = nlohmann::json::parse(std::ifstream(c + "/capture.json"))["white"];
+  EditJson(c, [&](nlohmann::json& j) { j["white"] = white_file; });
+  std::string said;
+  Acquire(ReadCapture(c), (dir_ / "file" / "m.vdb").string(), o, [&](const std::string& l) { said += l + "\n"; });
+  EXPECT_NE(said.find("white_black5.yml: its stacks were merged with a sensor black level of 0.05,0.05,0.05, this "
+                      "capture's with 0,0,0"), std::string::npos) << said;
+  EditJson(c, [&](nlohmann::json& j) { j["white"] = white; });
   for (const auto& [value, error] : std::vector<std::pair<nlohmann::json, std::string>>{
            {0.5, "sensor_black: expected fractions of full scale in [0, 0.5)"},
            {nlohmann::json::array({0.01, 0.02}), "sensor_black: expected 3 numbers"},
