@@ -390,12 +390,13 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
         calib::WriteWhiteBalance(tmp, white, b.empty() ? cv::Vec3d() : cv::Vec3d(cv::mean(b).val), cap.white.black);
       });
       if (cap.white.flat_field) {
-        // Per channel (white - black) over its mean in the patch: 1 where the patch's
-        // irradiance falls, the unit of q.
+        // The reference's irradiance in q units (1 where the patch's falls) per channel: its
+        // radiance gains x (white - black) over albedo / pi.
         const cv::Mat diff = b.empty() ? w : cv::Mat(w - b);
-        const cv::Vec3d at_patch = calib::MeanInPolygon(diff, patch);
+        cv::Scalar scale;
+        for (int k = 0; k < 3; ++k) scale[k] = white.gains[k] * CV_PI / cap.white.albedo[size_t(k)];
         cv::Mat flat;
-        cv::multiply(diff, cv::Scalar(1 / at_patch[0], 1 / at_patch[1], 1 / at_patch[2]), flat);
+        cv::multiply(diff, scale, flat);
         WriteAtomically(flat_exr, [&](const std::string& tmp) { calib::WriteExr(tmp, flat); });
       }
       log.Record("white", sig);

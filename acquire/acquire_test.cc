@@ -112,6 +112,15 @@ class AcquireTest : public ::testing::Test {
       EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
     }
   }
+  // Rewrites every PNG photo in `folder` through `edit`.
+  static void EditPhotos(const std::string& folder, const std::function<void(cv::Mat&)>& edit) {
+    for (const auto& e : fs::directory_iterator(folder)) {
+      if (e.path().extension() != ".png") continue;
+      cv::Mat img = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
+      edit(img);
+      cv::imwrite(e.path().string(), img);
+    }
+  }
   // acquire --no-solve of `capture` into `out`, against the capture's truth; *report, *said:
   // acquire's report and progress lines (optional).
   static DatasetMismatch MappingOf(const std::string& capture, const std::string& out,
@@ -363,12 +372,7 @@ TEST_F(AcquireTest, ProjectorFalloffFromTheFlatField) {
   }
   // The white reference's left quarter of the image black: the lit face's left nodes are named.
   const std::string c = CopyOf(SmallCapture(Setup::kBack, "_falloff", R"(, "projector_falloff": 0.8)"));
-  for (const auto& e : fs::directory_iterator(c + "/calib/white")) {
-    if (e.path().extension() != ".png") continue;
-    cv::Mat img = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
-    img(cv::Rect(0, 0, img.cols / 4, img.rows)).setTo(0);
-    cv::imwrite(e.path().string(), img);
-  }
+  EditPhotos(c + "/calib/white", [](cv::Mat& img) { img(cv::Rect(0, 0, img.cols / 4, img.rows)).setTo(0); });
   ExpectError(c, "capture.json: white.flat_field: the white reference's image is dark at lit-face node (0, ");
   EditJson(c, [](nlohmann::json& j) { j["white"]["flat_field"] = "yes"; });
   ExpectError(c, "capture.json: white.flat_field: expected true or false");
@@ -417,21 +421,13 @@ TEST_F(AcquireTest, CameraVignettingFromTheCameraFlat) {
   }
   const std::string c =
       CopyOf(SmallCapture(Setup::kBack, "_vignetting", R"(, "camera_vignetting": 0.6, "projector_falloff": 0.8)"));
-  for (const auto& e : fs::directory_iterator(c + "/calib/camera_flat")) {
-    if (e.path().extension() != ".png") continue;
-    cv::Mat img = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
-    img(cv::Rect(0, 0, img.cols / 4, img.rows / 4)).setTo(0);
-    cv::imwrite(e.path().string(), img);
-  }
+  EditPhotos(c + "/calib/camera_flat", [](cv::Mat& img) { img(cv::Rect(0, 0, img.cols / 4, img.rows / 4)).setTo(0); });
   ExpectError(c, "capture.json: camera_flat: " + c + "/calib/camera_flat: dark at pixel (0, 0): a camera flat must fill "
                  "the view evenly");
-  for (const auto& e : fs::directory_iterator(c + "/calib/camera_flat")) {
-    if (e.path().extension() != ".png") continue;
-    cv::Mat img = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
+  EditPhotos(c + "/calib/camera_flat", [](cv::Mat& img) {
     img(cv::Rect(0, 0, img.cols / 4, img.rows / 4)).setTo(1);
     img(cv::Rect(200, 100, 20, 20)).setTo(255);
-    cv::imwrite(e.path().string(), img);
-  }
+  });
   ExpectError(c, "capture.json: camera_flat: " + c + "/calib/camera_flat: saturated at pixel (200, 100)");
   EditJson(c, [](nlohmann::json& j) { j["camera_flat"] = "calib/no_flat"; });
   ExpectError(c, "capture.json: camera_flat: " + c + "/calib/no_flat not found");
