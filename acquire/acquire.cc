@@ -301,6 +301,14 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   rep.exposure_times = times_sig;
   merge_sig = times_sig + black_sig;
 
+  // An HDR image or a stack merged here, its time warning shown.
+  auto read_hdr = [&](const std::string& path) {
+    calib::HdrReadInfo info;
+    cv::Mat img = calib::ReadHdrOrStack(path, curve, merge_options, &info);
+    if (!info.time_warning.empty()) progress("warning: " + info.time_warning);
+    return img;
+  };
+
   // The lens's vignetting: every HDR image is divided by the camera flat, normalised to its mean
   // (a constant factor that the white gains take back).
   cv::Mat camera_flat;
@@ -312,7 +320,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     } else {
       progress("camera flat ...");
       try {
-        const cv::Mat merged = calib::ReadHdrOrStack(cap.camera_flat, curve, merge_options);
+        const cv::Mat merged = read_hdr(cap.camera_flat);
         if (merged.size() != camera.image_size)
           throw calib::CalibError(fmt::format("{}: images are {}x{} but the camera calibration is {}x{}",
                                               cap.camera_flat, merged.cols, merged.rows, camera.image_size.width,
@@ -367,8 +375,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       white = calib::ReadWhiteBalance(yml);
     } else {
       progress("white balance ...");
-      cv::Mat w = calib::ReadHdrOrStack(cap.white.white, curve, merge_options);
-      cv::Mat b = cap.white.black.empty() ? cv::Mat() : calib::ReadHdrOrStack(cap.white.black, curve, merge_options);
+      cv::Mat w = read_hdr(cap.white.white);
+      cv::Mat b = cap.white.black.empty() ? cv::Mat() : read_hdr(cap.white.black);
       for (const auto& [img, path] : {std::pair<const cv::Mat&, const std::string&>{w, cap.white.white},
                                       std::pair<const cv::Mat&, const std::string&>{b, cap.white.black}})
         if (!img.empty() && img.size() != camera.image_size)

@@ -421,6 +421,18 @@ TEST_F(AcquireTest, CameraVignettingFromTheCameraFlat) {
   }
   const std::string c =
       CopyOf(SmallCapture(Setup::kBack, "_vignetting", R"(, "camera_vignetting": 0.6, "projector_falloff": 0.8)"));
+  // Times off in the camera flat's stack and in the white stack: merged, and acquire passes the
+  // merges' warnings on (it used to drop them).
+  for (const char* stack : {"/calib/camera_flat", "/calib/white"}) {
+    const std::string json = c + stack + "/exposures.json";
+    nlohmann::json times = nlohmann::json::parse(std::ifstream(json));
+    times["t01.png"] = times["t01.png"].get<double>() * 1.1;
+    std::ofstream(json) << times.dump();
+  }
+  std::string said;
+  MappingOf(c, (dir_ / "times" / "m.vdb").string(), nullptr, &said);
+  for (const char* stack : {"/calib/camera_flat: t01.png is", "/calib/white: t01.png is"})
+    EXPECT_NE(said.find("warning: " + c + stack), std::string::npos) << said;
   EditPhotos(c + "/calib/camera_flat", [](cv::Mat& img) { img(cv::Rect(0, 0, img.cols / 4, img.rows / 4)).setTo(0); });
   ExpectError(c, "capture.json: camera_flat: " + c + "/calib/camera_flat: dark at pixel (0, 0): a camera flat must fill "
                  "the view evenly");

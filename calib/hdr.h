@@ -148,7 +148,10 @@ struct HdrImage {
   size_t saturated = 0, underexposed = 0;  // channel samples flagged
   // Where two exposures next in time brighten by a ratio more than 3 % off the ratio of their
   // times as read (over 200 samples or more; camera labels read as labelled are up to 7 % off):
-  // a sentence naming the stack, both photos and the ratios; else "".
+  // a sentence naming the stack, both photos and the ratios; the same for linear photos too far
+  // apart in time for that check, more than 2x off over their dimmer pixels (MergeHdr). Where two
+  // exposures next in time share too few well-exposed samples for their times to be checked,
+  // though each has 50 or more: a sentence saying so. Else "". (The first, shortest first.)
   std::string time_warning;
   ShutterTimes shutter = ShutterTimes::kLabelled;  // how the times were read (never kAuto)
   std::string BriefReport() const;
@@ -208,8 +211,12 @@ ShutterChoice ChooseShutterTimes(const ExposureStack& stack, const ExposureStack
 // shot noise). A channel saturated in every exposure is +inf and flagged; one under-exposed in
 // every exposure takes the longest exposure's value (>= 0) and is flagged. Throws CalibError
 // naming the stack and both photos when two exposures next in time contradict their times: the
-// median ratio of their linear values, over samples well inside the valid range in both, more
-// than 2x off the ratio of their times (pairs with fewer than 50 such samples are not judged).
+// median ratio of their linear values, over samples well inside the valid range in both (0.1 of
+// it in from either end), more than 2x off the ratio of their times. Linear pairs with fewer
+// than 50 such samples are judged on 0.01 of the range in from either end, where a black level
+// left in the photos also contradicts the times: time_warning then, not an error. Pairs with
+// fewer than 50 samples either way are not judged (time_warning says so where each photo has
+// 50 or more).
 HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
                   const ExposureStack* black = nullptr, const MergeOptions& options = {});
 
@@ -220,10 +227,17 @@ HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
 // the view evenly).
 cv::Mat NormalizedCameraFlat(const cv::Mat& hdr, const std::string& path);
 
+// What ReadHdrOrStack did with a stack folder (left as constructed for an image file).
+struct HdrReadInfo {
+  bool merged = false;                         // `path` was a stack folder, merged here
+  ShutterTimes shutter = ShutterTimes::kAuto;  // how its times were read (HdrImage::shutter)
+  std::string time_warning;                    // HdrImage::time_warning: "" or one sentence
+};
+
 // A linear HDR image from `path`: an image file read as is (ReadLinearRgb), or a stack folder
-// merged with MergeHdr (`response` for 8-bit stacks, may be null otherwise). *times_read receives
-// how a stack's times were read (HdrImage::shutter), and is left alone for an image file.
+// merged with MergeHdr (`response` for 8-bit stacks, may be null otherwise). *info, where given,
+// receives what the merge found; callers show its time_warning as a warning.
 cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response,
-                       const MergeOptions& options = {}, ShutterTimes* times_read = nullptr);
+                       const MergeOptions& options = {}, HdrReadInfo* info = nullptr);
 
 }  // namespace translume::calib

@@ -409,6 +409,34 @@ TEST(Hdr, MergeRefusesTimesThatContradictThePhotos) {
   EXPECT_NE(CalibErrorOf([&] { MergeHdr(MakeStack(eight, t), &curve); }).find("as bright as e4.png"), std::string::npos);
 }
 
+// 16-bit photos four stops apart share no sample in the 8-bit-sized window "well inside" the
+// valid range (0.1 of it in from both ends: [0.097, 0.873], 3.2 stops), so a wrong time used to
+// merge without a word. Linear pairs are judged on a wider window where the narrow one has too few
+// samples (a warning: a black level left in the photos contradicts there too); exposures that
+// still share none, though each sees the scene, are named as unchecked.
+TEST(Hdr, FourStopLinearBracketsAreChecked) {
+  std::vector<double> t;
+  for (int j = 0; j < 5; ++j) t.push_back(0.01 * std::pow(16.0, j));
+  StackOptions so;
+  so.bits = 16;
+  so.seed = 21;
+  const auto images = SyntheticRig::RenderExposureStack(TestScene(22), t, {}, so);
+  const HdrImage h = MergeHdr(MakeStack(images, t), nullptr);
+  EXPECT_EQ(h.time_warning, "");
+  std::vector<double> wrong = t;
+  wrong[2] *= 3;  // a slip in exposures.json
+  const std::string w = MergeHdr(MakeStack(images, wrong), nullptr).time_warning;
+  EXPECT_EQ(w.find("synthetic: e2.png (7.68 s) is 15.92x as bright as e1.png (0.16 s) over pixels dim in e1.png, but "
+                   "its exposure time is 48.00x as long: check the times"), 0u) << w;
+  EXPECT_NE(w.find(", or give the black level left in the photos"), std::string::npos) << w;
+  // Photos twelve stops apart: each sees part of the scene, no pixel is valid in both.
+  const std::vector<double> far{0.01, 40.96};
+  const auto far_images = SyntheticRig::RenderExposureStack(TestScene(22), far, {}, so);
+  const HdrImage hf = MergeHdr(MakeStack(far_images, far), nullptr);
+  EXPECT_NE(hf.time_warning.find("synthetic: e1.png and e0.png share"), std::string::npos) << hf.time_warning;
+  EXPECT_NE(hf.time_warning.find("their times are not checked"), std::string::npos) << hf.time_warning;
+}
+
 TEST(Hdr, SixteenBitLinearMergeWithBlackFrames) {
   const auto t = NineTimes();
   StackOptions so;

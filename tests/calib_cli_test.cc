@@ -107,12 +107,12 @@ TEST_F(CalibCli, CameraBadInputs) {
                                P("out.yml")), P("nothere") + ": not a folder");
   ExpectOneLineError(Translume("calibrate camera " + P("blank") + " --board chessboard:9x6:25 -o " +
                                P("blank/cam.yml")), "would write into the input folder");
-  ExpectOneLineError(Translume("calibrate wobble"), "unknown subcommand 'wobble'");
-  // --threads before the subcommand, as every command takes it.
+  ExpectOneLineError(Translume("calibrate wobble"), "translume calibrate: error: unknown subcommand 'wobble'");
+  // --threads before the subcommand, as every command takes it; the line names the subcommand.
   for (const char* threads : {"--threads 1", "--threads=1"})
     ExpectOneLineError(Translume(std::string("calibrate ") + threads + " camera " + P("blank") +
                                  " --board chessboard:9x6:25 -o " + P("out.yml")),
-                       P("blank/c.png") + ": cannot read image");
+                       "translume calibrate camera: error: " + P("blank/c.png") + ": cannot read image");
 }
 
 TEST_F(CalibCli, CalibrateProjectorFromPlanes) {
@@ -193,6 +193,17 @@ TEST_F(CalibCli, CalibrateWhite) {
   const WhiteBalance wf = ReadWhiteBalance(P("white_flat.yml"));
   EXPECT_TRUE(wf.camera_flat);
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(wf.gains[c] / w.gains[c], 1.0, 1e-4);
+  // A white stack whose times disagree with its photos by 8 %: calibrated, with the merge's warning.
+  StackOptions so;
+  so.bits = 16;
+  std::vector<double> t{0.1, 0.2, 0.4, 0.8};
+  const std::vector<cv::Mat> photos = SyntheticRig::RenderExposureStack(ReadLinearRgb(P("white.exr")), t, {}, so);
+  t[2] *= 1.08;
+  WriteStack("white_stack", photos, t);
+  r = Translume("calibrate white " + P("white_stack") + " --chart colorchecker -o " + P("white_stack.yml"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("calibrate white: warning: " + P("white_stack") + ": e3.png is 1.999x as bright as e2.png"), std::string::npos)
+      << r.output;
   WriteExr(P("small_flat.exr"), cv::Mat(image / 2, CV_32FC3, cv::Scalar::all(1)));
   WriteSentinels();
   ExpectOneLineError(Translume("calibrate white " + P("white.exr") + " --camera-flat " + P("small_flat.exr") +

@@ -129,7 +129,9 @@ int RunPatterns(int argc, char** argv) {
   if (corners.empty()) {
     calib::ResponseCurve curve;
     if (!response_path.empty()) curve = calib::ReadResponse(response_path);
-    job.photo = calib::ReadHdrOrStack(photo, response_path.empty() ? nullptr : &curve);
+    calib::HdrReadInfo info;
+    job.photo = calib::ReadHdrOrStack(photo, response_path.empty() ? nullptr : &curve, {}, &info);
+    if (!info.time_warning.empty()) std::printf("patterns: warning: %s\n", info.time_warning.c_str());
     job.corners_source = "--photo " + photo;
   }
   const acquire::PatternSet set = acquire::MakeRegionPatterns(job);

@@ -235,12 +235,20 @@ int RunCalibrateWhite(int argc, char** argv) {
   calib::ResponseCurve curve;
   if (!response_path.empty()) curve = calib::ReadResponse(response_path);
   const calib::ResponseCurve* response = response_path.empty() ? nullptr : &curve;
-  calib::ShutterTimes white_times = calib::ShutterTimes::kAuto;
-  cv::Mat white = calib::ReadHdrOrStack(white_path, response, merge, &white_times);
-  cv::Mat black = black_path.empty() ? cv::Mat() : calib::ReadHdrOrStack(black_path, response, merge);
+  // A stack merged here, its time warning shown (one per stack).
+  auto read = [&](const std::string& path, calib::HdrReadInfo* info = nullptr) {
+    calib::HdrReadInfo own;
+    if (!info) info = &own;
+    cv::Mat img = calib::ReadHdrOrStack(path, response, merge, info);
+    if (!info->time_warning.empty()) std::printf("calibrate white: warning: %s\n", info->time_warning.c_str());
+    return img;
+  };
+  calib::HdrReadInfo white_read;
+  cv::Mat white = read(white_path, &white_read);
+  const calib::ShutterTimes white_times = white_read.merged ? white_read.shutter : calib::ShutterTimes::kAuto;
+  cv::Mat black = black_path.empty() ? cv::Mat() : read(black_path);
   if (!camera_flat_path.empty()) {
-    const cv::Mat flat = calib::NormalizedCameraFlat(calib::ReadHdrOrStack(camera_flat_path, response, merge),
-                                                     camera_flat_path);
+    const cv::Mat flat = calib::NormalizedCameraFlat(read(camera_flat_path), camera_flat_path);
     for (auto [img, path] : {std::pair<cv::Mat*, const std::string*>{&white, &white_path},
                              std::pair<cv::Mat*, const std::string*>{&black, &black_path}}) {
       if (img->empty()) continue;

@@ -9,6 +9,7 @@
 #include <opencv2/core/utils/logger.hpp>
 #include <exception>
 #include <string>
+#include <vector>
 
 #include "solver/status.h"
 #include "solver/threads.h"
@@ -20,6 +21,7 @@ struct Command {
   const char* name;
   int (*run)(int, char**);
   const char* help;
+  std::vector<std::string> subcommands = {};  // named in error lines: "translume calibrate white: error: ..."
 };
 
 const Command kCommands[] = {
@@ -32,9 +34,11 @@ const Command kCommands[] = {
     {"simulate", translume::RunSimulate, "Simulate node-space data of a material (no photos): a dataset"},
     {"solve", translume::RunSolve, "Recover kappa and mu from a dataset (the inverse problem)"},
     {"evaluate", translume::RunEvaluate, "Held-out relighting and parameter errors of a recovery"},
-    {"calibrate", translume::RunCalibrate, "Calibrate camera, projector, response, white balance"},
+    {"calibrate", translume::RunCalibrate, "Calibrate camera, projector, response, white balance",
+     {"camera", "projector", "response", "white"}},
     {"hdr", translume::RunHdr, "Merge an exposure stack into a linear HDR image (.exr)"},
-    {"bench", translume::RunBench, "Benchmarks: bench forward, recovery, exposure-times, patterns"},
+    {"bench", translume::RunBench, "Benchmarks: bench forward, recovery, exposure-times, patterns",
+     {"forward", "recovery", "exposure-times", "patterns"}},
     {"render", translume::RunRender, "Render a material on a shape (polygrid diffusion, Section 5)"},
     {"edit", translume::RunEdit, "Edit a material: scale/add kappa, mu in a mask and depth range"},
     {"info", translume::RunInfo, "Version, build, backends, threads, memory estimates"},
@@ -48,6 +52,15 @@ void PrintUsage(FILE* out) {
                TRANSLUME_VERSION);
   for (const Command& c : kCommands) std::fprintf(out, "  %-17s %s\n", c.name, c.help);
   std::fprintf(out, "\nEvery command takes --threads N. Docs: README.md and docs/.\n");
+}
+
+// "calibrate white" for `translume calibrate --threads 2 white ...`: the command and its
+// subcommand, the first argument that names one.
+std::string ShownName(const Command& c, int argc, char** argv) {
+  for (int k = 2; k < argc; ++k)
+    for (const std::string& sub : c.subcommands)
+      if (sub == argv[k]) return std::string(c.name) + " " + sub;
+  return c.name;
 }
 
 }  // namespace
@@ -74,32 +87,34 @@ int main(int argc, char** argv) {
   }
   for (const Command& c : kCommands) {
     if (std::strcmp(argv[1], c.name) != 0) continue;
+    const std::string shown = ShownName(c, argc, argv);
+    const char* name = shown.c_str();
     try {
       return c.run(argc - 1, argv + 1);
     } catch (const CLI::ParseError& e) {
-      std::fprintf(stderr, "translume %s: %s (see translume %s --help)\n", c.name, e.what(),
-                   c.name);
+      std::fprintf(stderr, "translume %s: %s (see translume %s --help)\n", name, e.what(),
+                   name);
       return 2;
     } catch (const translume::InputError& e) {
-      std::fprintf(stderr, "translume %s: error: %s\n", c.name, e.what());
+      std::fprintf(stderr, "translume %s: error: %s\n", name, e.what());
       return 1;
     } catch (const translume::Interrupted& e) {
-      std::fprintf(stderr, "translume %s: interrupted: %s\n", c.name, e.what());
+      std::fprintf(stderr, "translume %s: interrupted: %s\n", name, e.what());
       return translume::kInterruptedExit;
     } catch (const std::filesystem::filesystem_error& e) {
       // "filesystem error: OPERATION: REASON [PATH]" -> "PATH: OPERATION: REASON", the file first.
       std::string what = e.what();
       if (what.rfind("filesystem error: ", 0) == 0) what.erase(0, 18);
       if (const size_t bracket = what.find(" ["); bracket != std::string::npos) what.resize(bracket);
-      std::fprintf(stderr, "translume %s: error: %s: %s\n", c.name,
+      std::fprintf(stderr, "translume %s: error: %s: %s\n", name,
                    e.path1().empty() ? "(a path)" : e.path1().c_str(), what.c_str());
       return 1;
     } catch (const std::bad_alloc&) {
       std::fprintf(stderr, "translume %s: error: out of memory: the grid or the images are too large "
-                   "for this machine (translume info --grid NXxNYxNZ estimates what a grid needs)\n", c.name);
+                   "for this machine (translume info --grid NXxNYxNZ estimates what a grid needs)\n", name);
       return 1;
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "translume %s: error: %s\n", c.name, e.what());
+      std::fprintf(stderr, "translume %s: error: %s\n", name, e.what());
       return 1;
     }
   }
