@@ -445,6 +445,19 @@ TEST_F(AcquireTest, CameraVignettingFromTheCameraFlat) {
   ExpectError(c, "capture.json: camera_flat: " + c + "/calib/no_flat not found");
 }
 
+// A rig's lens blur (sample_blur_px) spreads the face's border light into the dark surround:
+// the border nodes lose it, and L maps further from the truth than with a sharp lens
+// (docs/benchmarks.md, "The face's outline, the lens's blur and the border nodes").
+TEST_F(AcquireTest, LensBlurDimsTheBorderNodes) {
+  const DatasetMismatch blurred =
+      MappingOf(SmallCapture(Setup::kBack, "_blur", R"(, "sample_blur_px": 1.0)"), Out());
+  const DatasetMismatch sharp = MappingOf(SmallCapture(Setup::kBack), (dir_ / "sharp" / "m.vdb").string());
+  std::printf("back-lit: L %.3f %% RMS with a lens blur of 1 px, %.3f %% with a sharp lens\n", 100 * blurred.L_rms,
+              100 * sharp.L_rms);
+  EXPECT_GT(blurred.L_rms, sharp.L_rms + 0.001);
+  EXPECT_LE(blurred.L_rms, 0.02);
+}
+
 // `translume patterns` for a real rig: the region patterns computed from the calibrations that
 // acquire makes of the simulated capture's photos, and the face corners, light what the
 // simulator's true rig lights (the capture's patterns/NN.png) up to the calibration's error.
@@ -544,6 +557,7 @@ TEST_F(AcquireTest, RigFileFieldsAndErrors) {
   EXPECT_EQ(DefaultCaptureRig(g, 0.5, Setup::kBack).noise.offset, 0);
   EXPECT_EQ(read(R"({"projector_falloff": 0.8})").projector_falloff, 0.8);
   EXPECT_EQ(read(R"({"camera_vignetting": 0.7})").camera_vignetting, 0.7);
+  EXPECT_EQ(read(R"({"sample_blur_px": 0.7})").sample_blur_px, 0.7);
   // 1 - 0.2 r^2: 1 at the principal point, 0.8 at the farthest corner.
   CaptureRig falloff_rig = DefaultCaptureRig(g, 0.5, Setup::kBack);
   falloff_rig.projector_falloff = 0.8;
@@ -557,6 +571,7 @@ TEST_F(AcquireTest, RigFileFieldsAndErrors) {
            {R"({"black_offset": "1 %"})", "black_offset: expected a number in [0, 0.5)"},
            {R"({"projector_falloff": 0})", "projector_falloff: expected a number in (0, 1]"},
            {R"({"camera_vignetting": 1.5})", "camera_vignetting: expected a number in (0, 1]"},
+           {R"({"sample_blur_px": 6})", "sample_blur_px: expected a number in [0, 5]"},
            {R"({"black_ofset": 0.01})", "black_ofset: unknown field"}}) {
     try {
       read(text);

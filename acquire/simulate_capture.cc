@@ -9,6 +9,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "acquire/capture.h"
 #include "calib/board.h"
@@ -125,6 +126,8 @@ cv::Mat RenderFace(const CaptureRig& rig, const calib::SyntheticRig& srig, const
         img.at<cv::Vec3f>(y, x) = cv::Vec3f(float(v[0]), float(v[1]), float(v[2]));
       }
   });
+  if (rig.sample_blur_px > 0)
+    cv::GaussianBlur(img, img, cv::Size(0, 0), rig.sample_blur_px, rig.sample_blur_px, cv::BORDER_CONSTANT);
   if (rig.camera_vignetting < 1) {
     const cv::Mat v = RadialFalloff(rig.camera, rig.camera_vignetting);
     for (int y = 0; y < img.rows; ++y)
@@ -240,7 +243,7 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
     if (k != "camera" && k != "projector" && k != "distance_scale" && k != "tilt_deg" &&
         k != "camera_gain" && k != "projector_black" && k != "bits" && k != "read_noise" &&
         k != "shot_noise" && k != "black_offset" && k != "shutter_labels" && k != "projector_falloff" &&
-        k != "camera_vignetting" && k != "comment")
+        k != "camera_vignetting" && k != "sample_blur_px" && k != "comment")
       fail(k, "unknown field");
   device("camera", &r.camera);
   const bool projector_K = device("projector", &r.projector);
@@ -272,6 +275,12 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
         fail(k, "expected a number in (0, 1]");
       (std::string(k) == "projector_falloff" ? r.projector_falloff : r.camera_vignetting) = j[k].get<double>();
     }
+  if (j.contains("sample_blur_px")) {
+    if (!j["sample_blur_px"].is_number() ||
+        !(j["sample_blur_px"].get<double>() >= 0 && j["sample_blur_px"].get<double>() <= 5))
+      fail("sample_blur_px", "expected a number in [0, 5]");
+    r.sample_blur_px = j["sample_blur_px"].get<double>();
+  }
   if (j.contains("bits")) {
     if (!j["bits"].is_number_integer() || (j["bits"] != 8 && j["bits"] != 16)) fail("bits", "expected 8 or 16");
     r.bits = j["bits"].get<int>();

@@ -38,6 +38,10 @@ struct CaptureRig {
   // sample-lit and camera-flat photos are taken through it (not the board photos). Below 1 the
   // capture has a camera flat (calib/camera_flat, capture.json's camera_flat).
   double camera_vignetting = 1.0;
+  // The lens's blur on the photos of the sample, the white reference, the sample lit and the
+  // camera flat: a Gaussian of this sigma (pixels) over the rendered image. 0: none (the face's
+  // outline one pixel sharp; the board photos take blur_sigma_px).
+  double sample_blur_px = 0.0;
 };
 
 // 1 - (1 - at_corner) r^2 per pixel of a device's image (CV_32FC1, its size), r the distance of
@@ -53,7 +57,7 @@ CaptureRig DefaultCaptureRig(const GridShape& grid, double h, Setup setup);
 
 // Reads a rig file (JSON; docs/capture.md "Simulated captures"): any of camera / projector
 // {size [w, h], K [9], dist [5]}, distance_scale, tilt_deg [3], camera_gain [3],
-// projector_black, projector_falloff, camera_vignetting, bits, read_noise, shot_noise, black_offset, shutter_labels, over
+// projector_black, projector_falloff, camera_vignetting, sample_blur_px, bits, read_noise, shot_noise, black_offset, shutter_labels, over
 // DefaultCaptureRig. Throws InputError.
 CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double h, Setup setup);
 
