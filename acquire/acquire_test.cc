@@ -445,16 +445,29 @@ TEST_F(AcquireTest, CameraVignettingFromTheCameraFlat) {
   ExpectError(c, "capture.json: camera_flat: " + c + "/calib/no_flat not found");
 }
 
-// A rig's lens blur (sample_blur_px) spreads the face's border light into the dark surround:
-// the border nodes lose it, and L maps further from the truth than with a sharp lens
-// (docs/benchmarks.md, "The face's outline, the lens's blur and the border nodes").
-TEST_F(AcquireTest, LensBlurDimsTheBorderNodes) {
+// A rig's lens blur (sample_blur_px) softens the face's outline in the sample's photos (the
+// steepest step between neighbouring pixels of a condition's HDR image, relative to its
+// brightest, falls), and L still maps within the 2 % target; acquire does not give the border
+// nodes back what the blur carries out of the face (docs/benchmarks.md, "The face's outline,
+// the lens's blur and the border nodes").
+TEST_F(AcquireTest, LensBlurSoftensTheOutline) {
+  AcquireReport blurred_report, sharp_report;
   const DatasetMismatch blurred =
-      MappingOf(SmallCapture(Setup::kBack, "_blur", R"(, "sample_blur_px": 1.0)"), Out());
-  const DatasetMismatch sharp = MappingOf(SmallCapture(Setup::kBack), (dir_ / "sharp" / "m.vdb").string());
-  std::printf("back-lit: L %.3f %% RMS with a lens blur of 1 px, %.3f %% with a sharp lens\n", 100 * blurred.L_rms,
-              100 * sharp.L_rms);
-  EXPECT_GT(blurred.L_rms, sharp.L_rms + 0.001);
+      MappingOf(SmallCapture(Setup::kBack, "_blur", R"(, "sample_blur_px": 1.0)"), Out(), &blurred_report);
+  const DatasetMismatch sharp =
+      MappingOf(SmallCapture(Setup::kBack), (dir_ / "sharp" / "m.vdb").string(), &sharp_report);
+  auto steepest = [](const AcquireReport& r) {
+    cv::Mat g;
+    cv::extractChannel(calib::ReadLinearRgb(r.work_dir + "/hdr/00.exr"), g, 1);
+    double top = 0, step = 0;
+    cv::minMaxLoc(g, nullptr, &top);
+    cv::minMaxLoc(cv::abs(g.colRange(1, g.cols) - g.colRange(0, g.cols - 1)), nullptr, &step);
+    return step / top;
+  };
+  const double soft = steepest(blurred_report), sharp_step = steepest(sharp_report);
+  std::printf("back-lit: steepest step %.3f of the brightest with a lens blur of 1 px, %.3f with a sharp lens; "
+              "L %.3f %% RMS, %.3f %%\n", soft, sharp_step, 100 * blurred.L_rms, 100 * sharp.L_rms);
+  EXPECT_LT(soft, 0.7 * sharp_step);
   EXPECT_LE(blurred.L_rms, 0.02);
 }
 
@@ -572,6 +585,8 @@ TEST_F(AcquireTest, RigFileFieldsAndErrors) {
            {R"({"projector_falloff": 0})", "projector_falloff: expected a number in (0, 1]"},
            {R"({"camera_vignetting": 1.5})", "camera_vignetting: expected a number in (0, 1]"},
            {R"({"sample_blur_px": 6})", "sample_blur_px: expected a number in [0, 5]"},
+           {R"({"sample_blur_px": -0.5})", "sample_blur_px: expected a number in [0, 5]"},
+           {R"({"sample_blur_px": "1 px"})", "sample_blur_px: expected a number in [0, 5]"},
            {R"({"black_ofset": 0.01})", "black_ofset: unknown field"}}) {
     try {
       read(text);

@@ -126,8 +126,7 @@ cv::Mat RenderFace(const CaptureRig& rig, const calib::SyntheticRig& srig, const
         img.at<cv::Vec3f>(y, x) = cv::Vec3f(float(v[0]), float(v[1]), float(v[2]));
       }
   });
-  if (rig.sample_blur_px > 0)
-    cv::GaussianBlur(img, img, cv::Size(0, 0), rig.sample_blur_px, rig.sample_blur_px, cv::BORDER_CONSTANT);
+  if (rig.sample_blur_px > 0) cv::GaussianBlur(img, img, cv::Size(0, 0), rig.sample_blur_px);
   if (rig.camera_vignetting < 1) {
     const cv::Mat v = RadialFalloff(rig.camera, rig.camera_vignetting);
     for (int y = 0; y < img.rows; ++y)
@@ -276,10 +275,9 @@ CaptureRig ReadCaptureRig(const std::string& path, const GridShape& grid, double
       (std::string(k) == "projector_falloff" ? r.projector_falloff : r.camera_vignetting) = j[k].get<double>();
     }
   if (j.contains("sample_blur_px")) {
-    if (!j["sample_blur_px"].is_number() ||
-        !(j["sample_blur_px"].get<double>() >= 0 && j["sample_blur_px"].get<double>() <= 5))
-      fail("sample_blur_px", "expected a number in [0, 5]");
-    r.sample_blur_px = j["sample_blur_px"].get<double>();
+    const double blur = j["sample_blur_px"].is_number() ? j["sample_blur_px"].get<double>() : -1;
+    if (!(blur >= 0 && blur <= 5)) fail("sample_blur_px", "expected a number in [0, 5]");
+    r.sample_blur_px = blur;
   }
   if (j.contains("bits")) {
     if (!j["bits"].is_number_integer() || (j["bits"] != 8 && j["bits"] != 16)) fail("bits", "expected 8 or 16");

@@ -38,9 +38,9 @@ struct CaptureRig {
   // sample-lit and camera-flat photos are taken through it (not the board photos). Below 1 the
   // capture has a camera flat (calib/camera_flat, capture.json's camera_flat).
   double camera_vignetting = 1.0;
-  // The lens's blur on the photos of the sample, the white reference, the sample lit and the
-  // camera flat: a Gaussian of this sigma (pixels) over the rendered image. 0: none (the face's
-  // outline one pixel sharp; the board photos take blur_sigma_px).
+  // The lens's blur on the photos of the sample, the white reference and the sample lit (not
+  // the camera flat, an even field): a Gaussian of this sigma (pixels) over the rendered image.
+  // 0: none (the face's outline one pixel sharp; the board photos take blur_sigma_px).
   double sample_blur_px = 0.0;
 };
 

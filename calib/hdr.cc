@@ -800,39 +800,51 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
   const double lo = eight ? o.low_code : o.low_linear, hi = eight ? o.high_code : o.high_linear;
   // Exposures next in time must brighten as their times say (swapped or wrong times, a copied
   // photo): the median ratio of their linear values within a factor of 2 of the ratio of their
-  // times. Linear pairs too far apart for the window "well inside" (3.2 stops on 16-bit photos)
-  // are judged on 0.01 of the range in from either end instead (6.5 stops), with a warning for
-  // an error. Pairs with fewer than 50 samples are not judged; where each photo sees the scene,
-  // the warning says so.
+  // times. Linear pairs too far apart for the window "well inside" (3.2 stops on 16-bit photos:
+  // their times say so, or each photo sees the scene but they share too few samples) are judged
+  // on 0.01 of the range in from either end instead (6.5 stops), with a warning for an error.
+  // Pairs with fewer than 50 samples are not judged; where each photo sees the scene, the
+  // warning says so. A warning about times that contradict replaces that note.
+  double narrow_span = std::numeric_limits<double>::infinity();  // the window's ratio, hi / lo
+  for (int c = 0; c < 3; ++c)
+    narrow_span = std::min(narrow_span, (hi - 0.1 * (hi - lin.Low(lo, c))) / (lin.Low(lo, c) + 0.1 * (hi - lin.Low(lo, c))));
+  bool note_only = false;  // time_warning holds only a "not checked" note
   for (PairRatio p : MeasurePairRatios(stack, lin, blacks, lo, hi)) {
-    const bool widen = p.samples < kMinPairSamples && !eight;
-    if (widen) p = MeasurePairRatio(stack, lin, blacks, p.a, p.b, lo, hi, 0.01);
     const Exposure &ea = stack.exposures[p.a], &eb = stack.exposures[p.b];
+    const double expected = eb.seconds / ea.seconds;
+    const bool widen = p.samples < kMinPairSamples && !eight &&
+                       (expected > narrow_span || (p.seen_a >= kMinPairSamples && p.seen_b >= kMinPairSamples));
+    if (widen) p = MeasurePairRatio(stack, lin, blacks, p.a, p.b, lo, hi, 0.01);
     if (p.samples < kMinPairSamples) {
-      if (p.seen_a >= kMinPairSamples && p.seen_b >= kMinPairSamples && h.time_warning.empty())
+      if (p.seen_a >= kMinPairSamples && p.seen_b >= kMinPairSamples && h.time_warning.empty()) {
+        note_only = true;
         h.time_warning = fmt::format(
             "{}: {} and {} share {} well-exposed samples of the ~10^4 compared (at least {} are needed): their times "
             "are not checked against their brightness (exposures closer in time would have them checked)", stack.dir, FileName(eb),
             FileName(ea), p.samples, kMinPairSamples);
+      }
       continue;
     }
-    const double expected = eb.seconds / ea.seconds;
     const double off = p.measured / expected - 1;
+    const bool may_warn = h.time_warning.empty() || note_only;
     const bool contradicts = p.measured > 2 * expected || p.measured < 0.5 * expected;
     if (widen) {
       // Its dark end also holds a black level left in the photos, which makes a short exposure
       // look as bright as the next: a warning here, not an error, and no 3 % judgement (the
       // window's edges bias it by read noise).
-      if (contradicts && h.time_warning.empty())
+      if (contradicts && may_warn) {
+        note_only = false;
         h.time_warning = fmt::format(
             "{}: {} ({:g} s) is {:.2f}x as bright as {} ({:g} s) over pixels dim in {}, but its exposure time is {:.2f}x "
             "as long: check the times (EXIF or exposures.json){}", stack.dir, FileName(eb), eb.seconds, p.measured,
             FileName(ea), ea.seconds, FileName(ea), expected,
             !given_black && o.sensor_black == cv::Vec3d(0, 0, 0)
                 ? ", or give the black level left in the photos (sensor black, or a black stack)" : "");
+      }
       continue;
     }
-    if (std::abs(off) > kTimeRatioWarning && p.samples >= kMinPairSamplesForPercent && h.time_warning.empty()) {
+    if (std::abs(off) > kTimeRatioWarning && p.samples >= kMinPairSamplesForPercent && may_warn) {
+      note_only = false;
       const std::string hint =
           times == ShutterTimes::kApex ? "read as APEX shutter speeds: are they true times? Then read them as labelled"
           : HasApexLabels(given_stack)
@@ -930,7 +942,6 @@ cv::Mat ReadHdrOrStack(const std::string& path, const ResponseCurve* response, c
   }
   HdrImage h = MergeHdr(ReadExposureStack(path), response, nullptr, options);
   if (info) {
-    info->merged = true;
     info->shutter = h.shutter;
     info->time_warning = h.time_warning;
   }

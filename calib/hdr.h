@@ -213,10 +213,11 @@ ShutterChoice ChooseShutterTimes(const ExposureStack& stack, const ExposureStack
 // naming the stack and both photos when two exposures next in time contradict their times: the
 // median ratio of their linear values, over samples well inside the valid range in both (0.1 of
 // it in from either end), more than 2x off the ratio of their times. Linear pairs with fewer
-// than 50 such samples are judged on 0.01 of the range in from either end, where a black level
-// left in the photos also contradicts the times: time_warning then, not an error. Pairs with
-// fewer than 50 samples either way are not judged (time_warning says so where each photo has
-// 50 or more).
+// than 50 such samples, whose times are further apart than that window spans or whose photos
+// each have 50 or more, are judged on 0.01 of the range in from either end, where a black level
+// left in the photos also contradicts the times: time_warning then, not an error. Pairs left
+// with fewer than 50 samples are not judged (time_warning says so where each photo has 50 or
+// more).
 HdrImage MergeHdr(const ExposureStack& stack, const ResponseCurve* response,
                   const ExposureStack* black = nullptr, const MergeOptions& options = {});
 
@@ -229,8 +230,7 @@ cv::Mat NormalizedCameraFlat(const cv::Mat& hdr, const std::string& path);
 
 // What ReadHdrOrStack did with a stack folder (left as constructed for an image file).
 struct HdrReadInfo {
-  bool merged = false;                         // `path` was a stack folder, merged here
-  ShutterTimes shutter = ShutterTimes::kAuto;  // how its times were read (HdrImage::shutter)
+  ShutterTimes shutter = ShutterTimes::kAuto;  // how a stack's times were read (HdrImage::shutter)
   std::string time_warning;                    // HdrImage::time_warning: "" or one sentence
 };
 

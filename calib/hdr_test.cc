@@ -435,6 +435,21 @@ TEST(Hdr, FourStopLinearBracketsAreChecked) {
   const HdrImage hf = MergeHdr(MakeStack(far_images, far), nullptr);
   EXPECT_NE(hf.time_warning.find("synthetic: e1.png and e0.png share"), std::string::npos) << hf.time_warning;
   EXPECT_NE(hf.time_warning.find("their times are not checked"), std::string::npos) << hf.time_warning;
+  // A later pair's times 5 % off: that warning, not the first pair's note.
+  const std::vector<double> three{0.01, 40.96, 81.92};
+  const auto three_images = SyntheticRig::RenderExposureStack(TestScene(22), three, {}, so);
+  const std::vector<double> three_labelled{0.01, 40.96, 81.92 * 1.05};
+  const std::string tw = MergeHdr(MakeStack(three_images, three_labelled), nullptr).time_warning;
+  EXPECT_EQ(tw.find("synthetic: e2.png is "), 0u) << tw;
+  // A dim stack two stops apart with a black level of 1 % left in: few samples well inside, but
+  // the times do not say the photos are far apart, and the wider window's dark end is mostly
+  // black level. Not judged there: no false "check the times".
+  const std::vector<double> dim{0.01, 0.04, 0.16};
+  StackOptions offset = so;
+  offset.offset = 0.01;
+  const auto dim_images = SyntheticRig::RenderExposureStack(SyntheticHdrScene({240, 160}, 4, 23), dim, {}, offset);
+  const std::string dw = MergeHdr(MakeStack(dim_images, dim), nullptr).time_warning;
+  EXPECT_EQ(dw.find("check the times"), std::string::npos) << dw;
 }
 
 TEST(Hdr, SixteenBitLinearMergeWithBlackFrames) {

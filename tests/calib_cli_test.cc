@@ -108,6 +108,7 @@ TEST_F(CalibCli, CameraBadInputs) {
   ExpectOneLineError(Translume("calibrate camera " + P("blank") + " --board chessboard:9x6:25 -o " +
                                P("blank/cam.yml")), "would write into the input folder");
   ExpectOneLineError(Translume("calibrate wobble"), "translume calibrate: error: unknown subcommand 'wobble'");
+  ExpectOneLineError(Translume("calibrate wobble white"), "translume calibrate: error: unknown subcommand 'wobble'");
   // --threads before the subcommand, as every command takes it; the line names the subcommand.
   for (const char* threads : {"--threads 1", "--threads=1"})
     ExpectOneLineError(Translume(std::string("calibrate ") + threads + " camera " + P("blank") +

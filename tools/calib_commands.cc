@@ -245,7 +245,7 @@ int RunCalibrateWhite(int argc, char** argv) {
   };
   calib::HdrReadInfo white_read;
   cv::Mat white = read(white_path, &white_read);
-  const calib::ShutterTimes white_times = white_read.merged ? white_read.shutter : calib::ShutterTimes::kAuto;
+  const calib::ShutterTimes white_times = white_read.shutter;
   cv::Mat black = black_path.empty() ? cv::Mat() : read(black_path);
   if (!camera_flat_path.empty()) {
     const cv::Mat flat = calib::NormalizedCameraFlat(read(camera_flat_path), camera_flat_path);

@@ -55,11 +55,16 @@ void PrintUsage(FILE* out) {
 }
 
 // "calibrate white" for `translume calibrate --threads 2 white ...`: the command and its
-// subcommand, the first argument that names one.
+// subcommand, where the first argument after the command's options names one.
 std::string ShownName(const Command& c, int argc, char** argv) {
-  for (int k = 2; k < argc; ++k)
+  for (int k = 2; k < argc; ++k) {
+    const std::string arg = argv[k];
+    if (arg == "--threads") ++k;  // and its value
+    if (arg.rfind("-", 0) == 0) continue;
     for (const std::string& sub : c.subcommands)
-      if (sub == argv[k]) return std::string(c.name) + " " + sub;
+      if (sub == arg) return std::string(c.name) + " " + sub;
+    break;
+  }
   return c.name;
 }
 
