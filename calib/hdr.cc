@@ -805,9 +805,12 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
   // on 0.01 of the range in from either end instead (6.5 stops), with a warning for an error.
   // Pairs with fewer than 50 samples are not judged; where each photo sees the scene, the
   // warning says so. A warning about times that contradict replaces that note.
-  double narrow_span = std::numeric_limits<double>::infinity();  // the window's ratio, hi / lo
-  for (int c = 0; c < 3; ++c)
-    narrow_span = std::min(narrow_span, (hi - 0.1 * (hi - lin.Low(lo, c))) / (lin.Low(lo, c) + 0.1 * (hi - lin.Low(lo, c))));
+  // The window's ratio of linear values, its top over its bottom (the sensor black removed).
+  double narrow_span = std::numeric_limits<double>::infinity();
+  for (int c = 0; c < 3; ++c) {
+    const double range = hi - lin.Low(lo, c);
+    narrow_span = std::min(narrow_span, (hi - 0.1 * range - lin.black[c]) / (lin.Low(lo, c) + 0.1 * range - lin.black[c]));
+  }
   bool note_only = false;  // time_warning holds only a "not checked" note
   for (PairRatio p : MeasurePairRatios(stack, lin, blacks, lo, hi)) {
     const Exposure &ea = stack.exposures[p.a], &eb = stack.exposures[p.b];

@@ -151,7 +151,8 @@ struct HdrImage {
   // a sentence naming the stack, both photos and the ratios; the same for linear photos too far
   // apart in time for that check, more than 2x off over their dimmer pixels (MergeHdr). Where two
   // exposures next in time share too few well-exposed samples for their times to be checked,
-  // though each has 50 or more: a sentence saying so. Else "". (The first, shortest first.)
+  // though each has 50 or more: a sentence saying so. Else "". (The first warning, shortest
+  // exposures first; a later warning replaces a "not checked" note.)
   std::string time_warning;
   ShutterTimes shutter = ShutterTimes::kLabelled;  // how the times were read (never kAuto)
   std::string BriefReport() const;

@@ -109,6 +109,7 @@ TEST_F(CalibCli, CameraBadInputs) {
                                P("blank/cam.yml")), "would write into the input folder");
   ExpectOneLineError(Translume("calibrate wobble"), "translume calibrate: error: unknown subcommand 'wobble'");
   ExpectOneLineError(Translume("calibrate wobble white"), "translume calibrate: error: unknown subcommand 'wobble'");
+  ExpectOneLineError(Translume("calibrate -v white"), "translume calibrate: error: unknown subcommand '-v'");
   // --threads before the subcommand, as every command takes it; the line names the subcommand.
   for (const char* threads : {"--threads 1", "--threads=1"})
     ExpectOneLineError(Translume(std::string("calibrate ") + threads + " camera " + P("blank") +

@@ -59,8 +59,11 @@ void PrintUsage(FILE* out) {
 std::string ShownName(const Command& c, int argc, char** argv) {
   for (int k = 2; k < argc; ++k) {
     const std::string arg = argv[k];
-    if (arg == "--threads") ++k;  // and its value
-    if (arg.rfind("-", 0) == 0) continue;
+    if (arg == "--threads") {
+      ++k;  // and its value
+      continue;
+    }
+    if (arg.rfind("--threads=", 0) == 0) continue;
     for (const std::string& sub : c.subcommands)
       if (sub == arg) return std::string(c.name) + " " + sub;
     break;
