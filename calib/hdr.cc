@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <tuple>
 #include <map>
 #include <optional>
 #include <nlohmann/json.hpp>
@@ -131,16 +132,19 @@ struct PairRatio {
   size_t samples = 0, seen_a = 0, seen_b = 0;
 };
 
+// Channel c's codes "well inside" the valid range (lo, hi]: `inset` of it in from either end.
+std::pair<double, double> WellInside(const Linearizer& lin, int c, double lo, double hi, double inset) {
+  const double range = hi - lin.Low(lo, c);
+  return {lin.Low(lo, c) + inset * range, hi - inset * range};
+}
+
 PairRatio MeasurePairRatio(const ExposureStack& stack, const Linearizer& lin,
                            const std::vector<const Exposure*>& blacks, size_t a, size_t b, double lo, double hi,
                            double inset) {
   const cv::Size size = stack.Size();
   const int step = std::max(1, int(std::sqrt(double(size.area()) / 1e4)));
   double well_lo[3], well_hi[3];
-  for (int c = 0; c < 3; ++c) {
-    well_lo[c] = lin.Low(lo, c) + inset * (hi - lin.Low(lo, c));
-    well_hi[c] = hi - inset * (hi - lin.Low(lo, c));
-  }
+  for (int c = 0; c < 3; ++c) std::tie(well_lo[c], well_hi[c]) = WellInside(lin, c, lo, hi, inset);
   PairRatio p;
   p.a = a;
   p.b = b;
@@ -808,8 +812,8 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
   // The window's ratio of linear values, its top over its bottom (the sensor black removed).
   double narrow_span = std::numeric_limits<double>::infinity();
   for (int c = 0; c < 3; ++c) {
-    const double range = hi - lin.Low(lo, c);
-    narrow_span = std::min(narrow_span, (hi - 0.1 * range - lin.black[c]) / (lin.Low(lo, c) + 0.1 * range - lin.black[c]));
+    const auto [well_lo, well_hi] = WellInside(lin, c, lo, hi, 0.1);
+    narrow_span = std::min(narrow_span, (well_hi - lin.black[c]) / (well_lo - lin.black[c]));
   }
   bool note_only = false;  // time_warning holds only a "not checked" note
   for (PairRatio p : MeasurePairRatios(stack, lin, blacks, lo, hi)) {
