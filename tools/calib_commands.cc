@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // Subcommands over the calib library: calibrate (camera, projector, response, white) and hdr.
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <algorithm>
 #include <cmath>
@@ -286,17 +287,33 @@ int RunCalibrateWhite(int argc, char** argv) {
   return 0;
 }
 
+struct CalibrateSubcommand {
+  const char* name;
+  const char* help;
+  int (*run)(int, char**);
+};
+
+const CalibrateSubcommand kCalibrateSubcommands[] = {
+    {"camera", "Camera intrinsics from photos of a printed board", RunCalibrateCamera},
+    {"projector", "Projector intrinsics and camera-projector pose from board planes", RunCalibrateProjector},
+    {"response", "Camera response curve from 8-bit exposure stacks", RunCalibrateResponse},
+    {"white", "White balance gains and black level under projector white", RunCalibrateWhite},
+};
+
 }  // namespace
 
+std::vector<std::string> CalibrateSubcommands() {
+  std::vector<std::string> names;
+  for (const CalibrateSubcommand& c : kCalibrateSubcommands) names.emplace_back(c.name);
+  return names;
+}
+
 int RunCalibrate(int argc, char** argv) {
-  static const char* kUsage =
+  std::string usage =
       "usage: translume calibrate SUBCOMMAND [options]   (translume calibrate SUBCOMMAND --help)\n\n"
-      "subcommands:\n"
-      "  camera      Camera intrinsics from photos of a printed board\n"
-      "  projector   Projector intrinsics and camera-projector pose from board planes\n"
-      "  response    Camera response curve from 8-bit exposure stacks\n"
-      "  white       White balance gains and black level under projector white\n"
-      "Photo protocol: docs/capture.md.\n";
+      "subcommands:\n";
+  for (const CalibrateSubcommand& c : kCalibrateSubcommands) usage += fmt::format("  {:<11} {}\n", c.name, c.help);
+  usage += "Photo protocol: docs/capture.md.\n";
   // "calibrate --threads N camera ..." is "calibrate camera ... --threads N" (every command
   // takes --threads; the subcommand parses it).
   std::vector<char*> args(argv, argv + argc);
@@ -309,17 +326,15 @@ int RunCalibrate(int argc, char** argv) {
     argv = args.data();
   }
   if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h")) {
-    std::fputs(kUsage, argc < 2 ? stderr : stdout);
+    std::fputs(usage.c_str(), argc < 2 ? stderr : stdout);
     return argc < 2 ? 2 : 0;
   }
   const std::string sub = argv[1];
   return OneLineErrors([&] {
-    if (sub == "camera") return RunCalibrateCamera(argc - 1, argv + 1);
-    if (sub == "projector") return RunCalibrateProjector(argc - 1, argv + 1);
-    if (sub == "response") return RunCalibrateResponse(argc - 1, argv + 1);
-    if (sub == "white") return RunCalibrateWhite(argc - 1, argv + 1);
-    throw calib::CalibError(fmt::format("unknown subcommand '{}' (camera, projector, response, "
-                                        "white)", sub));
+    for (const CalibrateSubcommand& c : kCalibrateSubcommands)
+      if (sub == c.name) return c.run(argc - 1, argv + 1);
+    throw calib::CalibError(
+        fmt::format("unknown subcommand '{}' ({})", sub, fmt::join(CalibrateSubcommands(), ", ")));
   });
 }
 

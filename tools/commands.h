@@ -17,6 +17,9 @@ int RunInfo(int argc, char** argv);
 int RunBench(int argc, char** argv);
 int RunDemo(int argc, char** argv);
 int RunCalibrate(int argc, char** argv);  // calibrate camera|projector|response|white
+// The subcommands' names of `calibrate` and `bench`, in their help's order (error lines name them).
+std::vector<std::string> CalibrateSubcommands();
+std::vector<std::string> BenchSubcommands();
 int RunHdr(int argc, char** argv);
 int RunSimulate(int argc, char** argv);
 int RunSolve(int argc, char** argv);

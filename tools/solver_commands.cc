@@ -177,16 +177,33 @@ int RunInfo(int argc, char** argv) {
   return 0;
 }
 
+namespace {
+
+void AddBenchmarks(CLI::App& bench) {
+  AddBenchForward(bench);
+  AddBenchRecovery(bench);
+  AddBenchExposureTimes(bench);
+  AddBenchPatterns(bench);
+}
+
+}  // namespace
+
+std::vector<std::string> BenchSubcommands() {
+  CLI::App app;
+  AddBenchmarks(app);
+  std::vector<std::string> names;
+  for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; }))
+    names.push_back(sub->get_name());
+  return names;
+}
+
 int RunBench(int argc, char** argv) {
   CLI::App app{"Benchmarks. Results are medians; ratios compare solvers run side by side in\n"
                "the same process on the same problem.", "translume bench"};
   app.require_subcommand(1);
-  AddBenchForward(app);
-  AddBenchRecovery(app);
-  AddBenchExposureTimes(app);
-  AddBenchPatterns(app);
+  AddBenchmarks(app);
   AddCommonOptions(app);
-  const std::vector<std::string> names = {"forward", "recovery", "exposure-times", "patterns"};
+  const std::vector<std::string> names = BenchSubcommands();
   if (argc >= 2 && argv[1][0] != '-' && std::find(names.begin(), names.end(), argv[1]) == names.end())
     throw InputError(fmt::format("unknown benchmark '{}' ({})", argv[1], fmt::join(names, ", ")));
   ParseOrHelp(app, argc, argv);

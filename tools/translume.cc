@@ -21,7 +21,7 @@ struct Command {
   const char* name;
   int (*run)(int, char**);
   const char* help;
-  std::vector<std::string> subcommands = {};  // named in error lines: "translume calibrate white: error: ..."
+  std::vector<std::string> (*subcommands)() = nullptr;  // named in error lines: "translume calibrate white: error: ..."
 };
 
 const Command kCommands[] = {
@@ -35,10 +35,10 @@ const Command kCommands[] = {
     {"solve", translume::RunSolve, "Recover kappa and mu from a dataset (the inverse problem)"},
     {"evaluate", translume::RunEvaluate, "Held-out relighting and parameter errors of a recovery"},
     {"calibrate", translume::RunCalibrate, "Calibrate camera, projector, response, white balance",
-     {"camera", "projector", "response", "white"}},
+     translume::CalibrateSubcommands},
     {"hdr", translume::RunHdr, "Merge an exposure stack into a linear HDR image (.exr)"},
     {"bench", translume::RunBench, "Benchmarks: bench forward, recovery, exposure-times, patterns",
-     {"forward", "recovery", "exposure-times", "patterns"}},
+     translume::BenchSubcommands},
     {"render", translume::RunRender, "Render a material on a shape (polygrid diffusion, Section 5)"},
     {"edit", translume::RunEdit, "Edit a material: scale/add kappa, mu in a mask and depth range"},
     {"info", translume::RunInfo, "Version, build, backends, threads, memory estimates"},
@@ -64,8 +64,9 @@ std::string ShownName(const Command& c, int argc, char** argv) {
       continue;
     }
     if (arg.rfind("--threads=", 0) == 0) continue;
-    for (const std::string& sub : c.subcommands)
-      if (sub == arg) return std::string(c.name) + " " + sub;
+    if (c.subcommands)
+      for (const std::string& sub : c.subcommands())
+        if (sub == arg) return std::string(c.name) + " " + sub;
     break;
   }
   return c.name;
