@@ -343,7 +343,10 @@ ExposureStack ReadExposureStack(const std::string& dir) {
     try {
       times = nlohmann::json::parse(f);
     } catch (const nlohmann::json::exception& e) {  // e.g. a number beyond a double (1e999)
-      throw CalibError(fmt::format("{}: not valid JSON ({})", json_path.string(), e.what()));
+      std::string why = e.what();  // as solver/json_file.cc words it: no "[json.exception.KIND.ID] "
+      if (const size_t at = why.find("] "); why.rfind("[json.exception.", 0) == 0 && at != std::string::npos)
+        why.erase(0, at + 2);
+      throw CalibError(fmt::format("{}: not valid JSON: {}", json_path.string(), why));
     }
     if (!times.is_object())
       throw CalibError(json_path.string() + ": expected an object {\"file name\": seconds}");
