@@ -132,6 +132,11 @@ struct PairRatio {
   size_t samples = 0, seen_a = 0, seen_b = 0;
 };
 
+// Pairs with fewer samples are not judged at all (MergeHdr's 2x check) ...
+constexpr size_t kMinPairSamples = 50;
+// ... and pairs with fewer are not weighed against 3 % (the warning, ShutterJudge).
+constexpr size_t kMinPairSamplesForPercent = 200;
+
 // Channel c's codes "well inside" the valid range (lo, hi]: `inset` of it in from either end.
 std::pair<double, double> WellInside(const Linearizer& lin, int c, double lo, double hi, double inset) {
   const double range = hi - lin.Low(lo, c);
@@ -143,12 +148,29 @@ PairRatio MeasurePairRatio(const ExposureStack& stack, const Linearizer& lin,
                            double inset) {
   const cv::Size size = stack.Size();
   const int step = std::max(1, int(std::sqrt(double(size.area()) / 1e4)));
-  double well_lo[3], well_hi[3];
-  for (int c = 0; c < 3; ++c) std::tie(well_lo[c], well_hi[c]) = WellInside(lin, c, lo, hi, inset);
+  double well_lo[3], well_hi[3], lin_lo[3], lin_hi[3];
+  for (int c = 0; c < 3; ++c) {
+    std::tie(well_lo[c], well_hi[c]) = WellInside(lin, c, lo, hi, inset);
+    lin_lo[c] = lin.Linear(float(well_lo[c]), c);
+    lin_hi[c] = lin.Linear(float(well_hi[c]), c);
+  }
+  // The samples are chosen by a third exposure where the stack has one: the one next shorter
+  // than a, else the one next longer than b, whose value (times the ratio of the times) says
+  // whether a's and b's lie well inside. Chosen by a's and b's own values, the ratio is biased:
+  // in a dim photo the values just above the window's floor are there partly because their
+  // noise is positive (a simulated projector-black stack, 8-bit, read noise 1 code: 1.93x for
+  // 2x). The third exposure's noise is not a's or b's. Where the third is too far away in time to
+  // choose enough samples (brackets several stops apart), a's and b's own values choose them.
+  const std::vector<size_t> order = TimeOrder(stack);
+  const size_t ka = size_t(std::find(order.begin(), order.end(), a) - order.begin());
+  const size_t kb = size_t(std::find(order.begin(), order.end(), b) - order.begin());
+  std::vector<size_t> judges;
+  if (ka > 0) judges.push_back(order[ka - 1]);
+  if (kb + 1 < order.size()) judges.push_back(order[kb + 1]);
   PairRatio p;
   p.a = a;
   p.b = b;
-  std::vector<double> ratios;
+  std::vector<double> ratios, own_ratios;  // chosen by a third exposure, by a's and b's own values
   for (int y = 0; y < size.height; y += step)
     for (int x = 0; x < size.width; x += step)
       for (int c = 0; c < 3; ++c) {
@@ -156,12 +178,27 @@ PairRatio MeasurePairRatio(const ExposureStack& stack, const Linearizer& lin,
         const bool in_a = va > well_lo[c] && va < well_hi[c], in_b = vb > well_lo[c] && vb < well_hi[c];
         p.seen_a += in_a;
         p.seen_b += in_b;
-        if (!(in_a && in_b)) continue;
+        bool chosen = false;
+        for (size_t j : judges) {
+          const Exposure& e = stack.exposures[j];
+          const float vj = lin.Code(e.pixels, y, x, c);
+          if (!(vj > well_lo[c] && vj < well_hi[c])) continue;
+          const double per_second = lin.Linear(vj, c) / e.seconds;
+          const double pa = per_second * stack.exposures[a].seconds, pb = per_second * stack.exposures[b].seconds;
+          // Well inside by the judge; a and b themselves only not clipped.
+          chosen = pa > lin_lo[c] && pa < lin_hi[c] && pb > lin_lo[c] && pb < lin_hi[c] &&
+                   va > lin.Low(lo, c) && va < hi && vb > lin.Low(lo, c) && vb < hi;
+          break;
+        }
+        if (!chosen && !(in_a && in_b)) continue;
         double xa = lin.Linear(va, c), xb = lin.Linear(vb, c);
         if (blacks[a]) xa -= lin.Linear(lin.Code(blacks[a]->pixels, y, x, c), c);
         if (blacks[b]) xb -= lin.Linear(lin.Code(blacks[b]->pixels, y, x, c), c);
-        if (xa > 0 && xb > 0) ratios.push_back(xb / xa);
+        if (!(xa > 0 && xb > 0)) continue;
+        if (chosen) ratios.push_back(xb / xa);
+        if (in_a && in_b) own_ratios.push_back(xb / xa);
       }
+  if (ratios.size() < kMinPairSamples) ratios.swap(own_ratios);
   p.samples = ratios.size();
   if (!ratios.empty()) {
     std::nth_element(ratios.begin(), ratios.begin() + long(ratios.size() / 2), ratios.end());
@@ -179,11 +216,6 @@ std::vector<PairRatio> MeasurePairRatios(const ExposureStack& stack, const Linea
     pairs.push_back(MeasurePairRatio(stack, lin, blacks, order[k], order[k + 1], lo, hi, 0.1));
   return pairs;
 }
-
-// Pairs with fewer samples are not judged at all (MergeHdr's 2x check) ...
-constexpr size_t kMinPairSamples = 50;
-// ... and pairs with fewer are not weighed against 3 % (the warning, ShutterJudge).
-constexpr size_t kMinPairSamplesForPercent = 200;
 
 }  // namespace
 
@@ -777,8 +809,8 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
   CheckMergeInput(given_stack);
   const bool eight = given_stack.IsEightBit();
   if (eight && !response)
-    throw CalibError(given_stack.dir + ": 8-bit photos need a response curve (translume calibrate "
-                     "response)");
+    throw CalibError(given_stack.dir + ": 8-bit photos need a response curve (a file of translume calibrate "
+                     "response: give it with --response)");
   if (eight) {
     if (std::string why = response->Validate(); !why.empty()) throw CalibError("response: " + why);
     if (o.sensor_black != cv::Vec3d(0, 0, 0))
