@@ -160,9 +160,14 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   StageLog log((work / "stages.json").string(), o.force);
   bool solving = false;
   auto progress = [&](const std::string& s) {
-    if (!solving && o.stop && o.stop())
-      throw Interrupted(fmt::format("stopped before \"{}\"; the finished stages are in {} (a re-run reuses them)",
-                                    s, rep.work_dir));
+    // A line that ends in "..." announces work; the others report work done.
+    if (!solving && o.stop && o.stop()) {
+      std::string what = s;
+      const bool announces = what.size() >= 3 && what.compare(what.size() - 3, 3, "...") == 0;
+      if (announces) what.erase(what.find_last_not_of(". ") + 1);
+      throw Interrupted(fmt::format("stopped {} \"{}\"; the finished stages are in {} (a re-run reuses them)",
+                                    announces ? "before" : "after", what, rep.work_dir));
+    }
     if (progress_fn) progress_fn(s);
   };
   auto t0 = Clock::now();

@@ -336,13 +336,16 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
                                        const SimulateCaptureOptions& o, const std::string& dir,
                                        const std::function<void(const std::string&)>& progress_fn) {
   if (std::string why = o.Validate(); !why.empty()) throw InputError("simulate-capture: " + why);
-  if (fs::exists(dir) && !(fs::is_directory(dir) && fs::is_empty(dir)))
+  if (fs::exists(dir) && !(fs::is_directory(dir) && fs::is_empty(dir)) &&
+      !(o.replace_simulated && fs::is_directory(dir) && fs::exists(fs::path(dir) / "truth/material.vdb")))
     throw InputError(fmt::format("{}: exists and is not empty (a new capture folder is written)", dir));
   const auto t_start = std::chrono::steady_clock::now();
   auto elapsed = [&] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   };
   auto progress = [&](const std::string& s) {
+    if (o.stop && o.stop())
+      throw Interrupted(fmt::format("stopped after \"{}\"; {} was not written", s, dir));
     if (progress_fn) progress_fn(fmt::format("{} ({:.1f} s)", s, elapsed()));
   };
   // Everything goes into a temporary sibling folder, renamed at the end.

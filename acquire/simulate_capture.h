@@ -3,6 +3,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <string>
 
 #include "acquire/face_mapping.h"
@@ -72,6 +73,12 @@ struct SimulateCaptureOptions {
   bool auto_corners = false;  // capture.json asks acquire to find the face corners
   double tolerance = 1e-9;    // forward solves
   uint64_t seed = 1;
+  // An existing `dir` that holds a simulated capture (truth/material.vdb) is replaced, once the
+  // new one is complete (the demo's re-runs); otherwise `dir` must not exist or be empty.
+  bool replace_simulated = false;
+  // Polled at every progress line: true stops with Interrupted (solver/status.h), and nothing
+  // is written (an existing `dir` is left as it was).
+  std::function<bool()> stop;
   std::string Validate() const;
 };
 
@@ -82,7 +89,8 @@ struct SimulateCaptureSummary {
   std::string BriefReport() const;
 };
 
-// Writes a complete capture folder `dir` (which must not exist or be empty) of `material`
+// Writes a complete capture folder `dir` (which must not exist or be empty, or see
+// replace_simulated) of `material`
 // (on the recovery grid) through `rig` (docs/capture.md): calib/camera (board photos),
 // calib/planes (projector plane pairs), calib/response (two exposure stacks of a static
 // gradient scene), calib/white and calib/white_black (a white card of albedo 0.9 where the

@@ -75,10 +75,14 @@ CameraCalibration CalibrateCamera(const BoardSpec& board, const std::vector<Name
   std::vector<cv::Mat> rv, tv;
   for (int round = 0;; ++round) {
     if (int(obj.size()) < o.min_views)
-      throw CalibError(fmt::format("camera calibration: only {} usable views of {} (need {}){}",
-                                   obj.size(), views.size(), o.min_views,
-                                   c.dropped.empty() ? "" : "; dropped: " + c.dropped.front() +
-                                   (c.dropped.size() > 1 ? ", ..." : "")));
+      throw CalibError(fmt::format(
+          "camera calibration: only {} usable views of {} (need {}){}{}", obj.size(), views.size(), o.min_views,
+          c.dropped.empty() ? ""
+                            : fmt::format("; dropped {}: {}{}", c.dropped.size(), c.dropped.front(),
+                                          c.dropped.size() > 1 ? fmt::format(" and {} more", c.dropped.size() - 1) : ""),
+          round == 0 && obj.empty() ? "; the board was found in no photo: check the board spec (its type and inner "
+                                      "corners per side)"
+                                    : ""));
     c.rms = cv::calibrateCamera(obj, img, c.image_size, K, dist, rv, tv, std_in, std_ex, errs,
                                 flags, crit);
     std::vector<double> e(errs.begin<double>(), errs.end<double>());

@@ -54,8 +54,8 @@ void FitGains(const std::vector<cv::Vec3d>& m, const std::vector<cv::Vec3d>& rho
 }  // namespace
 
 std::string WhiteBalance::BriefReport() const {
-  return fmt::format("{} from {} patches: gains R {:.6g} G {:.6g} B {:.6g}; misfit R {:.2f}% G "
-                     "{:.2f}% B {:.2f}%", method, patches, gains[0], gains[1], gains[2],
+  return fmt::format("{} from {} patch{}: gains R {:.6g} G {:.6g} B {:.6g}; misfit R {:.2f}% G "
+                     "{:.2f}% B {:.2f}%", method, patches, patches == 1 ? "" : "es", gains[0], gains[1], gains[2],
                      100 * residual[0], 100 * residual[1], 100 * residual[2]);
 }
 

@@ -11,11 +11,14 @@
 namespace translume {
 
 std::string EditOptions::Validate() const {
-  for (double v : {scale_kappa, scale_mu, add_kappa, add_mu})
-    if (!std::isfinite(v)) return "multipliers and added values must be finite";
-  if (scale_kappa < 0 || scale_mu < 0) return "multipliers must be >= 0";
+  for (double v : {scale_kappa, scale_mu})
+    if (!std::isfinite(v)) return "--scale: the multipliers must be finite";
+  for (double v : {add_kappa, add_mu})
+    if (!std::isfinite(v)) return "--add: the added values must be finite";
+  if (scale_kappa < 0 || scale_mu < 0)
+    return fmt::format("--scale: the multipliers must be >= 0 (kappa x{:g}, mu x{:g})", scale_kappa, scale_mu);
   if (depth_begin < 0 || (depth_end >= 0 && depth_end < depth_begin))
-    return "the depth range A:B needs 0 <= A <= B";
+    return "--depth A:B: needs 0 <= A <= B";
   return "";
 }
 
@@ -55,7 +58,7 @@ void EditOptions::ParseDepth(const std::string& text) {
 }
 
 Material EditMaterial(const Material& material, const EditOptions& o, const Image* mask) {
-  if (std::string err = o.Validate(); !err.empty()) throw InputError("edit: " + err);
+  if (std::string err = o.Validate(); !err.empty()) throw InputError(err);
   Material m = material;
   const GridShape& s = m.shape;
   if (o.depth_begin >= s.nz || o.depth_end >= s.nz)

@@ -396,7 +396,7 @@ TriangleMesh Repair(const std::string& path, const MeshFile& f, std::vector<std:
   // Triangles, each with the face it came from.
   TriangleMesh m;
   std::vector<size_t> source;
-  int64_t short_faces = 0, ear_clipped = 0;
+  int64_t short_faces = 0, ear_clipped = 0, repeated_corners = 0;
   std::vector<int> corners;
   for (size_t i = 0; i < f.faces.size(); ++i) {
     corners.clear();
@@ -411,10 +411,12 @@ TriangleMesh Repair(const std::string& path, const MeshFile& f, std::vector<std:
       ++short_faces;
       continue;
     }
+    repeated_corners += corners.size() < f.faces[i].size();
     ear_clipped += Triangulate(f.vertices, corners, &m.triangles);
     source.resize(m.triangles.size(), i);
   }
   note(ear_clipped, "non-convex polygons triangulated by ear clipping");
+  note(repeated_corners, "faces with a repeated corner: the repeats dropped");
   note(short_faces, "faces with fewer than three distinct corners dropped");
 
   // Weld vertices at one position; drop the triangles that this (or a polygon's repeated

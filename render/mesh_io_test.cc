@@ -212,12 +212,13 @@ TEST(MeshIo, UnweldedVerticesAreWelded) {
 }
 
 // A triangle written as a quad with a repeated corner, and a face "f 1 1 2": dropped corners
-// and faces, not a refused mesh.
+// and faces, not a refused mesh, each said (the repeated corners were dropped without a word).
 TEST(MeshIo, RepeatedCornersAreDropped) {
   std::vector<std::string> repairs;
   const TriangleMesh m = ReadMesh(Write("tl_repeat.obj", kTet + "f 1 3 2 2\nf 1 2 4\nf 2 3 4 4\nf 1 4 3\nf 1 1 2\n"), &repairs);
   EXPECT_EQ(m.triangles.size(), 4u);
-  EXPECT_EQ(repairs, (std::vector<std::string>{"1 faces with fewer than three distinct corners dropped"}));
+  EXPECT_EQ(repairs, (std::vector<std::string>{"2 faces with a repeated corner: the repeats dropped",
+                                                "1 faces with fewer than three distinct corners dropped"}));
   // A face written twice (its edges were 'shared by 3 triangles').
   repairs.clear();
   const TriangleMesh twice = ReadMesh(Write("tl_twice.obj", kTet + "f 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\nf 4 2 3\n"), &repairs);

@@ -103,6 +103,21 @@ TEST_F(Cli, DemoRunsThePipelineAndSaysWhereTheOutputsAre) {
                         "recovered.vdb", "recovered_work/dataset/dataset.json", "recovered_work/report.json",
                         "recovered_work/previews/fit_00.png", "recovered_sphere.png"})
     EXPECT_TRUE(fs::exists(P("demo/") + f)) << f;
+  // A re-run stopped by Ctrl-C while it simulates leaves the earlier capture as it was (it used to
+  // delete it first) and no temporary folder; a re-run to the end replaces it.
+  const auto before = fs::last_write_time(P("demo/capture/capture.json"));
+  const CommandRun stopped = testing_cli::Run(
+      std::string(TRANSLUME_BINARY) + " demo --grid 12x10x5 --lights 2x2 --max-iterations 20 -o " + P("demo") + " > " +
+      P("log") + " 2>&1 & pid=$!; for i in $(seq 600); do grep -q 'simulating a capture' " + P("log") +
+      " && break; sleep 0.1; done; kill -INT $pid; wait $pid; echo exit=$?; cat " + P("log"));
+  EXPECT_NE(stopped.output.find("exit=130"), std::string::npos) << stopped.output;
+  EXPECT_NE(stopped.output.find("translume demo: interrupted: stopped after"), std::string::npos) << stopped.output;
+  EXPECT_EQ(fs::last_write_time(P("demo/capture/capture.json")), before);
+  EXPECT_TRUE(fs::exists(P("demo/capture/truth/material.vdb")));
+  for (const auto& e : fs::directory_iterator(P("demo")))
+    EXPECT_EQ(e.path().filename().string().find(".capture."), std::string::npos) << e.path();
+  ASSERT_EQ(Translume("demo --grid 12x10x5 --lights 2x2 --max-iterations 2 -o " + P("demo")).status, 0);
+  EXPECT_NE(fs::last_write_time(P("demo/capture/capture.json")), before);
 }
 
 TEST_F(Cli, CapturePipelineErrorsAreOneLine) {
@@ -267,6 +282,26 @@ TEST_F(Cli, InverseCommandsRejectBadArguments) {
 
 // No command replaces or writes into its inputs, and an output path that names a folder is
 // found before the work; each case one line, the input unchanged.
+// Errors name the flag as the user typed it, not an options struct's field, and a misspelt
+// flag is named even where a required one is then missing.
+TEST_F(Cli, ErrorsNameTheFlags) {
+  ASSERT_EQ(Translume("synth --preset wax --grid 8x6x4 -o " + P("m.vdb")).status, 0);
+  ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + P("ds")).status, 0);
+  ExpectOneLineError(Translume("synth --presets wax -o " + P("a.vdb")), "The following argument was not expected: --presets");
+  ExpectOneLineError(Translume("solve " + P("ds") + " --max-iterations -5 -o " + P("r.vdb")), "--max-iterations: must be");
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --oversample 9 -o " + P("d2")), "--oversample: must be in [1, 8]");
+  ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " --exposures 1 -o " + P("c2")), "--exposures: must be in [2, 16]");
+  ExpectOneLineError(Translume("edit " + P("m.vdb") + " --scale mu=-1 -o " + P("e.vdb")),
+                     "--scale: the multipliers must be >= 0 (kappa x1, mu x-1)");
+  // evaluate says why a row is empty.
+  ASSERT_EQ(Translume("solve " + P("ds") + " --max-iterations 2 -o " + P("r.vdb")).status, 0);
+  CommandRun r = Translume("evaluate " + P("r.vdb") + " --truth " + P("m.vdb") + " --dataset " + P("ds"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("has no holdout/ (translume simulate --holdout N writes one)"), std::string::npos) << r.output;
+  r = Translume("evaluate " + P("r.vdb") + " --dataset " + P("ds"));
+  EXPECT_NE(r.output.find("note: without --truth only the fit error"), std::string::npos) << r.output;
+}
+
 TEST_F(Cli, OutputsNeverReplaceInputs) {
   ASSERT_EQ(Translume("synth --preset wax --grid 8x6x4 -o " + P("m.vdb")).status, 0);
   const auto bytes = fs::file_size(P("m.vdb"));
@@ -285,6 +320,14 @@ TEST_F(Cli, OutputsNeverReplaceInputs) {
   ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("r.vdb") + " --checkpoint /proc/translume_ck"),
                      "cannot write into /proc");
   ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("m.vdb/r.vdb")), "is a file, not a folder");
+  // Every command that writes a file or folder says so with the flag (synth named a temporary
+  // file, simulate-capture a temporary folder, only at the end).
+  ExpectOneLineError(Translume("synth --preset wax --grid 8x6x4 -o /proc/translume_s.vdb"),
+                     "-o /proc/translume_s.vdb: cannot write into /proc");
+  ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " -o /proc/translume_cap"),
+                     "-o /proc/translume_cap: cannot write into /proc");
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " -o /proc/translume_ds"),
+                     "-o /proc/translume_ds: cannot write into /proc");
   ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("r.vdb") + " --init " + P("r.vdb")), "would overwrite");
   fs::create_directories(P("r.json"));
   ExpectOneLineError(Translume("solve " + P("ds") + " -o " + P("r.vdb")), "is a folder");
@@ -505,7 +548,8 @@ TEST_F(Cli, AcquireStopsCleanlyOnSigint) {
   };
   CommandRun r = interrupt_at("a.vdb", "calibrating the camera");
   EXPECT_NE(r.output.find("exit=130"), std::string::npos) << r.output;
-  EXPECT_NE(r.output.find("translume acquire: interrupted: stopped before"), std::string::npos) << r.output;
+  // The line it stopped at is a result ("after" it) or an announcement ("before" it).
+  EXPECT_NE(r.output.find("translume acquire: interrupted: stopped "), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(P("a.vdb")));
   r = interrupt_at("b.vdb", "solving for kappa and mu");
   EXPECT_NE(r.output.find("exit=130"), std::string::npos) << r.output;

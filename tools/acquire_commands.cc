@@ -58,12 +58,16 @@ int RunSimulateCapture(int argc, char** argv) {
   o.lights = regions.front().region_n;
   if (fs::exists(out) && !(fs::is_directory(out) && fs::is_empty(out)))
     throw InputError(fmt::format("-o {}: exists and is not empty (a new capture folder is written)", out));
+  RequireFolderPath("-o", out);
+  if (std::string why = o.Validate(); !why.empty()) throw OptionsError(app, "simulate-capture", why);
   const Material m = ReadMaterial(material_path);
   const acquire::CaptureRig rig = rig_path == "default"
                                       ? acquire::DefaultCaptureRig(m.shape, m.spacing_mm, o.setup)
                                       : acquire::ReadCaptureRig(rig_path, m.shape, m.spacing_mm, o.setup);
   std::printf("simulate-capture: %s, grid %s, %s-lit, %s regions, %d threads\n", material_path.c_str(),
               m.shape.ToString().c_str(), SetupName(o.setup), lights.c_str(), NumThreads());
+  SigintGuard sigint;  // Ctrl-C: stop at the next stage, the temporary folder removed
+  o.stop = [&] { return sigint.interrupted(); };
   const auto sum = acquire::SimulateCapture(m, rig, o, out, [](const std::string& line) {
     std::printf("  %s\n", line.c_str());
     std::fflush(stdout);
@@ -110,6 +114,7 @@ int RunPatterns(int argc, char** argv) {
     for (int k = 0; k < 4; ++k) corners.emplace_back(c[size_t(2 * k)], c[size_t(2 * k + 1)]);
   }
   if (std::string why = acquire::PatternFolderProblem(out); !why.empty()) throw InputError("-o " + why);
+  RequireFolderPath("-o", out);
   auto flagged = [](const char* flag, const auto& read) {
     try {
       return read();
@@ -246,6 +251,7 @@ int RunDemo(int argc, char** argv) {
   if (iterations < 0) throw InputError("--max-iterations: must be >= 0");
   if (fs::exists(out) && !fs::is_directory(out))
     throw InputError(fmt::format("-o {}: is a file; the demo writes a folder", out));
+  RequireFolderPath("-o", (fs::path(out) / "capture").string());
   SynthOptions so;
   so.preset = "marble";
   so.shape = ParseGridShape(grid, "--grid");
@@ -257,12 +263,15 @@ int RunDemo(int argc, char** argv) {
                     fmt::format("the demo on the {} grid", so.shape.ToString()));
   const Material truth = SynthesizeMaterial(so);
   const fs::path capture = fs::path(out) / "capture";
-  // A capture folder from an earlier demo run is replaced; anything else is left alone.
-  if (fs::exists(capture)) {
-    if (!fs::exists(capture / "truth/material.vdb"))
-      throw InputError(fmt::format("{}: exists and is not a simulated capture; choose another -o", capture.string()));
-    fs::remove_all(capture);
-  }
+  // A capture folder from an earlier demo run is replaced once the new one is complete; anything
+  // else is left alone.
+  if (fs::exists(capture) && !fs::exists(capture / "truth/material.vdb"))
+    throw InputError(fmt::format("{}: exists and is not a simulated capture; choose another -o", capture.string()));
+  sc.replace_simulated = true;
+  // Ctrl-C: the capture stops at its next stage (nothing replaced), acquire at its next stage or
+  // iteration (finished stages kept for a re-run), and the demo ends there.
+  std::optional<SigintGuard> sigint(std::in_place);
+  sc.stop = [&] { return sigint->interrupted(); };
   std::printf("demo: 1/4 simulating a capture of a %s marble sample (h %g mm, %s-lit, %s regions)\n",
               truth.shape.ToString().c_str(), truth.spacing_mm, setup.c_str(), lights.c_str());
   std::fflush(stdout);
@@ -272,6 +281,7 @@ int RunDemo(int argc, char** argv) {
 
   acquire::AcquireOptions ao;
   ao.recovery.max_iterations = iterations;
+  ao.stop = sc.stop;
   const std::string rec_path = (fs::path(out) / "recovered.vdb").string();
   std::printf("demo: 2/4 acquiring it: translume acquire %s -o %s\n", capture.c_str(), rec_path.c_str());
   std::fflush(stdout);
@@ -279,9 +289,13 @@ int RunDemo(int argc, char** argv) {
                                     [&](const IterationReport& r, const RecoveryState&) {
     if (r.iteration % 25 == 0) print(fmt::format("iteration {:4d}  objective {:.3e}  solves {}  {:.1f} s",
                                                  r.iteration, r.objective, r.solves, elapsed()));
-    return true;
+    return !sigint->interrupted();
   });
   std::printf("%s", rep.Table().c_str());
+  if (sigint->interrupted())
+    throw Interrupted(fmt::format("stopped during the solve; {} is the best material so far (re-run the demo, or "
+                                  "translume acquire {} -o {})", rec_path, capture.string(), rec_path));
+  sigint.reset();  // the rest takes seconds: Ctrl-C ends at once again
 
   const Dataset training = ReadDataset((capture / "truth/dataset").string());
   const Dataset holdout = ReadDataset((capture / "truth/dataset/holdout").string());

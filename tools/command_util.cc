@@ -99,11 +99,12 @@ void RequireNotInput(const char* flag, const std::string& out, const std::vector
   }
 }
 
-void RequireFilePath(const char* flag, const std::string& path) {
+namespace {
+
+// The output `path` is written into its folder (created if missing, under the nearest one that
+// exists), as a temporary file or folder renamed into place: that folder must be writable.
+void RequireWritableParent(const char* flag, const std::string& path) {
   namespace fs = std::filesystem;
-  if (fs::is_directory(path)) throw InputError(fmt::format("{} {}: is a folder, not a file", flag, path));
-  // The output is written into its folder (created if missing, under the nearest one that
-  // exists), as a temporary file renamed into place: that folder must be writable.
   std::error_code ec;
   fs::path folder = fs::absolute(path, ec).parent_path();
   while (!folder.empty() && !fs::exists(folder, ec) && folder != folder.root_path()) folder = folder.parent_path();
@@ -118,6 +119,28 @@ void RequireFilePath(const char* flag, const std::string& path) {
   unlink(probe.c_str());
 }
 
+}  // namespace
+
+void RequireFilePath(const char* flag, const std::string& path) {
+  if (std::filesystem::is_directory(path)) throw InputError(fmt::format("{} {}: is a folder, not a file", flag, path));
+  RequireWritableParent(flag, path);
+}
+
+void RequireFolderPath(const char* flag, const std::string& path) {
+  if (std::filesystem::exists(path) && !std::filesystem::is_directory(path))
+    throw InputError(fmt::format("{} {}: is a file, not a folder", flag, path));
+  RequireWritableParent(flag, path);
+}
+
+InputError OptionsError(const CLI::App& app, const std::string& command, const std::string& why) {
+  const size_t space = why.find(' ');
+  std::string flag = "--" + why.substr(0, space);
+  std::replace(flag.begin(), flag.end(), '_', '-');
+  if (space != std::string::npos && app.get_option_no_throw(flag) != nullptr)
+    return InputError(fmt::format("{}: {}", flag, why.substr(space + 1)));
+  return InputError(command + ": " + why);
+}
+
 void RequireFinitePixels(const Image& image, const std::string& what) {
   if (const std::string problem = NonFinitePixel(image); !problem.empty()) throw InputError(what + ": " + problem);
 }
@@ -128,6 +151,19 @@ bool ParseOrHelp(CLI::App& app, int argc, char** argv) {
   } catch (const CLI::CallForHelp&) {
     std::fputs(app.help().c_str(), stdout);
     return true;
+  } catch (const CLI::RequiredError&) {
+    // CLI11 checks required options before unknown ones: "synth --presets wax" said only that
+    // --preset is required. The misspelt flag is the message.
+    if (app.get_subcommands([](const CLI::App*) { return true; }).empty())
+      for (int k = 1; k < argc; ++k) {
+        const std::string arg = argv[k];
+        if (arg.size() < 2 || arg[0] != '-' || std::isdigit(static_cast<unsigned char>(arg[1])) || arg[1] == '.') continue;
+        if (arg == "--") break;
+        const std::string name = arg.substr(0, arg.find('='));
+        if (app.get_option_no_throw(name) == nullptr && name != "-h" && name != "--help")
+          throw CLI::ExtrasError(std::vector<std::string>{name});
+      }
+    throw;
   }
   return false;
 }

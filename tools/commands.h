@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "solver/image.h"
+#include "solver/status.h"
 
 namespace translume {
 
@@ -64,6 +65,12 @@ void RequireNotInput(const char* flag, const std::string& out, const std::vector
 // written into (or the nearest existing folder above it) is not writable (checked before the
 // work, so that it is not lost at the end).
 void RequireFilePath(const char* flag, const std::string& path);
+// The same for an output folder (written as a temporary sibling renamed into place): "FLAG PATH:
+// is a file, not a folder", or the folder above it not writable.
+void RequireFolderPath(const char* flag, const std::string& path);
+// An options struct's Validate() message as the user typed it: "max_iterations must be >= 0" ->
+// "--max-iterations: must be >= 0" where `app` has that flag, else "COMMAND: WHY".
+InputError OptionsError(const CLI::App& app, const std::string& command, const std::string& why);
 // Throws InputError "WHAT: pixel (X, Y) is not finite" at an image's first NaN or inf.
 void RequireFinitePixels(const Image& image, const std::string& what);
 

@@ -36,6 +36,7 @@ namespace fs = std::filesystem;
 }  // namespace
 
 void AddRecoveryFlags(CLI::App& app, RecoveryFlags* f) {
+  f->app = &app;
   app.add_option("--optimizer", f->optimizer, "lbfgs, ncg or paper")->capture_default_str();
   app.add_option("--lambda", f->options.lambda, "Regularisation weight")->capture_default_str();
   app.add_option("--regularizer", f->regularizer, "tk1, tv or huber")->capture_default_str();
@@ -55,7 +56,7 @@ RecoveryOptions RecoveryFlags::Options(const char* command) const {
   o.regularizer.kind = ParseRegularizer(regularizer);
   o.backend = ParseBackend(backend);
   if (o.backend == Backend::kGl) GlContext::Get();  // fail before any output
-  if (std::string err = o.Validate(); !err.empty()) throw InputError(std::string(command) + ": " + err);
+  if (std::string err = o.Validate(); !err.empty()) throw OptionsError(*app, command, err);
   return o;
 }
 
@@ -121,8 +122,9 @@ int RunSimulate(int argc, char** argv) {
   o.setup = ParseSetup(setup);
   o.backend = ParseBackend(backend);
   if (o.backend == Backend::kGl) GlContext::Get();  // fail before any output
-  if (std::string err = o.Validate(); !err.empty()) throw InputError("simulate: " + err);
+  if (std::string err = o.Validate(); !err.empty()) throw OptionsError(app, "simulate", err);
   RequireDatasetFolder(out, material_path);
+  RequireFolderPath("-o", out);
   const Material m = ReadMaterial(material_path);
   const auto t0 = std::chrono::steady_clock::now();
   const SimulatedData data = SimulateDataset(m, o);
@@ -335,13 +337,22 @@ int RunEvaluate(int argc, char** argv) {
   } catch (const InputError& e) {
     throw InputError(fmt::format("{} against --dataset {}: {}", rec_path, dataset_path, e.what()));
   }
+  // The fit against the data the material was fitted to (acquire's), where that is not --dataset.
+  double measured_fit = -1;
+  if (mapping) measured_fit = EvaluateRecovery(rec, nullptr, ReadDataset(measured_path), Dataset{}, mg).fit_error;
   if (!json) {
-    std::printf("%s\n", EvaluationTable(r).c_str());
+    std::printf("%s", EvaluationTable(r).c_str());
+    if (mapping) std::printf("fit E (vs --measured)    %.3e   (the data it was fitted to)\n", measured_fit);
+    if (!truth) std::printf("note: without --truth only the fit error\n");
+    else if (holdout.conditions.empty())
+      std::printf("note: %s has no holdout/ (translume simulate --holdout N writes one): no held-out error\n",
+                  DatasetFolder(dataset_path).c_str());
     return 0;
   }
   nlohmann::json j = nlohmann::json::parse(EvaluationJson(r));
   if (mapping)
     j["mapping"] = {{"measured", measured_path},
+                    {"fit_error", measured_fit},
                     {"L_rms", mapping->L_rms},
                     {"q_rms", mapping->q_rms},
                     {"L_scale", mapping->L_scale},

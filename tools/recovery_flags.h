@@ -15,6 +15,7 @@ struct RecoveryFlags {
   // The parsed options; throws InputError "COMMAND: problem" when invalid (and checks that a gl
   // context exists for --backend gl).
   RecoveryOptions Options(const char* command) const;
+  const CLI::App* app = nullptr;  // set by AddRecoveryFlags: errors name its flags
 };
 void AddRecoveryFlags(CLI::App& app, RecoveryFlags* flags);
 

@@ -43,8 +43,9 @@ void WriteRadiance(const std::string& path, const GridShape& s, const FacePatter
 
 int RunSynth(int argc, char** argv) {
   CLI::App app{"Write a synthetic material volume with physically plausible kappa and mu.\n"
-               "Presets: homogeneous, layered, marble, inclusions, wax, and the paper's samples\n"
-               "wax1 (130x53x37), wax2 (140x75x48), marble (256x256x20), stone (128x128x41).",
+               "Presets: homogeneous, layered, inclusions, wax (default grid 64x48x16), and the\n"
+               "paper's samples at their grids: wax1 (130x53x37), wax2 (140x75x48), marble\n"
+               "(256x256x20), stone (128x128x41). --grid sets any preset's grid.",
                "translume synth"};
   SynthOptions o;
   std::string grid, out;
@@ -57,6 +58,7 @@ int RunSynth(int argc, char** argv) {
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   RequireExtension(out, {".vdb"}, "-o");
+  RequireFilePath("-o", out);
   if (!grid.empty()) o.shape = ParseGridShape(grid, "--grid");
   const GridShape shape = o.shape.size() > 0 ? o.shape : DefaultSynthShape(o.preset);
   // The material (RGB kappa, mu) plus OpenVDB's copy while writing.
