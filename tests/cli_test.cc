@@ -217,6 +217,7 @@ TEST_F(Cli, SimulateSolveEvaluateAndResume) {
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("homogeneous fit:"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("iter    8"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("left <= 0.0 s"), std::string::npos) << r.output;  // at the last iteration
   EXPECT_TRUE(fs::exists(P("rec.vdb")));
   EXPECT_TRUE(fs::exists(P("rec_kappa_k00.png")));
   EXPECT_TRUE(fs::exists(P("rec_mu_k03.png")));

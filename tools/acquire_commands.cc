@@ -200,6 +200,7 @@ int RunAcquire(int argc, char** argv) {
   // the solve and write the best material so far (as `solve` does).
   std::optional<SigintGuard> sigint(std::in_place);
   o.stop = [&] { return sigint->interrupted(); };
+  TimeLeft time_left;
   const acquire::AcquireReport rep = acquire::Acquire(
       cap, out, o,
       [](const std::string& line) {
@@ -207,9 +208,11 @@ int RunAcquire(int argc, char** argv) {
         std::fflush(stdout);
       },
       [&](const IterationReport& r, const RecoveryState&) {
+        const std::string left = time_left(r, o.recovery.max_iterations);
         if (tty || r.iteration % every == 0)
-          std::printf("%s  iteration %4d  objective %.4e  solves %lld  %s%s", tty ? "\r" : "", r.iteration,
-                      r.objective, (long long)r.solves, FormatSeconds(r.seconds).c_str(), tty ? "   " : "\n");
+          std::printf("%s  iteration %4d  objective %.4e  solves %lld  elapsed %s  left %s%s", tty ? "\r" : "",
+                      r.iteration, r.objective, (long long)r.solves, FormatSeconds(r.seconds).c_str(), left.c_str(),
+                      tty ? "   " : "\n");
         std::fflush(stdout);
         return !sigint->interrupted();
       });
@@ -282,13 +285,15 @@ int RunDemo(int argc, char** argv) {
   acquire::AcquireOptions ao;
   ao.recovery.max_iterations = iterations;
   ao.stop = sc.stop;
+  TimeLeft time_left;
   const std::string rec_path = (fs::path(out) / "recovered.vdb").string();
   std::printf("demo: 2/4 acquiring it: translume acquire %s -o %s\n", capture.c_str(), rec_path.c_str());
   std::fflush(stdout);
   const auto rep = acquire::Acquire(acquire::ReadCapture(capture.string()), rec_path, ao, print,
                                     [&](const IterationReport& r, const RecoveryState&) {
-    if (r.iteration % 25 == 0) print(fmt::format("iteration {:4d}  objective {:.3e}  solves {}  {:.1f} s",
-                                                 r.iteration, r.objective, r.solves, elapsed()));
+    const std::string left = time_left(r, iterations);
+    if (r.iteration % 25 == 0) print(fmt::format("iteration {:4d}  objective {:.3e}  solves {}  {:.1f} s, left {}",
+                                                 r.iteration, r.objective, r.solves, elapsed(), left));
     return !sigint->interrupted();
   });
   std::printf("%s", rep.Table().c_str());

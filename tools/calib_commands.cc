@@ -383,13 +383,13 @@ int RunHdr(int argc, char** argv) {
     const calib::HdrImage h = calib::MergeHdr(stack, response_path.empty() ? nullptr : &curve,
                                               black_dir.empty() ? nullptr : &black, o);
     WriteAtomically(out, [&](const std::string& tmp) { calib::WriteExr(tmp, h.radiance); });
-    std::printf("wrote %s: %zu exposures, %s\n", out.c_str(), stack.exposures.size(),
-                h.BriefReport().c_str());
     if (stack.IsEightBit() && calib::HasApexLabels(stack))
       std::printf("hdr: exposure times %s, %s\n",
                   calib::Describe(h.shutter),
                   times != "auto" ? "as --exposure-times says" : "as the response was fitted");
     if (!h.time_warning.empty()) std::printf("hdr: warning: %s\n", h.time_warning.c_str());
+    std::printf("wrote %s: %zu exposures, %s\n", out.c_str(), stack.exposures.size(),
+                h.BriefReport().c_str());
     return 0;
   });
 }

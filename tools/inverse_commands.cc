@@ -60,6 +60,16 @@ RecoveryOptions RecoveryFlags::Options(const char* command) const {
   return o;
 }
 
+std::string TimeLeft::operator()(const IterationReport& r, int max_iterations) {
+  if (first_seconds_ < 0) {
+    first_seconds_ = r.seconds;
+    first_iteration_ = r.iteration;
+  }
+  if (r.iteration <= first_iteration_) return "?";
+  return "<= " + FormatSeconds((r.seconds - first_seconds_) / (r.iteration - first_iteration_) *
+                               std::max(0, max_iterations - r.iteration));
+}
+
 std::string FormatSeconds(double s) {
   if (s < 120) return fmt::format("{:.1f} s", s);
   if (s < 7200) return fmt::format("{:.1f} min", s / 60);
@@ -206,8 +216,7 @@ int RunSolve(int argc, char** argv) {
   std::optional<SigintGuard> sigint(std::in_place);
   auto last_checkpoint = std::chrono::steady_clock::now();
   bool printed_homogeneous = !state.x.empty();
-  double first_report = -1;
-  int first_iteration = 0;
+  TimeLeft time_left;
   auto callback = [&](const IterationReport& r, const RecoveryState& s) {
     if (!printed_homogeneous) {
       printed_homogeneous = true;
@@ -215,16 +224,7 @@ int RunSolve(int argc, char** argv) {
                   s.homogeneous_kappa[0], s.homogeneous_kappa[1], s.homogeneous_kappa[2],
                   s.homogeneous_mu[0], s.homogeneous_mu[1], s.homogeneous_mu[2]);
     }
-    // Time left if every remaining iteration runs: the mean iteration time since the first
-    // report (so the homogeneous fit does not count).
-    if (first_report < 0) {
-      first_report = r.seconds;
-      first_iteration = r.iteration;
-    }
-    std::string left = "?";
-    if (r.iteration > first_iteration)
-      left = "<= " + FormatSeconds((r.seconds - first_report) / (r.iteration - first_iteration) *
-                                   std::max(0, o.max_iterations - r.iteration));
+    const std::string left = time_left(r, o.max_iterations);
     std::printf("%siter %4d  objective %.4e  |grad| %.3e  solves %lld  elapsed %s  left %s%s",
                 tty ? "\r" : "", r.iteration, r.objective, r.gradient_norm, (long long)r.solves,
                 FormatSeconds(r.seconds).c_str(), left.c_str(), tty ? "   " : "\n");

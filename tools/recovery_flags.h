@@ -22,4 +22,16 @@ void AddRecoveryFlags(CLI::App& app, RecoveryFlags* flags);
 // "12.3 s", "4.5 min", "1.2 h".
 std::string FormatSeconds(double seconds);
 
+// The time left if every remaining iteration up to `max_iterations` runs, "<= 1.2 min" (an upper
+// bound: the fit may stop sooner), from the mean iteration time since the first report (so the
+// homogeneous fit before it does not count); "?" at the first report.
+class TimeLeft {
+ public:
+  std::string operator()(const IterationReport& report, int max_iterations);
+
+ private:
+  double first_seconds_ = -1;
+  int first_iteration_ = 0;
+};
+
 }  // namespace translume
