@@ -160,15 +160,17 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   StageLog log((work / "stages.json").string(), o.force);
   bool solving = false;
   auto progress = [&](const std::string& s) {
-    // A line that ends in "..." announces work; the others report work done.
+    // A line that ends in "..." announces work, and a stop comes before it, unprinted; the others
+    // report work done, and are printed before a stop.
+    std::string what = s;
+    const bool announces = what.size() >= 3 && what.compare(what.size() - 3, 3, "...") == 0;
+    if (!announces && progress_fn) progress_fn(s);
     if (!solving && o.stop && o.stop()) {
-      std::string what = s;
-      const bool announces = what.size() >= 3 && what.compare(what.size() - 3, 3, "...") == 0;
       if (announces) what.erase(what.find_last_not_of(". ") + 1);
       throw Interrupted(fmt::format("stopped {} \"{}\"; the finished stages are in {} (a re-run reuses them)",
                                     announces ? "before" : "after", what, rep.work_dir));
     }
-    if (progress_fn) progress_fn(s);
+    if (announces && progress_fn) progress_fn(s);
   };
   auto t0 = Clock::now();
   auto stage_done = [&](const std::string& name) {

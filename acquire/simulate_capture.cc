@@ -344,9 +344,8 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   };
   auto progress = [&](const std::string& s) {
-    if (o.stop && o.stop())
-      throw Interrupted(fmt::format("stopped after \"{}\"; {} was not written", s, dir));
     if (progress_fn) progress_fn(fmt::format("{} ({:.1f} s)", s, elapsed()));
+    if (o.stop && o.stop()) throw Interrupted(fmt::format("stopped after \"{}\"; {} was not written", s, dir));
   };
   // Everything goes into a temporary sibling folder, renamed at the end.
   SimulateCaptureSummary sum;

@@ -78,8 +78,8 @@ CameraCalibration CalibrateCamera(const BoardSpec& board, const std::vector<Name
       throw CalibError(fmt::format(
           "camera calibration: only {} usable views of {} (need {}){}{}", obj.size(), views.size(), o.min_views,
           c.dropped.empty() ? ""
-                            : fmt::format("; dropped {}: {}{}", c.dropped.size(), c.dropped.front(),
-                                          c.dropped.size() > 1 ? fmt::format(" and {} more", c.dropped.size() - 1) : ""),
+                            : fmt::format("; dropped {} ({}{})", c.dropped.size(), c.dropped.front(),
+                                          c.dropped.size() > 1 ? fmt::format(", and {} more", c.dropped.size() - 1) : ""),
           round == 0 && obj.empty() ? "; the board was found in no photo: check the board spec (its type and inner "
                                       "corners per side)"
                                     : ""));

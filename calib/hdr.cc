@@ -124,7 +124,8 @@ std::vector<size_t> TimeOrder(const ExposureStack& stack) {
 
 // Two exposures next in time (indices into the stack, a the shorter) and how much brighter b is:
 // the median ratio of their linear values (black subtracted) over samples well inside the valid
-// range [lo, hi] in both (`inset` of the range in from either end), on a grid of ~10^4 pixels.
+// range [lo, hi] in both (`inset` of the range in from either end; chosen by a third exposure
+// where it can, MeasurePairRatio), on a grid of ~10^4 pixels.
 // seen_a, seen_b: the grid's samples well inside the range in a, in b.
 struct PairRatio {
   size_t a = 0, b = 0;
@@ -151,8 +152,9 @@ PairRatio MeasurePairRatio(const ExposureStack& stack, const Linearizer& lin,
   double well_lo[3], well_hi[3], lin_lo[3], lin_hi[3];
   for (int c = 0; c < 3; ++c) {
     std::tie(well_lo[c], well_hi[c]) = WellInside(lin, c, lo, hi, inset);
-    lin_lo[c] = lin.Linear(float(well_lo[c]), c);
-    lin_hi[c] = lin.Linear(float(well_hi[c]), c);
+    // The lowest and highest codes inside, as linear values (8-bit codes are integers).
+    lin_lo[c] = lin.Linear(float(lin.eight ? std::ceil(well_lo[c]) : well_lo[c]), c);
+    lin_hi[c] = lin.Linear(float(lin.eight ? std::floor(well_hi[c]) : well_hi[c]), c);
   }
   // The samples are chosen by a third exposure where the stack has one: the one next shorter
   // than a, else the one next longer than b, whose value (times the ratio of the times) says
@@ -160,7 +162,8 @@ PairRatio MeasurePairRatio(const ExposureStack& stack, const Linearizer& lin,
   // in a dim photo the values just above the window's floor are there partly because their
   // noise is positive (a simulated projector-black stack, 8-bit, read noise 1 code: 1.93x for
   // 2x). The third exposure's noise is not a's or b's. Where the third is too far away in time to
-  // choose enough samples (brackets several stops apart), a's and b's own values choose them.
+  // choose enough samples for the 3 % judgement (16-bit brackets from ~1.5 stops apart), a's
+  // and b's own values choose them where they choose more.
   const std::vector<size_t> order = TimeOrder(stack);
   const size_t ka = size_t(std::find(order.begin(), order.end(), a) - order.begin());
   const size_t kb = size_t(std::find(order.begin(), order.end(), b) - order.begin());
@@ -198,7 +201,9 @@ PairRatio MeasurePairRatio(const ExposureStack& stack, const Linearizer& lin,
         if (chosen) ratios.push_back(xb / xa);
         if (in_a && in_b) own_ratios.push_back(xb / xa);
       }
-  if (ratios.size() < kMinPairSamples) ratios.swap(own_ratios);
+  // Too few for the 3 % judgement where the pair's own choice has more: that one (a third photo
+  // more than ~1.5 stops from the pair rarely sees a pixel well inside with both).
+  if (ratios.size() < kMinPairSamplesForPercent && own_ratios.size() > ratios.size()) ratios.swap(own_ratios);
   p.samples = ratios.size();
   if (!ratios.empty()) {
     std::nth_element(ratios.begin(), ratios.begin() + long(ratios.size() / 2), ratios.end());

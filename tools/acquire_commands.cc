@@ -56,9 +56,9 @@ int RunSimulateCapture(int argc, char** argv) {
   o.setup = ParseSetup(setup);
   const auto regions = RegionLights(lights);  // validates NxN
   o.lights = regions.front().region_n;
+  RequireFolderPath("-o", out);
   if (fs::exists(out) && !(fs::is_directory(out) && fs::is_empty(out)))
     throw InputError(fmt::format("-o {}: exists and is not empty (a new capture folder is written)", out));
-  RequireFolderPath("-o", out);
   if (std::string why = o.Validate(); !why.empty()) throw OptionsError(app, "simulate-capture", why);
   const Material m = ReadMaterial(material_path);
   const acquire::CaptureRig rig = rig_path == "default"
@@ -261,6 +261,7 @@ int RunDemo(int argc, char** argv) {
   acquire::SimulateCaptureOptions sc;
   sc.setup = ParseSetup(setup);
   sc.lights = RegionLights(lights).front().region_n;
+  if (std::string why = sc.Validate(); !why.empty()) throw OptionsError(app, "demo", why);
   CheckFitsInMemory(EstimateMemory(RefineShape(so.shape, sc.oversample), 1, Precision::kDouble).forward_bytes +
                         EstimateMemory(so.shape, sc.lights * sc.lights, Precision::kDouble).recovery_bytes,
                     fmt::format("the demo on the {} grid", so.shape.ToString()));
@@ -289,13 +290,23 @@ int RunDemo(int argc, char** argv) {
   const std::string rec_path = (fs::path(out) / "recovered.vdb").string();
   std::printf("demo: 2/4 acquiring it: translume acquire %s -o %s\n", capture.c_str(), rec_path.c_str());
   std::fflush(stdout);
-  const auto rep = acquire::Acquire(acquire::ReadCapture(capture.string()), rec_path, ao, print,
-                                    [&](const IterationReport& r, const RecoveryState&) {
+  const auto progress = [&](const IterationReport& r, const RecoveryState&) {
     const std::string left = time_left(r, iterations);
-    if (r.iteration % 25 == 0) print(fmt::format("iteration {:4d}  objective {:.3e}  solves {}  {:.1f} s, left {}",
-                                                 r.iteration, r.objective, r.solves, elapsed(), left));
+    if (r.iteration % 25 == 0)
+      print(fmt::format("iteration {:4d}  objective {:.3e}  solves {}  {:.1f} s, left {}", r.iteration, r.objective,
+                        r.solves, elapsed(), left));
     return !sigint->interrupted();
-  });
+  };
+  acquire::AcquireReport rep;
+  try {
+    rep = acquire::Acquire(acquire::ReadCapture(capture.string()), rec_path, ao, print, progress);
+  } catch (const Interrupted& e) {
+    // Stopped before the solve: a demo re-run simulates the capture again and reuses no stage,
+    // but acquire on this capture goes on from the finished ones.
+    const std::string what = e.what();
+    throw Interrupted(fmt::format("{}; translume acquire {} -o {} goes on from there",
+                                  what.substr(0, what.find("; the finished stages")), capture.string(), rec_path));
+  }
   std::printf("%s", rep.Table().c_str());
   if (sigint->interrupted())
     throw Interrupted(fmt::format("stopped during the solve; {} is the best material so far (re-run the demo, or "

@@ -1,6 +1,5 @@
 // SPDX-License-Identifier: MIT
 #include <algorithm>
-#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <csignal>
@@ -153,16 +152,10 @@ bool ParseOrHelp(CLI::App& app, int argc, char** argv) {
     return true;
   } catch (const CLI::RequiredError&) {
     // CLI11 checks required options before unknown ones: "synth --presets wax" said only that
-    // --preset is required. The misspelt flag is the message.
-    if (app.get_subcommands([](const CLI::App*) { return true; }).empty())
-      for (int k = 1; k < argc; ++k) {
-        const std::string arg = argv[k];
-        if (arg.size() < 2 || arg[0] != '-' || std::isdigit(static_cast<unsigned char>(arg[1])) || arg[1] == '.') continue;
-        if (arg == "--") break;
-        const std::string name = arg.substr(0, arg.find('='));
-        if (app.get_option_no_throw(name) == nullptr && name != "-h" && name != "--help")
-          throw CLI::ExtrasError(std::vector<std::string>{name});
-      }
+    // --preset is required. The arguments it did not take (known by then) are the message.
+    std::vector<std::string> extras = app.remaining();
+    std::reverse(extras.begin(), extras.end());  // ExtrasError lists them last first
+    if (!extras.empty()) throw CLI::ExtrasError(extras);
     throw;
   }
   return false;

@@ -308,9 +308,11 @@ int RunEvaluate(int argc, char** argv) {
   if (ParseOrHelp(app, argc, argv)) return 0;
   const Dataset training = ReadDataset(dataset_path);
   std::optional<DatasetMismatch> mapping;
+  Dataset measured;
   if (!measured_path.empty()) {
     try {
-      mapping = CompareDatasets(ReadDataset(measured_path), training);
+      measured = ReadDataset(measured_path);
+      mapping = CompareDatasets(measured, training);
     } catch (const InputError& e) {
       throw InputError(fmt::format("--measured {} against --dataset {}: {}", measured_path, dataset_path, e.what()));
     }
@@ -339,7 +341,13 @@ int RunEvaluate(int argc, char** argv) {
   }
   // The fit against the data the material was fitted to (acquire's), where that is not --dataset.
   double measured_fit = -1;
-  if (mapping) measured_fit = EvaluateRecovery(rec, nullptr, ReadDataset(measured_path), Dataset{}, mg).fit_error;
+  if (mapping) {
+    try {
+      measured_fit = EvaluateRecovery(rec, nullptr, measured, Dataset{}, mg).fit_error;
+    } catch (const InputError& e) {
+      throw InputError(fmt::format("{} against --measured {}: {}", rec_path, measured_path, e.what()));
+    }
+  }
   if (!json) {
     std::printf("%s", EvaluationTable(r).c_str());
     if (mapping) std::printf("fit E (vs --measured)    %.3e   (the data it was fitted to)\n", measured_fit);
