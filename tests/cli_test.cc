@@ -251,10 +251,10 @@ TEST_F(Cli, InverseCommandsRejectBadArguments) {
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --setup side -o " + P("ds")), "side");
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --noise -1 -o " + P("ds")), "noise");
   // 1e300 overflowed the data, and the error named the dataset's temporary folder.
-  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --noise 1e300 -o " + P("ds")), "noise must be within 0..1");
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --noise 1e300 -o " + P("ds")), "--noise: must be within 0..1");
   // 2^31 - 1 held-out spots tried to allocate 28 GB and failed with a bare "out of memory".
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --holdout 2147483647 -o " + P("ds")),
-                     "holdout must be within 0..4096");
+                     "--holdout: must be within 0..4096");
   EXPECT_FALSE(fs::exists(P("ds")));
   ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + P("ds")).status, 0);
   ExpectOneLineError(Translume("solve " + P("nope") + " -o " + P("r.vdb")), "no such file");
