@@ -124,8 +124,8 @@ std::vector<size_t> TimeOrder(const ExposureStack& stack) {
 
 // Two exposures next in time (indices into the stack, a the shorter) and how much brighter b is:
 // the median ratio of their linear values (black subtracted) over samples well inside the valid
-// range [lo, hi] in both (`inset` of the range in from either end; chosen by a third exposure
-// where it can, MeasurePairRatio), on a grid of ~10^4 pixels.
+// range [lo, hi] in both (`inset` of the range in from either end; judged by a third exposure
+// where one is well inside, MeasurePairRatio), on a grid of ~10^4 pixels.
 // seen_a, seen_b: the grid's samples well inside the range in a, in b.
 struct PairRatio {
   size_t a = 0, b = 0;
@@ -152,18 +152,18 @@ PairRatio MeasurePairRatio(const ExposureStack& stack, const Linearizer& lin,
   double well_lo[3], well_hi[3], lin_lo[3], lin_hi[3];
   for (int c = 0; c < 3; ++c) {
     std::tie(well_lo[c], well_hi[c]) = WellInside(lin, c, lo, hi, inset);
-    // The lowest and highest codes inside, as linear values (8-bit codes are integers).
-    lin_lo[c] = lin.Linear(float(lin.eight ? std::ceil(well_lo[c]) : well_lo[c]), c);
-    lin_hi[c] = lin.Linear(float(lin.eight ? std::floor(well_hi[c]) : well_hi[c]), c);
+    // The lowest and highest codes strictly inside, as linear values (8-bit codes are integers).
+    lin_lo[c] = lin.Linear(float(lin.eight ? std::floor(well_lo[c]) + 1 : well_lo[c]), c);
+    lin_hi[c] = lin.Linear(float(lin.eight ? std::ceil(well_hi[c]) - 1 : well_hi[c]), c);
   }
   // The samples are chosen by a third exposure where the stack has one: the one next shorter
   // than a, else the one next longer than b, whose value (times the ratio of the times) says
   // whether a's and b's lie well inside. Chosen by a's and b's own values, the ratio is biased:
   // in a dim photo the values just above the window's floor are there partly because their
   // noise is positive (a simulated projector-black stack, 8-bit, read noise 1 code: 1.93x for
-  // 2x). The third exposure's noise is not a's or b's. Where the third is too far away in time to
-  // choose enough samples for the 3 % judgement (16-bit brackets from ~1.5 stops apart), a's
-  // and b's own values choose them where they choose more.
+  // 2x). The third exposure's noise is not a's or b's. Per pixel: where neither third exposure
+  // is well inside (a pixel mid-range in a and b, in brackets more than a stop apart), a's and
+  // b's own values choose; the window's ends, where the bias is, are seen by one of them.
   const std::vector<size_t> order = TimeOrder(stack);
   const size_t ka = size_t(std::find(order.begin(), order.end(), a) - order.begin());
   const size_t kb = size_t(std::find(order.begin(), order.end(), b) - order.begin());
@@ -173,7 +173,7 @@ PairRatio MeasurePairRatio(const ExposureStack& stack, const Linearizer& lin,
   PairRatio p;
   p.a = a;
   p.b = b;
-  std::vector<double> ratios, own_ratios;  // chosen by a third exposure, by a's and b's own values
+  std::vector<double> ratios, own_ratios;  // judged per pixel; chosen by a's and b's own values
   for (int y = 0; y < size.height; y += step)
     for (int x = 0; x < size.width; x += step)
       for (int c = 0; c < 3; ++c) {
@@ -181,7 +181,7 @@ PairRatio MeasurePairRatio(const ExposureStack& stack, const Linearizer& lin,
         const bool in_a = va > well_lo[c] && va < well_hi[c], in_b = vb > well_lo[c] && vb < well_hi[c];
         p.seen_a += in_a;
         p.seen_b += in_b;
-        bool chosen = false;
+        bool judged = false, chosen = false;
         for (size_t j : judges) {
           const Exposure& e = stack.exposures[j];
           const float vj = lin.Code(e.pixels, y, x, c);
@@ -189,21 +189,23 @@ PairRatio MeasurePairRatio(const ExposureStack& stack, const Linearizer& lin,
           const double per_second = lin.Linear(vj, c) / e.seconds;
           const double pa = per_second * stack.exposures[a].seconds, pb = per_second * stack.exposures[b].seconds;
           // Well inside by the judge; a and b themselves only not clipped.
+          judged = true;
           chosen = pa > lin_lo[c] && pa < lin_hi[c] && pb > lin_lo[c] && pb < lin_hi[c] &&
                    va > lin.Low(lo, c) && va < hi && vb > lin.Low(lo, c) && vb < hi;
           break;
         }
-        if (!chosen && !(in_a && in_b)) continue;
+        const bool take = judged ? chosen : in_a && in_b;
+        if (!take && !(in_a && in_b)) continue;
         double xa = lin.Linear(va, c), xb = lin.Linear(vb, c);
         if (blacks[a]) xa -= lin.Linear(lin.Code(blacks[a]->pixels, y, x, c), c);
         if (blacks[b]) xb -= lin.Linear(lin.Code(blacks[b]->pixels, y, x, c), c);
         if (!(xa > 0 && xb > 0)) continue;
-        if (chosen) ratios.push_back(xb / xa);
+        if (take) ratios.push_back(xb / xa);
         if (in_a && in_b) own_ratios.push_back(xb / xa);
       }
-  // Too few for the 3 % judgement where the pair's own choice has more: that one (a third photo
-  // more than ~1.5 stops from the pair rarely sees a pixel well inside with both).
-  if (ratios.size() < kMinPairSamplesForPercent && own_ratios.size() > ratios.size()) ratios.swap(own_ratios);
+  // Times that contradict the photos make the third exposures' predictions miss, and they reject
+  // nearly every pixel: there the pair's own choice, for the 2x check.
+  if (ratios.size() < kMinPairSamples && own_ratios.size() >= kMinPairSamples) ratios.swap(own_ratios);
   p.samples = ratios.size();
   if (!ratios.empty()) {
     std::nth_element(ratios.begin(), ratios.begin() + long(ratios.size() / 2), ratios.end());
