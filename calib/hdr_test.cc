@@ -409,6 +409,13 @@ TEST(Hdr, MergeRefusesTimesThatContradictThePhotos) {
   EXPECT_NE(CalibErrorOf([&] { MergeHdr(MakeStack(eight, t), &curve); }).find("as bright as e4.png"), std::string::npos);
 }
 
+// The merge's time warning for `photos` labelled with `t`, one of whose times is off by `factor`.
+std::string WarningWithOneTimeScaled(const std::vector<cv::Mat>& photos, std::vector<double> t,
+                                     const ResponseCurve* curve, size_t index, double factor) {
+  t[index] *= factor;
+  return MergeHdr(MakeStack(photos, t), curve).time_warning;
+}
+
 // A dim 8-bit stack (the projector's black level on a sample): in the shorter photo of each pair
 // most values lie just above the window's floor, where they are partly because their noise is
 // positive. Chosen by those values, the ratio came out 3-4 % short of the times' and the merge
@@ -426,9 +433,7 @@ TEST(Hdr, DimStacksOnExactTimesDoNotWarn) {
   const auto photos = SyntheticRig::RenderExposureStack(dim, t, f, so);
   EXPECT_EQ(MergeHdr(MakeStack(photos, t), &curve).time_warning, "");
   // The pairs are judged: a time 5 % off is still found.
-  std::vector<double> off = t;
-  off[1] *= 1.05;
-  const std::string w = MergeHdr(MakeStack(photos, off), &curve).time_warning;
+  const std::string w = WarningWithOneTimeScaled(photos, t, &curve, 1, 1.05);
   EXPECT_EQ(w.find("synthetic: e1.png is "), 0u) << w;
 }
 
@@ -444,9 +449,7 @@ TEST(Hdr, StacksOneAndAHalfStopsApartAreJudgedAtThreePercent) {
   so.seed = 29;
   const auto photos = SyntheticRig::RenderExposureStack(TestScene(24), t, {}, so);
   EXPECT_EQ(MergeHdr(MakeStack(photos, t), nullptr).time_warning, "");
-  std::vector<double> off = t;
-  off[5] /= 1.05;
-  const std::string w = MergeHdr(MakeStack(photos, off), nullptr).time_warning;
+  const std::string w = WarningWithOneTimeScaled(photos, t, nullptr, 5, 1 / 1.05);
   EXPECT_EQ(w.find("synthetic: e5.png is "), 0u) << w;
 }
 
