@@ -24,10 +24,8 @@ VALUES(3, Q, q, readonly);
 
 #ifdef FIELDS4
 #define K 4
-#define DCOEF dvec4
 #else
 #define K 1
-#define DCOEF double
 #endif
 
 // Slot `slot` of component c's field, or false past the last field.
@@ -43,7 +41,7 @@ bool Slot(int c, int slot, out double v) {
 
 void main() {
   uint o = Field() * uint(n);
-  DCOEF coef = DCOEF(0.0LF);
+  double cs[K];
   for (int c = 0; c < K; ++c) {
     double v0, v1, on;
     double s = 0.0LF;
@@ -56,12 +54,13 @@ void main() {
         Slot(c, kCgRz, v1))
       s = v1 / v0;  // alpha
 #endif
-#ifdef FIELDS4
-    coef[c] = s;
-#else
-    coef = s;
-#endif
+    cs[c] = s;
   }
+#ifdef FIELDS4
+  dvec4 coef = dvec4(cs[0], cs[1], cs[2], cs[3]);
+#else
+  double coef = cs[0];
+#endif
 #if defined(ADD) && !defined(FIELDS4)
   if (coef == 0.0LF) return;
 #endif
@@ -70,9 +69,9 @@ void main() {
     ST(p, e, MG_LDV(z, e) + MG_VALUE(coef) * MG_LDV(p, e));
 #else
 #ifdef FIELDS4
-    dvec4 pe = dvec4(LD4(p, e));
+    vec4 pe = LD4(p, e);
     for (int c = 0; c < 4; ++c)
-      if (coef[c] != 0.0LF) STD(x, 4u * e + uint(c), LDD(x, 4u * e + uint(c)) + coef[c] * pe[c]);
+      if (cs[c] != 0.0LF) STD(x, 4u * e + uint(c), LDD(x, 4u * e + uint(c)) + cs[c] * double(pe[c]));
 #else
     STD(x, e, LDD(x, e) + coef * double(LD(p, e)));
 #endif

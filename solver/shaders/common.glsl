@@ -77,6 +77,12 @@ bool Column(int nx, int ny, int nz, int kz, out int i, out int j, out int k0, ou
 #define STD(a, e, v) a[e] = (v)
 #endif
 
+// Component c (0..3, not a constant) of a double vector. NVIDIA's compiler (driver 580) has no
+// variable index into double vectors ("can't find __setVectorIndex function in stdlib" at link
+// time), so shaders read them through DComp and build vectors from arrays (float ones too,
+// to be safe).
+double DComp(dvec4 v, int c) { return c == 0 ? v.x : c == 1 ? v.y : c == 2 ? v.z : v.w; }
+
 // FIELDS4 (the host's define for a batch, Tuning::pack_fields): the field values come four
 // fields to a vec4 per node, work-group z counting groups of four fields (field 4 g + c in
 // component c of group g; a buffer's group holds n vec4). The coefficients stay one float per

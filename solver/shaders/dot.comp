@@ -43,9 +43,9 @@ void Store(uint g, uint G, DSUM s0, DSUM s1) {
     if (f >= uint(fields)) return;
     uint at = (f * G + g) * W;
 #ifdef FIELDS4
-    STD(partial, at, s0[c]);
+    STD(partial, at, DComp(s0, c));
 #ifdef PAIR
-    STD(partial, at + 1u, s1[c]);
+    STD(partial, at + 1u, DComp(s1, c));
 #endif
 #else
     STD(partial, at, s0);

@@ -55,12 +55,12 @@ void main() {
       if (from >= 0) ST(per_field, from, v[c]);
     }
 #else
-    vec4 v = vec4(0.0);
+    float v[4];
     for (int c = 0; c < 4; ++c) {
       int from = Source(g, int(e), c);
-      if (from >= 0) v[c] = LD(per_field, from);
+      v[c] = from >= 0 ? LD(per_field, from) : 0.0;
     }
-    ST(grouped, at, v);
+    ST(grouped, at, vec4(v[0], v[1], v[2], v[3]));
 #endif
   }
 }

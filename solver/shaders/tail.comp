@@ -97,12 +97,12 @@ MG_VALUE LoadIn(int e, int n0) {
 #if defined(PACKED_IO) || !defined(FIELDS4)
   return MG_LDV(b_in, int(Field()) * n0 + e);
 #else
-  vec4 v = vec4(0.0);
+  float v[4];
   for (int c = 0; c < 4; ++c) {
     int f = 4 * int(Field()) + c;
-    if (f < fields) v[c] = LD(b_in, f * n0 + e);
+    v[c] = f < fields ? LD(b_in, f * n0 + e) : 0.0;
   }
-  return v;
+  return vec4(v[0], v[1], v[2], v[3]);
 #endif
 }
 void StoreOut(int e, int n0, MG_VALUE v) {
@@ -215,15 +215,18 @@ void CgIteration() {
   dvec4 s = dvec4(0.0LF);
   for (int e = lid; e < n0; e += group) s += dvec4(LD4(work, wp + e)) * dvec4(LD4(work, wq + e));
   dvec4 pq = GroupSum(s);
-  dvec4 alpha = dvec4(0.0LF);
-  for (int c = 0; c < 4; ++c)
-    if (Live(c) && LDD(scal, ScalAt(c, kCgActive)) != 0.0LF && pq[c] != 0.0LF)
-      alpha[c] = LDD(scal, ScalAt(c, kCgRz)) / pq[c];
+  double al[4];
+  for (int c = 0; c < 4; ++c) {
+    al[c] = 0.0LF;
+    if (Live(c) && LDD(scal, ScalAt(c, kCgActive)) != 0.0LF && DComp(pq, c) != 0.0LF)
+      al[c] = LDD(scal, ScalAt(c, kCgRz)) / DComp(pq, c);
+  }
+  dvec4 alpha = dvec4(al[0], al[1], al[2], al[3]);
   for (int e = lid; e < n0; e += group) {
     vec4 p = LD4(work, wp + e), r = LD4(r_f, o + e) - vec4(alpha) * LD4(work, wq + e);
     for (int c = 0; c < 4; ++c) {
       int at = 4 * (o + e) + c;
-      if (Live(c)) STD(xd, at, LDD(xd, at) + alpha[c] * double(p[c]));
+      if (Live(c)) STD(xd, at, LDD(xd, at) + al[c] * double(p[c]));
     }
     ST(r_f, o + e, r);
     ST(work, wb + e, r);
@@ -237,27 +240,28 @@ void CgIteration() {
   }
   rr = GroupSum(rr);
   rz = GroupSum(rz);
-  vec4 beta = vec4(0.0);
+  float be[4];
   for (int c = 0; c < 4; ++c) {
     double rz_old = Live(c) ? LDD(scal, ScalAt(c, kCgRz)) : 0.0LF;
-    if (rz_old != 0.0LF) beta[c] = float(rz[c] / rz_old);
+    be[c] = rz_old != 0.0LF ? float(DComp(rz, c) / rz_old) : 0.0;
   }
+  vec4 beta = vec4(be[0], be[1], be[2], be[3]);
   for (int e = lid; e < n0; e += group) ST(p_f, o + e, LD4(work, wz + e) + beta * LD4(work, wp + e));
   barrier();  // every invocation has read the scalars
   if (lid != 0) return;
   for (int c = 0; c < 4; ++c) {
     if (!Live(c)) continue;
     int f = 4 * int(Field()) + c;
-    STD(scal, ScalAt(c, kCgPq), pq[c]);
-    STD(scal, ScalAt(c, kCgRr), rr[c]);
-    STD(scal, ScalAt(c, kCgRzNew), rz[c]);
+    STD(scal, ScalAt(c, kCgPq), DComp(pq, c));
+    STD(scal, ScalAt(c, kCgRr), DComp(rr, c));
+    STD(scal, ScalAt(c, kCgRzNew), DComp(rz, c));
     if (LDD(scal, ScalAt(c, kCgActive)) != 0.0LF) {
       int it = int(LDD(scal, ScalAt(c, kCgIter)));
-      if (it < max_iterations) STD(hist, f * max_iterations + it, rr[c]);
+      if (it < max_iterations) STD(hist, f * max_iterations + it, DComp(rr, c));
       STD(scal, ScalAt(c, kCgIter), double(it + 1));
-      if (rr[c] <= LDD(scal, ScalAt(c, kCgTol2))) STD(scal, ScalAt(c, kCgActive), 0.0LF);
+      if (DComp(rr, c) <= LDD(scal, ScalAt(c, kCgTol2))) STD(scal, ScalAt(c, kCgActive), 0.0LF);
     }
-    STD(scal, ScalAt(c, kCgRz), rz[c]);
+    STD(scal, ScalAt(c, kCgRz), DComp(rz, c));
   }
 }
 #endif

@@ -35,11 +35,12 @@ void main() {
   for (uint e = ThreadIndex(); e < uint(nq); e += Stride()) {
     int r = Div(int(e), mg_qw), i = int(e) - r * mg_qw, k = Div(r, Y.n_fine);
     MgRow row = ProlongRow(r - k * Y.n_fine, k, X, Y, Z);
-    vec4 s = vec4(0.0);
+    float a[4];
     for (int c = 0; c < 4; ++c) {
       int x = c * mg_qw + i;
-      if (x < X.n_fine) s[c] = ProlongAt(x, row, X, 0);
+      a[c] = x < X.n_fine ? ProlongAt(x, row, X, 0) : 0.0;
     }
+    vec4 s = vec4(a[0], a[1], a[2], a[3]);
     ST(dst, int(e), add != 0 ? LD4(dst, int(e)) + s : s);
   }
 #elif defined(PROLONG)
