@@ -53,6 +53,9 @@ struct Tuning {
   // Single-field solves run the finest level in quarter rows (common.glsl's QUARTERS: four
   // nodes of a row per vec4). TRANSLUME_GL_QUARTERS=0|1 overrides it.
   bool quarters = false;
+  // The line smoother's nodes per block (multigrid.glsl's MG_LINE_BLOCK; 1: node by node).
+  // TRANSLUME_GL_LINE_BLOCK=N overrides it (1..16).
+  int line_block = 1;
 };
 const Tuning& GetTuning();
 

@@ -68,17 +68,18 @@ std::string SpliceInclude(const char* source, std::string* included) {
 }
 
 // Compiles and links one compute program from the Tuning's defines (TL_IMAGES,
-// TL_INVOCATION_SUMS, TL_GROUP unless `defines` sets its own), `defines`, common.glsl and the
-// file's text.
+// TL_INVOCATION_SUMS, MG_LINE_BLOCK, TL_GROUP unless `defines` sets its own), `defines`,
+// common.glsl and the file's text.
 GLuint CompileProgram(const gl::EmbeddedShader& common, const std::string& defines,
                       const std::string& file_name, const char* source) {
   GLuint shader = api.CreateShader(GL_COMPUTE_SHADER);
   std::string included;
   const std::string body = SpliceInclude(source, &included);
   const std::string text =
-      fmt::format("#version 430\n{}{}{}{}#line {}\n{}#line 1\n{}",
+      fmt::format("#version 430\n{}{}{}{}{}#line {}\n{}#line 1\n{}",
                   GetTuning().images ? "#define TL_IMAGES\n" : "",
                   GetTuning().invocation_sums ? "#define TL_INVOCATION_SUMS\n" : "",
+                  GetTuning().line_block > 1 ? fmt::format("#define MG_LINE_BLOCK {}\n", GetTuning().line_block) : std::string(),
                   defines.find("#define TL_GROUP ") == std::string::npos
                       ? fmt::format("#define TL_GROUP {}\n", GetTuning().group)
                       : "",
@@ -138,12 +139,16 @@ const Tuning& GetTuning() {
     t.tail_group = cpu ? 8 : 256;
     t.pack_fields = cpu ? 4 : 1;
     t.quarters = cpu;
+    // On a GPU a column's serial chain of loads is the smoother's cost (docs/gpu.md); on
+    // llvmpipe the invocations of a group run as SIMD lanes of one thread anyway.
+    t.line_block = cpu ? 1 : 4;
     if (const char* tail = std::getenv("TRANSLUME_GL_TAIL_NODES")) t.tail_nodes = std::atoll(tail);
     if (const char* g = std::getenv("TRANSLUME_GL_TAIL_GROUP")) t.tail_group = std::atoi(g);
     if (const char* g = std::getenv("TRANSLUME_GL_GROUP")) t.group = std::max(8, std::atoi(g));
     if (const char* g = std::getenv("TRANSLUME_GL_FLAT_GROUPS")) t.flat_groups = std::max(1, std::atoi(g));
     if (const char* f = std::getenv("TRANSLUME_GL_PACK_FIELDS")) t.pack_fields = std::atoi(f) == 4 ? 4 : 1;
     if (const char* q = std::getenv("TRANSLUME_GL_QUARTERS")) t.quarters = std::atoi(q) != 0;
+    if (const char* b = std::getenv("TRANSLUME_GL_LINE_BLOCK")) t.line_block = std::clamp(std::atoi(b), 1, 16);
     return t;
   }();
   return tuning;
@@ -154,10 +159,10 @@ const Tuning& GetTuning() {
 std::string GlShaderTuning() {
   const gl_internal::Tuning& t = gl_internal::GetTuning();
   return fmt::format("{} ({}, {}-invocation groups, {} field(s) per value in batches, single "
-                     "fields {}; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)",
+                     "fields {}, line smoother in blocks of {}; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)",
                      t.images ? "llvmpipe" : "gpu",
                      t.images ? "image buffers, z-column invocations" : "storage buffers, one node per invocation",
-                     t.group, t.pack_fields, t.quarters ? "in quarter rows" : "plain");
+                     t.group, t.pack_fields, t.quarters ? "in quarter rows" : "plain", t.line_block);
 }
 
 namespace gl_internal {
@@ -472,8 +477,13 @@ int64_t GlMultigridSolver::Impl::TailLoopIterations(size_t first) const {
   // A loop of tail.comp's group over `items` (its invocation's share, rounded up), each
   // iteration running inner loops of `inner` counted iterations.
   auto over = [&](int64_t items, int64_t inner) { return (items + g - 1) / g * (1 + inner) + 1; };
-  // HalfSweep: its columns, each SmoothLine's two loops of nz and nz - 1 nodes.
-  auto half_sweep = [&](const GridShape& s) { return over((s.nx + 1) / 2 * s.ny, 2 * s.nz + 1); };
+  // HalfSweep: its columns, each SmoothLine's two loops of nz and nz - 1 nodes (in blocks of
+  // B: a loop over the blocks, each two loops of B).
+  const int64_t B = GetTuning().line_block;
+  auto half_sweep = [&](const GridShape& s) {
+    if (B == 1) return over((s.nx + 1) / 2 * s.ny, 2 * s.nz + 1);
+    return over((s.nx + 1) / 2 * s.ny, ((s.nz + B - 1) / B + (s.nz - 1 + B - 1) / B) * (2 * B + 3) + 2);
+  };
   // StencilLevel: its columns of kz nodes (or its nodes), each ResidualColumn's loop.
   auto stencil = [&](const GridShape& s) {
     const int64_t kz = GetTuning().columns ? s.nz : 1;

@@ -38,24 +38,82 @@ bool SmoothColumn(int t, int nx, int ny, int color, out int i, out int j) {
 // neighbouring columns held fixed (the line factors inv, luc from factor.comp). b0 and x0: the
 // offsets of this field's level values in b and x. x holds d' between the two passes; the
 // value of the node below (forward) or above (backward) is carried in a register.
+//
+// MG_LINE_BLOCK (Tuning::line_block, default 1): with B > 1 each pass walks the column in
+// blocks of B nodes, first loading the block's values (none depends on the recurrence, so the
+// loads are in flight together), then running the recurrence over them in registers. A column
+// is a serial chain of nz nodes, and one invocation per column leaves a GPU mostly idle, so
+// one memory round trip per node made the smoother latency-bound (docs/gpu.md); blocks make it
+// one per B nodes. The same sums, except that the forward pass adds the node below last
+// (B = 1 adds it first).
+#ifndef MG_LINE_BLOCK
+#define MG_LINE_BLOCK 1
+#endif
+// d plus the terms of node p's x- and y-neighbours (q: p's offset in x), added in this order.
+MG_VALUE AddLineNeighbours(MgLevel L, int i, int j, int p, int q, MG_VALUE d) {
+  int nx = L.nx, ny = L.ny;
+  if (i > 0) d += LDC(mg_cx, L.cx + p - 1) * MG_LDV(mg_x, q - 1);
+#ifdef QUARTERS
+  else d += FromLeft(LDC(mg_cx, L.cx + p + nx - 1)) * FromLeft(MG_LDV(mg_x, q + nx - 1));
+#endif
+  if (i + 1 < nx) d += LDC(mg_cx, L.cx + p) * MG_LDV(mg_x, q + 1);
+#ifdef QUARTERS
+  else d += LDC(mg_cx, L.cx + p) * FromRight(MG_LDV(mg_x, q - (nx - 1)));
+#endif
+  if (j > 0) d += LDC(mg_cy, L.cy + p - nx) * MG_LDV(mg_x, q - nx);
+  if (j + 1 < ny) d += LDC(mg_cy, L.cy + p) * MG_LDV(mg_x, q + nx);
+  return d;
+}
+
 void SmoothLine(MgLevel L, int i, int j, int b0, int x0) {
-  int nx = L.nx, ny = L.ny, nz = L.nz, nxy = nx * ny;
+  int nx = L.nx, nz = L.nz, nxy = nx * L.ny;
   MG_VALUE below = MG_VALUE(0.0);
   MG_COEF cz_below = MG_COEF(0.0);
-  int p = i + nx * j;
+  int p0 = i + nx * j;
+#if MG_LINE_BLOCK > 1
+  const int B = MG_LINE_BLOCK;
+  for (int k0 = 0; k0 < nz; k0 += B) {
+    MG_VALUE d[B];
+    MG_COEF inv[B], cz[B];
+    for (int u = 0; u < B; ++u) {
+      int p = p0 + (k0 + u) * nxy;
+      if (k0 + u < nz) {
+        d[u] = AddLineNeighbours(L, i, j, p, x0 + p, MG_LDV(mg_b, b0 + p));
+        inv[u] = LDC(mg_inv, L.inv + p);
+        cz[u] = LDC(mg_cz, L.cz + p);
+      }
+    }
+    for (int u = 0; u < B; ++u) {
+      if (k0 + u < nz) {
+        below = (d[u] + cz_below * below) * inv[u];
+        ST(mg_x, x0 + p0 + (k0 + u) * nxy, below);
+        cz_below = cz[u];
+      }
+    }
+  }
+  MG_VALUE above = below;
+  for (int k0 = nz - 2; k0 >= 0; k0 -= B) {
+    MG_VALUE xv[B];
+    MG_COEF luc[B];
+    for (int u = 0; u < B; ++u) {
+      int p = p0 + (k0 - u) * nxy;
+      if (k0 - u >= 0) {
+        xv[u] = MG_LDV(mg_x, x0 + p);
+        luc[u] = LDC(mg_luc, L.luc + p);
+      }
+    }
+    for (int u = 0; u < B; ++u) {
+      if (k0 - u >= 0) {
+        above = xv[u] + luc[u] * above;
+        ST(mg_x, x0 + p0 + (k0 - u) * nxy, above);
+      }
+    }
+  }
+#else
+  int p = p0;
   for (int k = 0; k < nz; ++k, p += nxy) {
     int q = x0 + p;
-    MG_VALUE d = MG_LDV(mg_b, b0 + p) + cz_below * below;
-    if (i > 0) d += LDC(mg_cx, L.cx + p - 1) * MG_LDV(mg_x, q - 1);
-#ifdef QUARTERS
-    else d += FromLeft(LDC(mg_cx, L.cx + p + nx - 1)) * FromLeft(MG_LDV(mg_x, q + nx - 1));
-#endif
-    if (i + 1 < nx) d += LDC(mg_cx, L.cx + p) * MG_LDV(mg_x, q + 1);
-#ifdef QUARTERS
-    else d += LDC(mg_cx, L.cx + p) * FromRight(MG_LDV(mg_x, q - (nx - 1)));
-#endif
-    if (j > 0) d += LDC(mg_cy, L.cy + p - nx) * MG_LDV(mg_x, q - nx);
-    if (j + 1 < ny) d += LDC(mg_cy, L.cy + p) * MG_LDV(mg_x, q + nx);
+    MG_VALUE d = AddLineNeighbours(L, i, j, p, q, MG_LDV(mg_b, b0 + p) + cz_below * below);
     below = d * LDC(mg_inv, L.inv + p);
     ST(mg_x, q, below);
     cz_below = LDC(mg_cz, L.cz + p);
@@ -66,6 +124,7 @@ void SmoothLine(MgLevel L, int i, int j, int b0, int x0) {
     above = MG_LDV(mg_x, x0 + p) + LDC(mg_luc, L.luc + p) * above;
     ST(mg_x, x0 + p, above);
   }
+#endif
 }
 #endif
 
