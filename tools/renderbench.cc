@@ -34,12 +34,16 @@ int main(int argc, char** argv) {
                "coherence, for each shape and resolution.", "translume-renderbench"};
   std::vector<std::string> shapes = {"sphere", "torus"};
   std::vector<int> resolutions = {9, 17};
-  std::string backend = "gl", iterations = "60,30,30";
+  std::string backend = "gl";
+  std::vector<int> iterations = {60, 30, 30};
   int frames = 10, size = 256, coherent_iterations = 20;
   bool skip_coherent = false;
   app.add_option("--shapes", shapes, "Built-in shapes")->delimiter(',');
   app.add_option("--resolutions", resolutions, "Nodes per cube edge")->delimiter(',');
   app.add_option("--backend", backend, "cpu or gl")->capture_default_str();
+  app.add_option("--iterations", iterations, "Relaxation steps per level, coarsest first")
+      ->delimiter(',')
+      ->capture_default_str();
   app.add_option("--frames", frames, "Timed frames per configuration")->capture_default_str();
   app.add_option("--image", size, "Square image size")->capture_default_str();
   app.add_option("--coherent-iterations", coherent_iterations, "Finest-level steps per coherent frame")
@@ -53,7 +57,8 @@ int main(int argc, char** argv) {
   try {
     DiffusionOptions d;
     d.backend = ParseDiffusionBackend(backend);
-    d.iterations = {60, 30, 30};
+    d.iterations = iterations;
+    if (const std::string err = d.Validate(); !err.empty()) throw InputError("--iterations: " + err);
     d.coherent_iterations = coherent_iterations;
     if (d.backend == DiffusionBackend::kGl) std::printf("%s\n", GlContext::Get().info().ToString().c_str());
     // Medians over the timed frames: t1 incident light, t2 diffusion, t3 shading (ms); fps =
