@@ -70,7 +70,10 @@ RecoveryBenchRow RunCase(const Case& c, const RecoveryBenchOptions& o, const Rec
   r.optimizer = OptimizerName(ro.optimizer);
   r.backend = ro.backend;
   r.termination = TerminationName(s.termination);
-  r.message = s.message;
+  // A bench stops a recovery only at its time cap (stop_after above).
+  r.message = s.termination == RecoveryTermination::kStopped && o.max_seconds > 0
+                  ? fmt::format("reached the --max-seconds cap of {:g} s", o.max_seconds)
+                  : s.message;
   r.seconds = s.seconds;
   r.homogeneous_seconds = s.homogeneous_seconds;
   r.simulate_seconds = c.simulate_seconds;

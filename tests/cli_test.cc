@@ -232,6 +232,7 @@ TEST_F(Cli, SimulateSolveEvaluateAndResume) {
   r = Translume("solve " + P("ds/dataset.json") + " -o " + P("rec.vdb") + " --max-iterations 10 --optimizer paper --checkpoint " + P("ck.bin"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("resuming"), std::string::npos) << r.output;
+  EXPECT_LT(r.output.find("solve: "), r.output.find("resuming")) << "the header first: " << r.output;
   EXPECT_NE(r.output.find("iter    9"), std::string::npos) << r.output;
   EXPECT_EQ(r.output.find("iter    1 "), std::string::npos) << r.output;
   r = Translume("evaluate " + P("rec.vdb") + " --truth " + P("m.vdb") + " --dataset " + P("ds") + " --json");
@@ -472,6 +473,7 @@ TEST_F(Cli, BenchRecoveryOneCaseWithTimeLimit) {
   EXPECT_EQ(c["backend"], "cpu");
   EXPECT_EQ(c["iterations"].get<int>(), 1);
   EXPECT_EQ(c["termination"], "stopped");
+  EXPECT_EQ(c["message"], "reached the --max-seconds cap of 1e-06 s");
   EXPECT_GT(c["seconds_per_iteration"].get<double>(), 0);
   ExpectOneLineError(Translume("bench recovery --setups side"), "side");
   ExpectOneLineError(Translume("bench recovery --backend gl,metal"), "metal");

@@ -196,19 +196,20 @@ int RunSolve(int argc, char** argv) {
                     fmt::format("a recovery on the {} grid with {} conditions", d.shape.ToString(),
                                 d.conditions.size()));
   RecoveryState state;
+  std::string resuming;
   if (!checkpoint.empty() && fs::exists(checkpoint)) {
     state = ReadCheckpoint(checkpoint, d);
-    std::printf("resuming from %s at iteration %d (%lld solves, %s)%s\n", checkpoint.c_str(),
-                state.iteration, (long long)state.solves, FormatSeconds(state.seconds).c_str(),
-                init.empty() ? "" : "; --init is not used when resuming");
+    resuming = fmt::format("resuming from {} at iteration {} ({} solves, {}){}\n", checkpoint,
+                           state.iteration, state.solves, FormatSeconds(state.seconds),
+                           init.empty() ? "" : "; --init is not used when resuming");
   } else if (!init.empty()) {
     state = StateFromMaterial(d, ReadMaterial(init));
   }
   std::printf("solve: %s, grid %s, %zu conditions, %s-lit, optimizer %s, lambda %g (%s%s), "
-              "%d threads\n", dataset_path.c_str(), d.shape.ToString().c_str(),
+              "%d threads\n%s", dataset_path.c_str(), d.shape.ToString().c_str(),
               d.conditions.size(), SetupName(d.setup), optimizer.c_str(), o.lambda,
               regularizer.c_str(), o.regularize_mu ? " on kappa and mu" : " on kappa",
-              NumThreads());
+              NumThreads(), resuming.c_str());
   if (state.x.empty()) std::printf("homogeneous fit first (6 unknowns)...\n");
   std::fflush(stdout);
   const bool tty = isatty(fileno(stdout));
