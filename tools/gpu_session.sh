@@ -1,20 +1,23 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: MIT
-# The prepared GPU session (docs/gpu.md, "Next GPU session"): every GPU measurement the issues
+# The prepared GPU session (docs/gpu.md, "GPU sessions"): every GPU measurement the issues
 # still lack, in one command, from the bundle that tools/gpu_bundle.sh writes (default
 # gpu-bundle/: translume-gpubench and translume-renderbench). Run from the repository root on
 # the GPU machine:
 #
-#   bash tools/gpu_session.sh [--quick] [--bundle DIR] [--budget SECONDS]
+#   bash tools/gpu_session.sh [--quick] [--full-recoveries] [--bundle DIR] [--budget SECONDS]
 #
 # Steps, each under its own `timeout` (one hang cannot eat the session) and all within
 # --budget seconds (default 480; a step gets at most what is left, a step with under 20 s left
-# is skipped): nvidia-smi, gl-info, the full RGB recovery with 16 conditions on the Wax I grid
-# on the gl backend, the renderbench on the 253-cube bunny (16^3 nodes and 16^3 cells per cube,
-# no frame coherence), the same recovery on the Marble grid, bench forward --backend gl on Wax
-# I, Marble and 129^3 with a batch of 16 (the cpu solver as the peer), the cpu backend as
-# the recovery's peer on Wax I (time-capped: its seconds per iteration is the comparison), and
-# the Wax I and Marble batches again with four fields per value (TRANSLUME_GL_PACK_FIELDS=4).
+# is skipped): nvidia-smi, gl-info, bench forward --backend gl on Wax I, Marble and 129^3 with
+# a batch of 16 (the cpu solver as the peer), the same batches (no peer) under other shader
+# tunings side by side (line smoother blocks of 1, 4 and 16 nodes against the default 8; coarse
+# tails from 8192 and 40000 nodes against 4096; four fields per value), the renderbench on the
+# 253-cube bunny (16^3 and 17^3 nodes per cube, no frame coherence), and the RGB recoveries with
+# 16 conditions on the Wax I and Marble grids on the gl backend, time-capped (their seconds
+# per iteration give the time of the bench's full 300 iterations). With --full-recoveries the
+# recoveries run to 300 iterations (or convergence) and the cpu backend's recovery on Wax I
+# (time-capped) runs as their peer.
 #
 # Output: "$OUT" (the device tool's output folder; default ./gpu-session): session.log (every
 # step's full output, in order), summary.md (the figures for docs/benchmarks.md, also printed
@@ -25,14 +28,16 @@ set -uo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 bundle=$root/gpu-bundle
 quick=0
+full=0
 budget=480
 while [ $# -gt 0 ]; do
   case "$1" in
     --quick) quick=1 ;;
+    --full-recoveries) full=1 ;;
     --bundle) bundle=$2; shift ;;
     --budget) budget=$2; shift ;;
-    -h|--help) sed -n '3,23p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
-    *) echo "gpu_session.sh: unknown argument '$1' (--quick, --bundle DIR, --budget SECONDS)" >&2; exit 2 ;;
+    -h|--help) sed -n '3,28p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "gpu_session.sh: unknown argument '$1' (--quick, --full-recoveries, --bundle DIR, --budget SECONDS)" >&2; exit 2 ;;
   esac
   shift
 done
@@ -103,19 +108,28 @@ if [ $quick = 1 ]; then
   wax=(--grid 12x10x5 --max-iterations 3 --max-seconds 60)
   marble=(--grid 16x16x4 --max-iterations 3 --max-seconds 60)
   peer=(--grid 12x10x5 --max-iterations 3 --max-seconds 30)
+  limits=(30 30 30 30)
 else
   grids=130x53x37,256x256x20,129x129x129; pack_grids=130x53x37,256x256x20; repeats=7; batch=16
   render_args=(--shapes bunny --resolutions 16,17 --frames 20 --skip-coherent)
-  # A full recovery: the bench's default 300 L-BFGS iterations (or convergence), with a time
-  # cap for the session (docs/gpu.md, "Next GPU session": the estimate).
-  wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 90)
-  marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 150)
-  peer=(--grid 130x53x37 --max-iterations 300 --max-seconds 30)
+  if [ $full = 1 ]; then
+    # A full recovery: the bench's default 300 L-BFGS iterations (or convergence), with a time
+    # cap for the session.
+    wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 90)
+    marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 240)
+    limits=(150 300 60)
+  else
+    # Time-capped: their seconds per iteration (docs/gpu.md, "GPU sessions").
+    wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 40)
+    marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 30)
+    limits=(70 75 0)
+  fi
+  peer=(--grid 130x53x37 --max-iterations 300 --max-seconds 20)
 fi
-# The data and the evaluation on the host's cpu (~5 s for Wax I and ~40 s for Marble on 16
-# cores, estimated from 2-core runs): with data simulated on gl, a gl recovery of wax on
-# 65x27x19 stopped after the homogeneous fit (zero step; docs/gpu.md, "Next GPU session").
-one_case=(--setups back --noises 0 --no-comparison --data-backend cpu)
+# The data simulated on the GPU too (Wax I ~3 s, Marble ~18 s on the H200; on the host's 16
+# cores the cpu took 23 s and 133 s), the held-out evaluation on the recovery's backend.
+one_case=(--setups back --noises 0 --no-comparison --data-backend gl)
+batches=(bench forward --backend gl --grids "$pack_grids" --repeats "$repeats" --batch "$batch" --no-peers)
 
 {
   echo "# GPU session $(date -u '+%Y-%m-%d %H:%M UTC')$([ $quick = 1 ] && echo ' (--quick)')"
@@ -131,27 +145,27 @@ else
   printf '\n### nvidia-smi\n\nnot found\n' >>"$summary"
 fi
 step "gl-info" 60 "$run" gl-info
-# The never-measured targets first (issue 5's recoveries, issue 7's bunny), so that an overrun
-# late in the session costs only the re-measurements.
-step "recovery Wax I (wax, gl)" 150 \
-  "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${wax[@]}"
+step "bench forward (gl, batch ${batch})" 90 \
+  "$run" bench forward --backend gl --grids "$grids" --repeats "$repeats" --batch "$batch"
+# The shader tunings side by side (gl_internal.h's Tuning; each an environment override).
+for variant in TRANSLUME_GL_LINE_BLOCK=1 TRANSLUME_GL_LINE_BLOCK=4 TRANSLUME_GL_LINE_BLOCK=16 \
+               TRANSLUME_GL_TAIL_NODES=8192 TRANSLUME_GL_TAIL_NODES=40000 TRANSLUME_GL_PACK_FIELDS=4; do
+  step "bench forward (gl, batch ${batch}, ${variant})" 40 env "$variant" "$run" "${batches[@]}"
+done
 if [ ${#render[@]} -gt 0 ]; then
-  step "renderbench (bunny)" 120 "${render[@]}" "${render_args[@]}"
+  step "renderbench (bunny)" 60 "${render[@]}" "${render_args[@]}"
 else
   say "== renderbench: no translume-renderbench in $bundle or render-bundle/"
   failed=1
 fi
-step "recovery Marble (marble, gl)" 210 \
+step "recovery Wax I (wax, gl)" "${limits[0]}" \
+  "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${wax[@]}"
+step "recovery Marble (marble, gl)" "${limits[1]}" \
   "$run" bench recovery --presets marble "${one_case[@]}" --backend gl "${marble[@]}"
-step "bench forward (gl, batch ${batch})" 90 \
-  "$run" bench forward --backend gl --grids "$grids" --repeats "$repeats" --batch "$batch"
-step "recovery Wax I (wax, cpu peer, time-capped)" 60 \
-  "$run" bench recovery --presets wax "${one_case[@]}" --backend cpu "${peer[@]}"
-# Last, as it only informs a tuning choice: four fields per value (llvmpipe's layout for
-# batches, docs/gpu.md) on the GPU, against the batch figures of the bench forward step above.
-step "bench forward (gl, batch ${batch}, four fields per value)" 60 \
-  env TRANSLUME_GL_PACK_FIELDS=4 "$run" bench forward --backend gl --grids "$pack_grids" --repeats "$repeats" \
-  --batch "$batch" --no-peers
+if [ "${limits[2]}" -gt 0 ]; then
+  step "recovery Wax I (wax, cpu peer, time-capped)" "${limits[2]}" \
+    "$run" bench recovery --presets wax "${one_case[@]}" --backend cpu "${peer[@]}"
+fi
 
 total=$(( $(date +%s) - start ))
 printf '\nsession: %d s of the %d s budget%s\n' "$total" "$budget" \
