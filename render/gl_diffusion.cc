@@ -90,6 +90,7 @@ void Dispatch(std::initializer_list<const Ssbo*> buffers, int64_t threads) {
   for (const Ssbo* s : buffers) api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, b++, s->id);
   const int64_t groups = (threads + 255) / 256;
   const int64_t gx = std::min<int64_t>(groups, 65535), gy = (groups + gx - 1) / gx;
+  if (profile.on) api.Finish();  // earlier work (uploads, other passes) is not this dispatch's
   const auto t0 = std::chrono::steady_clock::now();
   api.DispatchCompute(GLuint(gx), GLuint(gy), 1);
   if (profile.on) {

@@ -240,6 +240,7 @@ int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
   for (int v : ints) api.Uniform1i(loc++, v);
   if (float_location >= 0) api.Uniform1f(float_location, float_value);
   const auto [gx, gy] = Tiling(threads);
+  if (profile.on) api.Finish();  // earlier work (uploads, copies) is not this dispatch's
   const auto t0 = profile.on ? std::chrono::steady_clock::now() : std::chrono::steady_clock::time_point{};
   api.DispatchCompute(GLuint(gx), GLuint(gy), GLuint(fields));
   ++dispatch_count;

@@ -5,42 +5,47 @@
 # gpu-bundle/: translume-gpubench and translume-renderbench). Run from the repository root on
 # the GPU machine:
 #
-#   bash tools/gpu_session.sh [--quick] [--full-recoveries] [--bundle DIR] [--budget SECONDS]
+#   bash tools/gpu_session.sh [--quick] [--long-recoveries] [--bundle DIR] [--budget SECONDS]
 #
-# Steps, each under its own `timeout` (one hang cannot eat the session) and all within
-# --budget seconds (default 480; a step gets at most what is left, a step with under 20 s left
-# is skipped): nvidia-smi, gl-info, bench forward --backend gl on Wax I, Marble and 129^3 with
-# a batch of 16 (the cpu solver as the peer), the same batches (no peer) under other shader
-# tunings side by side (line smoother blocks of 1, 4 and 16 nodes against the default 8; coarse
-# tails from 8192 and 40000 nodes against 4096; four fields per value), the renderbench on the
-# 253-cube bunny (16^3 and 17^3 nodes per cube, no frame coherence), and the RGB recoveries with
-# 16 conditions on the Wax I and Marble grids on the gl backend, time-capped (their seconds
-# per iteration give the time of the bench's full 300 iterations). With --full-recoveries the
-# recoveries run to 300 iterations (or convergence) and the cpu backend's recovery on Wax I
-# (time-capped) runs as their peer.
+# Steps, in this order, each under its own `timeout` (one hang cannot eat the session) and all
+# within --budget seconds (default 230, 560 with --long-recoveries; a step gets at most what is
+# left, a step with under 20 s left is skipped): nvidia-smi, gl-info, bench forward --backend gl
+# on Wax I, Marble and 129^3 with a batch of 16 (the cpu solver as the peer), the renderbench on
+# the 253-cube bunny (16^3 and 17^3 nodes per cube, no frame coherence), the RGB recoveries
+# with 16 conditions on the Wax I and Marble grids on the gl backend, time-capped at 40 s and
+# 30 s (their seconds per iteration give the time of the bench's full 300 iterations), and
+# last the Wax I and Marble batches (no peer) under other shader tunings side by side: line
+# smoother blocks of 1, 8 and 16 nodes against the default 4, coarse tails from 8192 and 40000
+# nodes against 4096, four fields per value.
+#
+# --long-recoveries: no tuning steps; Wax I runs its 300 iterations (cap 120 s, ~100 s on the
+# H200), Marble 300 s (~170 of its 300 iterations: 300 take ~520 s, more than one device call
+# holds), and the cpu backend's recovery on Wax I (20 s) runs as their peer.
 #
 # Output: "$OUT" (the device tool's output folder; default ./gpu-session): session.log (every
 # step's full output, in order), summary.md (the figures for docs/benchmarks.md, also printed
 # at the end): two files, well within what the device tool brings back (8).
 #
-# --quick runs the same steps on tiny sizes (a dry run here, on Mesa llvmpipe: 10-20 s).
+# --quick runs every step (the cpu peer too) on tiny sizes: a dry run here, on Mesa llvmpipe,
+# about a minute (the unrolled line blocks compile slowly there).
 set -uo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 bundle=$root/gpu-bundle
 quick=0
-full=0
-budget=480
+long=0
+budget=
 while [ $# -gt 0 ]; do
   case "$1" in
     --quick) quick=1 ;;
-    --full-recoveries) full=1 ;;
+    --long-recoveries) long=1 ;;
     --bundle) bundle=$2; shift ;;
     --budget) budget=$2; shift ;;
-    -h|--help) sed -n '3,28p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
-    *) echo "gpu_session.sh: unknown argument '$1' (--quick, --full-recoveries, --bundle DIR, --budget SECONDS)" >&2; exit 2 ;;
+    -h|--help) sed -n '3,30p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "gpu_session.sh: unknown argument '$1' (--quick, --long-recoveries, --bundle DIR, --budget SECONDS)" >&2; exit 2 ;;
   esac
   shift
 done
+[ -n "$budget" ] || budget=$([ $long = 1 ] && echo 560 || echo 230)
 out=${OUT:-$root/gpu-session}
 mkdir -p "$out"
 log=$out/session.log
@@ -102,29 +107,28 @@ step() {
 }
 
 if [ $quick = 1 ]; then
-  # One small grid: llvmpipe spends ~40 s per grid timing the 256 MiB copy kernel.
   grids=17x13x9; pack_grids=$grids; repeats=1; batch=4
   render_args=(--shapes bunny --resolutions 3,4 --frames 2 --image 64 --skip-coherent)
   wax=(--grid 12x10x5 --max-iterations 3 --max-seconds 60)
   marble=(--grid 16x16x4 --max-iterations 3 --max-seconds 60)
   peer=(--grid 12x10x5 --max-iterations 3 --max-seconds 30)
-  limits=(30 30 30 30)
+  limits=(30 30 30)
+  tunings=1
 else
   grids=130x53x37,256x256x20,129x129x129; pack_grids=130x53x37,256x256x20; repeats=7; batch=16
   render_args=(--shapes bunny --resolutions 16,17 --frames 20 --skip-coherent)
-  if [ $full = 1 ]; then
-    # A full recovery: the bench's default 300 L-BFGS iterations (or convergence), with a time
-    # cap for the session.
-    wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 90)
-    marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 240)
-    limits=(150 300 60)
+  peer=(--grid 130x53x37 --max-iterations 300 --max-seconds 20)
+  if [ $long = 1 ]; then
+    wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 120)
+    marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 300)
+    limits=(150 345 45)
+    tunings=0
   else
-    # Time-capped: their seconds per iteration (docs/gpu.md, "GPU sessions").
     wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 40)
     marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 30)
     limits=(70 75 0)
+    tunings=1
   fi
-  peer=(--grid 130x53x37 --max-iterations 300 --max-seconds 20)
 fi
 # The data simulated on the GPU too (Wax I ~3 s, Marble ~18 s on the H200; on the host's 16
 # cores the cpu took 23 s and 133 s), the held-out evaluation on the recovery's backend.
@@ -147,11 +151,6 @@ fi
 step "gl-info" 60 "$run" gl-info
 step "bench forward (gl, batch ${batch})" 90 \
   "$run" bench forward --backend gl --grids "$grids" --repeats "$repeats" --batch "$batch"
-# The shader tunings side by side (gl_internal.h's Tuning; each an environment override).
-for variant in TRANSLUME_GL_LINE_BLOCK=1 TRANSLUME_GL_LINE_BLOCK=4 TRANSLUME_GL_LINE_BLOCK=16 \
-               TRANSLUME_GL_TAIL_NODES=8192 TRANSLUME_GL_TAIL_NODES=40000 TRANSLUME_GL_PACK_FIELDS=4; do
-  step "bench forward (gl, batch ${batch}, ${variant})" 40 env "$variant" "$run" "${batches[@]}"
-done
 if [ ${#render[@]} -gt 0 ]; then
   step "renderbench (bunny)" 60 "${render[@]}" "${render_args[@]}"
 else
@@ -165,6 +164,13 @@ step "recovery Marble (marble, gl)" "${limits[1]}" \
 if [ "${limits[2]}" -gt 0 ]; then
   step "recovery Wax I (wax, cpu peer, time-capped)" "${limits[2]}" \
     "$run" bench recovery --presets wax "${one_case[@]}" --backend cpu "${peer[@]}"
+fi
+# The shader tunings side by side (gl_internal.h's Tuning; each an environment override).
+if [ $tunings = 1 ]; then
+  for variant in TRANSLUME_GL_LINE_BLOCK=1 TRANSLUME_GL_LINE_BLOCK=8 TRANSLUME_GL_LINE_BLOCK=16 \
+                 TRANSLUME_GL_TAIL_NODES=8192 TRANSLUME_GL_TAIL_NODES=40000 TRANSLUME_GL_PACK_FIELDS=4; do
+    step "bench forward (gl, batch ${batch}, ${variant})" 40 env "$variant" "$run" "${batches[@]}"
+  done
 fi
 
 total=$(( $(date +%s) - start ))

@@ -71,11 +71,11 @@ void SmoothLine(MgLevel L, int i, int j, int b0, int x0) {
   MG_COEF cz_below = MG_COEF(0.0);
   int p0 = i + nx * j;
 #if MG_LINE_BLOCK > 1
-  const int B = MG_LINE_BLOCK;
-  for (int k0 = 0; k0 < nz; k0 += B) {
-    MG_VALUE d[B];
-    MG_COEF inv[B], cz[B];
-    for (int u = 0; u < B; ++u) {
+  const int kBlock = MG_LINE_BLOCK;
+  for (int k0 = 0; k0 < nz; k0 += kBlock) {
+    MG_VALUE d[kBlock];
+    MG_COEF inv[kBlock], cz[kBlock];
+    for (int u = 0; u < kBlock; ++u) {
       int p = p0 + (k0 + u) * nxy;
       if (k0 + u < nz) {
         d[u] = AddLineNeighbours(L, i, j, p, x0 + p, MG_LDV(mg_b, b0 + p));
@@ -83,7 +83,7 @@ void SmoothLine(MgLevel L, int i, int j, int b0, int x0) {
         cz[u] = LDC(mg_cz, L.cz + p);
       }
     }
-    for (int u = 0; u < B; ++u) {
+    for (int u = 0; u < kBlock; ++u) {
       if (k0 + u < nz) {
         below = (d[u] + cz_below * below) * inv[u];
         ST(mg_x, x0 + p0 + (k0 + u) * nxy, below);
@@ -92,17 +92,17 @@ void SmoothLine(MgLevel L, int i, int j, int b0, int x0) {
     }
   }
   MG_VALUE above = below;
-  for (int k0 = nz - 2; k0 >= 0; k0 -= B) {
-    MG_VALUE xv[B];
-    MG_COEF luc[B];
-    for (int u = 0; u < B; ++u) {
+  for (int k0 = nz - 2; k0 >= 0; k0 -= kBlock) {
+    MG_VALUE xv[kBlock];
+    MG_COEF luc[kBlock];
+    for (int u = 0; u < kBlock; ++u) {
       int p = p0 + (k0 - u) * nxy;
       if (k0 - u >= 0) {
         xv[u] = MG_LDV(mg_x, x0 + p);
         luc[u] = LDC(mg_luc, L.luc + p);
       }
     }
-    for (int u = 0; u < B; ++u) {
+    for (int u = 0; u < kBlock; ++u) {
       if (k0 - u >= 0) {
         above = xv[u] + luc[u] * above;
         ST(mg_x, x0 + p0 + (k0 - u) * nxy, above);
