@@ -286,11 +286,15 @@ TEST_F(Cli, InverseCommandsRejectBadArguments) {
 }
 
 // Errors name the flag as the user typed it, not an options struct's field, and a misspelt
-// flag is named even where a required one is then missing; evaluate says why a row is empty.
+// flag or a stray word is named even where a required one is then missing; evaluate says why a
+// row is empty.
 TEST_F(Cli, ErrorsNameTheFlagsAndEmptyRowsSayWhy) {
   ASSERT_EQ(Translume("synth --preset wax --grid 8x6x4 -o " + P("m.vdb")).status, 0);
   ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + P("ds")).status, 0);
   ExpectOneLineError(Translume("synth --presets wax -o " + P("a.vdb")), "The following arguments were not expected: --presets wax");
+  // A bare word where the one missing required option's value would go: that option is named.
+  ExpectOneLineError(Translume("synth wax -o " + P("a.vdb")),
+                     "The following argument was not expected: wax; did you mean --preset wax?");
   ExpectOneLineError(Translume("solve " + P("ds") + " --max-iterations -5 -o " + P("r.vdb")), "--max-iterations: must be");
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --oversample 9 -o " + P("d2")), "--oversample: must be in [1, 8]");
   ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " --exposures 1 -o " + P("c2")), "--exposures: must be in [2, 16]");

@@ -154,9 +154,16 @@ bool ParseOrHelp(CLI::App& app, int argc, char** argv) {
     // CLI11 checks required options before unknown ones: "synth --presets wax" said only that
     // --preset is required. The arguments it did not take (known by then) are the message.
     std::vector<std::string> extras = app.remaining();
+    if (extras.empty()) throw;
     std::reverse(extras.begin(), extras.end());  // ExtrasError lists them last first
-    if (!extras.empty()) throw CLI::ExtrasError(extras);
-    throw;
+    std::string message = CLI::ExtrasError(extras).what();
+    // One bare word where one required option is missing ("synth wax"): most likely its value.
+    std::vector<const CLI::Option*> missing;
+    for (const CLI::Option* opt : app.get_options())
+      if (opt->get_required() && opt->count() == 0 && !opt->get_lnames().empty()) missing.push_back(opt);
+    if (missing.size() == 1 && extras.size() == 1 && extras[0].rfind('-', 0) != 0)
+      message += fmt::format("; did you mean --{} {}?", missing[0]->get_lnames()[0], extras[0]);
+    throw CLI::ExtrasError(message, CLI::ExitCodes::ExtrasError);
   }
   return false;
 }
