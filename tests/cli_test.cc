@@ -295,6 +295,8 @@ TEST_F(Cli, ErrorsNameTheFlagsAndEmptyRowsSayWhy) {
   // A bare word where the one missing required option's value would go: that option is named.
   ExpectOneLineError(Translume("synth wax -o " + P("a.vdb")),
                      "The following argument was not expected: wax; did you mean --preset wax?");
+  ExpectOneLineError(Translume("synth --preset wax -o " + P("a.vdb") + " foo bar"),
+                     "The following arguments were not expected: foo bar");
   ExpectOneLineError(Translume("solve " + P("ds") + " --max-iterations -5 -o " + P("r.vdb")), "--max-iterations: must be");
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --oversample 9 -o " + P("d2")), "--oversample: must be in [1, 8]");
   ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " --exposures 1 -o " + P("c2")), "--exposures: must be in [2, 16]");

@@ -145,24 +145,34 @@ void RequireFinitePixels(const Image& image, const std::string& what) {
 }
 
 bool ParseOrHelp(CLI::App& app, int argc, char** argv) {
+  // The arguments the parse did not take, in the order ExtrasError wants them: it lists them
+  // last first (its own lists came out reversed: "synth --preset wax foo bar" said "bar foo").
+  auto extras = [&app] {
+    std::vector<std::string> v = app.remaining();
+    std::reverse(v.begin(), v.end());
+    return v;
+  };
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp&) {
     std::fputs(app.help().c_str(), stdout);
     return true;
+  } catch (const CLI::ExtrasError&) {
+    const std::vector<std::string> v = extras();
+    if (v.empty()) throw;
+    throw CLI::ExtrasError(v);
   } catch (const CLI::RequiredError&) {
     // CLI11 checks required options before unknown ones: "synth --presets wax" said only that
     // --preset is required. The arguments it did not take (known by then) are the message.
-    std::vector<std::string> extras = app.remaining();
-    if (extras.empty()) throw;
-    std::reverse(extras.begin(), extras.end());  // ExtrasError lists them last first
-    std::string message = CLI::ExtrasError(extras).what();
+    const std::vector<std::string> v = extras();
+    if (v.empty()) throw;
+    std::string message = CLI::ExtrasError(v).what();
     // One bare word where one required option is missing ("synth wax"): most likely its value.
     std::vector<const CLI::Option*> missing;
     for (const CLI::Option* opt : app.get_options())
       if (opt->get_required() && opt->count() == 0 && !opt->get_lnames().empty()) missing.push_back(opt);
-    if (missing.size() == 1 && extras.size() == 1 && extras[0].rfind('-', 0) != 0)
-      message += fmt::format("; did you mean --{} {}?", missing[0]->get_lnames()[0], extras[0]);
+    if (missing.size() == 1 && v.size() == 1 && v[0].rfind('-', 0) != 0)
+      message += fmt::format("; did you mean --{} {}?", missing[0]->get_lnames()[0], v[0]);
     throw CLI::ExtrasError(message, CLI::ExitCodes::ExtrasError);
   }
   return false;
