@@ -16,7 +16,7 @@
 # 30 s (their seconds per iteration give the time of the bench's full 300 iterations), and
 # last the Wax I and Marble batches (no peer) under other shader tunings side by side: line
 # smoother blocks of 1, 8 and 16 nodes against the default 4, coarse tails from 8192 and 40000
-# nodes against 4096, four fields per value.
+# nodes against 4096, four fields per value; then the renderbench again.
 #
 # --long-recoveries: no tuning steps; Wax I runs its 300 iterations (cap 120 s, ~100 s on the
 # H200), Marble 300 s (~170 of its 300 iterations: 300 take ~520 s, more than one device call
@@ -171,6 +171,12 @@ if [ $tunings = 1 ]; then
                  TRANSLUME_GL_TAIL_NODES=8192 TRANSLUME_GL_TAIL_NODES=40000 TRANSLUME_GL_PACK_FIELDS=4; do
     step "bench forward (gl, batch ${batch}, ${variant})" 40 env "$variant" "$run" "${batches[@]}"
   done
+fi
+# The bunny again: its diffusion time differed 2.5x between the 2026-11-30 calls; a second
+# measurement in the same call (and each run's t2 range) tells drift within a session from
+# differences between machines.
+if [ ${#render[@]} -gt 0 ]; then
+  step "renderbench (bunny, again)" 60 "${render[@]}" "${render_args[@]}"
 fi
 
 total=$(( $(date +%s) - start ))

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cstdio>
 #include <exception>
+#include <fmt/format.h>
 #include <string>
 #include <vector>
 
@@ -63,9 +64,11 @@ int main(int argc, char** argv) {
     if (d.backend == DiffusionBackend::kGl) std::printf("%s\n", GlContext::Get().info().ToString().c_str());
     // Medians over the timed frames: t1 incident light, t2 diffusion, t3 shading (ms); fps =
     // 1 / median frame time; diff fps = 1 / median t2 (diffusion only); coh: with frame
-    // coherence (skipped: -). build s: the polygrid hierarchy's construction (once).
-    std::printf("%-7s %-14s %8s %8s %9s %9s %9s %8s %9s %9s %8s\n", "shape", "polygrid", "nodes",
-                "build s", "t1 ms", "t2 ms", "t3 ms", "fps", "diff fps", "t2coh ms", "fps coh");
+    // coherence (skipped: -). build s: the polygrid hierarchy's construction (once). t2 range:
+    // the fastest and slowest frame's diffusion without coherence (a run's spread, to tell it
+    // from differences between runs).
+    std::printf("%-7s %-14s %8s %8s %9s %9s %13s %9s %8s %9s %9s %8s\n", "shape", "polygrid", "nodes",
+                "build s", "t1 ms", "t2 ms", "t2 range ms", "t3 ms", "fps", "diff fps", "t2coh ms", "fps coh");
     for (const std::string& name : shapes)
       for (int res : resolutions) {
         const auto shape = MakeBuiltinShape(name, 20);
@@ -80,7 +83,7 @@ int main(int argc, char** argv) {
         RenderOptions ro;
         ro.width = ro.height = size;
         ro.supersample = 1;
-        double fps[2] = {0, 0}, t1 = 0, t2[2] = {0, 0}, t3 = 0;
+        double fps[2] = {0, 0}, t1 = 0, t2[2] = {0, 0}, t3 = 0, t2_min = 0, t2_max = 0;
         for (int coh = 0; coh < (skip_coherent ? 1 : 2); ++coh) {
           d.frame_coherence = coh;
           Renderer r(shape.get(), &levels, mats, ReflectionParameterC(1.3), d, ro);
@@ -96,14 +99,19 @@ int main(int argc, char** argv) {
           }
           fps[coh] = 1 / Median(frame);
           t2[coh] = Median(b);
-          if (!coh) t1 = Median(a), t3 = Median(c);
+          if (!coh) {
+            t1 = Median(a), t3 = Median(c);
+            t2_min = *std::min_element(b.begin(), b.end());
+            t2_max = *std::max_element(b.begin(), b.end());
+          }
         }
         const std::string coh_ms = skip_coherent ? "-" : std::to_string(1e3 * t2[1]).substr(0, 7);
         const std::string coh_fps = skip_coherent ? "-" : std::to_string(fps[1]).substr(0, 7);
-        std::printf("%-7s %-14s %8lld %8.1f %9.1f %9.1f %9.1f %8.2f %9.2f %9s %8s\n", name.c_str(),
+        const std::string range = fmt::format("{:.1f}-{:.1f}", 1e3 * t2_min, 1e3 * t2_max);
+        std::printf("%-7s %-14s %8lld %8.1f %9.1f %9.1f %13s %9.1f %8.2f %9.2f %9s %8s\n", name.c_str(),
                     (std::to_string(pc.cubes.size()) + "x" + std::to_string(res) + "^3").c_str(),
-                    (long long)levels[0].size(), build_s, 1e3 * t1, 1e3 * t2[0], 1e3 * t3, fps[0],
-                    1 / t2[0], coh_ms.c_str(), coh_fps.c_str());
+                    (long long)levels[0].size(), build_s, 1e3 * t1, 1e3 * t2[0], range.c_str(), 1e3 * t3,
+                    fps[0], 1 / t2[0], coh_ms.c_str(), coh_fps.c_str());
         std::fflush(stdout);
       }
   } catch (const std::exception& e) {
