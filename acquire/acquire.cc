@@ -167,8 +167,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     if (!announces && progress_fn) progress_fn(s);
     if (!solving && o.stop && o.stop()) {
       if (announces) what.erase(what.find_last_not_of(". ") + 1);
-      throw Interrupted(fmt::format("stopped {} \"{}\"; the finished stages are in {} (a re-run reuses them)",
-                                    announces ? "before" : "after", what, rep.work_dir));
+      throw StageInterrupted(fmt::format("stopped {} \"{}\"", announces ? "before" : "after", what), rep.work_dir);
     }
     if (announces && progress_fn) progress_fn(s);
   };

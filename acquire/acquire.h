@@ -7,8 +7,20 @@
 
 #include "acquire/capture.h"
 #include "solver/recover.h"
+#include "solver/status.h"
 
 namespace translume::acquire {
+
+// Acquire stopped between stages (AcquireOptions::stop): what() is the whole message; `where`
+// its first part ("stopped before \"...\"" or "stopped after \"...\""), for callers that give
+// other advice than a re-run of acquire.
+class StageInterrupted : public Interrupted {
+ public:
+  StageInterrupted(const std::string& where, const std::string& work_dir)
+      : Interrupted(where + "; the finished stages are in " + work_dir + " (a re-run reuses them)"),
+        where(where) {}
+  std::string where;
+};
 
 struct AcquireOptions {
   RecoveryOptions recovery;  // the solve (as `translume solve`)

@@ -128,6 +128,7 @@ std::vector<size_t> TimeOrder(const ExposureStack& stack) {
 // where one is well inside, MeasurePairRatio), on a grid of ~10^4 pixels.
 // seen_a, seen_b: the grid's samples well inside the range in a, in b.
 struct PairRatio {
+  size_t k = 0;     // a's place in the time order (b's is k + 1)
   size_t a = 0, b = 0;
   double measured = 0;
   size_t samples = 0, seen_a = 0, seen_b = 0;
@@ -144,9 +145,11 @@ std::pair<double, double> WellInside(const Linearizer& lin, int c, double lo, do
   return {lin.Low(lo, c) + inset * range, hi - inset * range};
 }
 
+// The pair order[k], order[k + 1] (order: TimeOrder(stack)).
 PairRatio MeasurePairRatio(const ExposureStack& stack, const Linearizer& lin,
-                           const std::vector<const Exposure*>& blacks, size_t a, size_t b, double lo, double hi,
-                           double inset) {
+                           const std::vector<const Exposure*>& blacks, const std::vector<size_t>& order, size_t k,
+                           double lo, double hi, double inset) {
+  const size_t a = order[k], b = order[k + 1];
   const cv::Size size = stack.Size();
   const int step = std::max(1, int(std::sqrt(double(size.area()) / 1e4)));
   double well_lo[3], well_hi[3], lin_lo[3], lin_hi[3];
@@ -164,13 +167,11 @@ PairRatio MeasurePairRatio(const ExposureStack& stack, const Linearizer& lin,
   // 2x). The third exposure's noise is not a's or b's. Per pixel: where neither third exposure
   // is well inside (a pixel mid-range in a and b, in brackets more than a stop apart), a's and
   // b's own values choose; the window's ends, where the bias is, are seen by one of them.
-  const std::vector<size_t> order = TimeOrder(stack);
-  const size_t ka = size_t(std::find(order.begin(), order.end(), a) - order.begin());
-  const size_t kb = size_t(std::find(order.begin(), order.end(), b) - order.begin());
   std::vector<size_t> judges;
-  if (ka > 0) judges.push_back(order[ka - 1]);
-  if (kb + 1 < order.size()) judges.push_back(order[kb + 1]);
+  if (k > 0) judges.push_back(order[k - 1]);
+  if (k + 2 < order.size()) judges.push_back(order[k + 2]);
   PairRatio p;
+  p.k = k;
   p.a = a;
   p.b = b;
   std::vector<double> ratios, own_ratios;  // judged per pixel; chosen by a's and b's own values
@@ -220,7 +221,7 @@ std::vector<PairRatio> MeasurePairRatios(const ExposureStack& stack, const Linea
   const std::vector<size_t> order = TimeOrder(stack);
   std::vector<PairRatio> pairs;
   for (size_t k = 0; k + 1 < order.size(); ++k)
-    pairs.push_back(MeasurePairRatio(stack, lin, blacks, order[k], order[k + 1], lo, hi, 0.1));
+    pairs.push_back(MeasurePairRatio(stack, lin, blacks, order, k, lo, hi, 0.1));
   return pairs;
 }
 
@@ -863,7 +864,7 @@ HdrImage MergeHdr(const ExposureStack& given_stack, const ResponseCurve* respons
     const double expected = eb.seconds / ea.seconds;
     const bool widen = p.samples < kMinPairSamples && !eight &&
                        (expected > narrow_span || (p.seen_a >= kMinPairSamples && p.seen_b >= kMinPairSamples));
-    if (widen) p = MeasurePairRatio(stack, lin, blacks, p.a, p.b, lo, hi, 0.01);
+    if (widen) p = MeasurePairRatio(stack, lin, blacks, order, p.k, lo, hi, 0.01);
     if (p.samples < kMinPairSamples) {
       if (p.seen_a >= kMinPairSamples && p.seen_b >= kMinPairSamples && h.time_warning.empty()) {
         note_only = true;

@@ -32,11 +32,14 @@ cv::Mat TestScene(uint64_t seed) {
   return E;
 }
 
-std::vector<double> NineTimes() {
+// n exposure times from `first` seconds, each `ratio` times the one before.
+std::vector<double> GeometricTimes(double first, double ratio, int n) {
   std::vector<double> t;
-  for (int j = 0; j < 9; ++j) t.push_back(0.9 * std::pow(2.5, j));  // 1.3 stops apart
+  for (int j = 0; j < n; ++j) t.push_back(first * std::pow(ratio, j));
   return t;
 }
+
+std::vector<double> NineTimes() { return GeometricTimes(0.9, 2.5, 9); }  // 1.3 stops apart
 
 ExposureStack MakeStack(const std::vector<cv::Mat>& images, const std::vector<double>& t) {
   ExposureStack s;
@@ -442,8 +445,7 @@ TEST(Hdr, DimStacksOnExactTimesDoNotWarn) {
 // few for the 3 % warning (a time 5 % off merged without a word). Pixels that no third exposure
 // sees well inside are chosen by the pair's own values.
 TEST(Hdr, StacksOneAndAHalfStopsApartAreJudgedAtThreePercent) {
-  std::vector<double> t;
-  for (int j = 0; j < 6; ++j) t.push_back(0.9 * std::pow(3.05, j));
+  const std::vector<double> t = GeometricTimes(0.9, 3.05, 6);
   StackOptions so;
   so.bits = 16;
   so.seed = 29;
@@ -459,8 +461,7 @@ TEST(Hdr, StacksOneAndAHalfStopsApartAreJudgedAtThreePercent) {
 // samples (a warning: a black level left in the photos contradicts there too); exposures that
 // still share none, though each sees the scene, are named as unchecked.
 TEST(Hdr, FourStopLinearBracketsAreChecked) {
-  std::vector<double> t;
-  for (int j = 0; j < 5; ++j) t.push_back(0.01 * std::pow(16.0, j));
+  const std::vector<double> t = GeometricTimes(0.01, 16.0, 5);
   StackOptions so;
   so.bits = 16;
   so.seed = 21;

@@ -300,12 +300,11 @@ int RunDemo(int argc, char** argv) {
   acquire::AcquireReport rep;
   try {
     rep = acquire::Acquire(acquire::ReadCapture(capture.string()), rec_path, ao, print, progress);
-  } catch (const Interrupted& e) {
+  } catch (const acquire::StageInterrupted& e) {
     // Stopped before the solve: a demo re-run simulates the capture again and reuses no stage,
     // but acquire on this capture goes on from the finished ones.
-    const std::string what = e.what();
-    throw Interrupted(fmt::format("{}; translume acquire {} -o {} goes on from there",
-                                  what.substr(0, what.find("; the finished stages")), capture.string(), rec_path));
+    throw Interrupted(fmt::format("{}; translume acquire {} -o {} goes on from there", e.where, capture.string(),
+                                  rec_path));
   }
   std::printf("%s", rep.Table().c_str());
   if (sigint->interrupted())
