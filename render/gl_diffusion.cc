@@ -2,7 +2,6 @@
 // The gl backend of the polygrid relaxation: one compute-shader dispatch per step, ping-ponging
 // two fluence buffers (Section 5.2's radiance buffers I_A, I_B) in the solver's headless context.
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <fmt/format.h>
@@ -15,6 +14,7 @@
 #include "render/gl_shaders.h"
 #include "solver/gl_api.h"
 #include "solver/gl_context.h"
+#include "solver/gl_profile.h"
 #include "solver/status.h"
 
 namespace translume {
@@ -23,21 +23,8 @@ namespace {
 using gl::api;
 using render_gl::Ssbo;
 
-// TRANSLUME_GL_PROFILE=1 (as in the solver, solver/gl_solver.cc): every dispatch is followed by
-// glFinish and timed; at exit, stderr gets the dispatches and seconds per shader file. A
-// diagnostic: the finishes serialise the queue.
-struct Profile {
-  const char* env = std::getenv("TRANSLUME_GL_PROFILE");
-  bool on = env && *env && std::string(env) != "0";
-  std::map<GLuint, std::string> names;                            // program -> shader file
-  std::map<std::string, std::pair<int64_t, double>> by_shader;  // dispatches, seconds
-  ~Profile() {
-    for (const auto& [name, v] : by_shader)
-      std::fprintf(stderr, "gl profile: %-28s %9lld dispatches %9.3f s %8.1f us each\n", name.c_str(),
-                   (long long)v.first, v.second, 1e6 * v.second / double(std::max<int64_t>(v.first, 1)));
-  }
-};
-Profile profile;
+// Shader file per program, for TRANSLUME_GL_PROFILE's keys (solver/gl_profile.h).
+std::map<GLuint, std::string> program_files;
 
 }  // namespace
 
@@ -80,7 +67,7 @@ GLuint Program(const std::string& file) {
     throw InputError(fmt::format("--backend gl: {}: link error: {}", file, log));
   }
   cache[file] = prog;
-  profile.names[prog] = file;
+  program_files[prog] = file;
   return prog;
 }
 
@@ -90,16 +77,13 @@ void Dispatch(std::initializer_list<const Ssbo*> buffers, int64_t threads) {
   for (const Ssbo* s : buffers) api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, b++, s->id);
   const int64_t groups = (threads + 255) / 256;
   const int64_t gx = std::min<int64_t>(groups, 65535), gy = (groups + gx - 1) / gx;
-  if (profile.on) api.Finish();  // earlier work (uploads, other passes) is not this dispatch's
-  const auto t0 = std::chrono::steady_clock::now();
+  gl::Profiler& profile = gl::Profiler::Get();  // (TRANSLUME_GL_PROFILE)
+  if (profile.on()) profile.Before();
   api.DispatchCompute(GLuint(gx), GLuint(gy), 1);
-  if (profile.on) {
-    api.Finish();
+  if (profile.on()) {
     GLint prog = 0;
     api.GetIntegerv(GL_CURRENT_PROGRAM, &prog);
-    auto& [count, seconds] = profile.by_shader[profile.names[GLuint(prog)]];
-    ++count;
-    seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    profile.After(program_files[GLuint(prog)]);
   }
   api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
 }

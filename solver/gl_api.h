@@ -49,7 +49,10 @@ namespace translume::gl {
   X(TlBindTexture, BindTexture)                                          \
   X(PFNGLTEXBUFFERPROC, TexBuffer)                                       \
   X(PFNGLBINDIMAGETEXTUREPROC, BindImageTexture)                         \
-  X(PFNGLFINISHPROC, Finish)
+  X(PFNGLFINISHPROC, Finish)                                             \
+  X(PFNGLGENQUERIESPROC, GenQueries)                                     \
+  X(PFNGLQUERYCOUNTERPROC, QueryCounter)                                 \
+  X(PFNGLGETQUERYOBJECTUI64VPROC, GetQueryObjectui64v)
 
 struct Api {
 #define TL_GL_DECLARE(type, name) type name = nullptr;

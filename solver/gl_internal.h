@@ -56,6 +56,11 @@ struct Tuning {
   // The line smoother's nodes per block (multigrid.glsl's MG_LINE_BLOCK; 1: node by node).
   // TRANSLUME_GL_LINE_BLOCK=N overrides it (1..16).
   int line_block = 1;
+  // The line smoother by parallel cyclic reduction (multigrid.glsl's SmoothLinePcr: one
+  // invocation per node, the column's serial chain log2 nz steps in shared memory) on the
+  // levels whose columns fit a work group, instead of one invocation per column (SmoothLine).
+  // Off by default until measured on a GPU (docs/gpu.md); TRANSLUME_GL_LINE_PCR=0|1 overrides.
+  bool line_pcr = false;
 };
 const Tuning& GetTuning();
 
@@ -354,11 +359,28 @@ struct GlMultigridSolver::Impl {
               "#define PROLONG\n");
   }
 
+  // One half-sweep of colour `color`: SmoothLine, or SmoothLinePcr where PcrLength(L) > 0.
   void Smooth(GLevel& L, const Buffer& b, Buffer& x, int color, int nb) {
     const GridShape s = ShapeOf(L);
     const Coefficients c = CoefficientsOf(L);
+    const int64_t columns = (s.nx + 1) / 2 * s.ny;
+    if (const int P = PcrLength(L); P > 0) {
+      RunOn(L, "smooth", {c.cx, c.cy, c.cz, &L.diag, c.luc, &b, &x}, {int(s.nx), int(s.ny), int(s.nz), color, P},
+            columns * P, nb, "#define MG_LINE_PCR\n");
+      return;
+    }
     RunOn(L, "smooth", {c.cx, c.cy, c.cz, c.inv, c.luc, &b, &x}, {int(s.nx), int(s.ny), int(s.nz), color},
-          (s.nx + 1) / 2 * s.ny, nb);
+          columns, nb);
+  }
+  // Tuning::line_pcr unless a test changed it.
+  bool line_pcr = false;
+  // Invocations per column of SmoothLinePcr on level L: the power of two >= nz where line_pcr
+  // is on, it divides the work group and L is not in quarter rows; else 0 (SmoothLine).
+  int PcrLength(const GLevel& L) const {
+    if (!line_pcr || Quarter(L)) return 0;
+    int P = 1;
+    while (P < L.s.nz) P *= 2;
+    return GetTuning().group % P == 0 ? P : 0;
   }
 
   // x_double (the CG iterate): x in double, the sums too (residual.comp).

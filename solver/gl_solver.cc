@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "solver/gl_internal.h"
+#include "solver/gl_profile.h"
 #include "solver/gl_context.h"
 #include "solver/gl_shaders.h"
 #include "solver/multigrid_hierarchy.h"
@@ -149,6 +150,7 @@ const Tuning& GetTuning() {
     if (const char* f = std::getenv("TRANSLUME_GL_PACK_FIELDS")) t.pack_fields = std::atoi(f) == 4 ? 4 : 1;
     if (const char* q = std::getenv("TRANSLUME_GL_QUARTERS")) t.quarters = std::atoi(q) != 0;
     if (const char* b = std::getenv("TRANSLUME_GL_LINE_BLOCK")) t.line_block = std::clamp(std::atoi(b), 1, 16);
+    if (const char* l = std::getenv("TRANSLUME_GL_LINE_PCR")) t.line_pcr = std::atoi(l) != 0;
     return t;
   }();
   return tuning;
@@ -159,10 +161,11 @@ const Tuning& GetTuning() {
 std::string GlShaderTuning() {
   const gl_internal::Tuning& t = gl_internal::GetTuning();
   return fmt::format("{} ({}, {}-invocation groups, {} field(s) per value in batches, single "
-                     "fields {}, line smoother in blocks of {}; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)",
+                     "fields {}, line smoother {}; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)",
                      t.images ? "llvmpipe" : "gpu",
                      t.images ? "image buffers, z-column invocations" : "storage buffers, one node per invocation",
-                     t.group, t.pack_fields, t.quarters ? "in quarter rows" : "plain", t.line_block);
+                     t.group, t.pack_fields, t.quarters ? "in quarter rows" : "plain",
+                     t.line_pcr ? std::string("by cyclic reduction") : fmt::format("in blocks of {}", t.line_block));
 }
 
 namespace gl_internal {
@@ -182,33 +185,17 @@ namespace {
 
 int64_t dispatch_count = 0;
 
-// TRANSLUME_GL_PROFILE=1: every dispatch is followed by glFinish and timed; at exit, stderr
-// gets the dispatches and seconds per shader (a diagnostic: the finishes serialise the queue).
-// TRANSLUME_GL_PROFILE=2: per shader, defines, threads and fields.
-struct Profile {
-  const char* env = std::getenv("TRANSLUME_GL_PROFILE");
-  bool on = env && *env && std::string(env) != "0";
-  bool detailed = on && std::string(env) == "2";
-  std::map<std::string, std::pair<int64_t, double>> by_shader;  // dispatches, seconds
-  static std::string Key(const char* name, const char* defines, int64_t threads, int fields) {
-    std::string d;
-    for (std::istringstream in(defines ? defines : ""); in >> std::ws && !in.eof();) {
-      std::string word;
-      in >> word;
-      if (word != "#define") d += (d.empty() ? "" : " ") + word;
-    }
-    return fmt::format("{} [{}] {} x {}", name, d, threads, fields);
+// TRANSLUME_GL_PROFILE=2's key: the shader, its defines, threads and fields.
+std::string ProfileKey(const char* name, const char* defines, int64_t threads, int fields) {
+  std::string d;
+  for (std::istringstream in(defines ? defines : ""); in >> std::ws && !in.eof();) {
+    std::string word;
+    in >> word;
+    if (word != "#define") d += (d.empty() ? "" : " ") + word;
   }
-  ~Profile() {
-    if (!on) return;
-    std::vector<std::pair<std::string, std::pair<int64_t, double>>> rows(by_shader.begin(), by_shader.end());
-    std::sort(rows.begin(), rows.end(), [](auto& a, auto& b) { return a.second.second > b.second.second; });
-    for (const auto& [name, v] : rows)
-      std::fprintf(stderr, "gl profile: %-14s %9lld dispatches %9.3f s %8.1f us each\n", name.c_str(),
-                   (long long)v.first, v.second, 1e6 * v.second / double(std::max<int64_t>(v.first, 1)));
-  }
-};
-Profile profile;
+  return fmt::format("{} [{}] {} x {}", name, d, threads, fields);
+}
+
 
 // Work groups (x, y) for `threads` threads: Tuning::group per group, at most 65535 groups
 // along x.
@@ -240,17 +227,11 @@ int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
   for (int v : ints) api.Uniform1i(loc++, v);
   if (float_location >= 0) api.Uniform1f(float_location, float_value);
   const auto [gx, gy] = Tiling(threads);
-  if (profile.on) api.Finish();  // earlier work (uploads, copies) is not this dispatch's
-  const auto t0 = profile.on ? std::chrono::steady_clock::now() : std::chrono::steady_clock::time_point{};
+  gl::Profiler& profile = gl::Profiler::Get();  // (TRANSLUME_GL_PROFILE)
+  if (profile.on()) profile.Before();
   api.DispatchCompute(GLuint(gx), GLuint(gy), GLuint(fields));
   ++dispatch_count;
-  if (profile.on) {
-    api.Finish();
-    auto& [count, seconds] = profile.by_shader[profile.detailed ? profile.Key(name, defines, threads, fields)
-                                                                : std::string(name)];
-    ++count;
-    seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  }
+  if (profile.on()) profile.After(profile.detailed() ? ProfileKey(name, defines, threads, fields) : name);
   api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
   return gx * gy;
 }
@@ -396,6 +377,7 @@ GlMultigridSolver::GlMultigridSolver(const GridShape& shape, double h, const Mul
   I.qw = int(2 * ((s0.nx + 7) / 8));
   I.nq = int64_t(I.qw) * s0.ny * s0.nz;
   I.quarters = gl_internal::GetTuning().quarters;
+  I.line_pcr = gl_internal::GetTuning().line_pcr;
   I.PackLevels();
   I.Reserve(1);
 }

@@ -401,7 +401,9 @@ TEST(GlSolver, LargeCoarseTailStaysWithinTheLoopBudgetAndMatchesTheCpu) {
     SCOPED_TRACE(::testing::Message() << group << " invocations per tail group, tail of " << gl.coarse_tail_levels()
                                       << " of " << gl.num_levels() << " levels");
     ASSERT_GE(gl.coarse_tail_levels(), 2);
-    if (budget > 0) EXPECT_LT(I.TailLoopIterations(I.tail_level), budget);
+    if (budget > 0) {
+      EXPECT_LT(I.TailLoopIterations(I.tail_level), budget);
+    }
     std::printf("%s, tail group %d: tail of %d of %d levels (%lld nodes first), %lld loop iterations counted\n",
                 s.ToString().c_str(), group, gl.coarse_tail_levels(), gl.num_levels(),
                 (long long)I.levels[I.tail_level]->n, (long long)I.TailLoopIterations(I.tail_level));
@@ -518,6 +520,81 @@ TEST(GlSolver, QuarterRowsMatchThePlainLayout) {
         EXPECT_LE(std::sqrt(dd / xx), 1e-5);
       }
     }
+  }
+}
+
+// The line smoother by cyclic reduction (Tuning::line_pcr, multigrid.glsl's SmoothLinePcr)
+// solves each column's tridiagonal system as the Thomas algorithm (SmoothLine) does: a
+// half-sweep of each colour from the same b and x gives the same x within float rounding, on
+// columns of 2, 5, 16 (powers of two) and 37 nodes (the Wax I grid's), for two fields one per
+// value and four fields per vec4 (FIELDS4); a batched solve then takes the same iterations to
+// the same solutions.
+TEST(GlSolver, CyclicReductionSmootherMatchesTheThomasSweep) {
+  for (const GridShape s : {GridShape{9, 7, 2}, GridShape{11, 6, 5}, GridShape{8, 9, 16}, GridShape{7, 5, 37}}) {
+    SCOPED_TRACE(s.ToString());
+    const int64_t n = s.size();
+    std::vector<float> kappa, mu;
+    VaryingMaterial(n, kappa, mu);
+    GlMultigridSolver gl(s, 0.5);
+    gl.SetCoefficients(kappa.data(), mu.data(), 2.6);
+    GlMultigridSolver::Impl& I = gl.impl();
+    GLevel& L = *I.levels[0];
+    I.line_pcr = true;
+    if (I.PcrLength(L) == 0) {
+      ADD_FAILURE() << "no cyclic reduction for nz " << s.nz << " in groups of " << gl_internal::GetTuning().group;
+      continue;
+    }
+    for (bool packed : {false, true}) {
+      SCOPED_TRACE(packed ? "four fields per value" : "one field per value");
+      const int nb = packed ? 4 : 2;
+      std::vector<float> b(nb * n), x0(nb * n);
+      for (int64_t e = 0; e < nb * n; ++e) {
+        b[e] = 0.01f * (1.0f + std::sin(0.37f * e));
+        x0[e] = 0.05f * std::cos(0.13f * e);
+      }
+      const Elem elem = packed ? Elem::kVec4 : Elem::kFloat;
+      Buffer bb, xx;
+      bb.Alloc(nb * n * 4, b.data(), elem);
+      for (int color : {0, 1}) {
+        std::vector<float> x[2];
+        for (bool pcr : {false, true}) {
+          xx.Alloc(nb * n * 4, x0.data(), elem);
+          I.line_pcr = pcr;
+          I.packed = packed;
+          I.Smooth(L, bb, xx, color, nb);
+          I.packed = false;
+          x[pcr].resize(nb * n);
+          xx.Download(x[pcr].data(), nb * n * 4);
+        }
+        double dmax = 0, xmax = 0, moved = 0;
+        for (int64_t e = 0; e < nb * n; ++e) {
+          dmax = std::max(dmax, double(std::abs(x[1][e] - x[0][e])));
+          xmax = std::max(xmax, double(std::abs(x[0][e])));
+          moved = std::max(moved, double(std::abs(x[0][e] - x0[e])));
+        }
+        EXPECT_GT(moved, 1e-3 * xmax) << "colour " << color;
+        EXPECT_LE(dmax, 1e-5 * xmax) << "colour " << color;
+      }
+    }
+  }
+  VariedProblem P({20, 14, 21}, 5);
+  GlMultigridSolver::Impl& I = P.gl->impl();
+  std::vector<float> x[2];
+  std::vector<SolveSummary> sums[2];
+  for (bool pcr : {false, true}) {
+    I.line_pcr = pcr;
+    x[pcr] = P.x0;
+    sums[pcr] = P.gl->SolveBatch(P.M, P.b.data(), x[pcr].data());
+  }
+  double dd = 0, xx = 0;
+  for (int64_t e = 0; e < P.M * P.n; ++e) {
+    dd += (double(x[1][e]) - x[0][e]) * (double(x[1][e]) - x[0][e]);
+    xx += double(x[0][e]) * x[0][e];
+  }
+  EXPECT_LE(std::sqrt(dd / xx), 1e-5);
+  for (int f = 0; f < P.M; ++f) {
+    EXPECT_TRUE(sums[1][f].converged) << sums[1][f].BriefReport();
+    EXPECT_EQ(sums[1][f].iterations, sums[0][f].iterations) << f;
   }
 }
 

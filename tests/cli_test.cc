@@ -426,6 +426,27 @@ TEST_F(Cli, BenchForwardGlReportsBandwidthAndAccuracy) {
   EXPECT_EQ(j[0]["batch_fields"].get<int>(), 2);
 }
 
+// TRANSLUME_GL_PROFILE=gpu times every dispatch with GPU timestamps (no finishes) and prints
+// per shader the dispatches and their seconds at exit; =1 with the host clock.
+TEST_F(Cli, GlProfileTimesTheDispatches) {
+  for (const std::string mode : {"gpu", "1"}) {
+    SCOPED_TRACE(mode);
+    const CommandRun r = Translume("bench forward --backend gl --grids 33x25x17 --repeats 1 --batch 0 --no-peers",
+                                   "TRANSLUME_GL_PROFILE=" + mode);
+    ASSERT_EQ(r.status, 0) << r.output;
+    EXPECT_NE(r.output.find(mode == "gpu" ? "gl profile (GPU timestamps" : "gl profile (host clock"),
+              std::string::npos) << r.output;
+    const size_t at = r.output.find("gl profile: smooth");
+    ASSERT_NE(at, std::string::npos) << r.output;
+    long long dispatches = 0;
+    double seconds = 0;
+    ASSERT_EQ(std::sscanf(r.output.c_str() + at, "gl profile: smooth %lld dispatches %lf s", &dispatches, &seconds), 2)
+        << r.output.substr(at, 120);
+    EXPECT_GT(dispatches, 0);
+    EXPECT_GT(seconds, 0.0);
+  }
+}
+
 TEST_F(Cli, BenchRecoverySmoke) {
   const CommandRun r = Translume("bench recovery --grid 8x6x4 --presets wax --max-iterations 3 "
                                  "--paper-iterations 2 --json");
@@ -568,8 +589,9 @@ TEST_F(Cli, AcquireStopsCleanlyOnSigint) {
   const bool before_projector = r.output.find("translume acquire: interrupted: stopped before \"calibrating the "
                                               "projector") != std::string::npos;
   EXPECT_TRUE(after_camera || before_projector) << r.output;
-  if (after_camera)  // the line it stopped after was shown
+  if (after_camera) {  // the line it stopped after was shown
     EXPECT_LT(r.output.find("\n  camera: "), r.output.find("interrupted: stopped after")) << r.output;
+  }
   EXPECT_FALSE(fs::exists(P("a.vdb")));
   r = interrupt_at("b.vdb", "solving for kappa and mu");
   EXPECT_NE(r.output.find("exit=130"), std::string::npos) << r.output;

@@ -17,6 +17,7 @@
 #include "solver/gl_context.h"
 #include "solver/memory.h"
 #include "solver/status.h"
+#include "solver/gl_solver.h"
 #include "solver/synthetic.h"
 #include "solver/threads.h"
 #include "tools/commands.h"
@@ -31,6 +32,8 @@ void PrintGlInfo() {
   const GlInfo& info = GlContext::Get().info();
   std::fprintf(stderr, "gl: %s, %s, %s\n", info.platform.c_str(), info.renderer.c_str(),
                info.version.c_str());
+  // The shader variant too, so that a log of runs under TRANSLUME_GL_* overrides says which ran.
+  std::fprintf(stderr, "gl shaders: %s\n", GlShaderTuning().c_str());
 }
 
 }  // namespace

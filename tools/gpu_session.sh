@@ -8,15 +8,18 @@
 #   bash tools/gpu_session.sh [--quick] [--long-recoveries] [--bundle DIR] [--budget SECONDS]
 #
 # Steps, in this order, each under its own `timeout` (one hang cannot eat the session) and all
-# within --budget seconds (default 230, 560 with --long-recoveries; a step gets at most what is
+# within --budget seconds (default 300, 560 with --long-recoveries; a step gets at most what is
 # left, a step with under 20 s left is skipped): nvidia-smi, gl-info, bench forward --backend gl
-# on Wax I, Marble and 129^3 with a batch of 16 (the cpu solver as the peer), the renderbench on
-# the 253-cube bunny (16^3 and 17^3 nodes per cube, no frame coherence), the RGB recoveries
-# with 16 conditions on the Wax I and Marble grids on the gl backend, time-capped at 40 s and
-# 30 s (their seconds per iteration give the time of the bench's full 300 iterations), and
-# last the Wax I and Marble batches (no peer) under other shader tunings side by side: line
-# smoother blocks of 1, 8 and 16 nodes against the default 4, coarse tails from 8192 and 40000
-# nodes against 4096, four fields per value; then the renderbench again.
+# on Wax I, Marble and 129^3 with a batch of 16 (the cpu solver as the peer), the same on Wax I
+# and Marble with the line smoother by cyclic reduction (TRANSLUME_GL_LINE_PCR=1), a profile
+# of Wax I's solves per kernel and level on GPU timestamps (default and cyclic reduction), the
+# renderbench on the 253-cube bunny (16^3 and 17^3 nodes per cube, no frame coherence), the
+# RGB recoveries with 16 conditions on the Wax I grid (default, then cyclic reduction) and the
+# Marble grid on the gl backend, time-capped at 40 s and 30 s (their seconds per iteration give
+# the time of the bench's full 300 iterations), and last the Wax I and Marble batches (no peer)
+# under other shader tunings side by side: line smoother blocks of 1 and 8 nodes against the
+# default 4, a coarse tail from 8192 nodes against 4096, cyclic reduction with tails from 1024
+# and 8192 nodes; then the renderbench again.
 #
 # --long-recoveries: no tuning steps; Wax I runs its 300 iterations (cap 120 s, ~100 s on the
 # H200), Marble 300 s (~170 of its 300 iterations: 300 take ~520 s, more than one device call
@@ -45,7 +48,7 @@ while [ $# -gt 0 ]; do
   esac
   shift
 done
-[ -n "$budget" ] || budget=$([ $long = 1 ] && echo 560 || echo 230)
+[ -n "$budget" ] || budget=$([ $long = 1 ] && echo 560 || echo 300)
 out=${OUT:-$root/gpu-session}
 mkdir -p "$out"
 log=$out/session.log
@@ -72,7 +75,8 @@ failed=0
 say() { echo "$*" | tee -a "$log" >&2; }
 
 # step NAME LIMIT_S COMMAND...: runs COMMAND under timeout (LIMIT_S, or what is left of the
-# budget), stdout (the result table) into the summary, stdout and stderr into the log.
+# budget), stdout (the result table) and a dispatch profile's lines into the summary, stdout
+# and stderr into the log.
 step() {
   local name=$1 limit=$2
   shift 2
@@ -100,6 +104,8 @@ step() {
   {
     printf '\n### %s (%s, %s s)\n\n`%s`\n\n' "$name" "$status" "$secs" "$*"
     cat "$so"
+    # TRANSLUME_GL_PROFILE's table (stderr, at exit) belongs to the results.
+    grep '^gl profile' "$se" | head -n 40
     # Failed or stopped: the last lines of stderr say why.
     if [ "$status" != "ok" ]; then echo; tail -n 5 "$se" | sed 's/^/    /'; fi
   } >>"$summary"
@@ -107,7 +113,7 @@ step() {
 }
 
 if [ $quick = 1 ]; then
-  grids=17x13x9; pack_grids=$grids; repeats=1; batch=4
+  grids=33x25x17; pack_grids=$grids; profile_grid=$grids; repeats=1; batch=4  # (above the coarse tail)
   render_args=(--shapes bunny --resolutions 3,4 --frames 2 --image 64 --skip-coherent)
   wax=(--grid 12x10x5 --max-iterations 3 --max-seconds 60)
   marble=(--grid 16x16x4 --max-iterations 3 --max-seconds 60)
@@ -115,7 +121,8 @@ if [ $quick = 1 ]; then
   limits=(30 30 30)
   tunings=1
 else
-  grids=130x53x37,256x256x20,129x129x129; pack_grids=130x53x37,256x256x20; repeats=7; batch=16
+  grids=130x53x37,256x256x20,129x129x129; pack_grids=130x53x37,256x256x20; profile_grid=130x53x37
+  repeats=7; batch=16
   render_args=(--shapes bunny --resolutions 16,17 --frames 20 --skip-coherent)
   peer=(--grid 130x53x37 --max-iterations 300 --max-seconds 20)
   if [ $long = 1 ]; then
@@ -151,6 +158,16 @@ fi
 step "gl-info" 60 "$run" gl-info
 step "bench forward (gl, batch ${batch})" 90 \
   "$run" bench forward --backend gl --grids "$grids" --repeats "$repeats" --batch "$batch"
+# The line smoother by cyclic reduction (off by default until measured here), right after the
+# default for a side-by-side comparison: single solves and batches on Wax I and Marble.
+step "bench forward (gl, batch ${batch}, TRANSLUME_GL_LINE_PCR=1)" 60 \
+  env TRANSLUME_GL_LINE_PCR=1 "$run" "${batches[@]}"
+# Where a Wax I solve's time goes, per kernel and level, timed on the GPU without finishes
+# (TRANSLUME_GL_PROFILE=gpu2; a single solve and a batch), default and cyclic reduction.
+for variant in TRANSLUME_GL_LINE_PCR=0 TRANSLUME_GL_LINE_PCR=1; do
+  step "profile Wax I (TRANSLUME_GL_PROFILE=gpu2, ${variant})" 40 env TRANSLUME_GL_PROFILE=gpu2 "$variant" \
+    "$run" bench forward --backend gl --grids "$profile_grid" --repeats 3 --batch "$batch" --no-peers
+done
 if [ ${#render[@]} -gt 0 ]; then
   step "renderbench (bunny)" 60 "${render[@]}" "${render_args[@]}"
 else
@@ -159,6 +176,10 @@ else
 fi
 step "recovery Wax I (wax, gl)" "${limits[0]}" \
   "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${wax[@]}"
+if [ $tunings = 1 ]; then
+  step "recovery Wax I (wax, gl, TRANSLUME_GL_LINE_PCR=1)" "${limits[0]}" \
+    env TRANSLUME_GL_LINE_PCR=1 "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${wax[@]}"
+fi
 step "recovery Marble (marble, gl)" "${limits[1]}" \
   "$run" bench recovery --presets marble "${one_case[@]}" --backend gl "${marble[@]}"
 if [ "${limits[2]}" -gt 0 ]; then
@@ -167,9 +188,12 @@ if [ "${limits[2]}" -gt 0 ]; then
 fi
 # The shader tunings side by side (gl_internal.h's Tuning; each an environment override).
 if [ $tunings = 1 ]; then
-  for variant in TRANSLUME_GL_LINE_BLOCK=1 TRANSLUME_GL_LINE_BLOCK=8 TRANSLUME_GL_LINE_BLOCK=16 \
-                 TRANSLUME_GL_TAIL_NODES=8192 TRANSLUME_GL_TAIL_NODES=40000 TRANSLUME_GL_PACK_FIELDS=4; do
-    step "bench forward (gl, batch ${batch}, ${variant})" 40 env "$variant" "$run" "${batches[@]}"
+  # (A variant may set several variables, separated by spaces.)
+  for variant in TRANSLUME_GL_LINE_BLOCK=1 TRANSLUME_GL_LINE_BLOCK=8 TRANSLUME_GL_TAIL_NODES=8192 \
+                 "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_TAIL_NODES=1024" \
+                 "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_TAIL_NODES=8192"; do
+    # shellcheck disable=SC2086  # the variant's words are the assignments
+    step "bench forward (gl, batch ${batch}, ${variant})" 40 env $variant "$run" "${batches[@]}"
   done
 fi
 # The bunny again: its diffusion time differed 2.5x between the 2026-11-30 calls; a second

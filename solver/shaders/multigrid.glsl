@@ -65,6 +65,7 @@ MG_VALUE AddLineNeighbours(MgLevel L, int i, int j, int p, int q, MG_VALUE d) {
   return d;
 }
 
+#ifndef MG_LINE_PCR  // (smooth.comp binds the diagonal instead of the factors)
 void SmoothLine(MgLevel L, int i, int j, int b0, int x0) {
   int nx = L.nx, nz = L.nz, nxy = nx * L.ny;
   MG_VALUE below = MG_VALUE(0.0);
@@ -125,6 +126,63 @@ void SmoothLine(MgLevel L, int i, int j, int b0, int x0) {
     ST(mg_x, x0 + p, above);
   }
 #endif
+}
+#endif  // MG_LINE_PCR
+#endif
+
+#ifdef MG_LINE_PCR
+// The same z-line solve by parallel cyclic reduction (Tuning::line_pcr, smooth.comp's
+// MG_LINE_PCR): one invocation per node, P (a power of two >= nz, dividing TL_GROUP)
+// invocations per column, a column's invocations in one work group. Each loads its node's row
+// of the column's tridiagonal system
+//   a_k x_{k-1} + d_k x_k + c_k x_{k+1} = r_k,  a_k = -cz_{k-1}, c_k = -cz_k, d_k = diag_k,
+//   r_k = b_k + the x- and y-neighbours' terms (AddLineNeighbours),
+// (rows k >= nz: the identity, 0 = x_k), then log2 P steps each eliminate the rows s = 1, 2,
+// 4, ... away: with alpha = -a_k / d_{k-s}, gamma = -c_k / d_{k+s},
+//   a_k <- alpha a_{k-s},  c_k <- gamma c_{k+s},
+//   d_k <- d_k + alpha c_{k-s} + gamma a_{k+s},  r_k <- r_k + alpha r_{k-s} + gamma r_{k+s},
+// after which every row is decoupled: x_k = r_k / d_k. Exact (up to rounding) like the Thomas
+// algorithm of SmoothLine, and stable for this diagonally dominant system; the column's loads
+// are all issued at once and its serial chain is log2 P steps in shared memory instead of 2 nz
+// dependent memory round trips (docs/gpu.md). valid: the invocation's column exists (SmoothColumn).
+shared float pcr_a[TL_GROUP], pcr_c[TL_GROUP], pcr_d[TL_GROUP];
+shared MG_VALUE pcr_r[TL_GROUP];
+void SmoothLinePcr(MgLevel L, bool valid, int i, int j, int k, int P, int b0, int x0) {
+  int nxy = L.nx * L.ny, p = i + L.nx * j + nxy * k, lid = int(gl_LocalInvocationID.x), kk = lid % P;
+  bool node = valid && k < L.nz;
+  float a = 0.0, c = 0.0, d = 1.0;
+  MG_VALUE r = MG_VALUE(0.0);
+  if (node) {
+    r = AddLineNeighbours(L, i, j, p, x0 + p, MG_LDV(mg_b, b0 + p));
+    d = LDC(mg_diag, L.inv + p);
+    if (k > 0) a = -LDC(mg_cz, L.cz + p - nxy);
+    if (k + 1 < L.nz) c = -LDC(mg_cz, L.cz + p);
+  }
+  for (int s = 1; s < P; s *= 2) {
+    pcr_a[lid] = a;
+    pcr_c[lid] = c;
+    pcr_d[lid] = d;
+    pcr_r[lid] = r;
+    memoryBarrierShared();
+    barrier();
+    float a2 = 0.0, c2 = 0.0;
+    if (kk >= s) {
+      float alpha = -a / pcr_d[lid - s];
+      a2 = alpha * pcr_a[lid - s];
+      d += alpha * pcr_c[lid - s];
+      r += alpha * pcr_r[lid - s];
+    }
+    if (kk + s < P) {
+      float gamma = -c / pcr_d[lid + s];
+      c2 = gamma * pcr_c[lid + s];
+      d += gamma * pcr_a[lid + s];
+      r += gamma * pcr_r[lid + s];
+    }
+    a = a2;
+    c = c2;
+    barrier();
+  }
+  if (node) ST(mg_x, x0 + p, r / d);
 }
 #endif
 
