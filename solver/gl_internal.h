@@ -375,7 +375,10 @@ struct GlMultigridSolver::Impl {
   // Tuning::line_pcr unless a test changed it.
   bool line_pcr = false;
   // Invocations per column of SmoothLinePcr on level L: the power of two >= nz where line_pcr
-  // is on, it divides the work group and L is not in quarter rows; else 0 (SmoothLine).
+  // is on, it divides the work group and L is not in quarter rows; else 0 (SmoothLine). (The
+  // work group is the tuning's: Smooth never compiles smooth.comp with its own TL_GROUP, so
+  // the shader's shared arrays and Tiling's groups both hold GetTuning().group invocations.
+  // The coarse tail's levels never come here: tail.comp runs SmoothLine itself.)
   int PcrLength(const GLevel& L) const {
     if (!line_pcr || Quarter(L)) return 0;
     int P = 1;

@@ -4,11 +4,13 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <iterator>
 
 namespace translume::gl {
 
 namespace {
-constexpr size_t kReadEvery = 128;  // dispatches between two read-backs of the timestamps
+constexpr size_t kReadEvery = 128;    // dispatches between two collections of the timestamps
+constexpr size_t kMostPending = 4096;  // beyond this many, a collection waits for them
 }
 
 Profiler& Profiler::Get() {
@@ -44,7 +46,7 @@ void Profiler::After(const std::string& key) {
   if (gpu_) {
     pending_.back().key = key;
     api.QueryCounter(pending_.back().after, GL_TIMESTAMP);
-    if (pending_.size() >= kReadEvery) ReadTimestamps();
+    if (pending_.size() % kReadEvery == 0) ReadTimestamps(pending_.size() >= kMostPending);
     return;
   }
   api.Finish();
@@ -53,23 +55,29 @@ void Profiler::After(const std::string& key) {
   seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0_).count();
 }
 
-void Profiler::ReadTimestamps() {
-  for (const Pending& p : pending_) {
+void Profiler::ReadTimestamps(bool wait) {
+  while (!pending_.empty()) {
+    const Pending& p = pending_.front();
+    if (!wait) {
+      GLuint64 ready = 0;  // the later query ready: the earlier one too
+      api.GetQueryObjectui64v(p.after, GL_QUERY_RESULT_AVAILABLE, &ready);
+      if (!ready) return;
+    }
     GLuint64 t0 = 0, t1 = 0;
-    api.GetQueryObjectui64v(p.before, GL_QUERY_RESULT, &t0);  // waits for the result
+    api.GetQueryObjectui64v(p.before, GL_QUERY_RESULT, &t0);
     api.GetQueryObjectui64v(p.after, GL_QUERY_RESULT, &t1);
     auto& [count, seconds] = by_key_[p.key];
     ++count;
     seconds += 1e-9 * double(t1 - t0);
     idle_queries_.push_back(p.before);
     idle_queries_.push_back(p.after);
+    pending_.pop_front();
   }
-  pending_.clear();
 }
 
 Profiler::~Profiler() {
   if (!on()) return;
-  ReadTimestamps();
+  ReadTimestamps(true);
   std::vector<std::pair<std::string, std::pair<int64_t, double>>> rows(by_key_.begin(), by_key_.end());
   std::sort(rows.begin(), rows.end(), [](auto& a, auto& b) { return a.second.second > b.second.second; });
   std::fprintf(stderr, "gl profile (%s):\n",

@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <deque>
 #include <map>
 #include <string>
 #include <utility>
@@ -19,10 +20,14 @@ namespace translume::gl {
 //   1    each dispatch between two glFinish calls, on the host's clock: what a dispatch costs
 //        alone, its launch latency and the finish's wait included (serialises the queue);
 //   2    the same, keyed per shader, defines, threads and fields (the solver's detail);
-//   gpu  GL_TIMESTAMP queries just before and after each dispatch and no finishes (the queue
-//        stays full, the results are read back 128 dispatches at a time): the GPU's own time
-//        per dispatch in the stream, the barrier's wait for the previous one included;
+//   gpu  GL_TIMESTAMP queries just before and after each dispatch and no finishes: a
+//        timestamp is taken once every earlier command has completed, so each dispatch's
+//        interval is its own execution in the stream, its launch gap included. Results are
+//        collected as they become available (every 128 dispatches, without waiting; the host
+//        waits only when 4096 are outstanding, and at exit), so the queue stays full;
 //   gpu2 the same, keyed as 2.
+// The table prints when the process exits normally (the profiler's static destructor, which
+// reads the last timestamps from the GL context of the exiting thread).
 // Use: if (Profiler::Get().on()) around each dispatch: Before(), DispatchCompute, After(key).
 class Profiler {
  public:
@@ -37,7 +42,8 @@ class Profiler {
 
  private:
   Profiler();
-  void ReadTimestamps();
+  // Reads the oldest pending timestamps: those available, or with `wait` all of them.
+  void ReadTimestamps(bool wait);
 
   bool on_ = false, detailed_ = false, gpu_ = false;
   std::chrono::steady_clock::time_point t0_;
@@ -46,7 +52,7 @@ class Profiler {
     std::string key;
     GLuint before, after;
   };
-  std::vector<Pending> pending_;
+  std::deque<Pending> pending_;
   std::vector<GLuint> idle_queries_;
 };
 

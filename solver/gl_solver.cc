@@ -165,7 +165,9 @@ std::string GlShaderTuning() {
                      t.images ? "llvmpipe" : "gpu",
                      t.images ? "image buffers, z-column invocations" : "storage buffers, one node per invocation",
                      t.group, t.pack_fields, t.quarters ? "in quarter rows" : "plain",
-                     t.line_pcr ? std::string("by cyclic reduction") : fmt::format("in blocks of {}", t.line_block));
+                     t.line_pcr ? fmt::format("by cyclic reduction where a column fits a work group, else in blocks of {}",
+                                              t.line_block)
+                                : fmt::format("in blocks of {}", t.line_block));
 }
 
 namespace gl_internal {

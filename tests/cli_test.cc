@@ -427,12 +427,19 @@ TEST_F(Cli, BenchForwardGlReportsBandwidthAndAccuracy) {
 }
 
 // TRANSLUME_GL_PROFILE=gpu times every dispatch with GPU timestamps (no finishes) and prints
-// per shader the dispatches and their seconds at exit; =1 with the host clock.
+// per shader the dispatches and their seconds at exit; =1 with the host clock; gpu2 keys them
+// by shader, defines, threads and fields; unset, nothing is printed.
 TEST_F(Cli, GlProfileTimesTheDispatches) {
+  const std::string bench = "bench forward --backend gl --grids 33x25x17 --repeats 1 --batch 0 --no-peers";
+  CommandRun r = Translume(bench, "TRANSLUME_GL_PROFILE=gpu2");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("gl profile: smooth ["), std::string::npos) << r.output;
+  r = Translume(bench, "TRANSLUME_GL_PROFILE=0");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(r.output.find("gl profile"), std::string::npos) << r.output;
   for (const std::string mode : {"gpu", "1"}) {
     SCOPED_TRACE(mode);
-    const CommandRun r = Translume("bench forward --backend gl --grids 33x25x17 --repeats 1 --batch 0 --no-peers",
-                                   "TRANSLUME_GL_PROFILE=" + mode);
+    r = Translume(bench, "TRANSLUME_GL_PROFILE=" + mode);
     ASSERT_EQ(r.status, 0) << r.output;
     EXPECT_NE(r.output.find(mode == "gpu" ? "gl profile (GPU timestamps" : "gl profile (host clock"),
               std::string::npos) << r.output;

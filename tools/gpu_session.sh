@@ -8,15 +8,16 @@
 #   bash tools/gpu_session.sh [--quick] [--long-recoveries] [--bundle DIR] [--budget SECONDS]
 #
 # Steps, in this order, each under its own `timeout` (one hang cannot eat the session) and all
-# within --budget seconds (default 300, 560 with --long-recoveries; a step gets at most what is
+# within --budget seconds (default 330, 560 with --long-recoveries; a step gets at most what is
 # left, a step with under 20 s left is skipped): nvidia-smi, gl-info, bench forward --backend gl
 # on Wax I, Marble and 129^3 with a batch of 16 (the cpu solver as the peer), the same on Wax I
 # and Marble with the line smoother by cyclic reduction (TRANSLUME_GL_LINE_PCR=1), a profile
 # of Wax I's solves per kernel and level on GPU timestamps (default and cyclic reduction), the
-# renderbench on the 253-cube bunny (16^3 and 17^3 nodes per cube, no frame coherence), the
-# RGB recoveries with 16 conditions on the Wax I grid (default, then cyclic reduction) and the
-# Marble grid on the gl backend, time-capped at 40 s and 30 s (their seconds per iteration give
-# the time of the bench's full 300 iterations), and last the Wax I and Marble batches (no peer)
+# renderbench on the 253-cube bunny (16^3 and 17^3 nodes per cube, no frame coherence) and a
+# profile of its 17^3 frames per shader on GPU timestamps, the RGB recoveries with 16
+# conditions on the Wax I grid (default, then cyclic reduction) and the Marble grid on the gl
+# backend, time-capped at 40 s and 30 s (their seconds per iteration give the time of the
+# bench's full 300 iterations), and last the Wax I and Marble batches (no peer)
 # under other shader tunings side by side: line smoother blocks of 1 and 8 nodes against the
 # default 4, a coarse tail from 8192 nodes against 4096, cyclic reduction with tails from 1024
 # and 8192 nodes; then the renderbench again.
@@ -48,7 +49,7 @@ while [ $# -gt 0 ]; do
   esac
   shift
 done
-[ -n "$budget" ] || budget=$([ $long = 1 ] && echo 560 || echo 300)
+[ -n "$budget" ] || budget=$([ $long = 1 ] && echo 560 || echo 330)
 out=${OUT:-$root/gpu-session}
 mkdir -p "$out"
 log=$out/session.log
@@ -115,6 +116,7 @@ step() {
 if [ $quick = 1 ]; then
   grids=33x25x17; pack_grids=$grids; profile_grid=$grids; repeats=1; batch=4  # (above the coarse tail)
   render_args=(--shapes bunny --resolutions 3,4 --frames 2 --image 64 --skip-coherent)
+  render_profile_args=(--shapes bunny --resolutions 4 --frames 2 --image 64 --skip-coherent)
   wax=(--grid 12x10x5 --max-iterations 3 --max-seconds 60)
   marble=(--grid 16x16x4 --max-iterations 3 --max-seconds 60)
   peer=(--grid 12x10x5 --max-iterations 3 --max-seconds 30)
@@ -124,6 +126,7 @@ else
   grids=130x53x37,256x256x20,129x129x129; pack_grids=130x53x37,256x256x20; profile_grid=130x53x37
   repeats=7; batch=16
   render_args=(--shapes bunny --resolutions 16,17 --frames 20 --skip-coherent)
+  render_profile_args=(--shapes bunny --resolutions 17 --frames 10 --skip-coherent)
   peer=(--grid 130x53x37 --max-iterations 300 --max-seconds 20)
   if [ $long = 1 ]; then
     wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 120)
@@ -170,6 +173,9 @@ for variant in TRANSLUME_GL_LINE_PCR=0 TRANSLUME_GL_LINE_PCR=1; do
 done
 if [ ${#render[@]} -gt 0 ]; then
   step "renderbench (bunny)" 60 "${render[@]}" "${render_args[@]}"
+  # Where a frame's time goes, per shader, timed on the GPU without finishes.
+  step "renderbench profile (bunny, TRANSLUME_GL_PROFILE=gpu)" 60 env TRANSLUME_GL_PROFILE=gpu \
+    "${render[@]}" "${render_profile_args[@]}"
 else
   say "== renderbench: no translume-renderbench in $bundle or render-bundle/"
   failed=1
