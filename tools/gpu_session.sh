@@ -20,7 +20,8 @@
 # bench's full 300 iterations), and last the Wax I and Marble batches (no peer)
 # under other shader tunings side by side: line smoother blocks of 1 and 8 nodes against the
 # default 4, a coarse tail from 8192 nodes against 4096, cyclic reduction with tails from 1024
-# and 8192 nodes; then the renderbench again.
+# and 8192 nodes and with four fields per value (slower with the serial smoother on
+# 2026-11-30: a quarter of the invocations); then the renderbench again.
 #
 # --long-recoveries: no tuning steps; Wax I runs its 300 iterations (cap 120 s, ~100 s on the
 # H200), Marble 300 s (~170 of its 300 iterations: 300 take ~520 s, more than one device call
@@ -197,7 +198,8 @@ if [ $tunings = 1 ]; then
   # (A variant may set several variables, separated by spaces.)
   for variant in TRANSLUME_GL_LINE_BLOCK=1 TRANSLUME_GL_LINE_BLOCK=8 TRANSLUME_GL_TAIL_NODES=8192 \
                  "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_TAIL_NODES=1024" \
-                 "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_TAIL_NODES=8192"; do
+                 "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_TAIL_NODES=8192" \
+                 "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_PACK_FIELDS=4"; do
     # shellcheck disable=SC2086  # the variant's words are the assignments
     step "bench forward (gl, batch ${batch}, ${variant})" 40 env $variant "$run" "${batches[@]}"
   done
