@@ -8,17 +8,17 @@
 #   bash tools/gpu_session.sh [--quick] [--long-recoveries] [--bundle DIR] [--budget SECONDS]
 #
 # Steps, in this order, each under its own `timeout` (one hang cannot eat the session) and all
-# within --budget seconds (default 330, 560 with --long-recoveries; a step gets at most what is
+# within --budget seconds (default 360, 560 with --long-recoveries; a step gets at most what is
 # left, a step with under 20 s left is skipped): nvidia-smi, gl-info, bench forward --backend gl
 # on Wax I, Marble and 129^3 with a batch of 16 (the cpu solver as the peer), the same on Wax I
 # and Marble with the line smoother by cyclic reduction (TRANSLUME_GL_LINE_PCR=1), a profile
 # of Wax I's solves per kernel and level on GPU timestamps (default and cyclic reduction), the
 # renderbench on the 253-cube bunny (16^3 and 17^3 nodes per cube, no frame coherence) and a
 # profile of its 17^3 frames per shader on GPU timestamps, the RGB recoveries with 16
-# conditions on the Wax I grid (default, then cyclic reduction) and the Marble grid on the gl
-# backend, time-capped at 40 s and 30 s (their seconds per iteration give the time of the
-# bench's full 300 iterations), and last the Wax I and Marble batches (no peer)
-# under other shader tunings side by side: line smoother blocks of 1 and 8 nodes against the
+# conditions on the Wax I grid (default, cyclic reduction, then 15 s with a GPU-timestamp
+# profile per kernel and grid) and the Marble grid on the gl backend, time-capped at 40 s and
+# 30 s (their seconds per iteration give the time of the bench's full 300 iterations), and
+# last the Wax I and Marble batches (no peer) under other shader tunings side by side: line smoother blocks of 1 and 8 nodes against the
 # default 4, a coarse tail from 8192 nodes against 4096, cyclic reduction with tails from 1024
 # and 8192 nodes and with four fields per value (slower with the serial smoother on
 # 2026-11-30: a quarter of the invocations); then the renderbench again.
@@ -50,7 +50,7 @@ while [ $# -gt 0 ]; do
   esac
   shift
 done
-[ -n "$budget" ] || budget=$([ $long = 1 ] && echo 560 || echo 330)
+[ -n "$budget" ] || budget=$([ $long = 1 ] && echo 560 || echo 360)
 out=${OUT:-$root/gpu-session}
 mkdir -p "$out"
 log=$out/session.log
@@ -121,6 +121,7 @@ if [ $quick = 1 ]; then
   wax=(--grid 12x10x5 --max-iterations 3 --max-seconds 60)
   marble=(--grid 16x16x4 --max-iterations 3 --max-seconds 60)
   peer=(--grid 12x10x5 --max-iterations 3 --max-seconds 30)
+  profile_recovery=(--grid 24x18x8 --max-iterations 3 --max-seconds 30)
   limits=(30 30 30)
   tunings=1
 else
@@ -129,6 +130,7 @@ else
   render_args=(--shapes bunny --resolutions 16,17 --frames 20 --skip-coherent)
   render_profile_args=(--shapes bunny --resolutions 17 --frames 10 --skip-coherent)
   peer=(--grid 130x53x37 --max-iterations 300 --max-seconds 20)
+  profile_recovery=(--grid 130x53x37 --max-iterations 300 --max-seconds 15)
   if [ $long = 1 ]; then
     wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 120)
     marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 300)
@@ -186,6 +188,11 @@ step "recovery Wax I (wax, gl)" "${limits[0]}" \
 if [ $tunings = 1 ]; then
   step "recovery Wax I (wax, gl, TRANSLUME_GL_LINE_PCR=1)" "${limits[0]}" \
     env TRANSLUME_GL_LINE_PCR=1 "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${wax[@]}"
+  # The recovery's GPU time per kernel (GPU timestamps, keyed by threads too, so that the
+  # recovery grid's dispatches stand apart from the data simulation's on the 2x finer grid):
+  # against its seconds per iteration it tells GPU-bound from host-bound (uploads, read-backs).
+  step "profile recovery Wax I (TRANSLUME_GL_PROFILE=gpu2)" 45 env TRANSLUME_GL_PROFILE=gpu2 \
+    "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${profile_recovery[@]}"
 fi
 step "recovery Marble (marble, gl)" "${limits[1]}" \
   "$run" bench recovery --presets marble "${one_case[@]}" --backend gl "${marble[@]}"
