@@ -2,8 +2,6 @@
 // The gl backend of the polygrid relaxation: one compute-shader dispatch per step, ping-ponging
 // two fluence buffers (Section 5.2's radiance buffers I_A, I_B) in the solver's headless context.
 #include <algorithm>
-#include <cstdio>
-#include <cstdlib>
 #include <fmt/format.h>
 #include <map>
 #include <memory>

@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <fmt/format.h>
@@ -13,9 +12,9 @@
 #include <omp.h>
 #include <sstream>
 
+#include "solver/gl_context.h"
 #include "solver/gl_internal.h"
 #include "solver/gl_profile.h"
-#include "solver/gl_context.h"
 #include "solver/gl_shaders.h"
 #include "solver/multigrid_hierarchy.h"
 #include "solver/status.h"
@@ -197,7 +196,6 @@ std::string ProfileKey(const char* name, const char* defines, int64_t threads, i
   }
   return fmt::format("{} [{}] {} x {}", name, d, threads, fields);
 }
-
 
 // Work groups (x, y) for `threads` threads: Tuning::group per group, at most 65535 groups
 // along x.
