@@ -49,11 +49,15 @@ class CpuHierarchy : public HierarchyRelaxer {
   void Relax(int l, bool adaptive, int iterations) override {
     const Level& v = L_[l];
     std::vector<float>& phi = phi_[l];
-    std::vector<float> next = phi;
+    // Three iterates (Chebyshev reads the previous one); all agree outside the updated nodes.
+    std::vector<float> next = phi, prev = phi;
     const int64_t na = adaptive ? int64_t(v.active.size()) : v.size, ni = v.num_interior;
     const int32_t* active = v.active.data();
     const float* s = s_[l].data();
+    ChebyshevSchedule schedule(v.rho);
     for (int it = 0; it < iterations; ++it) {
+      const std::array<float, 3> w = schedule.Next();
+      const bool jacobi = ChebyshevSchedule::IsJacobi(w);
       const float* p = phi.data();
 #pragma omp parallel for schedule(static) if (na > 50000)
       for (int64_t i = 0; i < na; ++i) {
@@ -63,10 +67,12 @@ class CpuHierarchy : public HierarchyRelaxer {
           const float* a = &v.a[(n * 3 + c) * 6];
           float acc = n < ni ? 0.f : s[(n - ni) * 3 + c];
           for (int k = 0; k < 6; ++k) acc += a[k] * p[nb[k] * 3 + c];
-          next[n * 3 + c] = acc;
+          const int64_t j = n * 3 + c;
+          next[j] = jacobi ? acc : prev[j] + w[c] * (acc - prev[j]);
         }
       }
-      phi.swap(next);  // both buffers agree outside the updated nodes
+      prev.swap(phi);
+      phi.swap(next);
     }
   }
   void Read(int l, int64_t first_row, std::vector<float>* phi) override {
@@ -86,6 +92,42 @@ std::unique_ptr<HierarchyRelaxer> MakeGlHierarchy();  // gl_diffusion.cc
 std::unique_ptr<HierarchyRelaxer> HierarchyRelaxer::Create(DiffusionBackend backend) {
   if (backend == DiffusionBackend::kGl) return MakeGlHierarchy();
   return std::make_unique<CpuHierarchy>();
+}
+
+double JacobiSpectralRadius(const HierarchyRelaxer::Level& v, int c, int iterations) {
+  std::vector<double> x(v.size, 1.0), ax(v.size);
+  double lowest = 0;
+  for (int it = 0; it <= iterations; ++it) {
+    double ratio = 1e300, largest = 0;
+#pragma omp parallel for schedule(static) reduction(min : ratio) reduction(max : largest) if (v.size > 50000)
+    for (int64_t n = 0; n < v.size; ++n) {
+      double acc = 0;
+      for (int k = 0; k < 6; ++k) acc += double(v.a[(n * 3 + c) * 6 + k]) * x[v.nb[n * 6 + k]];
+      ax[n] = acc;
+      ratio = std::min(ratio, acc / x[n]);
+      largest = std::max(largest, 0.5 * (x[n] + acc));
+    }
+    lowest = ratio;
+    if (it == iterations || largest <= 0) break;
+#pragma omp parallel for schedule(static) if (v.size > 50000)
+    for (int64_t n = 0; n < v.size; ++n) x[n] = 0.5 * (x[n] + ax[n]) / largest;
+  }
+  return std::clamp(v.size > 0 ? lowest : 0.0, 0.0, 1.0);
+}
+
+std::array<float, 3> ChebyshevSchedule::Next() {
+  for (int c = 0; c < 3; ++c) {
+    const double r2 = rho_[c] * rho_[c];
+    omega_[c] = step_ == 0 ? 1 : step_ == 1 ? 1 / (1 - r2 / 2) : 1 / (1 - r2 * omega_[c] / 4);
+  }
+  ++step_;
+  return {float(omega_[0]), float(omega_[1]), float(omega_[2])};
+}
+
+Relaxation ParseRelaxation(const std::string& text) {
+  if (text == "jacobi") return Relaxation::kJacobi;
+  if (text == "chebyshev") return Relaxation::kChebyshev;
+  throw InputError("--relaxation: unknown relaxation '" + text + "' (expected jacobi or chebyshev)");
 }
 
 DiffusionBackend ParseDiffusionBackend(const std::string& text) {
@@ -199,7 +241,7 @@ BoundaryLight BoundaryRadiance(const Polygrid& pg, const NodeMaterial& m, const 
   return L;
 }
 
-std::vector<float> SolveReference(const JacobiSystem& S, int channels) {
+std::vector<float> SolveReference(const JacobiSystem& S, int channels, bool diagonal_preconditioner) {
   std::vector<float> phi(S.size * 3, 0.f);
   for (int c = 0; c < channels; ++c) {
     std::vector<Eigen::Triplet<double>> t;
@@ -214,13 +256,26 @@ std::vector<float> SolveReference(const JacobiSystem& S, int channels) {
     }
     Eigen::SparseMatrix<double> A(S.size, S.size);
     A.setFromTriplets(t.begin(), t.end());
-    Eigen::BiCGSTAB<Eigen::SparseMatrix<double>, Eigen::IncompleteLUT<double>> solver;
-    solver.setTolerance(1e-12);
-    solver.setMaxIterations(2000);
-    solver.compute(A);
-    TL_CHECK_MSG(solver.info() == Eigen::Success, "polygrid system: ILUT failed");
-    Eigen::VectorXd x = solver.solve(b);
-    if (solver.info() != Eigen::Success) {  // stiff systems (tiny d): sparse LU instead
+    Eigen::VectorXd x;
+    bool solved = false;
+    if (diagonal_preconditioner) {
+      Eigen::BiCGSTAB<Eigen::SparseMatrix<double>, Eigen::DiagonalPreconditioner<double>> solver;
+      solver.setTolerance(1e-12);
+      solver.setMaxIterations(20000);
+      solver.compute(A);
+      x = solver.solve(b);
+      solved = solver.info() == Eigen::Success;
+    }
+    if (!solved) {
+      Eigen::BiCGSTAB<Eigen::SparseMatrix<double>, Eigen::IncompleteLUT<double>> solver;
+      solver.setTolerance(1e-12);
+      solver.setMaxIterations(2000);
+      solver.compute(A);
+      TL_CHECK_MSG(solver.info() == Eigen::Success, "polygrid system: ILUT failed");
+      x = solver.solve(b);
+      solved = solver.info() == Eigen::Success;
+    }
+    if (!solved) {  // stiff systems (tiny d): sparse LU instead
       Eigen::SparseLU<Eigen::SparseMatrix<double>> lu(A);
       TL_CHECK_MSG(lu.info() == Eigen::Success, "polygrid system is singular");
       x = lu.solve(b);
@@ -269,6 +324,8 @@ PolygridDiffusion::PolygridDiffusion(const std::vector<Polygrid>* levels,
     for (int64_t n = 0; n < pg.size(); ++n)
       if (depth_[l] < 0 || pg.layer[n] <= depth_[l]) hl[l].active.push_back(int32_t(n));
     if (l + 1 < nl) hl[l].prolong = MakeProlongation(L[l + 1], pg);
+    if (options_.relaxation == Relaxation::kChebyshev)
+      for (int c = 0; c < 3; ++c) hl[l].rho[c] = JacobiSpectralRadius(hl[l], c);
   }
   relaxer_ = HierarchyRelaxer::Create(options.backend);
   relaxer_->Load(std::move(hl));

@@ -66,8 +66,11 @@ BoundaryLight BoundaryRadiance(const Polygrid& pg, const NodeMaterial& m, const 
 
 // The reference solution for tests, in double: BiCGSTAB preconditioned by incomplete LU to a
 // relative residual of 1e-12 (sparse LU if that fails); phi'[n * 3 + c] for the first
-// `channels` channels (the others are left 0).
-std::vector<float> SolveReference(const JacobiSystem& system, int channels = 3);
+// `channels` channels (the others are left 0). With diagonal_preconditioner, BiCGSTAB first
+// tries the diagonal (Jacobi) preconditioner, whose setup costs nothing: minutes less on
+// polygrids of a million nodes, where the incomplete LU's takes most of the time.
+std::vector<float> SolveReference(const JacobiSystem& system, int channels = 3,
+                                  bool diagonal_preconditioner = false);
 
 // Where the relaxation runs.
 enum class DiffusionBackend { kCpu, kGl };
@@ -82,6 +85,11 @@ DiffusionBackend ParseDiffusionBackend(const std::string& text);
 //   phi'_n <- sum_k a[n][k] phi'_{nb[n][k]} + (n boundary ? q_b g_b : 0)
 // so a step reads 6 neighbour indices, 18 weights and 3 values per node (and the active list
 // only when adaptive): nothing per interior node beyond the stencil.
+// With Level::rho set, the steps of one Relax call are accelerated by Chebyshev's
+// semi-iteration (Golub & Van Loan, Section 11.2.8; Varga 1962):
+//   phi'_(k+1) = phi'_(k-1) + omega_(k+1) (J phi'_k - phi'_(k-1)),   J phi' = the step above,
+// with the omega_k of ChebyshevSchedule (omega_1 = 1: the first step is Jacobi's), which also
+// reads the previous iterate (3 values more per node). The fixed point is Jacobi's.
 class HierarchyRelaxer {
  public:
   struct Level {
@@ -92,6 +100,9 @@ class HierarchyRelaxer {
     std::vector<float> source_coef;  // g[b * 3 + c]: boundary row b's source per unit q, over its diagonal
     std::vector<int32_t> active;     // the nodes that adaptive relaxation updates
     Prolongation prolong;            // from the next coarser level (empty on the coarsest)
+    // Per channel, the spectral radius of the step's iteration matrix (a) that Chebyshev's
+    // semi-iteration assumes (JacobiSpectralRadius); 0: plain Jacobi steps.
+    std::array<double, 3> rho{};
   };
   virtual ~HierarchyRelaxer() = default;
   virtual void Load(std::vector<Level> levels) = 0;
@@ -111,12 +122,43 @@ class HierarchyRelaxer {
 // num_interior) from the polygrid and its material.
 HierarchyRelaxer::Level RelaxationRows(const Polygrid& pg, const NodeMaterial& m, double C);
 
+// An estimate of the spectral radius of the relaxation's iteration matrix a (nonnegative:
+// RelaxationRows' weights are >= 0), for channel c, from below: the smallest ratio
+// (a x)_n / x_n (Collatz-Wielandt: rho >= min_n (a x)_n / x_n for any x > 0) after
+// `iterations` steps of the power iteration x <- (x + a x) / 2 from x = 1 (halved with the
+// identity so that a's eigenvalue -rho, which bipartite grids have, does not stall it). An
+// estimate below rho keeps Chebyshev's semi-iteration convergent for real eigenvalues within
+// (-1, 1) (|T_k(lambda / r) / T_k(1 / r)| < 1 for every |lambda| < 1 and r <= 1), and it only
+// slows the modes between the estimate and rho.
+double JacobiSpectralRadius(const HierarchyRelaxer::Level& level, int c, int iterations = 50);
+
+// The over-relaxation weights of Chebyshev's semi-iteration for spectral radii rho (per
+// channel): omega_1 = 1, omega_2 = 1 / (1 - rho^2 / 2), omega_(k+1) = 1 / (1 - rho^2 omega_k / 4)
+// (omega_k decreases towards 2 / (1 + sqrt(1 - rho^2))); rho = 0 gives Jacobi (omega = 1).
+class ChebyshevSchedule {
+ public:
+  explicit ChebyshevSchedule(const std::array<double, 3>& rho) : rho_(rho) {}
+  std::array<float, 3> Next();  // the weights of the next step
+  static bool IsJacobi(const std::array<float, 3>& omega) {
+    return omega[0] == 1 && omega[1] == 1 && omega[2] == 1;
+  }
+
+ private:
+  std::array<double, 3> rho_, omega_{};
+  int step_ = 0;
+};
+
+enum class Relaxation { kJacobi, kChebyshev };
+Relaxation ParseRelaxation(const std::string& text);  // "jacobi" or "chebyshev"; InputError otherwise
+
 // The hierarchical, adaptive scheme of Section 5.3.
 struct DiffusionOptions {
   DiffusionBackend backend = DiffusionBackend::kCpu;
   // Relaxation steps per level, COARSEST first; missing entries repeat the last one; with more
   // entries than levels the coarsest entries are dropped (the last is always the finest's).
-  std::vector<int> iterations = {200, 100, 100};
+  // (Jacobi's steps needed 200 / 100 / 100 and more; Chebyshev's 60 / 30 / 30 leave E < 1e-4 on
+  // the bunny at 17^3, docs/benchmarks.md.)
+  std::vector<int> iterations = {60, 30, 30};
   // Adaptive depth per level, COARSEST first: after prolongation, only nodes within this many
   // layers of the boundary are updated on that level (the deeper ones stay at the coarse
   // solution, Fig. 8). -1 (or missing): all nodes. The coarsest level always updates all.
@@ -125,6 +167,10 @@ struct DiffusionOptions {
   bool frame_coherence = false;
   // Frame-coherent frames run this many steps on the finest level.
   int coherent_iterations = 50;
+  // The paper's Jacobi steps, or the same steps accelerated by Chebyshev's semi-iteration
+  // (HierarchyRelaxer): on the bunny at 9^3 with 60 / 30 / 30 steps, the error against the
+  // converged solution falls from 6.9e-3 to 5e-5 (docs/benchmarks.md).
+  Relaxation relaxation = Relaxation::kChebyshev;
 
   std::string Validate() const;
 };

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "render/diffusion.h"
 
+#include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -54,11 +55,13 @@ TEST(Diffusion, HierarchyAndCoherenceReduceTheError) {
   const double C = ReflectionParameterC(1.3);
   const std::vector<float> exact = SolveReference(BuildJacobiSystem(s.levels[0], s.mats[0], C, s.q[0]));
   DiffusionOptions flat;
+  flat.relaxation = Relaxation::kJacobi;  // the paper's steps (Chebyshev's converge in 100 anyway)
   flat.iterations = {100};
   std::vector<Polygrid> one = {s.levels[0]};
   PolygridDiffusion d1(&one, {s.mats[0]}, C, flat);
   const double e_flat = RelativeL2(d1.Solve({s.q[0]}), exact);
   DiffusionOptions hier;
+  hier.relaxation = Relaxation::kJacobi;
   hier.iterations = {50, 50, 100};
   PolygridDiffusion d3(&s.levels, s.mats, C, hier);
   const double e_hier = RelativeL2(d3.Solve(s.q), exact);
@@ -84,11 +87,16 @@ TEST(Diffusion, HierarchyAndCoherenceReduceTheError) {
   EXPECT_LT(e_adapt3, e_adapt1);
 }
 
-TEST(Diffusion, GlBackendMatchesCpu) {
+class DiffusionRelaxation : public ::testing::TestWithParam<Relaxation> {};
+
+TEST_P(DiffusionRelaxation, GlBackendMatchesCpu) {
   SphereCase s(9);
   const double C = ReflectionParameterC(1.3);
   DiffusionOptions o;
-  o.iterations = {50, 50, 100};
+  o.relaxation = GetParam();
+  // Chebyshev's steps converge to float rounding in ~60 finest steps, where both backends
+  // would agree whatever their arithmetic; fewer steps compare the steps themselves.
+  o.iterations = GetParam() == Relaxation::kJacobi ? std::vector<int>{50, 50, 100} : std::vector<int>{8, 8, 12};
   PolygridDiffusion cpu(&s.levels, s.mats, C, o);
   const std::vector<float> a = cpu.Solve(s.q);
   o.backend = DiffusionBackend::kGl;
@@ -99,7 +107,7 @@ TEST(Diffusion, GlBackendMatchesCpu) {
   // on the device between frames).
   o.depth = {-1, -1, 2};
   o.frame_coherence = true;
-  o.coherent_iterations = 30;
+  o.coherent_iterations = GetParam() == Relaxation::kJacobi ? 30 : 6;
   o.backend = DiffusionBackend::kCpu;
   PolygridDiffusion cpu2(&s.levels, s.mats, C, o);
   o.backend = DiffusionBackend::kGl;
@@ -117,6 +125,83 @@ TEST(Diffusion, GlBackendMatchesCpu) {
   EXPECT_LT(err_adaptive, 1e-5);
   EXPECT_LT(err_coherent, 1e-5);
   EXPECT_GT(RelativeL2(cpu_coherent, a), 0.1);  // the coherent frame did use the new light
+  const std::vector<float> exact = SolveReference(BuildJacobiSystem(s.levels[0], s.mats[0], C, s.q[0]));
+  EXPECT_GT(RelativeL2(a, exact), 1e-5);  // not converged: the comparison is of the steps
+}
+
+INSTANTIATE_TEST_SUITE_P(Diffusion, DiffusionRelaxation,
+                         ::testing::Values(Relaxation::kJacobi, Relaxation::kChebyshev),
+                         [](const auto& info) {
+                           return info.param == Relaxation::kJacobi ? "Jacobi" : "Chebyshev";
+                         });
+
+// The estimate against the spectral radius of the dense iteration matrix: from below, and
+// close enough that Chebyshev's steps gain (a small sphere, every channel).
+TEST(Diffusion, SpectralRadiusEstimateIsCloseFromBelow) {
+  SphereCase s(5, 1);
+  const double C = ReflectionParameterC(1.3);
+  const HierarchyRelaxer::Level v = RelaxationRows(s.levels[0], s.mats[0], C);
+  for (int c = 0; c < 3; ++c) {
+    Eigen::MatrixXd a = Eigen::MatrixXd::Zero(v.size, v.size);
+    for (int64_t n = 0; n < v.size; ++n)
+      for (int k = 0; k < 6; ++k) {
+        ASSERT_GE(v.a[(n * 3 + c) * 6 + k], 0.f);  // what the estimate's bound needs
+        a(n, v.nb[n * 6 + k]) += v.a[(n * 3 + c) * 6 + k];
+      }
+    const Eigen::VectorXcd ev = Eigen::EigenSolver<Eigen::MatrixXd>(a, false).eigenvalues();
+    double rho = 0, imag = 0;
+    for (int i = 0; i < ev.size(); ++i) rho = std::max(rho, std::abs(ev[i])), imag = std::max(imag, std::abs(ev[i].imag()));
+    const double e10 = JacobiSpectralRadius(v, c, 10), e50 = JacobiSpectralRadius(v, c);
+    std::printf("[diffusion] sphere 5^3 (%lld nodes), channel %d: rho %.6f (largest |Im| %.1e), "
+                "estimate after 10 / 50 power steps %.6f / %.6f\n", (long long)v.size, c, rho, imag, e10, e50);
+    EXPECT_LE(e10, e50 + 1e-12);
+    EXPECT_LE(e50, rho * (1 + 1e-9));
+    EXPECT_GT(e50, rho - 0.25 * (1 - rho));  // within a quarter of the gap to 1
+  }
+}
+
+// Chebyshev's steps reach the solution of the same equations (the direct solve's) far sooner
+// than Jacobi's, on both backends, with and without the hierarchy.
+TEST(Diffusion, ChebyshevConvergesFasterToTheSameSolution) {
+  SphereCase s(9);
+  const double C = ReflectionParameterC(1.3);
+  const std::vector<float> exact = SolveReference(BuildJacobiSystem(s.levels[0], s.mats[0], C, s.q[0]));
+  const std::vector<Polygrid> one = {s.levels[0]};
+  for (DiffusionBackend backend : {DiffusionBackend::kCpu, DiffusionBackend::kGl})
+    for (bool hierarchy : {false, true}) {
+      double err[2][2];  // [relaxation][few, many steps]
+      for (Relaxation r : {Relaxation::kJacobi, Relaxation::kChebyshev})
+        for (int many = 0; many < 2; ++many) {
+          DiffusionOptions o;
+          o.backend = backend;
+          o.relaxation = r;
+          const int finest = many ? 400 : 30;
+          o.iterations = hierarchy ? std::vector<int>{30, 30, finest} : std::vector<int>{finest};
+          PolygridDiffusion d(hierarchy ? &s.levels : &one,
+                              hierarchy ? s.mats : std::vector<NodeMaterial>{s.mats[0]}, C, o);
+          err[int(r)][many] = RelativeL2(d.Solve(hierarchy ? s.q : std::vector<BoundaryLight>{s.q[0]}), exact);
+        }
+      std::printf("[diffusion] %s, %s: 30 finest steps, Jacobi %.2e, Chebyshev %.2e; 400 steps %.2e, %.2e\n",
+                  backend == DiffusionBackend::kGl ? "gl" : "cpu", hierarchy ? "3 levels" : "one level",
+                  err[0][0], err[1][0], err[0][1], err[1][1]);
+      EXPECT_LT(err[1][0], 0.1 * err[0][0]);
+      EXPECT_LT(err[1][1], 1e-5);  // float rounding: the same fixed point
+    }
+}
+
+TEST(Diffusion, ChebyshevScheduleWeights) {
+  ChebyshevSchedule jacobi({0, 0, 0});
+  for (int k = 0; k < 5; ++k) EXPECT_TRUE(ChebyshevSchedule::IsJacobi(jacobi.Next()));
+  ChebyshevSchedule s({0.9, 0.99, 0.999});
+  const std::array<float, 3> w1 = s.Next(), w2 = s.Next();
+  EXPECT_EQ(w1[0], 1.f);
+  EXPECT_NEAR(w2[1], 1 / (1 - 0.99 * 0.99 / 2), 1e-6);
+  std::array<float, 3> w{};
+  for (int k = 0; k < 2000; ++k) w = s.Next();
+  for (int c = 0; c < 3; ++c) {
+    const double rho = c == 0 ? 0.9 : c == 1 ? 0.99 : 0.999;
+    EXPECT_NEAR(w[c], 2 / (1 + std::sqrt(1 - rho * rho)), 1e-4) << c;
+  }
 }
 
 }  // namespace

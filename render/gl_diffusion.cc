@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
-// The gl backend of the polygrid relaxation: one compute-shader dispatch per step, ping-ponging
-// two fluence buffers (Section 5.2's radiance buffers I_A, I_B) in the solver's headless context.
+// The gl backend of the polygrid relaxation: one compute-shader dispatch per step, rotating
+// three fluence buffers (Section 5.2's radiance buffers I_A, I_B, and the iterate before them
+// for Chebyshev's steps) in the solver's headless context.
 #include <algorithm>
 #include <fmt/format.h>
 #include <map>
@@ -92,7 +93,7 @@ namespace {
 
 // Per level: the rows (neighbours, weights over the diagonal), the boundary rows' source
 // coefficients, q and sources, the active list, the prolongation from the coarser level, and
-// two fluence buffers (the current one is phi[cur]).
+// three fluence buffers (the current one is phi[cur]).
 class GlHierarchy : public HierarchyRelaxer {
  public:
   GlHierarchy() {
@@ -116,6 +117,7 @@ class GlHierarchy : public HierarchyRelaxer {
       d.s.Zero();
       d.active.Set(v.active);
       d.num_active = int64_t(v.active.size());
+      d.rho = v.rho;
       d.p_start.Set(v.prolong.start);
       d.p_index.Set(v.prolong.index);
       d.p_weight.Set(v.prolong.weight);
@@ -142,7 +144,8 @@ class GlHierarchy : public HierarchyRelaxer {
     api.UseProgram(prolong_);
     api.Uniform1i(0, int(d.size));
     render_gl::Dispatch({&d.p_start, &d.p_index, &d.p_weight, &coarse.phi[coarse.cur], &d.phi[d.cur]}, d.size);
-    d.phi[1 - d.cur].CopyFrom(d.phi[d.cur], size_t(d.size) * 3 * sizeof(float));
+    for (int k = 1; k < 3; ++k)
+      d.phi[(d.cur + k) % 3].CopyFrom(d.phi[d.cur], size_t(d.size) * 3 * sizeof(float));
   }
   void Relax(int l, bool adaptive, int iterations) override {
     Device& d = dev_[l];
@@ -154,9 +157,17 @@ class GlHierarchy : public HierarchyRelaxer {
     api.Uniform1i(2, adaptive ? 1 : 0);
     // Without the list the shader never reads binding 3; the rows stand in for it.
     const Ssbo& list = adaptive ? d.active : d.nb;
+    // phi[cur] is the iterate, phi[cur + 2] the one before it (read by Chebyshev's steps from
+    // the second on) and phi[cur + 1] the next; all three agree outside the updated nodes.
+    ChebyshevSchedule schedule(d.rho);
     for (int it = 0; it < iterations; ++it) {
-      render_gl::Dispatch({&d.nb, &d.a, &d.s, &list, &d.phi[d.cur], &d.phi[1 - d.cur]}, count);
-      d.cur = 1 - d.cur;  // both buffers agree outside the updated nodes
+      const std::array<float, 3> w = schedule.Next();
+      const bool jacobi = ChebyshevSchedule::IsJacobi(w);
+      api.Uniform1i(3, jacobi ? 0 : 1);
+      api.Uniform3f(4, w[0], w[1], w[2]);
+      const Ssbo &cur = d.phi[d.cur], &next = d.phi[(d.cur + 1) % 3], &prev = d.phi[(d.cur + 2) % 3];
+      render_gl::Dispatch({&d.nb, &d.a, &d.s, &list, &cur, &next, &prev}, count);
+      d.cur = (d.cur + 1) % 3;
     }
   }
   void Read(int l, int64_t first_row, std::vector<float>* phi) override {
@@ -170,7 +181,8 @@ class GlHierarchy : public HierarchyRelaxer {
   struct Device {
     int64_t size = 0, num_interior = 0, num_active = 0;
     int cur = 0;
-    Ssbo nb, a, coef, q, s, active, p_start, p_index, p_weight, phi[2];
+    Ssbo nb, a, coef, q, s, active, p_start, p_index, p_weight, phi[3];
+    std::array<double, 3> rho{};
   };
   GLuint jacobi_ = 0, source_ = 0, prolong_ = 0;
   std::vector<Device> dev_;

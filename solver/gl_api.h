@@ -33,6 +33,7 @@ namespace translume::gl {
   X(PFNGLUSEPROGRAMPROC, UseProgram)                                     \
   X(PFNGLUNIFORM1IPROC, Uniform1i)                                       \
   X(PFNGLUNIFORM1FPROC, Uniform1f)                                       \
+  X(PFNGLUNIFORM3FPROC, Uniform3f)                                       \
   X(PFNGLGENBUFFERSPROC, GenBuffers)                                     \
   X(PFNGLDELETEBUFFERSPROC, DeleteBuffers)                               \
   X(PFNGLBINDBUFFERPROC, BindBuffer)                                     \

@@ -13,8 +13,9 @@
 # on Wax I, Marble and 129^3 with a batch of 16 (the cpu solver as the peer), the same on Wax I
 # and Marble with the line smoother by cyclic reduction (TRANSLUME_GL_LINE_PCR=1), a profile
 # of Wax I's solves per kernel and level on GPU timestamps (default and cyclic reduction), the
-# renderbench on the 253-cube bunny (16^3 and 17^3 nodes per cube, no frame coherence) and a
-# profile of its 17^3 frames per shader on GPU timestamps, the RGB recoveries with 16
+# renderbench on the 253-cube bunny (16^3 and 17^3 nodes per cube, no frame coherence; the
+# default Chebyshev steps, twice as many, and the paper's Jacobi steps) and a profile of its
+# 17^3 frames per shader on GPU timestamps, the RGB recoveries with 16
 # conditions on the Wax I grid (default, cyclic reduction, then 15 s with a GPU-timestamp
 # profile per kernel and grid) and the Marble grid on the gl backend, time-capped at 40 s and
 # 30 s (their seconds per iteration give the time of the bench's full 300 iterations), and
@@ -116,8 +117,9 @@ step() {
 
 if [ $quick = 1 ]; then
   grids=33x25x17; pack_grids=$grids; profile_grid=$grids; repeats=1; batch=4  # (above the coarse tail)
-  render_args=(--shapes bunny --resolutions 3,4 --frames 2 --image 64 --skip-coherent)
-  render_profile_args=(--shapes bunny --resolutions 4 --frames 2 --image 64 --skip-coherent)
+  render_args=(--shapes bunny --resolutions 3,4 --frames 2 --image 64 --skip-coherent --no-error)
+  render_profile_args=(--shapes bunny --resolutions 4 --frames 2 --image 64 --skip-coherent --no-error)
+  render_variant_args=("${render_profile_args[@]}")
   wax=(--grid 12x10x5 --max-iterations 3 --max-seconds 60)
   marble=(--grid 16x16x4 --max-iterations 3 --max-seconds 60)
   peer=(--grid 12x10x5 --max-iterations 3 --max-seconds 30)
@@ -127,8 +129,9 @@ if [ $quick = 1 ]; then
 else
   grids=130x53x37,256x256x20,129x129x129; pack_grids=130x53x37,256x256x20; profile_grid=130x53x37
   repeats=7; batch=16
-  render_args=(--shapes bunny --resolutions 16,17 --frames 20 --skip-coherent)
-  render_profile_args=(--shapes bunny --resolutions 17 --frames 10 --skip-coherent)
+  render_args=(--shapes bunny --resolutions 16,17 --frames 20 --skip-coherent --no-error)
+  render_profile_args=(--shapes bunny --resolutions 17 --frames 10 --skip-coherent --no-error)
+  render_variant_args=("${render_profile_args[@]}")
   peer=(--grid 130x53x37 --max-iterations 300 --max-seconds 20)
   profile_recovery=(--grid 130x53x37 --max-iterations 300 --max-seconds 15)
   if [ $long = 1 ]; then
@@ -176,6 +179,14 @@ for variant in TRANSLUME_GL_LINE_PCR=0 TRANSLUME_GL_LINE_PCR=1; do
 done
 if [ ${#render[@]} -gt 0 ]; then
   step "renderbench (bunny)" 60 "${render[@]}" "${render_args[@]}"
+  # The bunny's diffusion with twice the default Chebyshev steps, and with the paper's Jacobi
+  # steps as measured on 2026-11-30 (60,30,30). Their errors against the converged solution
+  # (the renderbench's E, a host solve that takes a minute at 17^3: --no-error here) do not
+  # depend on the backend; docs/benchmarks.md has them from the cpu backend.
+  step "renderbench (bunny, chebyshev 60,30,30)" 30 "${render[@]}" "${render_variant_args[@]}" \
+    --iterations 60,30,30
+  step "renderbench (bunny, jacobi 60,30,30)" 30 "${render[@]}" "${render_variant_args[@]}" \
+    --relaxation jacobi --iterations 60,30,30
   # Where a frame's time goes, per shader, timed on the GPU without finishes.
   step "renderbench profile (bunny, TRANSLUME_GL_PROFILE=gpu)" 60 env TRANSLUME_GL_PROFILE=gpu \
     "${render[@]}" "${render_profile_args[@]}"

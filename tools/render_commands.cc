@@ -88,7 +88,8 @@ int RunRender(int argc, char** argv) {
                " a closed mesh (.obj, .ply) with an optional --polycube (a file, or auto).",
                "translume render"};
   std::string material, shape_name = "sphere", polycube_path, save_polycube, light = "dir:1,0.3,0.6", out,
-              camera, image = "256x256", iterations = "200,100,100", depth, backend = "cpu", placement = "winslow";
+              camera, image = "256x256", iterations = "60,30,30", depth, backend = "cpu", placement = "winslow",
+              relaxation = "chebyshev";
   double size_mm = 20, map_scale = 1, first_layer = 0.1;
   int resolution = 17, levels = 3, turntable = 1, variance_steps = PolygridOptions().variance_iterations;
   bool coherence = false, clamp = false;
@@ -119,6 +120,9 @@ int RunRender(int argc, char** argv) {
                  "Relaxation steps per level (0..1000000), coarsest first (a longer list than the levels drops "
                  "its first entries, a shorter one repeats its last)")->capture_default_str();
   app.add_option("--depth", depth, "Adaptive depth per level in node layers, coarsest first (-1: all; the coarsest level, with no coarser solution to keep, always updates all)");
+  app.add_option("--relaxation", relaxation,
+                 "Diffusion steps: jacobi (the paper's) or chebyshev (the same steps accelerated by Chebyshev's "
+                 "semi-iteration)")->capture_default_str();
   app.add_option("--backend", backend, "All three passes on cpu or gl (compute shaders)")->capture_default_str();
   app.add_option("--light", light, "dir:X,Y,Z | point:X,Y,Z (mm; shadows in every direction: a cube shadow map when near or inside the object's bounding sphere) | env:FILE.exr (lat-long)")->capture_default_str();
   app.add_option("--camera", camera,
@@ -239,6 +243,7 @@ int RunRender(int argc, char** argv) {
   DiffusionOptions dopt;
   dopt.backend = ParseDiffusionBackend(backend);
   dopt.iterations = ParseIntList(iterations, "--iterations");
+  dopt.relaxation = ParseRelaxation(relaxation);
   if (!depth.empty()) dopt.depth = ParseIntList(depth, "--depth");
   dopt.frame_coherence = coherence;
   // Measured on the torus at 9^3 (the converged frames against the coherent ones): mean 1.5 %,

@@ -13,12 +13,14 @@
 #include <string>
 #include <vector>
 
-#include "solver/threads.h"
+#include "render/diffusion.h"
 #include "render/material_map.h"
 #include "render/renderer.h"
 #include "solver/gl_context.h"
 #include "solver/status.h"
+#include "solver/threads.h"
 
+namespace translume {
 namespace {
 
 double Median(std::vector<double> v) {
@@ -26,7 +28,27 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
+// The last frame's error in the paper's Figure 15 metric, over the finest level's boundary
+// nodes and RGB: E = sum (L - L0)^2 / sum L0^2, L0 the radiance of the converged solution of
+// the same equations and light (SolveReference, no hierarchy, no adaptive depth).
+double ErrorAgainstConverged(const Polygrid& pg, const NodeMaterial& m, double C, const Renderer& r) {
+  const BoundaryLight& q = r.boundary_light();
+  BoundaryLight none;  // the renderer's radiance is phi / (2 pi), without subtracting q
+  for (int c = 0; c < 3; ++c) none[c].assign(q[c].size(), 0.f);
+  const BoundaryLight L0 =
+      BoundaryRadiance(pg, m, none, SolveReference(BuildJacobiSystem(pg, m, C, q), 3, pg.size() > 100000));
+  const BoundaryLight& L = r.boundary_radiance();
+  double num = 0, den = 0;
+  for (int c = 0; c < 3; ++c)
+    for (size_t b = 0; b < L0[c].size(); ++b) {
+      num += (double(L[c][b]) - L0[c][b]) * (double(L[c][b]) - L0[c][b]);
+      den += double(L0[c][b]) * L0[c][b];
+    }
+  return den > 0 ? num / den : 0;
+}
+
 }  // namespace
+}  // namespace translume
 
 int main(int argc, char** argv) {
   using namespace translume;
@@ -35,16 +57,27 @@ int main(int argc, char** argv) {
                "coherence, for each shape and resolution.", "translume-renderbench"};
   std::vector<std::string> shapes = {"sphere", "torus"};
   std::vector<int> resolutions = {9, 17};
-  std::string backend = "gl";
-  std::vector<int> iterations = {60, 30, 30};
+  std::string backend = "gl", relaxation = "chebyshev";
+  // Chebyshev steps that keep E below 1e-3 on the bunny at 9^3 and 17^3 (5e-4; the paper's
+  // Figure 15 allows 5e-3; docs/benchmarks.md, 2026-12-01).
+  std::vector<int> iterations = {30, 15, 15};
+  std::vector<int> depth;
   int frames = 10, size = 256, coherent_iterations = 20;
-  bool skip_coherent = false;
+  bool skip_coherent = false, skip_error = false;
   app.add_option("--shapes", shapes, "Built-in shapes")->delimiter(',');
   app.add_option("--resolutions", resolutions, "Nodes per cube edge")->delimiter(',');
   app.add_option("--backend", backend, "cpu or gl")->capture_default_str();
   app.add_option("--iterations", iterations, "Relaxation steps per level, coarsest first")
       ->delimiter(',')
       ->capture_default_str();
+  app.add_option("--relaxation", relaxation, "jacobi (the paper's) or chebyshev (accelerated)")
+      ->capture_default_str();
+  app.add_option("--depth", depth,
+                 "Adaptive depth per level in node layers, coarsest first (-1: all nodes; the "
+                 "default: all nodes on every level)")
+      ->delimiter(',');
+  app.add_flag("--no-error", skip_error, "Skip the error against the converged solution (a sparse "
+                                         "solve in double on the host)");
   app.add_option("--frames", frames, "Timed frames per configuration")->capture_default_str();
   app.add_option("--image", size, "Square image size")->capture_default_str();
   app.add_option("--coherent-iterations", coherent_iterations, "Finest-level steps per coherent frame")
@@ -59,16 +92,21 @@ int main(int argc, char** argv) {
     DiffusionOptions d;
     d.backend = ParseDiffusionBackend(backend);
     d.iterations = iterations;
-    if (const std::string err = d.Validate(); !err.empty()) throw InputError("--iterations: " + err);
+    d.depth = depth;
+    d.relaxation = ParseRelaxation(relaxation);
+    if (const std::string err = d.Validate(); !err.empty())
+      throw InputError("--iterations/--depth: " + err);
     d.coherent_iterations = coherent_iterations;
     if (d.backend == DiffusionBackend::kGl) std::printf("%s\n", GlContext::Get().info().ToString().c_str());
     // Medians over the timed frames: t1 incident light, t2 diffusion, t3 shading (ms); fps =
     // 1 / median frame time; diff fps = 1 / median t2 (diffusion only); coh: with frame
     // coherence (skipped: -). build s: the polygrid hierarchy's construction (once). t2 range:
     // the fastest and slowest frame's diffusion without coherence (a run's spread, to tell it
-    // from differences between runs).
-    std::printf("%-7s %-14s %8s %8s %9s %9s %13s %9s %8s %9s %9s %8s\n", "shape", "polygrid", "nodes",
-                "build s", "t1 ms", "t2 ms", "t2 range ms", "t3 ms", "fps", "diff fps", "t2coh ms", "fps coh");
+    // from differences between runs). E: the last frame without coherence against the
+    // converged solution (ErrorAgainstConverged; the paper's Figure 15 keeps it below 0.5 %).
+    std::printf("%-7s %-14s %8s %8s %9s %9s %13s %9s %8s %9s %9s %8s %8s\n", "shape", "polygrid", "nodes",
+                "build s", "t1 ms", "t2 ms", "t2 range ms", "t3 ms", "fps", "diff fps", "t2coh ms", "fps coh",
+                "E");
     for (const std::string& name : shapes)
       for (int res : resolutions) {
         const auto shape = MakeBuiltinShape(name, 20);
@@ -80,13 +118,14 @@ int main(int argc, char** argv) {
         const double build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tb).count();
         const std::vector<NodeMaterial> mats =
             RestrictMaterialHierarchy(levels, ProceduralNodeMaterial(levels[0], "marble"));
+        const double C = ReflectionParameterC(1.3);
         RenderOptions ro;
         ro.width = ro.height = size;
         ro.supersample = 1;
-        double fps[2] = {0, 0}, t1 = 0, t2[2] = {0, 0}, t3 = 0, t2_min = 0, t2_max = 0;
+        double fps[2] = {0, 0}, t1 = 0, t2[2] = {0, 0}, t3 = 0, t2_min = 0, t2_max = 0, error = -1;
         for (int coh = 0; coh < (skip_coherent ? 1 : 2); ++coh) {
           d.frame_coherence = coh;
-          Renderer r(shape.get(), &levels, mats, ReflectionParameterC(1.3), d, ro);
+          Renderer r(shape.get(), &levels, mats, C, d, ro);
           r.Render(RenderLight::Parse("dir:1,0.3,0.6"), 0);  // warm-up (shader compile, first solve)
           std::vector<double> frame, a, b, c;
           for (int f = 1; f <= frames; ++f) {
@@ -100,6 +139,7 @@ int main(int argc, char** argv) {
           fps[coh] = 1 / Median(frame);
           t2[coh] = Median(b);
           if (!coh) {
+            if (!skip_error) error = ErrorAgainstConverged(levels[0], mats[0], C, r);
             t1 = Median(a), t3 = Median(c);
             t2_min = *std::min_element(b.begin(), b.end());
             t2_max = *std::max_element(b.begin(), b.end());
@@ -108,10 +148,11 @@ int main(int argc, char** argv) {
         const std::string coh_ms = skip_coherent ? "-" : std::to_string(1e3 * t2[1]).substr(0, 7);
         const std::string coh_fps = skip_coherent ? "-" : std::to_string(fps[1]).substr(0, 7);
         const std::string range = fmt::format("{:.1f}-{:.1f}", 1e3 * t2_min, 1e3 * t2_max);
-        std::printf("%-7s %-14s %8lld %8.1f %9.1f %9.1f %13s %9.1f %8.2f %9.2f %9s %8s\n", name.c_str(),
+        const std::string e = error < 0 ? "-" : fmt::format("{:.1e}", error);
+        std::printf("%-7s %-14s %8lld %8.1f %9.1f %9.1f %13s %9.1f %8.2f %9.2f %9s %8s %8s\n", name.c_str(),
                     (std::to_string(pc.cubes.size()) + "x" + std::to_string(res) + "^3").c_str(),
                     (long long)levels[0].size(), build_s, 1e3 * t1, 1e3 * t2[0], range.c_str(), 1e3 * t3,
-                    fps[0], 1 / t2[0], coh_ms.c_str(), coh_fps.c_str());
+                    fps[0], 1 / t2[0], coh_ms.c_str(), coh_fps.c_str(), e.c_str());
         std::fflush(stdout);
       }
   } catch (const std::exception& e) {

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // One relaxation step of the polygrid diffusion (render/diffusion.h, HierarchyRelaxer), RGB:
 //   dst[n] = sum_k a[n][k] src[nb[n][k]] + (n >= num_interior ? s[n - num_interior] : 0)
-// for n = active[i] (adaptive) or n = i, i < count.
+// for n = active[i] (adaptive) or n = i, i < count; with use_prev, Chebyshev's semi-iteration
+// (render/diffusion.h): dst[n] = prev[n] + omega (that - prev[n]), per channel.
 #version 430
 layout(local_size_x = 256) in;
 layout(std430, binding = 0) readonly buffer Nb { int nb[]; };
@@ -10,9 +11,12 @@ layout(std430, binding = 2) readonly buffer S { float s[]; };
 layout(std430, binding = 3) readonly buffer Active { int active_nodes[]; };
 layout(std430, binding = 4) readonly buffer Src { float src[]; };
 layout(std430, binding = 5) writeonly buffer Dst { float dst[]; };
+layout(std430, binding = 6) readonly buffer Prev { float prev[]; };
 layout(location = 0) uniform int count;
 layout(location = 1) uniform int num_interior;
 layout(location = 2) uniform int use_list;
+layout(location = 3) uniform int use_prev;
+layout(location = 4) uniform vec3 omega;
 
 void main() {
   int i = int(gl_WorkGroupID.y * gl_NumWorkGroups.x * 256u + gl_GlobalInvocationID.x);
@@ -24,6 +28,6 @@ void main() {
     int row = (n * 3 + c) * 6;
     float acc = n < num_interior ? 0.0 : s[(n - num_interior) * 3 + c];
     for (int k = 0; k < 6; ++k) acc += a[row + k] * src[nbr[k] * 3 + c];
-    dst[n * 3 + c] = acc;
+    dst[n * 3 + c] = use_prev != 0 ? prev[n * 3 + c] + omega[c] * (acc - prev[n * 3 + c]) : acc;
   }
 }
