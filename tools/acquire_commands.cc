@@ -172,7 +172,7 @@ int RunAcquire(int argc, char** argv) {
   if (ParseOrHelp(app, argc, argv)) return 0;
   RequireExtension(out, {".vdb"}, "-o");
   RequireFilePath("-o", out);  // else found only when the material is written, after the solve
-  o.recovery = flags.Options("acquire");
+  o.recovery = flags.Options(app, "acquire");
   o.solve = !no_solve;
   const acquire::CaptureSpec cap = acquire::ReadCapture(capture_path);
   const std::string work = acquire::WorkDir(out);

@@ -36,7 +36,6 @@ namespace fs = std::filesystem;
 }  // namespace
 
 void AddRecoveryFlags(CLI::App& app, RecoveryFlags* f) {
-  f->app = &app;
   app.add_option("--optimizer", f->optimizer, "lbfgs, ncg or paper")->capture_default_str();
   app.add_option("--lambda", f->options.lambda, "Regularisation weight")->capture_default_str();
   app.add_option("--regularizer", f->regularizer, "tk1, tv or huber")->capture_default_str();
@@ -50,13 +49,13 @@ void AddRecoveryFlags(CLI::App& app, RecoveryFlags* f) {
       ->capture_default_str();
 }
 
-RecoveryOptions RecoveryFlags::Options(const char* command) const {
+RecoveryOptions RecoveryFlags::Options(const CLI::App& app, const char* command) const {
   RecoveryOptions o = options;
   o.optimizer = ParseOptimizer(optimizer);
   o.regularizer.kind = ParseRegularizer(regularizer);
   o.backend = ParseBackend(backend);
   if (o.backend == Backend::kGl) GlContext::Get();  // fail before any output
-  if (std::string err = o.Validate(); !err.empty()) throw OptionsError(*app, command, err);
+  if (std::string err = o.Validate(); !err.empty()) throw OptionsError(app, command, err);
   return o;
 }
 
@@ -167,7 +166,7 @@ int RunSolve(int argc, char** argv) {
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
   RequireExtension(out, {".vdb"}, "-o");
-  const RecoveryOptions o = flags.Options("solve");
+  const RecoveryOptions o = flags.Options(app, "solve");
   const std::string& optimizer = flags.optimizer;
   const std::string& regularizer = flags.regularizer;
   const Dataset d = ReadDataset(dataset_path);

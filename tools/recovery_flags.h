@@ -12,10 +12,10 @@ namespace translume {
 struct RecoveryFlags {
   RecoveryOptions options;
   std::string optimizer = "lbfgs", regularizer = "tk1", backend = "cpu";
-  // The parsed options; throws InputError "COMMAND: problem" when invalid (and checks that a gl
-  // context exists for --backend gl).
-  RecoveryOptions Options(const char* command) const;
-  const CLI::App* app = nullptr;  // set by AddRecoveryFlags: errors name its flags
+  // The parsed options; throws InputError "--flag: problem" (a flag of `app`, the command's, that
+  // the problem names) or "COMMAND: problem" when invalid, and checks that a gl context exists
+  // for --backend gl.
+  RecoveryOptions Options(const CLI::App& app, const char* command) const;
 };
 void AddRecoveryFlags(CLI::App& app, RecoveryFlags* flags);
 
