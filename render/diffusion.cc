@@ -200,7 +200,7 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
           w_link -= lateral * pg.weights[j][k];
           ++slot;
         }
-        S.w[(n * 3 + c) * 6] = float(w_link);
+        S.w[(n * 3 + c) * 6] = float(std::max(0.0, w_link));  // capped rows: 0 up to rounding
         S.s[n * 3 + c] = float(q[c][b] * coef[b * 3 + c]);
         S.inv_diag[n * 3 + c] = float(1 / (kj * d + 2 * C * kn * kj + C * d * d * m.mu[c][n] * kj));
       }

@@ -64,7 +64,7 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
 BoundaryLight BoundaryRadiance(const Polygrid& pg, const NodeMaterial& m, const BoundaryLight& q,
                                const std::vector<float>& phi_prime);
 
-// The reference solution for tests, in double: BiCGSTAB preconditioned by incomplete LU to a
+// The reference solution for tests and the renderbench's error, in double: BiCGSTAB preconditioned by incomplete LU to a
 // relative residual of 1e-12 (sparse LU if that fails); phi'[n * 3 + c] for the first
 // `channels` channels (the others are left 0). With diagonal_preconditioner, BiCGSTAB first
 // tries the diagonal (Jacobi) preconditioner, whose setup costs nothing: minutes less on
@@ -109,8 +109,9 @@ class HierarchyRelaxer {
   virtual void SetSource(int level, const BoundaryLight& q) = 0;
   virtual void Zero(int level) = 0;     // phi' = 0
   virtual void Prolong(int level) = 0;  // phi'(level) = P phi'(level + 1)
-  // `iterations` Jacobi steps on the level's active nodes (adaptive) or all nodes; the others
-  // keep their values.
+  // `iterations` steps on the level's active nodes (adaptive) or all nodes; the others keep
+  // their values. Jacobi's steps, or with Level::rho Chebyshev's, whose sequence starts afresh
+  // in every call. Zero and Prolong set every iterate the backend keeps.
   virtual void Relax(int level, bool adaptive, int iterations) = 0;
   // Rows [first_row, size) of the level's phi' into (*phi)[first_row * 3 ...]; phi holds
   // size * 3 values, the other rows are left as they are.
@@ -128,8 +129,11 @@ HierarchyRelaxer::Level RelaxationRows(const Polygrid& pg, const NodeMaterial& m
 // `iterations` steps of the power iteration x <- (x + a x) / 2 from x = 1 (halved with the
 // identity so that a's eigenvalue -rho, which bipartite grids have, does not stall it). An
 // estimate below rho keeps Chebyshev's semi-iteration convergent for real eigenvalues within
-// (-1, 1) (|T_k(lambda / r) / T_k(1 / r)| < 1 for every |lambda| < 1 and r <= 1), and it only
-// slows the modes between the estimate and rho.
+// (-1, 1) (|T_k(lambda / r) / T_k(1 / r)| < 1 for every |lambda| < 1 and r < 1), and it only
+// slows the modes between the estimate and rho. (Real eigenvalues: a is similar to a symmetric
+// matrix only approximately, as the boundary rows and distorted cells are not symmetric; a
+// small sphere's spectrum is real, Diffusion.SpectralRadiusEstimateIsCloseFromBelow.) Rows of
+// tiny weight sums pull the estimate towards 0, i.e. towards plain Jacobi steps.
 double JacobiSpectralRadius(const HierarchyRelaxer::Level& level, int c, int iterations = 50);
 
 // The over-relaxation weights of Chebyshev's semi-iteration for spectral radii rho (per
@@ -139,6 +143,7 @@ class ChebyshevSchedule {
  public:
   explicit ChebyshevSchedule(const std::array<double, 3>& rho) : rho_(rho) {}
   std::array<float, 3> Next();  // the weights of the next step
+  // Every weight 1: the step is Jacobi's and need not read the previous iterate.
   static bool IsJacobi(const std::array<float, 3>& omega) {
     return omega[0] == 1 && omega[1] == 1 && omega[2] == 1;
   }
@@ -168,8 +173,8 @@ struct DiffusionOptions {
   // Frame-coherent frames run this many steps on the finest level.
   int coherent_iterations = 50;
   // The paper's Jacobi steps, or the same steps accelerated by Chebyshev's semi-iteration
-  // (HierarchyRelaxer): on the bunny at 9^3 with 60 / 30 / 30 steps, the error against the
-  // converged solution falls from 6.9e-3 to 5e-5 (docs/benchmarks.md).
+  // (HierarchyRelaxer): on the bunny at 17^3 with 60 / 30 / 30 steps, the error against the
+  // converged solution falls from 1.5e-2 to 7.6e-5 (docs/benchmarks.md).
   Relaxation relaxation = Relaxation::kChebyshev;
 
   std::string Validate() const;

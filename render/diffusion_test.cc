@@ -1,9 +1,9 @@
 // SPDX-License-Identifier: MIT
 #include "render/diffusion.h"
 
-#include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -96,7 +96,7 @@ TEST_P(DiffusionRelaxation, GlBackendMatchesCpu) {
   o.relaxation = GetParam();
   // Chebyshev's steps converge to float rounding in ~60 finest steps, where both backends
   // would agree whatever their arithmetic; fewer steps compare the steps themselves.
-  o.iterations = GetParam() == Relaxation::kJacobi ? std::vector<int>{50, 50, 100} : std::vector<int>{8, 8, 12};
+  o.iterations = GetParam() == Relaxation::kJacobi ? std::vector<int>{50, 50, 100} : std::vector<int>{8, 8, 13};
   PolygridDiffusion cpu(&s.levels, s.mats, C, o);
   const std::vector<float> a = cpu.Solve(s.q);
   o.backend = DiffusionBackend::kGl;
@@ -107,7 +107,8 @@ TEST_P(DiffusionRelaxation, GlBackendMatchesCpu) {
   // on the device between frames).
   o.depth = {-1, -1, 2};
   o.frame_coherence = true;
-  o.coherent_iterations = GetParam() == Relaxation::kJacobi ? 30 : 6;
+  // (Step counts that are no multiple of 3, so the gl backend's current buffer is not the first.)
+  o.coherent_iterations = GetParam() == Relaxation::kJacobi ? 31 : 7;
   o.backend = DiffusionBackend::kCpu;
   PolygridDiffusion cpu2(&s.levels, s.mats, C, o);
   o.backend = DiffusionBackend::kGl;
@@ -150,7 +151,10 @@ TEST(Diffusion, SpectralRadiusEstimateIsCloseFromBelow) {
       }
     const Eigen::VectorXcd ev = Eigen::EigenSolver<Eigen::MatrixXd>(a, false).eigenvalues();
     double rho = 0, imag = 0;
-    for (int i = 0; i < ev.size(); ++i) rho = std::max(rho, std::abs(ev[i])), imag = std::max(imag, std::abs(ev[i].imag()));
+    for (int i = 0; i < ev.size(); ++i) {
+      rho = std::max(rho, std::abs(ev[i]));
+      imag = std::max(imag, std::abs(ev[i].imag()));
+    }
     const double e10 = JacobiSpectralRadius(v, c, 10), e50 = JacobiSpectralRadius(v, c);
     std::printf("[diffusion] sphere 5^3 (%lld nodes), channel %d: rho %.6f (largest |Im| %.1e), "
                 "estimate after 10 / 50 power steps %.6f / %.6f\n", (long long)v.size, c, rho, imag, e10, e50);

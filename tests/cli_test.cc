@@ -638,11 +638,16 @@ TEST_F(Cli, RenderAndEdit) {
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("no light reaches the surface"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("inside the object"), std::string::npos) << r.output;
-  // Frame coherence over large turntable steps lags the converged frames: noted.
+  // Frame coherence over large turntable steps lags the converged frames with Jacobi's steps:
+  // noted; Chebyshev's (the default) converge within the coherent steps: no note.
+  r = Translume("render homogeneous:0.2,0.02 --shape sphere --resolution 5 --turntable 2 --coherence "
+                "--relaxation jacobi --image 8x8 -o " + P("coh.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("at 180-degree steps frames lag the converged image"), std::string::npos) << r.output;
   r = Translume("render homogeneous:0.2,0.02 --shape sphere --resolution 5 --turntable 2 --coherence --image 8x8 -o " +
                 P("coh.png"));
   ASSERT_EQ(r.status, 0) << r.output;
-  EXPECT_NE(r.output.find("at 180-degree steps frames lag the converged image"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("lag the converged image"), std::string::npos) << r.output;
   // An eye inside the object sees nothing: said, not a silent black image.
   r = Translume("render homogeneous:0.2,0.02 --shape sphere --resolution 5 --camera 0,0,2 --image 16x16 -o " +
                 P("blind.png"));
