@@ -20,9 +20,10 @@ class CpuHierarchy : public HierarchyRelaxer {
   void Load(std::vector<Level> levels) override {
     L_ = std::move(levels);
     phi_.assign(L_.size(), {});
+    cur_.assign(L_.size(), 0);
     s_.assign(L_.size(), {});
     for (size_t l = 0; l < L_.size(); ++l) {
-      phi_[l].assign(L_[l].size * 3, 0.f);
+      for (std::vector<float>& p : phi_[l]) p.assign(L_[l].size * 3, 0.f);
       s_[l].assign((L_[l].size - L_[l].num_interior) * 3, 0.f);
     }
   }
@@ -32,11 +33,13 @@ class CpuHierarchy : public HierarchyRelaxer {
     for (int64_t b = 0; b < v.size - v.num_interior; ++b)
       for (int c = 0; c < 3; ++c) s[b * 3 + c] = q[c][b] * v.source_coef[b * 3 + c];
   }
-  void Zero(int l) override { std::fill(phi_[l].begin(), phi_[l].end(), 0.f); }
+  void Zero(int l) override {
+    for (std::vector<float>& p : phi_[l]) std::fill(p.begin(), p.end(), 0.f);
+  }
   void Prolong(int l) override {
     const Prolongation& P = L_[l].prolong;
-    const std::vector<float>& coarse = phi_[l + 1];
-    std::vector<float>& fine = phi_[l];
+    const std::vector<float>& coarse = Current(l + 1);
+    std::vector<float>& fine = Current(l);
     const int64_t n = L_[l].size;
 #pragma omp parallel for schedule(static) if (n > 50000)
     for (int64_t f = 0; f < n; ++f)
@@ -45,20 +48,23 @@ class CpuHierarchy : public HierarchyRelaxer {
         for (int32_t k = P.start[f]; k < P.start[f + 1]; ++k) acc += double(P.weight[k]) * coarse[P.index[k] * 3 + c];
         fine[f * 3 + c] = float(acc);
       }
+    for (int k = 1; k < 3; ++k) phi_[l][(cur_[l] + k) % 3] = fine;
   }
   void Relax(int l, bool adaptive, int iterations) override {
     const Level& v = L_[l];
-    std::vector<float>& phi = phi_[l];
-    // Three iterates (Chebyshev reads the previous one); all agree outside the updated nodes.
-    std::vector<float> next = phi, prev = phi;
     const int64_t na = adaptive ? int64_t(v.active.size()) : v.size, ni = v.num_interior;
     const int32_t* active = v.active.data();
     const float* s = s_[l].data();
+    // phi[cur] is the iterate, phi[cur + 2] the one before it (read by Chebyshev's steps from
+    // the second on) and phi[cur + 1] the next; all three agree outside the updated nodes.
     ChebyshevSchedule schedule(v.rho);
     for (int it = 0; it < iterations; ++it) {
       const std::array<float, 3> w = schedule.Next();
       const bool jacobi = ChebyshevSchedule::IsJacobi(w);
-      const float* p = phi.data();
+      const int cur = cur_[l];
+      const float* p = phi_[l][cur].data();
+      const float* prev = phi_[l][(cur + 2) % 3].data();
+      float* next = phi_[l][(cur + 1) % 3].data();
 #pragma omp parallel for schedule(static) if (na > 50000)
       for (int64_t i = 0; i < na; ++i) {
         const int64_t n = adaptive ? active[i] : i;
@@ -71,18 +77,23 @@ class CpuHierarchy : public HierarchyRelaxer {
           next[j] = jacobi ? acc : prev[j] + w[c] * (acc - prev[j]);
         }
       }
-      prev.swap(phi);
-      phi.swap(next);
+      cur_[l] = (cur + 1) % 3;
     }
   }
   void Read(int l, int64_t first_row, std::vector<float>* phi) override {
-    TL_CHECK(phi->size() == phi_[l].size());
-    std::copy(phi_[l].begin() + first_row * 3, phi_[l].end(), phi->begin() + first_row * 3);
+    const std::vector<float>& p = Current(l);
+    TL_CHECK(phi->size() == p.size());
+    std::copy(p.begin() + first_row * 3, p.end(), phi->begin() + first_row * 3);
   }
 
  private:
+  std::vector<float>& Current(int l) { return phi_[l][cur_[l]]; }
+
   std::vector<Level> L_;
-  std::vector<std::vector<float>> phi_, s_;  // s_: the boundary rows' sources, [b * 3 + c]
+  // Per level three fluence buffers, as the gl backend's (phi_[l][cur_[l]] the current one).
+  std::vector<std::array<std::vector<float>, 3>> phi_;
+  std::vector<int> cur_;
+  std::vector<std::vector<float>> s_;  // the boundary rows' sources, [b * 3 + c]
 };
 
 }  // namespace
@@ -235,10 +246,15 @@ BoundaryLight BoundaryRadiance(const Polygrid& pg, const NodeMaterial& m, const 
     for (int64_t b = 0; b < pg.num_boundary(); ++b) {
       const int64_t n = pg.num_interior + b;
       const double k = m.kappa[c][n];
-      L[c][b] = float(std::max(0.0, (phi[n * 3 + c] - q[c][b] * k) / (2 * kPi * k)));
+      const double qb = q[c].empty() ? 0.0 : q[c][b];  // (ShadedRadiance: none)
+      L[c][b] = float(std::max(0.0, (phi[n * 3 + c] - qb * k) / (2 * kPi * k)));
     }
   }
   return L;
+}
+
+BoundaryLight ShadedRadiance(const Polygrid& pg, const NodeMaterial& m, const std::vector<float>& phi) {
+  return BoundaryRadiance(pg, m, BoundaryLight{}, phi);
 }
 
 std::vector<float> SolveReference(const JacobiSystem& S, int channels, bool diagonal_preconditioner) {

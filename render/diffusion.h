@@ -60,9 +60,15 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
                                const BoundaryLight& q);
 
 // Outgoing multiple-scattering radiance at the boundary nodes (Section 5.2, without the Fresnel
-// factor, applied at shading): L_b = (phi'_b - q_b kappa_b) / (2 pi kappa_b) = (phi_b - q_b) / (2 pi).
+// factor, applied at shading): L_b = (phi'_b - q_b kappa_b) / (2 pi kappa_b) = (phi_b - q_b) / (2 pi)
+// (q[c] empty: q = 0 in that channel).
 BoundaryLight BoundaryRadiance(const Polygrid& pg, const NodeMaterial& m, const BoundaryLight& q,
                                const std::vector<float>& phi_prime);
+
+// The radiance the renderer shades with: L_b = phi_b / (2 pi), BoundaryRadiance without
+// subtracting q: the SPEC's (phi - q) / (2 pi) where unlit (q = 0). The paper's net-flux form
+// is negative under the light (SPEC section 3), which would render lit regions black.
+BoundaryLight ShadedRadiance(const Polygrid& pg, const NodeMaterial& m, const std::vector<float>& phi_prime);
 
 // The reference solution for tests and the renderbench's error, in double: BiCGSTAB preconditioned by incomplete LU to a
 // relative residual of 1e-12 (sparse LU if that fails); phi'[n * 3 + c] for the first

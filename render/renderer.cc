@@ -690,12 +690,7 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
   const Polygrid& pg = (*I.levels)[0];
   if (I.diffusion) {
     const std::vector<float>& phi = I.diffusion->Solve(q, /*boundary_only=*/true);
-    // Shading uses L = phi / (2 pi): the SPEC's (phi - q) / (2 pi) where unlit (q = 0), without
-    // subtracting q where lit. The paper's net-flux form (phi - q) / (2 pi) is negative under the
-    // light (SPEC section 3), which would render lit regions black.
-    BoundaryLight none;
-    for (int c = 0; c < 3; ++c) none[c].assign(pg.num_boundary(), 0.f);
-    radiance_ = BoundaryRadiance(pg, I.materials[0], none, phi);
+    radiance_ = ShadedRadiance(pg, I.materials[0], phi);
   } else {
     std::array<float, 3> k, m;
     for (int c = 0; c < 3; ++c) {

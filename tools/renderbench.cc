@@ -32,11 +32,8 @@ double Median(std::vector<double> v) {
 // nodes and RGB: E = sum (L - L0)^2 / sum L0^2, L0 the radiance of the converged solution of
 // the same equations and light (SolveReference, no hierarchy, no adaptive depth).
 double ErrorAgainstConverged(const Polygrid& pg, const NodeMaterial& m, double C, const Renderer& r) {
-  const BoundaryLight& q = r.boundary_light();
-  BoundaryLight none;  // the renderer's radiance is phi / (2 pi), without subtracting q
-  for (int c = 0; c < 3; ++c) none[c].assign(q[c].size(), 0.f);
-  const BoundaryLight L0 =
-      BoundaryRadiance(pg, m, none, SolveReference(BuildJacobiSystem(pg, m, C, q), 3, pg.size() > 100000));
+  const BoundaryLight L0 = ShadedRadiance(
+      pg, m, SolveReference(BuildJacobiSystem(pg, m, C, r.boundary_light()), 3, pg.size() > 100000));
   const BoundaryLight& L = r.boundary_radiance();
   double num = 0, den = 0;
   for (int c = 0; c < 3; ++c)
