@@ -55,6 +55,8 @@ struct RecoveryBenchRow {
   // seconds: the whole recovery (homogeneous fit included); simulate / evaluate: the data and
   // the evaluation, outside the recovery.
   double seconds = 0, homogeneous_seconds = 0, simulate_seconds = 0, evaluate_seconds = 0;
+  // Of the heterogeneous phase, the time outside the objective (RecoverySummary).
+  double optimizer_seconds = 0;
   int iterations = 0;
   int64_t solves = 0, homogeneous_solves = 0;
   // Conjugate-gradient iterations of all solves and of the homogeneous fit's.
@@ -63,6 +65,8 @@ struct RecoveryBenchRow {
   std::vector<double> kappa_layer_error, mu_layer_error;
   // Seconds per iteration of the heterogeneous phase (what scales with the iteration count).
   double SecondsPerIteration() const;
+  // optimizer_seconds as a share of the heterogeneous phase.
+  double OptimizerShare() const;
   // Mean conjugate-gradient iterations per solve of the homogeneous fit and of the phase after.
   double HomogeneousIterationsPerSolve() const;
   double IterationsPerSolve() const;

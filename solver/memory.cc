@@ -3,6 +3,9 @@
 
 #include <fmt/format.h>
 #include <fstream>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 #include <sstream>
 
 #include "solver/status.h"
@@ -55,6 +58,15 @@ std::string FormatBytes(int64_t bytes) {
   if (b >= 1024.0 * 1024 * 1024) return fmt::format("{:.2f} GiB", b / (1024.0 * 1024 * 1024));
   if (b >= 1024.0 * 1024) return fmt::format("{:.1f} MiB", b / (1024.0 * 1024));
   return fmt::format("{:.1f} KiB", b / 1024.0);
+}
+
+void KeepFreedMemoryForReuse() {
+#if defined(__GLIBC__)
+  // M_MMAP_MAX 0: no block gets its own mapping (glibc still maps where the heap cannot grow).
+  // Setting either value also ends glibc's dynamic adjustment of both thresholds.
+  mallopt(M_MMAP_MAX, 0);
+  mallopt(M_TRIM_THRESHOLD, 1 << 30);
+#endif
 }
 
 }  // namespace translume

@@ -80,6 +80,9 @@ struct RecoverySummary {
   int iterations = 0;
   int64_t solves = 0;
   double seconds = 0, homogeneous_seconds = 0;
+  // Of this run's seconds after the homogeneous fit, those spent outside the objective's
+  // evaluations: the optimiser's own vector work and line search, and the callback.
+  double optimizer_seconds = 0;
   int64_t homogeneous_solves = 0;  // of `solves`, spent in the homogeneous fit
   // Conjugate-gradient iterations of this run's solves (not of a resumed run's earlier ones),
   // and of them the homogeneous fit's.

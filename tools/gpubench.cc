@@ -7,12 +7,14 @@
 #include <exception>
 
 #include "solver/gl_context.h"
+#include "solver/memory.h"
 #include "solver/status.h"
 #include "solver/threads.h"
 #include "tools/commands.h"
 
 int main(int argc, char** argv) {
   translume::UsePassiveOpenMpByDefault(argv);
+  translume::KeepFreedMemoryForReuse();
   if (const std::string err = translume::InitThreadsFromEnvironment(); !err.empty()) {
     std::fprintf(stderr, "translume: error: %s\n", err.c_str());
     return 1;

@@ -266,6 +266,7 @@ int RunSolve(int argc, char** argv) {
   j["solves"] = sum.solves;
   j["seconds"] = sum.seconds;
   j["homogeneous_seconds"] = sum.homogeneous_seconds;
+  j["optimizer_seconds"] = sum.optimizer_seconds;
   j["homogeneous_kappa"] = sum.homogeneous_kappa;
   j["homogeneous_mu"] = sum.homogeneous_mu;
   j["initial_objective"] = sum.initial_objective;

@@ -17,6 +17,7 @@
 #include "render/material_map.h"
 #include "render/renderer.h"
 #include "solver/gl_context.h"
+#include "solver/memory.h"
 #include "solver/status.h"
 #include "solver/threads.h"
 
@@ -50,6 +51,7 @@ double ErrorAgainstConverged(const Polygrid& pg, const NodeMaterial& m, double C
 int main(int argc, char** argv) {
   using namespace translume;
   UsePassiveOpenMpByDefault(argv);
+  KeepFreedMemoryForReuse();
   CLI::App app{"Polygrid renderer frame rates: three passes per frame, with and without frame "
                "coherence, for each shape and resolution.", "translume-renderbench"};
   std::vector<std::string> shapes = {"sphere", "torus"};

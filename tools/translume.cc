@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "solver/memory.h"
 #include "solver/status.h"
 #include "solver/threads.h"
 #include "tools/commands.h"
@@ -76,6 +77,7 @@ std::string ShownName(const Command& c, int argc, char** argv) {
 
 int main(int argc, char** argv) {
   translume::UsePassiveOpenMpByDefault(argv);
+  translume::KeepFreedMemoryForReuse();
   // OpenCV's own log lines ("[ERROR:0@0.029] ... Can't open file") would come before ours,
   // which name the file and the problem.
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
