@@ -105,25 +105,36 @@ std::unique_ptr<HierarchyRelaxer> HierarchyRelaxer::Create(DiffusionBackend back
   return std::make_unique<CpuHierarchy>();
 }
 
-double JacobiSpectralRadius(const HierarchyRelaxer::Level& v, int c, int iterations) {
-  std::vector<double> x(v.size, 1.0), ax(v.size);
-  double lowest = 0;
+std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& v, int iterations) {
+  const int64_t N = v.size;
+  std::vector<double> x(N * 3, 1.0), ax(N * 3);
+  std::array<double, 3> lowest{};
   for (int it = 0; it <= iterations; ++it) {
-    double ratio = 1e300, largest = 0;
-#pragma omp parallel for schedule(static) reduction(min : ratio) reduction(max : largest) if (v.size > 50000)
-    for (int64_t n = 0; n < v.size; ++n) {
-      double acc = 0;
-      for (int k = 0; k < 6; ++k) acc += double(v.a[(n * 3 + c) * 6 + k]) * x[v.nb[n * 6 + k]];
-      ax[n] = acc;
-      ratio = std::min(ratio, acc / x[n]);
-      largest = std::max(largest, 0.5 * (x[n] + acc));
+    double r0 = 1e300, r1 = 1e300, r2 = 1e300, l0 = 0, l1 = 0, l2 = 0;
+#pragma omp parallel for schedule(static) reduction(min : r0, r1, r2) reduction(max : l0, l1, l2) if (N > 50000)
+    for (int64_t n = 0; n < N; ++n) {
+      double acc[3] = {0, 0, 0};
+      for (int k = 0; k < 6; ++k) {
+        const int64_t j = v.nb[n * 6 + k];
+        for (int c = 0; c < 3; ++c) acc[c] += double(v.a[(n * 3 + c) * 6 + k]) * x[j * 3 + c];
+      }
+      for (int c = 0; c < 3; ++c) ax[n * 3 + c] = acc[c];
+      r0 = std::min(r0, acc[0] / x[n * 3]);
+      r1 = std::min(r1, acc[1] / x[n * 3 + 1]);
+      r2 = std::min(r2, acc[2] / x[n * 3 + 2]);
+      l0 = std::max(l0, 0.5 * (x[n * 3] + acc[0]));
+      l1 = std::max(l1, 0.5 * (x[n * 3 + 1] + acc[1]));
+      l2 = std::max(l2, 0.5 * (x[n * 3 + 2] + acc[2]));
     }
-    lowest = ratio;
-    if (it == iterations || largest <= 0) break;
-#pragma omp parallel for schedule(static) if (v.size > 50000)
-    for (int64_t n = 0; n < v.size; ++n) x[n] = 0.5 * (x[n] + ax[n]) / largest;
+    lowest = {r0, r1, r2};
+    const std::array<double, 3> largest = {l0, l1, l2};
+    if (it == iterations || !(std::min({l0, l1, l2}) > 0)) break;
+#pragma omp parallel for schedule(static) if (N > 50000)
+    for (int64_t n = 0; n < N; ++n)
+      for (int c = 0; c < 3; ++c) x[n * 3 + c] = 0.5 * (x[n * 3 + c] + ax[n * 3 + c]) / largest[c];
   }
-  return std::clamp(v.size > 0 ? lowest : 0.0, 0.0, 1.0);
+  for (double& r : lowest) r = std::clamp(N > 0 ? r : 0.0, 0.0, 1.0);
+  return lowest;
 }
 
 std::array<float, 3> ChebyshevSchedule::Next() {
@@ -340,8 +351,10 @@ PolygridDiffusion::PolygridDiffusion(const std::vector<Polygrid>* levels,
     for (int64_t n = 0; n < pg.size(); ++n)
       if (depth_[l] < 0 || pg.layer[n] <= depth_[l]) hl[l].active.push_back(int32_t(n));
     if (l + 1 < nl) hl[l].prolong = MakeProlongation(L[l + 1], pg);
-    if (options_.relaxation == Relaxation::kChebyshev)
-      for (int c = 0; c < 3; ++c) hl[l].rho[c] = JacobiSpectralRadius(hl[l], c);
+    // Over the whole level, also where the steps update only the active nodes: the principal
+    // submatrix's own estimate, lower and further below its radius after 50 power steps, gave
+    // larger errors (docs/benchmarks.md, "Chebyshev's radius in one pass").
+    if (options_.relaxation == Relaxation::kChebyshev) hl[l].rho = JacobiSpectralRadii(hl[l]);
   }
   relaxer_ = HierarchyRelaxer::Create(options.backend);
   relaxer_->Load(std::move(hl));

@@ -107,7 +107,7 @@ class HierarchyRelaxer {
     std::vector<int32_t> active;     // the nodes that adaptive relaxation updates
     Prolongation prolong;            // from the next coarser level (empty on the coarsest)
     // Per channel, the spectral radius of the step's iteration matrix (a) that Chebyshev's
-    // semi-iteration assumes (JacobiSpectralRadius); 0: plain Jacobi steps.
+    // semi-iteration assumes (JacobiSpectralRadii); 0: plain Jacobi steps.
     std::array<double, 3> rho{};
   };
   virtual ~HierarchyRelaxer() = default;
@@ -129,18 +129,19 @@ class HierarchyRelaxer {
 // num_interior) from the polygrid and its material.
 HierarchyRelaxer::Level RelaxationRows(const Polygrid& pg, const NodeMaterial& m, double C);
 
-// An estimate of the spectral radius of the relaxation's iteration matrix a (nonnegative:
-// RelaxationRows' weights are >= 0), for channel c, from below: the smallest ratio
-// (a x)_n / x_n (Collatz-Wielandt: rho >= min_n (a x)_n / x_n for any x > 0) after
-// `iterations` steps of the power iteration x <- (x + a x) / 2 from x = 1 (halved with the
-// identity so that a's eigenvalue -rho, which bipartite grids have, does not stall it). An
-// estimate below rho keeps Chebyshev's semi-iteration convergent for real eigenvalues within
-// (-1, 1) (|T_k(lambda / r) / T_k(1 / r)| < 1 for every |lambda| < 1 and r < 1), and it only
-// slows the modes between the estimate and rho. (Real eigenvalues: a is similar to a symmetric
-// matrix only approximately, as the boundary rows and distorted cells are not symmetric; a
-// small sphere's spectrum is real, Diffusion.SpectralRadiusEstimateIsCloseFromBelow.) Rows of
-// tiny weight sums pull the estimate towards 0, i.e. towards plain Jacobi steps.
-double JacobiSpectralRadius(const HierarchyRelaxer::Level& level, int c, int iterations = 50);
+// Estimates of the spectral radius of the relaxation's iteration matrix a (nonnegative:
+// RelaxationRows' weights are >= 0), per channel, from below: the smallest ratio (a x)_n / x_n
+// (Collatz-Wielandt: rho >= min_n (a x)_n / x_n for any x > 0) after `iterations` steps of the
+// power iteration x <- (x + a x) / 2 from x = 1 (halved with the identity so that a's
+// eigenvalue -rho, which bipartite grids have, does not stall it); the three channels in one
+// pass over the rows. An estimate below rho keeps Chebyshev's semi-iteration convergent for
+// real eigenvalues within (-1, 1) (|T_k(lambda / r) / T_k(1 / r)| < 1 for every |lambda| < 1
+// and r < 1), and it only slows the modes between the estimate and rho. (Real eigenvalues: a
+// is similar to a symmetric matrix only approximately, as the boundary rows and distorted cells
+// are not symmetric; a small sphere's spectrum is real, and at 9^3 nodes per edge its largest
+// imaginary part is 6e-3, Diffusion.SpectralRadiusEstimateIsCloseFromBelow.) Rows of tiny
+// weight sums pull the estimate towards 0, i.e. towards plain Jacobi steps.
+std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& level, int iterations = 50);
 
 // The over-relaxation weights of Chebyshev's semi-iteration for spectral radii rho (per
 // channel): omega_1 = 1, omega_2 = 1 / (1 - rho^2 / 2), omega_(k+1) = 1 / (1 - rho^2 omega_k / 4)
