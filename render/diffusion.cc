@@ -110,25 +110,22 @@ std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& v, int 
   std::vector<double> x(N * 3, 1.0), ax(N * 3);
   std::array<double, 3> lowest{};
   for (int it = 0; it <= iterations; ++it) {
-    double r0 = 1e300, r1 = 1e300, r2 = 1e300, l0 = 0, l1 = 0, l2 = 0;
-#pragma omp parallel for schedule(static) reduction(min : r0, r1, r2) reduction(max : l0, l1, l2) if (N > 50000)
+    double ratio[3] = {1e300, 1e300, 1e300}, largest[3] = {0, 0, 0};
+#pragma omp parallel for schedule(static) reduction(min : ratio[:3]) reduction(max : largest[:3]) if (N > 50000)
     for (int64_t n = 0; n < N; ++n) {
       double acc[3] = {0, 0, 0};
       for (int k = 0; k < 6; ++k) {
         const int64_t j = v.nb[n * 6 + k];
         for (int c = 0; c < 3; ++c) acc[c] += double(v.a[(n * 3 + c) * 6 + k]) * x[j * 3 + c];
       }
-      for (int c = 0; c < 3; ++c) ax[n * 3 + c] = acc[c];
-      r0 = std::min(r0, acc[0] / x[n * 3]);
-      r1 = std::min(r1, acc[1] / x[n * 3 + 1]);
-      r2 = std::min(r2, acc[2] / x[n * 3 + 2]);
-      l0 = std::max(l0, 0.5 * (x[n * 3] + acc[0]));
-      l1 = std::max(l1, 0.5 * (x[n * 3 + 1] + acc[1]));
-      l2 = std::max(l2, 0.5 * (x[n * 3 + 2] + acc[2]));
+      for (int c = 0; c < 3; ++c) {
+        ax[n * 3 + c] = acc[c];
+        ratio[c] = std::min(ratio[c], acc[c] / x[n * 3 + c]);
+        largest[c] = std::max(largest[c], 0.5 * (x[n * 3 + c] + acc[c]));
+      }
     }
-    lowest = {r0, r1, r2};
-    const std::array<double, 3> largest = {l0, l1, l2};
-    if (it == iterations || !(std::min({l0, l1, l2}) > 0)) break;
+    lowest = {ratio[0], ratio[1], ratio[2]};
+    if (it == iterations || !(std::min({largest[0], largest[1], largest[2]}) > 0)) break;
 #pragma omp parallel for schedule(static) if (N > 50000)
     for (int64_t n = 0; n < N; ++n)
       for (int c = 0; c < 3; ++c) x[n * 3 + c] = 0.5 * (x[n * 3 + c] + ax[n * 3 + c]) / largest[c];
@@ -283,25 +280,20 @@ std::vector<float> SolveReference(const JacobiSystem& S, int channels, bool diag
     }
     Eigen::SparseMatrix<double> A(S.size, S.size);
     A.setFromTriplets(t.begin(), t.end());
+    // BiCGSTAB to 1e-12, preconditioned by the type of `preconditioner`; false if it did not
+    // converge.
     Eigen::VectorXd x;
-    bool solved = false;
-    if (diagonal_preconditioner) {
-      Eigen::BiCGSTAB<Eigen::SparseMatrix<double>, Eigen::DiagonalPreconditioner<double>> solver;
+    auto bicgstab = [&](auto preconditioner, int max_iterations) {
+      Eigen::BiCGSTAB<Eigen::SparseMatrix<double>, decltype(preconditioner)> solver;
       solver.setTolerance(1e-12);
-      solver.setMaxIterations(20000);
+      solver.setMaxIterations(max_iterations);
       solver.compute(A);
+      TL_CHECK_MSG(solver.info() == Eigen::Success, "polygrid system: preconditioner setup failed");
       x = solver.solve(b);
-      solved = solver.info() == Eigen::Success;
-    }
-    if (!solved) {
-      Eigen::BiCGSTAB<Eigen::SparseMatrix<double>, Eigen::IncompleteLUT<double>> solver;
-      solver.setTolerance(1e-12);
-      solver.setMaxIterations(2000);
-      solver.compute(A);
-      TL_CHECK_MSG(solver.info() == Eigen::Success, "polygrid system: ILUT failed");
-      x = solver.solve(b);
-      solved = solver.info() == Eigen::Success;
-    }
+      return solver.info() == Eigen::Success;
+    };
+    bool solved = diagonal_preconditioner && bicgstab(Eigen::DiagonalPreconditioner<double>(), 20000);
+    if (!solved) solved = bicgstab(Eigen::IncompleteLUT<double>(), 2000);
     if (!solved) {  // stiff systems (tiny d): sparse LU instead
       Eigen::SparseLU<Eigen::SparseMatrix<double>> lu(A);
       TL_CHECK_MSG(lu.info() == Eigen::Success, "polygrid system is singular");

@@ -16,6 +16,7 @@
 #include "render/diffusion.h"
 #include "render/material_map.h"
 #include "render/renderer.h"
+#include "solver/evaluate.h"
 #include "solver/gl_context.h"
 #include "solver/memory.h"
 #include "solver/status.h"
@@ -35,14 +36,7 @@ double Median(std::vector<double> v) {
 double ErrorAgainstConverged(const Polygrid& pg, const NodeMaterial& m, double C, const Renderer& r) {
   const BoundaryLight L0 = ShadedRadiance(
       pg, m, SolveReference(BuildJacobiSystem(pg, m, C, r.boundary_light()), 3, pg.size() > 100000));
-  const BoundaryLight& L = r.boundary_radiance();
-  double num = 0, den = 0;
-  for (int c = 0; c < 3; ++c)
-    for (size_t b = 0; b < L0[c].size(); ++b) {
-      num += (double(L[c][b]) - L0[c][b]) * (double(L[c][b]) - L0[c][b]);
-      den += double(L0[c][b]) * L0[c][b];
-    }
-  return den > 0 ? num / den : 0;
+  return RelightingError({r.boundary_radiance()}, {L0});
 }
 
 }  // namespace
