@@ -23,11 +23,15 @@ MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision 
   const double material = 6 * 4 * n;  // RGB kappa and mu, float
   MemoryEstimate e;
   e.forward_bytes = int64_t(solve + material);
-  // Recovery, per channel: forward and adjoint fields of every condition (kept for warm starts
-  // and the gradient), parameters, gradient and optimiser history (~20 vectors of 2N doubles),
-  // one solver. Three channels run concurrently.
-  const double per_channel = solve + 2.0 * conditions * t * n + 20 * 2 * 8 * n;
-  e.recovery_bytes = int64_t(3 * per_channel + material);
+  // Recovery. Per channel (three run concurrently): one solver, the forward and adjoint fields
+  // of every condition (kept for warm starts and the gradient), kappa, mu and their gradients
+  // (4 vectors of N doubles). The optimiser, over all 6N log-parameters: Ceres' L-BFGS history
+  // (rank 20: 20 pairs of vectors) and its working vectors (iterates, gradients, directions,
+  // line-search points; ~17 measured besides the history, docs/benchmarks.md, "The recovery's
+  // memory estimate"), counted as 28 for a margin: 68 vectors of 6N doubles.
+  const double per_channel = solve + 2.0 * conditions * t * n + 4 * 8 * n;
+  const double optimizer = (2 * 20 + 28) * 6 * 8 * n;
+  e.recovery_bytes = int64_t(3 * per_channel + optimizer + material);
   return e;
 }
 

@@ -14,8 +14,12 @@ struct MemoryEstimate {
   int64_t recovery_bytes = 0;  // a recovery with `conditions` lights, channels concurrently
 };
 
-// Upper-bound estimates from the data structures' sizes (the multigrid hierarchy is counted
-// as 4/3 of the finest level, the bound for semi-coarsening in two axes).
+// Upper-bound estimates of the memory a forward solve or a cpu recovery adds to the process,
+// from the data structures' sizes (the multigrid hierarchy is counted as 4/3 of the finest
+// level, the bound for semi-coarsening in two axes) and, for the optimiser's working vectors,
+// a measured count with a margin: with 16 conditions a recovery's estimate is 4.8 kB per node
+// (Wax I: 1.2 GB; Marble: 6.3 GB), ~1.13x the peak measured on the cpu backend (a gl
+// recovery needs less on the host).
 MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision precision);
 
 // MemAvailable from /proc/meminfo; -1 if unknown.
