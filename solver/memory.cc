@@ -18,8 +18,9 @@ MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision 
   // Per level: kappa, mu, cx, cy, cz, diag, the smoother's copy of the stencil in its own
   // layout (4 arrays), lu_inv, b, x, transfer temporaries (~2).
   const double hierarchy = 15 * t * n * 4.0 / 3.0;
-  // Finest level extras: CG vectors r, p, q; the caller's kappa, mu, b, phi.
-  const double solve = hierarchy + 7 * t * n;
+  // Finest level extras: CG vectors r, p, q; the caller's kappa, mu, b, phi; the CG iterate,
+  // double in both precisions (docs/solver.md).
+  const double solve = hierarchy + 7 * t * n + 8 * n;
   const double material = 6 * 4 * n;  // RGB kappa and mu, float
   MemoryEstimate e;
   e.forward_bytes = int64_t(solve + material);
@@ -27,11 +28,12 @@ MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision 
   // of every condition (kept for warm starts and the gradient), kappa, mu and their gradients
   // (4 vectors of N doubles). The optimiser, over all 6N log-parameters: Ceres' L-BFGS history
   // (rank 20: 20 pairs of vectors) and its working vectors (iterates, gradients, directions,
-  // line-search points; ~17 measured besides the history, docs/benchmarks.md, "The recovery's
-  // memory estimate"), counted as 28 for a margin: 68 vectors of 6N doubles.
+  // line-search points; 17-21 measured besides the history, docs/benchmarks.md, "The
+  // recovery's memory estimate"), counted as 32 for a margin: 72 vectors of 6N doubles. Plus
+  // 16 MiB whatever the grid (threads, the dataset's face images, small levels; ~5 measured).
   const double per_channel = solve + 2.0 * conditions * t * n + 4 * 8 * n;
-  const double optimizer = (2 * 20 + 28) * 6 * 8 * n;
-  e.recovery_bytes = int64_t(3 * per_channel + optimizer + material);
+  const double optimizer = (2 * 20 + 32) * 6 * 8 * n;
+  e.recovery_bytes = int64_t(3 * per_channel + optimizer + material) + (int64_t(16) << 20);
   return e;
 }
 
@@ -55,6 +57,31 @@ void CheckFitsInMemory(int64_t bytes, const std::string& what) {
     throw InputError(fmt::format("{} needs about {} of memory, but only {} is available",
                                  what, FormatBytes(bytes), FormatBytes(avail)));
   }
+}
+
+namespace {
+
+int64_t ProcStatusBytes(const std::string& field) {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind(field + ":", 0) == 0) return std::stoll(line.substr(field.size() + 1)) * 1024;
+  return -1;
+}
+
+}  // namespace
+
+int64_t ResidentSetBytes() { return ProcStatusBytes("VmRSS"); }
+int64_t PeakResidentSetBytes() { return ProcStatusBytes("VmHWM"); }
+
+bool ResetPeakResidentSet() {
+#if defined(__GLIBC__)
+  malloc_trim(0);
+#endif
+  std::ofstream clear("/proc/self/clear_refs");
+  clear << "5";
+  clear.flush();
+  return bool(clear);
 }
 
 std::string FormatBytes(int64_t bytes) {

@@ -17,8 +17,8 @@ struct MemoryEstimate {
 // Upper-bound estimates of the memory a forward solve or a cpu recovery adds to the process,
 // from the data structures' sizes (the multigrid hierarchy is counted as 4/3 of the finest
 // level, the bound for semi-coarsening in two axes) and, for the optimiser's working vectors,
-// a measured count with a margin: with 16 conditions a recovery's estimate is 4.8 kB per node
-// (Wax I: 1.2 GB; Marble: 6.3 GB), ~1.13x the peak measured on the cpu backend (a gl
+// a measured count with a margin: with 16 conditions a recovery's estimate is 5.0 kB per node
+// (Wax I: 1.3 GB; Marble: 6.6 GB), 1.1-1.2x the peak measured on the cpu backend (a gl
 // recovery needs less on the host).
 MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision precision);
 
@@ -29,6 +29,15 @@ int64_t AvailableMemoryBytes();
 void CheckFitsInMemory(int64_t bytes, const std::string& what);
 
 std::string FormatBytes(int64_t bytes);
+
+// The process's resident set and its peak since the start or the last ResetPeakResidentSet,
+// in bytes (Linux: VmRSS, VmHWM of /proc/self/status); -1 where unknown.
+int64_t ResidentSetBytes();
+int64_t PeakResidentSetBytes();
+// Hands free heap memory back to the system (glibc's malloc_trim), so that memory freed
+// earlier cannot hide what comes next, then resets the peak to the current resident set
+// (/proc/self/clear_refs); false where the kernel does not allow it.
+bool ResetPeakResidentSet();
 
 // Makes glibc's malloc keep freed memory for reuse: large blocks come from the heap instead of
 // fresh mappings, and up to 1 GiB of free memory stays at the heap's top. A recovery's optimiser

@@ -290,20 +290,12 @@ TEST(Recover, PaperOptimizerAndNcgLowerTheObjective) {
   EXPECT_THROW(ParseOptimizer("adam"), InputError);
 }
 
-// A field of /proc/self/status in bytes ("VmRSS", "VmHWM"); -1 if missing.
-int64_t ProcStatusBytes(const std::string& field) {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind(field + ":", 0) == 0) return std::stoll(line.substr(field.size() + 1)) * 1024;
-  return -1;
-}
-
 // The recovery's memory estimate (memory.h), which `solve` and `acquire` check against the
 // available memory, bounds what a recovery adds to the process: the peak resident set, from
-// just before it, over a recovery long enough to fill the L-BFGS history (rank 20), with
-// freed memory kept as the translume binaries keep it. Not loose either: the old estimate
-// (half the optimiser's vectors uncounted) was 0.56 of the peak measured here.
+// just before it (the free heap handed back first, so that none serves the recovery), over a
+// recovery long enough to fill the L-BFGS history (rank 20), with freed memory kept as the
+// translume binaries keep it. Not loose either: the old estimate
+// (half the optimiser's vectors uncounted) was 0.51-0.55 of the peak measured here.
 TEST(Recover, PeakMemoryStaysWithinTheEstimate) {
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
   GTEST_SKIP() << "the sanitizer's allocator and shadow memory change the resident set";
@@ -317,17 +309,13 @@ TEST(Recover, PeakMemoryStaysWithinTheEstimate) {
   RecoveryOptions ro;
   ro.max_iterations = 22;
   ro.tolerance = 1e-15;
-  {
-    std::ofstream clear("/proc/self/clear_refs");
-    clear << "5";  // resets VmHWM to the current resident set
-    clear.flush();
-    if (!clear) GTEST_SKIP() << "cannot reset the peak resident set (/proc/self/clear_refs)";
-  }
-  const int64_t before = ProcStatusBytes("VmRSS");
+  // What the data's simulation freed must not serve the recovery.
+  if (!ResetPeakResidentSet()) GTEST_SKIP() << "cannot reset the peak resident set (/proc/self/clear_refs)";
+  const int64_t before = ResidentSetBytes();
   ASSERT_GT(before, 0);
   RecoveryState st;
   const RecoverySummary s = Recover(d, ro, &st);
-  const int64_t peak = ProcStatusBytes("VmHWM");
+  const int64_t peak = PeakResidentSetBytes();
   const int64_t estimate = EstimateMemory(d.shape, int(d.conditions.size()), Precision::kDouble).recovery_bytes;
   const double used = double(peak - before);
   std::printf("%s, %d conditions, %d iterations: peak %s above the start, estimate %s (%.2f)\n",
@@ -335,7 +323,7 @@ TEST(Recover, PeakMemoryStaysWithinTheEstimate) {
               FormatBytes(peak - before).c_str(), FormatBytes(estimate).c_str(), used / double(estimate));
   EXPECT_EQ(s.iterations, 22);
   EXPECT_LE(used, double(estimate));
-  EXPECT_GE(used, 0.7 * double(estimate));
+  EXPECT_GE(used, 0.6 * double(estimate));
 }
 
 }  // namespace
