@@ -8,6 +8,7 @@
 
 #include "solver/evaluate.h"
 #include "solver/light.h"
+#include "solver/memory.h"
 #include "solver/simulate.h"
 #include "solver/status.h"
 #include "solver/synthetic.h"
@@ -53,7 +54,12 @@ RecoveryBenchRow RunCase(const Case& c, const RecoveryBenchOptions& o, const Rec
     stop_after = [&](const IterationReport& rep, const RecoveryState&) {
       return rep.seconds < o.max_seconds;
     };
+  // The peak from here on is the recovery's (the data's and earlier cases' freed memory handed
+  // back first, so that none of it serves this one).
+  const bool peak_reset = ResetPeakResidentSet();
+  const int64_t resident_before = ResidentSetBytes();
   const RecoverySummary s = Recover(c.data.training, ro, &st, stop_after);
+  const int64_t peak = PeakResidentSetBytes();
   const Material rec = MaterialFromState(c.data.training, st);
   MultigridOptions mg;
   mg.tolerance = 1e-9;
@@ -89,6 +95,8 @@ RecoveryBenchRow RunCase(const Case& c, const RecoveryBenchOptions& o, const Rec
   r.truth_holdout_error = ev.truth_holdout_error;
   r.kappa_layer_error = ev.kappa_layer_error;
   r.mu_layer_error = ev.mu_layer_error;
+  if (peak_reset && resident_before > 0 && peak >= resident_before) r.peak_memory_bytes = peak - resident_before;
+  r.memory_estimate_bytes = RecoveryMemoryBytes(c.data.training.shape, int(c.data.training.conditions.size()), ro);
   if (summary_out) *summary_out = s;
   return r;
 }
@@ -144,12 +152,15 @@ RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
                                  "fit E {:.2e}, {} iterations ({}: {}), {} solves, {:.1f} s "
                                  "(homogeneous {:.1f} s, {:.3f} s/iteration, {:.0f} % of it in the optimiser; "
                                  "evaluation {:.1f} s); "
-                                 "CG iterations per solve {:.2f} in the homogeneous fit, {:.2f} after",
+                                 "CG iterations per solve {:.2f} in the homogeneous fit, {:.2f} after; "
+                                 "peak memory {} (estimate {})",
                                  preset, SetupName(setup), noise, BackendName(backend),
                                  r.holdout_error, r.truth_holdout_error, r.fit_error, r.iterations,
                                  r.termination, r.message, r.solves, r.seconds, r.homogeneous_seconds,
                                  r.SecondsPerIteration(), 100 * r.OptimizerShare(), r.evaluate_seconds,
-                                 r.HomogeneousIterationsPerSolve(), r.IterationsPerSolve()));
+                                 r.HomogeneousIterationsPerSolve(), r.IterationsPerSolve(),
+                                 r.peak_memory_bytes >= 0 ? FormatBytes(r.peak_memory_bytes) : "unknown",
+                                 FormatBytes(r.memory_estimate_bytes)));
           out.rows.push_back(std::move(r));
         }
       }
@@ -242,7 +253,9 @@ std::string RecoveryBenchJson(const RecoveryBenchResult& res) {
                           {"holdout_error", r.holdout_error},
                           {"truth_holdout_error", r.truth_holdout_error},
                           {"kappa_layer_error", r.kappa_layer_error},
-                          {"mu_layer_error", r.mu_layer_error}});
+                          {"mu_layer_error", r.mu_layer_error},
+                          {"peak_memory_bytes", r.peak_memory_bytes},
+                          {"memory_estimate_bytes", r.memory_estimate_bytes}});
   const auto& c = res.comparison;
   if (c.ran)
     j["optimizer_comparison"] = {{"paper_objective", c.paper_objective},

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -63,6 +64,9 @@ struct RecoveryBenchRow {
   int64_t cg_iterations = 0, homogeneous_cg_iterations = 0;
   double objective = 0, fit_error = 0, holdout_error = 0, truth_holdout_error = 0;
   std::vector<double> kappa_layer_error, mu_layer_error;
+  // Memory: the peak resident set the recovery added to the process (-1 where /proc does not
+  // tell), and EstimateMemory's recovery_bytes for it (memory.h; what `solve` checks).
+  int64_t peak_memory_bytes = -1, memory_estimate_bytes = 0;
   // Seconds per iteration of the heterogeneous phase (what scales with the iteration count).
   double SecondsPerIteration() const;
   // optimizer_seconds as a share of the heterogeneous phase.

@@ -12,7 +12,7 @@
 
 namespace translume {
 
-MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision precision) {
+MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision precision, int optimizer_vectors) {
   const double n = double(shape.size());
   const double t = precision == Precision::kDouble ? 8 : 4;
   // Per level: kappa, mu, cx, cy, cz, diag, the smoother's copy of the stencil in its own
@@ -26,13 +26,11 @@ MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision 
   e.forward_bytes = int64_t(solve + material);
   // Recovery. Per channel (three run concurrently): one solver, the forward and adjoint fields
   // of every condition (kept for warm starts and the gradient), kappa, mu and their gradients
-  // (4 vectors of N doubles). The optimiser, over all 6N log-parameters: Ceres' L-BFGS history
-  // (rank 20: 20 pairs of vectors) and its working vectors (iterates, gradients, directions,
-  // line-search points; 17-21 measured besides the history, docs/benchmarks.md, "The
-  // recovery's memory estimate"), counted as 32 for a margin: 72 vectors of 6N doubles. Plus
-  // 16 MiB whatever the grid (threads, the dataset's face images, small levels; ~5 measured).
+  // (4 vectors of N doubles). The optimiser: `optimizer_vectors` vectors of all 6N
+  // log-parameters. Plus 16 MiB whatever the grid (threads, the dataset's face images, small
+  // levels; ~5 measured).
   const double per_channel = solve + 2.0 * conditions * t * n + 4 * 8 * n;
-  const double optimizer = (2 * 20 + 32) * 6 * 8 * n;
+  const double optimizer = double(optimizer_vectors) * 6 * 8 * n;
   e.recovery_bytes = int64_t(3 * per_channel + optimizer + material) + (int64_t(16) << 20);
   return e;
 }
@@ -51,11 +49,11 @@ int64_t AvailableMemoryBytes() {
   return -1;
 }
 
-void CheckFitsInMemory(int64_t bytes, const std::string& what) {
+void CheckFitsInMemory(int64_t bytes, const std::string& what, const std::string& hint) {
   const int64_t avail = AvailableMemoryBytes();
   if (avail > 0 && bytes > avail) {
-    throw InputError(fmt::format("{} needs about {} of memory, but only {} is available",
-                                 what, FormatBytes(bytes), FormatBytes(avail)));
+    throw InputError(fmt::format("{} needs about {} of memory, but only {} is available{}",
+                                 what, FormatBytes(bytes), FormatBytes(avail), hint));
   }
 }
 

@@ -20,13 +20,17 @@ struct MemoryEstimate {
 // a measured count with a margin: with 16 conditions a recovery's estimate is 5.0 kB per node
 // (Wax I: 1.3 GB; Marble: 6.6 GB), 1.1-1.2x the peak measured on the cpu backend (a gl
 // recovery needs less on the host).
-MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision precision);
+// `optimizer_vectors`: how many vectors of all 6N log-parameters (doubles) the optimiser keeps;
+// 72 is the default L-BFGS's (RecoveryMemoryBytes in recover.h counts them for other options).
+MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision precision,
+                              int optimizer_vectors = 72);
 
 // MemAvailable from /proc/meminfo; -1 if unknown.
 int64_t AvailableMemoryBytes();
 
-// Throws InputError if `bytes` exceeds the available memory, naming `what` and the estimate.
-void CheckFitsInMemory(int64_t bytes, const std::string& what);
+// Throws InputError if `bytes` exceeds the available memory, naming `what` and the estimate, then
+// `hint` (a way to need less).
+void CheckFitsInMemory(int64_t bytes, const std::string& what, const std::string& hint = "");
 
 std::string FormatBytes(int64_t bytes);
 

@@ -10,6 +10,7 @@
 
 #include "solver/forward.h"
 #include "solver/light.h"
+#include "solver/status.h"
 
 namespace translume {
 namespace {
@@ -87,6 +88,19 @@ INSTANTIATE_TEST_SUITE_P(Memory, ForwardPeak, ::testing::Values(Precision::kFloa
                          [](const ::testing::TestParamInfo<Precision>& p) {
                            return std::string(p.param == Precision::kFloat ? "Float" : "Double");
                          });
+
+TEST(Memory, TooLargeNamesWhatTheEstimateAndTheHint) {
+  if (AvailableMemoryBytes() < 0) GTEST_SKIP() << "no MemAvailable in /proc/meminfo";
+  EXPECT_NO_THROW(CheckFitsInMemory(1 << 20, "a small thing"));
+  try {
+    CheckFitsInMemory(int64_t(1) << 60, "a huge thing", " (try less)");
+    ADD_FAILURE() << "an exabyte fits";
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    EXPECT_EQ(m.rfind("a huge thing needs about 1073741824.00 GiB of memory, but only ", 0), 0u) << m;
+    EXPECT_TRUE(m.ends_with(" is available (try less)")) << m;
+  }
+}
 
 TEST(Memory, FormatBytesPicksTheUnit) {
   EXPECT_EQ(FormatBytes(512), "0.5 KiB");

@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "solver/atomic_file.h"
+#include "solver/memory.h"
 #include "solver/status.h"
 #include "solver/threads.h"
 
@@ -290,7 +291,7 @@ class CeresHook : public ceres::IterationCallback {
   const IterationHook& hook_;
 };
 
-OptimizerResult RunCeres(RecoveryProblem* problem, OptimizerKind kind, int max_iterations,
+OptimizerResult RunCeres(RecoveryProblem* problem, OptimizerKind kind, int max_iterations, int lbfgs_rank,
                          double tolerance, std::vector<double>* x, const IterationHook& hook) {
   ceres::GradientProblem gp(new CeresFunction(problem));
   ceres::GradientProblemSolver::Options so;
@@ -299,6 +300,7 @@ OptimizerResult RunCeres(RecoveryProblem* problem, OptimizerKind kind, int max_i
   so.nonlinear_conjugate_gradient_type = ceres::POLAK_RIBIERE;
   so.line_search_type = ceres::WOLFE;
   so.max_num_iterations = max_iterations;
+  so.max_lbfgs_rank = lbfgs_rank;
   so.function_tolerance = tolerance;
   so.gradient_tolerance = 1e-16;
   so.parameter_tolerance = 1e-14;
@@ -460,12 +462,24 @@ const char* TerminationName(RecoveryTermination t) {
 std::string RecoveryOptions::Validate() const {
   if (!(lambda >= 0) || !std::isfinite(lambda)) return fmt::format("lambda must be a finite number >= 0, got {}", lambda);
   if (max_iterations < 0) return "max_iterations must be >= 0";
+  if (lbfgs_rank < 1 || lbfgs_rank > 1000) return fmt::format("lbfgs_rank must be in [1, 1000], got {}", lbfgs_rank);
   if (!(tolerance > 0 && tolerance < 1)) return fmt::format("tolerance must be in (0, 1), got {}", tolerance);
   if (homogeneous_iterations < 0) return "homogeneous_iterations must be >= 0";
   if (!(homogeneous_kappa > 0) || !(homogeneous_mu > 0)) return "the homogeneous start must be > 0";
   if (!(solve_tolerance > 0 && solve_tolerance < 1e-3)) return "solve_tolerance must be in (0, 1e-3)";
   if (threads_per_channel < 0) return "threads_per_channel must be >= 0";
   return regularizer.Validate();
+}
+
+int64_t RecoveryMemoryBytes(const GridShape& shape, int conditions, const RecoveryOptions& o) {
+  // Vectors of 6N doubles. Ceres' line search and its directions' working vectors (iterates,
+  // gradients, directions, line-search points): 17-21 measured besides the L-BFGS history
+  // (docs/benchmarks.md, "The recovery's memory estimate"), counted as 32 for a margin; the
+  // history, 2 per rank. RunPaper's: x, g, g_new, d, trial, and one for a margin.
+  int vectors = 6;
+  if (o.optimizer == OptimizerKind::kNcg) vectors = 32;
+  if (o.optimizer == OptimizerKind::kLbfgs) vectors = 32 + 2 * o.lbfgs_rank;
+  return EstimateMemory(shape, conditions, Precision::kDouble, vectors).recovery_bytes;
 }
 
 std::string RecoverySummary::BriefReport() const {
@@ -571,7 +585,7 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
   } else if (o.optimizer == OptimizerKind::kPaper) {
     r = RunPaper(&problem, remaining, o.tolerance, &state->x, hook);
   } else {
-    r = RunCeres(&problem, o.optimizer, remaining, o.tolerance, &state->x, hook);
+    r = RunCeres(&problem, o.optimizer, remaining, o.lbfgs_rank, o.tolerance, &state->x, hook);
   }
   sum.optimizer_seconds =
       std::max(0.0, Since(t_optimizer) - (problem.evaluation_seconds() - evaluation0));

@@ -36,6 +36,10 @@ struct RecoveryOptions {
   RegularizerOptions regularizer;
   bool regularize_mu = false;
   int max_iterations = 300;
+  // lbfgs: how many past steps' pairs of vectors (6N doubles each, 96 bytes per node per pair)
+  // shape the search direction (Ceres' max_lbfgs_rank; 20, Ceres' default, is ~40 % of a
+  // recovery's memory). A lower rank trades little for memory here (docs/inverse.md, "Memory").
+  int lbfgs_rank = 20;
   // Stop when an iteration lowers the objective by less than tolerance * objective.
   double tolerance = 1e-7;
   // First fit one (kappa, mu) per channel (Levenberg-Marquardt on 2 unknowns per channel, at
@@ -60,6 +64,10 @@ struct IterationReport {
 
 enum class RecoveryTermination { kConverged, kMaxIterations, kStopped, kFailed };
 const char* TerminationName(RecoveryTermination t);
+
+// The memory a recovery with these options adds to the process (EstimateMemory's recovery_bytes,
+// with the L-BFGS history these options keep; none for ncg and paper).
+int64_t RecoveryMemoryBytes(const GridShape& shape, int conditions, const RecoveryOptions& options);
 
 // Where a recovery starts: empty x -> homogeneous fit first. Filled from a material (--init) or
 // a checkpoint (resume: counters and history continue).

@@ -197,6 +197,7 @@ TEST_F(Cli, InfoSizesAGridAndRefusesWhatDoesNotFit) {
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("threads:"), std::string::npos);
   EXPECT_NE(r.output.find("forward solve:"), std::string::npos);
+  EXPECT_NE(r.output.find("with --lbfgs-rank 5:"), std::string::npos) << r.output;
   r = Translume("info --grid 4000x4000x4000");
   EXPECT_NE(r.output.find("does NOT fit"), std::string::npos) << r.output;
   ExpectOneLineError(Translume("synth --preset wax --grid 4000x4000x4000 -o " + P("huge.vdb")),
@@ -298,6 +299,7 @@ TEST_F(Cli, ErrorsNameTheFlagsAndEmptyRowsSayWhy) {
   ExpectOneLineError(Translume("synth --preset wax -o " + P("a.vdb") + " foo bar"),
                      "The following arguments were not expected: foo bar");
   ExpectOneLineError(Translume("solve " + P("ds") + " --max-iterations -5 -o " + P("r.vdb")), "--max-iterations: must be");
+  ExpectOneLineError(Translume("solve " + P("ds") + " --lbfgs-rank 0 -o " + P("r.vdb")), "--lbfgs-rank: must be in [1, 1000]");
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --oversample 9 -o " + P("d2")), "--oversample: must be in [1, 8]");
   ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " --exposures 1 -o " + P("c2")), "--exposures: must be in [2, 16]");
   ExpectOneLineError(Translume("demo --lights 9x9 -o " + P("demo")), "--lights: ");
@@ -462,6 +464,10 @@ TEST_F(Cli, BenchRecoverySmoke) {
   EXPECT_EQ(j["cases"].size(), 5u);  // back/front x 0/1 % noise, and the paper optimiser
   EXPECT_EQ(j["cases"][0]["kappa_layer_error"].size(), 4u);
   EXPECT_GT(j["cases"][0]["holdout_error"].get<double>(), 0);
+  // The memory a recovery took, beside the estimate `solve` checks (which bounds it).
+  const int64_t peak = j["cases"][0]["peak_memory_bytes"].get<int64_t>();
+  EXPECT_GT(peak, 0);
+  EXPECT_LE(peak, j["cases"][0]["memory_estimate_bytes"].get<int64_t>());
   EXPECT_TRUE(j.contains("optimizer_comparison"));
   ExpectOneLineError(Translume("bench recovery --grid 8x6"), "--grid");
 }

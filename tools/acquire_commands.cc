@@ -187,9 +187,9 @@ int RunAcquire(int argc, char** argv) {
   if (within(work_abs, cap_abs) || within(cap_abs, work_abs))
     throw InputError(fmt::format("-o {}: its work folder {} {} the capture folder {}; choose another -o", out, work,
                                  within(work_abs, cap_abs) ? "is or lies inside" : "holds", cap.dir));
-  CheckFitsInMemory(EstimateMemory(cap.grid, int(cap.conditions.size()), Precision::kDouble).recovery_bytes,
-                    fmt::format("{}: a recovery on the {} grid with {} conditions", cap.file, cap.grid.ToString(),
-                                cap.conditions.size()));
+  CheckRecoveryFitsInMemory(cap.grid, int(cap.conditions.size()), o.recovery,
+                            fmt::format("{}: a recovery on the {} grid with {} conditions", cap.file,
+                                        cap.grid.ToString(), cap.conditions.size()));
   std::printf("acquire: %s, grid %s (h %g mm), %s-lit, %zu conditions, %d threads\n", cap.file.c_str(),
               cap.grid.ToString().c_str(), cap.spacing_mm, SetupName(cap.setup), cap.conditions.size(),
               NumThreads());

@@ -146,13 +146,15 @@ void AddBenchRecovery(CLI::App& bench) {
   rec->add_option("--tolerance", ro.recovery.tolerance, "Stop when an iteration lowers the "
                   "objective by less than this fraction (tiny: run all --max-iterations)")
       ->capture_default_str();
+  rec->add_option("--lbfgs-rank", ro.recovery.lbfgs_rank, "L-BFGS history: pairs of vectors kept "
+                  "(memory: 96 bytes per node each)")->capture_default_str();
   rec->add_option("--lambda", ro.recovery.lambda, "lambda for noise-free data")->capture_default_str();
   rec->add_option("--noisy-lambda", ro.noisy_lambda, "lambda for 1 % noise")->capture_default_str();
   rec->add_flag("--comparison-only", f->comparison_only, "Only the paper-vs-lbfgs comparison");
   rec->add_flag("--no-comparison", f->no_comparison, "Skip the paper-vs-lbfgs comparison");
   rec->add_option("--paper-iterations", ro.paper_iterations, "Iterations of the paper optimiser")
       ->capture_default_str();
-  rec->callback([f] {
+  rec->callback([f, rec] {
     RecoveryBenchOptions o = f->o;
     if (f->full) o.shape = {64, 48, 16};
     if (!f->grid.empty()) o.shape = ParseGridShape(f->grid, "--grid");
@@ -176,8 +178,7 @@ void AddBenchRecovery(CLI::App& bench) {
     if (!(o.max_seconds >= 0)) throw InputError("bench recovery: --max-seconds must be >= 0");
     for (double n : o.noises)
       if (!(n >= 0 && n <= 1)) throw InputError(fmt::format("bench recovery: noise {} must be within 0..1", n));
-    if (std::string err = o.recovery.Validate(); !err.empty())
-      throw InputError("bench recovery: " + err);
+    if (std::string err = o.recovery.Validate(); !err.empty()) throw OptionsError(*rec, "bench recovery", err);
     if (o.data_backend == Backend::kGl ||
         std::find(o.backends.begin(), o.backends.end(), Backend::kGl) != o.backends.end())
       PrintGlInfo();

@@ -42,6 +42,9 @@ void AddRecoveryFlags(CLI::App& app, RecoveryFlags* f) {
   app.add_flag("--regularize-mu", f->options.regularize_mu, "Regularise mu too");
   app.add_option("--max-iterations", f->options.max_iterations, "Iterations of the heterogeneous fit")
       ->capture_default_str();
+  app.add_option("--lbfgs-rank", f->options.lbfgs_rank,
+                 "L-BFGS history: pairs of vectors kept, 96 bytes per node each (lower: less memory)")
+      ->capture_default_str();
   app.add_option("--tolerance", f->options.tolerance,
                  "Stop when an iteration lowers the objective by less than this fraction")
       ->capture_default_str();
@@ -57,6 +60,18 @@ RecoveryOptions RecoveryFlags::Options(const CLI::App& app, const char* command)
   if (o.backend == Backend::kGl) GlContext::Get();  // fail before any output
   if (std::string err = o.Validate(); !err.empty()) throw OptionsError(app, command, err);
   return o;
+}
+
+void CheckRecoveryFitsInMemory(const GridShape& shape, int conditions, const RecoveryOptions& o,
+                               const std::string& what) {
+  std::string hint;
+  if (o.optimizer == OptimizerKind::kLbfgs && o.lbfgs_rank > 5) {
+    RecoveryOptions smaller = o;
+    smaller.lbfgs_rank = 5;
+    hint = fmt::format(" (with --lbfgs-rank 5 about {}: docs/inverse.md, \"Memory\")",
+                       FormatBytes(RecoveryMemoryBytes(shape, conditions, smaller)));
+  }
+  CheckFitsInMemory(RecoveryMemoryBytes(shape, conditions, o), what, hint);
 }
 
 std::string TimeLeft::operator()(const IterationReport& r, int max_iterations) {
@@ -191,9 +206,9 @@ int RunSolve(int argc, char** argv) {
                                      "name", checkpoint, out, path == out ? "material" : path == report ?
                                      "report" : "slice " + path));
   }
-  CheckFitsInMemory(EstimateMemory(d.shape, int(d.conditions.size()), Precision::kDouble).recovery_bytes,
-                    fmt::format("a recovery on the {} grid with {} conditions", d.shape.ToString(),
-                                d.conditions.size()));
+  CheckRecoveryFitsInMemory(d.shape, int(d.conditions.size()), o,
+                            fmt::format("a recovery on the {} grid with {} conditions", d.shape.ToString(),
+                                        d.conditions.size()));
   RecoveryState state;
   std::string resuming;
   if (!checkpoint.empty() && fs::exists(checkpoint)) {

@@ -19,6 +19,11 @@ struct RecoveryFlags {
 };
 void AddRecoveryFlags(CLI::App& app, RecoveryFlags* flags);
 
+// CheckFitsInMemory (solver/memory.h) for a recovery with these options; where a lower
+// --lbfgs-rank would need less, the error says how much.
+void CheckRecoveryFitsInMemory(const GridShape& shape, int conditions, const RecoveryOptions& options,
+                               const std::string& what);
+
 // "12.3 s", "4.5 min", "1.2 h".
 std::string FormatSeconds(double seconds);
 

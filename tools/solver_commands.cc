@@ -172,9 +172,16 @@ int RunInfo(int argc, char** argv) {
                 precision.c_str());
     std::printf("  forward solve: %s%s\n", FormatBytes(e.forward_bytes).c_str(),
                 avail > 0 && e.forward_bytes > avail ? "  (does NOT fit in available memory)" : "");
-    std::printf("  recovery with %d conditions, RGB: %s%s\n", conditions,
-                FormatBytes(e.recovery_bytes).c_str(),
-                avail > 0 && e.recovery_bytes > avail ? "  (does NOT fit in available memory)" : "");
+    // A recovery runs in double whatever --precision says; the L-BFGS rank sets most of it.
+    RecoveryOptions ro;
+    const int64_t recovery = RecoveryMemoryBytes(shape, conditions, ro);
+    ro.lbfgs_rank = 5;
+    const int64_t recovery5 = RecoveryMemoryBytes(shape, conditions, ro);
+    std::printf("  recovery with %d conditions, RGB: %s%s; with --lbfgs-rank 5: %s%s\n", conditions,
+                FormatBytes(recovery).c_str(),
+                avail > 0 && recovery > avail ? "  (does NOT fit in available memory)" : "",
+                FormatBytes(recovery5).c_str(),
+                avail > 0 && recovery5 > avail ? "  (does NOT fit either)" : "");
   }
   return 0;
 }
