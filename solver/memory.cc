@@ -2,6 +2,8 @@
 #include "solver/memory.h"
 
 #include <fmt/format.h>
+
+#include <algorithm>
 #include <fstream>
 #if defined(__GLIBC__)
 #include <malloc.h>
@@ -35,18 +37,102 @@ MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision 
   return e;
 }
 
-int64_t AvailableMemoryBytes() {
-  std::ifstream in("/proc/meminfo");
+namespace {
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return in ? s.str() : std::string();
+}
+
+// The number after `key` on the line that starts with `key` (then ':' or ' '), -1 if none.
+// Units are the caller's ("MemAvailable:  123 kB" gives 123).
+int64_t KeyedNumber(const std::string& text, const std::string& key) {
+  std::istringstream lines(text);
   std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind("MemAvailable:", 0) == 0) {
-      std::istringstream s(line.substr(13));
-      int64_t kb = 0;
-      s >> kb;
-      return kb * 1024;
+  while (std::getline(lines, line)) {
+    if (line.size() > key.size() && line.rfind(key, 0) == 0 &&
+        (line[key.size()] == ':' || line[key.size()] == ' ')) {
+      std::istringstream s(line.substr(key.size() + 1));
+      int64_t v = -1;
+      return s >> v ? v : -1;
     }
   }
   return -1;
+}
+
+// A file that holds one number, or "max" (-1), or nothing readable (-1).
+int64_t FileNumber(const std::string& path) {
+  std::istringstream s(ReadFile(path));
+  int64_t v = -1;
+  return s >> v ? v : -1;
+}
+
+struct CgroupFiles {
+  const char* limit;
+  const char* usage;
+  const char* inactive_file;  // key in memory.stat
+};
+
+// limit - usage + inactive file pages for `dir`, -1 without a limit.
+int64_t CgroupDirAvailable(const std::string& dir, const CgroupFiles& f) {
+  const int64_t limit = FileNumber(dir + "/" + f.limit);
+  if (limit < 0 || limit >= (int64_t(1) << 62)) return -1;
+  const int64_t usage = std::max<int64_t>(FileNumber(dir + "/" + f.usage), 0);
+  const int64_t inactive = std::max<int64_t>(KeyedNumber(ReadFile(dir + "/memory.stat"), f.inactive_file), 0);
+  return std::max<int64_t>(limit - usage + inactive, 0);
+}
+
+// The least over `path` and its ancestors under `base`; -1 where none has a limit.
+int64_t CgroupPathAvailable(const std::string& base, std::string path, const CgroupFiles& f) {
+  int64_t least = -1;
+  while (true) {
+    while (path.size() > 1 && path.back() == '/') path.pop_back();
+    const int64_t a = CgroupDirAvailable(base + (path == "/" ? "" : path), f);
+    if (a >= 0 && (least < 0 || a < least)) least = a;
+    if (path.empty() || path == "/") break;
+    const size_t slash = path.rfind('/');
+    path = slash == std::string::npos || slash == 0 ? "/" : path.substr(0, slash);
+  }
+  return least;
+}
+
+}  // namespace
+
+int64_t CgroupAvailableBytes(const std::string& proc_self_cgroup, const std::string& root) {
+  static constexpr CgroupFiles kV1{"memory.limit_in_bytes", "memory.usage_in_bytes", "total_inactive_file"};
+  static constexpr CgroupFiles kV2{"memory.max", "memory.current", "inactive_file"};
+  int64_t least = -1;
+  const auto keep = [&](int64_t a) {
+    if (a >= 0 && (least < 0 || a < least)) least = a;
+  };
+  std::istringstream lines(proc_self_cgroup);
+  std::string line;
+  while (std::getline(lines, line)) {
+    const size_t c1 = line.find(':');
+    const size_t c2 = c1 == std::string::npos ? c1 : line.find(':', c1 + 1);
+    if (c2 == std::string::npos) continue;
+    const std::string path = line.substr(c2 + 1);
+    if (c2 == c1 + 1) {  // "0::/path": the v2 hierarchy
+      keep(CgroupPathAvailable(root, path, kV2));
+      keep(CgroupPathAvailable(root + "/unified", path, kV2));
+      continue;
+    }
+    std::istringstream controllers(line.substr(c1 + 1, c2 - c1 - 1));
+    std::string controller;
+    while (std::getline(controllers, controller, ','))
+      if (controller == "memory") keep(CgroupPathAvailable(root + "/memory", path, kV1));
+  }
+  return least;
+}
+
+int64_t AvailableMemoryBytes() {
+  const int64_t kb = KeyedNumber(ReadFile("/proc/meminfo"), "MemAvailable");
+  const int64_t meminfo = kb < 0 ? -1 : kb * 1024;
+  const int64_t cgroup = CgroupAvailableBytes(ReadFile("/proc/self/cgroup"));
+  if (meminfo < 0) return cgroup;
+  return cgroup < 0 ? meminfo : std::min(meminfo, cgroup);
 }
 
 void CheckFitsInMemory(int64_t bytes, const std::string& what, const std::string& hint) {
@@ -60,11 +146,8 @@ void CheckFitsInMemory(int64_t bytes, const std::string& what, const std::string
 namespace {
 
 int64_t ProcStatusBytes(const std::string& field) {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind(field + ":", 0) == 0) return std::stoll(line.substr(field.size() + 1)) * 1024;
-  return -1;
+  const int64_t kb = KeyedNumber(ReadFile("/proc/self/status"), field);
+  return kb < 0 ? -1 : kb * 1024;
 }
 
 }  // namespace

@@ -25,8 +25,20 @@ struct MemoryEstimate {
 MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision precision,
                               int optimizer_vectors = 72);
 
-// MemAvailable from /proc/meminfo; -1 if unknown.
+// The memory this process may still take: the least of MemAvailable (/proc/meminfo) and what its
+// cgroups allow (CgroupAvailableBytes); -1 if neither is known. In a container /proc/meminfo
+// shows the host's memory, so the cgroup's limit is the one the OOM killer enforces.
 int64_t AvailableMemoryBytes();
+
+// What the memory limits of a cgroup and its ancestors still allow: for each with a limit,
+// limit - usage + inactive_file (page cache the kernel reclaims before it kills), the least of
+// them; -1 where none sets a limit. Reads the cgroup v2 files (memory.max, memory.current,
+// memory.stat) under `root` or `root`/unified, and the v1 memory controller's
+// (memory.limit_in_bytes, memory.usage_in_bytes, memory.stat's total_inactive_file) under
+// `root`/memory; v1 limits of 2^62 bytes or more mean "none". `proc_self_cgroup`: the text of
+// /proc/self/cgroup ("id:controllers:path" lines). Directories that do not exist are skipped, so
+// that a container which mounts its own cgroup at `root` is read there.
+int64_t CgroupAvailableBytes(const std::string& proc_self_cgroup, const std::string& root = "/sys/fs/cgroup");
 
 // Throws InputError if `bytes` exceeds the available memory, naming `what` and the estimate, then
 // `hint` (a way to need less).

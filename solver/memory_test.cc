@@ -3,8 +3,11 @@
 
 #include <gtest/gtest.h>
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <memory>
 #include <string>
 
@@ -100,6 +103,80 @@ TEST(Memory, TooLargeNamesWhatTheEstimateAndTheHint) {
     EXPECT_EQ(m.rfind("a huge thing needs about 1073741824.00 GiB of memory, but only ", 0), 0u) << m;
     EXPECT_TRUE(m.ends_with(" is available (try less)")) << m;
   }
+}
+
+// A cgroup tree as the kernel shows it, written under a temporary root.
+class FakeCgroups {
+ public:
+  FakeCgroups() : root_(std::filesystem::path(::testing::TempDir()) / ("cgroups_" + std::to_string(::getpid()))) {
+    std::filesystem::remove_all(root_);
+  }
+  ~FakeCgroups() { std::filesystem::remove_all(root_); }
+  void Write(const std::string& file, const std::string& text) const {
+    const std::filesystem::path p = root_ / file;
+    std::filesystem::create_directories(p.parent_path());
+    std::ofstream(p) << text;
+  }
+  std::string root() const { return root_.string(); }
+
+ private:
+  std::filesystem::path root_;
+};
+
+// In a container /proc/meminfo shows the host's memory; the cgroup's limit is what the OOM
+// killer enforces, so it bounds the available memory (limit - usage + inactive file pages,
+// the least over the cgroup and its ancestors).
+TEST(Memory, CgroupLimitsBoundTheAvailableMemory) {
+  {  // v2: the parent's limit is tighter than the leaf's.
+    FakeCgroups fs;
+    fs.Write("a/b/memory.max", "1000000\n");
+    fs.Write("a/b/memory.current", "400000\n");
+    fs.Write("a/b/memory.stat", "anon 300000\nfile 100000\ninactive_file 100000\nactive_file 0\n");
+    fs.Write("a/memory.max", "500000\n");
+    fs.Write("a/memory.current", "420000\n");
+    fs.Write("a/memory.stat", "inactive_file 30000\n");
+    fs.Write("memory.current", "9000000\n");  // the root has no memory.max
+    EXPECT_EQ(CgroupAvailableBytes("0::/a/b\n", fs.root()), 110000);
+    fs.Write("a/memory.max", "max\n");
+    EXPECT_EQ(CgroupAvailableBytes("0::/a/b\n", fs.root()), 700000);
+    EXPECT_EQ(CgroupAvailableBytes("0::/a/b/\n", fs.root()), 700000);
+    fs.Write("a/b/memory.max", "max\n");
+    EXPECT_EQ(CgroupAvailableBytes("0::/a/b\n", fs.root()), -1);
+  }
+  {  // v1 memory controller (beside other controllers and a v2 hierarchy: hybrid).
+    FakeCgroups fs;
+    const std::string self = "5:cpu,cpuacct:/job\n4:memory:/job\n0::/job\n";
+    fs.Write("memory/job/memory.limit_in_bytes", "9223372036854771712\n");  // no limit
+    fs.Write("memory/job/memory.usage_in_bytes", "500000\n");
+    fs.Write("memory/job/memory.stat", "cache 300000\ninactive_file 1\ntotal_inactive_file 250000\n");
+    fs.Write("memory/memory.limit_in_bytes", "9223372036854771712\n");
+    EXPECT_EQ(CgroupAvailableBytes(self, fs.root()), -1);
+    fs.Write("memory/job/memory.limit_in_bytes", "2000000\n");
+    EXPECT_EQ(CgroupAvailableBytes(self, fs.root()), 1750000);
+    // A v2 limit in the hybrid's unified hierarchy counts too.
+    fs.Write("unified/job/memory.max", "600000\n");
+    fs.Write("unified/job/memory.current", "100000\n");
+    EXPECT_EQ(CgroupAvailableBytes(self, fs.root()), 500000);
+    // Usage above the limit (before reclaim) means nothing is left, not a negative amount.
+    fs.Write("memory/job/memory.usage_in_bytes", "3000000\n");
+    EXPECT_EQ(CgroupAvailableBytes(self, fs.root()), 0);
+  }
+  {  // A container that mounts its own cgroup at the root while /proc/self/cgroup names the
+     // host's path: the path's directories do not exist, the root's files are read.
+    FakeCgroups fs;
+    fs.Write("memory/memory.limit_in_bytes", "8000000\n");
+    fs.Write("memory/memory.usage_in_bytes", "1000000\n");
+    EXPECT_EQ(CgroupAvailableBytes("4:memory:/docker/0123abcd\n", fs.root()), 7000000);
+  }
+  {  // Nothing there, or nothing readable.
+    FakeCgroups fs;
+    EXPECT_EQ(CgroupAvailableBytes("0::/\n", fs.root()), -1);
+    EXPECT_EQ(CgroupAvailableBytes("", fs.root()), -1);
+    EXPECT_EQ(CgroupAvailableBytes("garbage\n", fs.root()), -1);
+  }
+  // This machine: the available memory is known.
+  const int64_t avail = AvailableMemoryBytes();
+  EXPECT_GT(avail, 0);
 }
 
 TEST(Memory, FormatBytesPicksTheUnit) {
