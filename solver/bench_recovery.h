@@ -51,6 +51,7 @@ struct RecoveryBenchRow {
   double noise = 0;
   GridShape shape;
   std::string optimizer;
+  int lbfgs_rank = 0;  // L-BFGS' history pairs; 0 for the optimisers that keep none
   Backend backend = Backend::kCpu;
   std::string termination, message;  // why the optimiser stopped (TerminationName; Ceres' words)
   // seconds: the whole recovery (homogeneous fit included); simulate / evaluate: the data and

@@ -458,10 +458,13 @@ TEST_F(Cli, GlProfileTimesTheDispatches) {
 
 TEST_F(Cli, BenchRecoverySmoke) {
   const CommandRun r = Translume("bench recovery --grid 8x6x4 --presets wax --max-iterations 3 "
-                                 "--paper-iterations 2 --json");
+                                 "--paper-iterations 2 --lbfgs-rank 7 --json");
   ASSERT_EQ(r.status, 0) << r.output;
   const auto j = nlohmann::json::parse(r.output.substr(r.output.find('{')));
-  EXPECT_EQ(j["cases"].size(), 5u);  // back/front x 0/1 % noise, and the paper optimiser
+  ASSERT_EQ(j["cases"].size(), 5u);  // back/front x 0/1 % noise, and the paper optimiser
+  EXPECT_EQ(j["cases"][0]["lbfgs_rank"].get<int>(), 7);
+  EXPECT_EQ(j["cases"][4]["optimizer"].get<std::string>(), "paper");
+  EXPECT_EQ(j["cases"][4]["lbfgs_rank"].get<int>(), 0);
   EXPECT_EQ(j["cases"][0]["kappa_layer_error"].size(), 4u);
   EXPECT_GT(j["cases"][0]["holdout_error"].get<double>(), 0);
   // The memory a recovery took, beside the estimate `solve` checks (which bounds it).
