@@ -15,6 +15,8 @@
 #include "tests/cli_harness.h"
 #include "solver/image_io.h"
 #include "solver/material_io.h"
+#include "solver/memory.h"
+#include "solver/recover.h"
 
 namespace translume {
 namespace {
@@ -410,6 +412,29 @@ TEST_F(Cli, BenchForwardSmoke) {
   // Every grid is sized before the first runs (this one ended in a bare "out of memory").
   ExpectOneLineError(Translume("bench forward --grids 17x13x9 65536x65536x65536"),
                      "--grids 65536x65536x65536: a forward solve on it needs about");
+}
+
+// A recovery that the available memory cannot hold stops before it starts, with the estimate
+// and what --lbfgs-rank 5 would need (L-BFGS' history is most of it); the other optimisers keep
+// no history and get no hint. A face of 32x24 nodes, 65536 deep: ~50 M nodes, ~230 GB.
+TEST_F(Cli, SolveTooLargeForTheMemoryNamesTheLowerRank) {
+  ASSERT_EQ(Translume("synth --preset wax --grid 32x24x4 -o " + P("m.vdb")).status, 0);
+  ASSERT_EQ(Translume("simulate " + P("m.vdb") + " --lights 2x2 -o " + P("ds")).status, 0);
+  nlohmann::json j;
+  std::ifstream(P("ds/dataset.json")) >> j;
+  j["grid"][2] = 65536;
+  std::ofstream(P("ds/dataset.json")) << j.dump(2);
+  const GridShape deep{32, 24, 65536};
+  const int64_t avail = AvailableMemoryBytes();
+  if (avail < 0 || avail >= RecoveryMemoryBytes(deep, 4, RecoveryOptions{}))
+    GTEST_SKIP() << "this machine has the memory for it";
+  CommandRun r = Translume("solve " + P("ds") + " -o " + P("r.vdb"));
+  ExpectOneLineError(r, "a recovery on the 32x24x65536 grid with 4 conditions needs about ");
+  EXPECT_NE(r.output.find(" (with --lbfgs-rank 5 about "), std::string::npos) << r.output;
+  r = Translume("solve " + P("ds") + " --optimizer ncg -o " + P("r.vdb"));
+  ExpectOneLineError(r, "needs about ");
+  EXPECT_EQ(r.output.find("--lbfgs-rank"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(P("r.vdb")));
 }
 
 // The gl benchmark reports the stencil's bandwidth against a copy, and how far its solution is
