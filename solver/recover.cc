@@ -212,6 +212,9 @@ class RecoveryProblem {
     std::vector<double>& m = mu_[c];
     const double* xk = x + 2 * c * n_;
     const double* xm = xk + n_;
+    // Parallel for the gl backend, whose channels run in turn on one host thread (Wax I: 7.5 ms
+    // an evaluation serial, ~2 % of an H200 iteration); on cpu each channel's threads_.
+#pragma omp parallel for schedule(static)
     for (int64_t p = 0; p < n_; ++p) {
       k[p] = std::exp(xk[p]);
       m[p] = std::exp(xm[p]);
@@ -227,6 +230,7 @@ class RecoveryProblem {
     if (grad) {
       // Chain rule through kappa = exp(x), and the 1/3 of the channel mean.
       double* g = grad + 2 * c * n_;
+#pragma omp parallel for schedule(static)
       for (int64_t p = 0; p < n_; ++p) {
         g[p] = gk[p] * k[p] / 3.0;
         g[n_ + p] = gm[p] * m[p] / 3.0;
