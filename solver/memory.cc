@@ -127,13 +127,17 @@ int64_t CgroupAvailableBytes(const std::string& proc_self_cgroup, const std::str
   return least;
 }
 
-int64_t AvailableMemoryBytes() {
+AvailableMemory ReadAvailableMemory() {
+  AvailableMemory a;
   const int64_t kb = KeyedNumber(ReadFile("/proc/meminfo"), "MemAvailable");
-  const int64_t meminfo = kb < 0 ? -1 : kb * 1024;
-  const int64_t cgroup = CgroupAvailableBytes(ReadFile("/proc/self/cgroup"));
-  if (meminfo < 0) return cgroup;
-  return cgroup < 0 ? meminfo : std::min(meminfo, cgroup);
+  a.meminfo_bytes = kb < 0 ? -1 : kb * 1024;
+  a.cgroup_bytes = CgroupAvailableBytes(ReadFile("/proc/self/cgroup"));
+  if (a.meminfo_bytes < 0) a.bytes = a.cgroup_bytes;
+  else a.bytes = a.cgroup_bytes < 0 ? a.meminfo_bytes : std::min(a.meminfo_bytes, a.cgroup_bytes);
+  return a;
 }
+
+int64_t AvailableMemoryBytes() { return ReadAvailableMemory().bytes; }
 
 void CheckFitsInMemory(int64_t bytes, const std::string& what, const std::string& hint) {
   const int64_t avail = AvailableMemoryBytes();

@@ -29,6 +29,11 @@ MemoryEstimate EstimateMemory(const GridShape& shape, int conditions, Precision 
 // cgroups allow (CgroupAvailableBytes); -1 if neither is known. In a container /proc/meminfo
 // shows the host's memory, so the cgroup's limit is the one the OOM killer enforces.
 int64_t AvailableMemoryBytes();
+// Both figures behind it, read once (-1 where unknown); bytes is the least of the known ones.
+struct AvailableMemory {
+  int64_t bytes = -1, meminfo_bytes = -1, cgroup_bytes = -1;
+};
+AvailableMemory ReadAvailableMemory();
 
 // What the memory limits of a cgroup and its ancestors still allow: for each with a limit,
 // limit - usage + inactive_file (page cache the kernel reclaims before it kills), the least of

@@ -5,6 +5,7 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -174,9 +175,11 @@ TEST(Memory, CgroupLimitsBoundTheAvailableMemory) {
     EXPECT_EQ(CgroupAvailableBytes("", fs.root()), -1);
     EXPECT_EQ(CgroupAvailableBytes("garbage\n", fs.root()), -1);
   }
-  // This machine: the available memory is known.
-  const int64_t avail = AvailableMemoryBytes();
-  EXPECT_GT(avail, 0);
+  // This machine: the available memory is known, the least of the two figures.
+  const AvailableMemory a = ReadAvailableMemory();
+  EXPECT_GT(a.meminfo_bytes, 0);
+  EXPECT_EQ(a.bytes, a.cgroup_bytes < 0 ? a.meminfo_bytes : std::min(a.meminfo_bytes, a.cgroup_bytes));
+  EXPECT_GT(AvailableMemoryBytes(), 0);
 }
 
 TEST(Memory, FormatBytesPicksTheUnit) {

@@ -164,8 +164,14 @@ int RunInfo(int argc, char** argv) {
   std::printf("threads: %d in use (of %d hardware threads); change with --threads N or "
               "TRANSLUME_THREADS=N\n", NumThreads(), omp_get_num_procs());
   std::printf("indices: 64-bit\n");
-  const int64_t avail = AvailableMemoryBytes();
-  if (avail > 0) std::printf("memory available: %s\n", FormatBytes(avail).c_str());
+  const AvailableMemory memory = ReadAvailableMemory();
+  const int64_t avail = memory.bytes;
+  if (avail > 0)
+    std::printf("memory available: %s%s\n", FormatBytes(avail).c_str(),
+                memory.cgroup_bytes >= 0 && memory.cgroup_bytes < memory.meminfo_bytes
+                    ? fmt::format(" (the cgroup's memory limit; the machine has {} available)",
+                                  FormatBytes(memory.meminfo_bytes)).c_str()
+                    : "");
   if (shape.size() > 0) {
     const MemoryEstimate e = EstimateMemory(shape, conditions, sized_precision);
     std::printf("grid %s (%lld nodes), %s:\n", shape.ToString().c_str(), (long long)shape.size(),
