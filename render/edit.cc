@@ -3,7 +3,9 @@
 
 #include <algorithm>
 #include <charconv>
+#include <cctype>
 #include <cmath>
+#include <cstring>
 #include <fmt/format.h>
 
 #include "solver/status.h"
@@ -57,6 +59,20 @@ void EditOptions::ParseDepth(const std::string& text) {
   depth_end = b;
 }
 
+void EditOptions::ParseChannels(const std::string& text) {
+  static constexpr char kLetters[] = "rgb";
+  std::array<bool, 3> chosen{false, false, false};
+  for (char ch : text) {
+    const char* at = ch == '\0' ? nullptr : std::strchr(kLetters, std::tolower(static_cast<unsigned char>(ch)));
+    if (!at) throw InputError("--channels " + text + ": expected letters of r, g, b (e.g. r or gb)");
+    bool& c = chosen[at - kLetters];
+    if (c) throw InputError(fmt::format("--channels {}: '{}' is named twice", text, ch));
+    c = true;
+  }
+  if (text.empty()) throw InputError("--channels: name at least one of r, g, b");
+  channels = chosen;
+}
+
 Material EditMaterial(const Material& material, const EditOptions& o, const Image* mask) {
   if (std::string err = o.Validate(); !err.empty()) throw InputError(err);
   Material m = material;
@@ -80,6 +96,7 @@ Material EditMaterial(const Material& material, const EditOptions& o, const Imag
         }
         const int64_t n = s.index(i, j, k);
         for (int c = 0; c < 3; ++c) {
+          if (!o.channels[c]) continue;
           float& kv = m.kappa[c][n];
           float& mv = m.mu[c][n];
           kv = float(kv + w * (o.scale_kappa * kv + o.add_kappa - kv));

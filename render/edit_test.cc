@@ -42,6 +42,29 @@ TEST(Edit, RepeatedTermsCompose) {
   EXPECT_DOUBLE_EQ(o.add_kappa, 0);
 }
 
+// A tint: only the named channels change.
+TEST(Edit, ChosenChannelsOnly) {
+  const Material m = Material::Constant({2, 2, 2}, 0.5, {0.2f, 0.3f, 0.4f}, {0.01f, 0.02f, 0.03f});
+  EditOptions o;
+  o.ParseTerm("mu=4", false);
+  o.ParseChannels("R");
+  EXPECT_EQ(o.channels, (std::array<bool, 3>{true, false, false}));
+  Material e = EditMaterial(m, o);
+  EXPECT_FLOAT_EQ(e.mu[0][5], 0.04f);
+  EXPECT_FLOAT_EQ(e.mu[1][5], 0.02f);
+  EXPECT_FLOAT_EQ(e.mu[2][5], 0.03f);
+  EXPECT_FLOAT_EQ(e.kappa[0][5], 0.2f);
+  o.ParseChannels("gb");
+  e = EditMaterial(m, o);
+  EXPECT_FLOAT_EQ(e.mu[0][5], 0.01f);
+  EXPECT_FLOAT_EQ(e.mu[1][5], 0.08f);
+  EXPECT_FLOAT_EQ(e.mu[2][5], 0.12f);
+  EXPECT_THROW(o.ParseChannels(""), InputError);
+  EXPECT_THROW(o.ParseChannels("rr"), InputError);
+  EXPECT_THROW(o.ParseChannels("x"), InputError);
+  EXPECT_THROW(o.ParseChannels("red"), InputError);
+}
+
 TEST(Edit, BadEditsAreRefused) {
   EditOptions o;
   EXPECT_THROW(o.ParseTerm("sigma=2", false), InputError);

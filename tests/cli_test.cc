@@ -790,6 +790,12 @@ TEST_F(Cli, RenderAndEdit) {
   const Material a = ReadMaterial(P("m.vdb")), b = ReadMaterial(P("e.vdb"));
   EXPECT_FLOAT_EQ(b.kappa[0][0], 2 * a.kappa[0][0]);
   EXPECT_FLOAT_EQ(b.kappa[0][a.shape.index(0, 0, 5)], a.kappa[0][a.shape.index(0, 0, 5)]);
+  r = Translume("edit " + P("m.vdb") + " --scale mu=2 --channels gb -o " + P("tint.vdb"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find(", channels gb"), std::string::npos) << r.output;
+  const Material t = ReadMaterial(P("tint.vdb"));
+  EXPECT_FLOAT_EQ(t.mu[0][0], a.mu[0][0]);
+  EXPECT_FLOAT_EQ(t.mu[2][0], 2 * a.mu[2][0]);
 
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --shape cone -o " + P("x.png")), "cone");
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --light sun:1 -o " + P("x.png")), "--light");
@@ -838,6 +844,8 @@ TEST_F(Cli, RenderAndEdit) {
   ExpectOneLineError(Translume("render " + P("m.vdb") + " --polycube " + P("bad.cubes") + " -o " + P("x.png")),
                      "face-connected");
   ExpectOneLineError(Translume("edit " + P("m.vdb") + " --add mu=-1 -o " + P("x.vdb")), "mu");
+  ExpectOneLineError(Translume("edit " + P("m.vdb") + " --scale mu=2 --channels rx -o " + P("x.vdb")),
+                     "--channels rx: expected letters of r, g, b");
   EXPECT_FALSE(fs::exists(P("x.png")));
   EXPECT_FALSE(fs::exists(P("x.vdb")));
 }

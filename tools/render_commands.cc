@@ -313,13 +313,14 @@ int RunEdit(int argc, char** argv) {
   CLI::App app{"Edit a material (Wang et al. 2008, Section 5.4): multiply or add constants to\n"
                "kappa and mu, within a pattern mask (image stretched over x-y) and a depth range.",
                "translume edit"};
-  std::string material, mask, depth, out;
+  std::string material, mask, depth, channels, out;
   std::vector<std::string> scales, adds;
   app.add_option("material", material, "Material file (.vdb)")->required();
   app.add_option("--scale", scales, "kappa=S or mu=S (multiply; repeated ones multiply)");
   app.add_option("--add", adds, "kappa=A or mu=A (add, mm or 1/mm; repeated ones add up)");
   app.add_option("--mask", mask, "Pattern mask image (luminance 0..1 weights the edit)");
   app.add_option("--depth", depth, "Node layers A:B (inclusive) to edit");
+  app.add_option("--channels", channels, "Channels to edit: letters of r, g, b (default: rgb)");
   app.add_option("-o,--output", out, "Output material (.vdb)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
@@ -328,6 +329,7 @@ int RunEdit(int argc, char** argv) {
   for (const auto& s : scales) eo.ParseTerm(s, false);
   for (const auto& a : adds) eo.ParseTerm(a, true);
   if (!depth.empty()) eo.ParseDepth(depth);
+  if (!channels.empty()) eo.ParseChannels(channels);
   RequireNotInput("-o", out, {material, mask});
   RequireFilePath("-o", out);
   const Material m = ReadMaterial(material);
@@ -338,9 +340,10 @@ int RunEdit(int argc, char** argv) {
   }
   const Material edited = EditMaterial(m, eo, mask.empty() ? nullptr : &mask_image);
   WriteMaterial(out, edited);
-  std::printf("wrote %s: kappa x%g %+g mm, mu x%g %+g /mm%s%s\n", out.c_str(), eo.scale_kappa,
+  std::printf("wrote %s: kappa x%g %+g mm, mu x%g %+g /mm%s%s%s\n", out.c_str(), eo.scale_kappa,
               eo.add_kappa, eo.scale_mu, eo.add_mu, mask.empty() ? "" : (", mask " + mask).c_str(),
-              depth.empty() ? "" : (", layers " + depth).c_str());
+              depth.empty() ? "" : (", layers " + depth).c_str(),
+              channels.empty() ? "" : (", channels " + channels).c_str());
   return 0;
 }
 
