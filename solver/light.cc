@@ -136,4 +136,28 @@ std::vector<LightSpec> RegionLights(const std::string& nxn) {
   return lights;
 }
 
+std::vector<LightSpec> TrainingLights(const std::string& text) {
+  if (text.find(':') == std::string::npos && text.find(';') == std::string::npos && text != "uniform")
+    return RegionLights(text);
+  std::vector<LightSpec> lights;
+  size_t from = 0;
+  while (from <= text.size()) {
+    const size_t semi = std::min(text.find(';', from), text.size());
+    const std::string entry = text.substr(from, semi - from);
+    if (entry.empty()) throw InputError(fmt::format("--lights: an empty entry in '{}' (specs are separated by ';')", text));
+    LightSpec spec;
+    try {
+      spec = LightSpec::Parse(entry);
+    } catch (const InputError& e) {
+      throw InputError(fmt::format("--lights: {}", e.what()));
+    }
+    if (spec.kind == LightSpec::Kind::kImage)
+      throw InputError(fmt::format("--lights: '{}': image lights are not supported here; use regions or spots", entry));
+    lights.push_back(spec);
+    if (lights.size() > 4096) throw InputError("--lights: more than 4096 lights");
+    from = semi + 1;
+  }
+  return lights;
+}
+
 }  // namespace translume

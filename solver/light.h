@@ -39,4 +39,9 @@ std::vector<float> RasterizeLight(const LightSpec& spec, const GridShape& shape,
 // "4x4" -> the 16 region specs region:I,J/4 in row-major order (J outer). Throws InputError.
 std::vector<LightSpec> RegionLights(const std::string& nxn);
 
+// Training lights as `simulate --lights` takes them: "NxN" (RegionLights), or light specs
+// separated by ';' ("spot:4,3,2;spot:12,3,2;region:0,0/2"), at most 4096; image lights are
+// refused (they need their file read at every grid). Throws InputError naming the bad entry.
+std::vector<LightSpec> TrainingLights(const std::string& text);
+
 }  // namespace translume

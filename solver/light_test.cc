@@ -102,5 +102,27 @@ TEST(Light, MalformedSpecsAreRejectedWithTheirText) {
   EXPECT_THROW(RasterizeLightFile(LightSpec::Parse("image:/nonexistent.png"), {4, 4, 2}, 1.0), InputError);
 }
 
+// simulate --lights: NxN regions, or specs separated by ';'.
+TEST(Light, TrainingLightsTakeRegionsOrSpecs) {
+  EXPECT_EQ(TrainingLights("3x3").size(), 9u);
+  const std::vector<LightSpec> l = TrainingLights("spot:4,3,2;region:1,0/2;uniform");
+  ASSERT_EQ(l.size(), 3u);
+  EXPECT_EQ(l[0].kind, LightSpec::Kind::kSpot);
+  EXPECT_EQ(l[1].kind, LightSpec::Kind::kRegion);
+  EXPECT_EQ(l[2].kind, LightSpec::Kind::kUniform);
+  EXPECT_EQ(TrainingLights("uniform").size(), 1u);
+  EXPECT_THROW(TrainingLights("spot:4,3,2;;uniform"), InputError);
+  EXPECT_THROW(TrainingLights("spot:4,3,2;"), InputError);
+  EXPECT_THROW(TrainingLights("spot:4,3"), InputError);
+  EXPECT_THROW(TrainingLights("image:p.png"), InputError);
+  EXPECT_THROW(TrainingLights("4x3"), InputError);
+  try {
+    TrainingLights("spot:1,1,1;blob:2");
+    ADD_FAILURE() << "blob:2 accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("blob:2"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace translume

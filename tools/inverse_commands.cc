@@ -124,14 +124,15 @@ void RequireDatasetFolder(const std::string& out, const std::string& material_pa
 
 int RunSimulate(int argc, char** argv) {
   CLI::App app{"Simulate a capture of a material into a node-space dataset (docs/formats.md):\n"
-               "region lights on the lit face, forward solves on a grid K times finer per axis\n"
+               "region or spot lights on the lit face, forward solves on a grid K times finer per axis\n"
                "(no inverse crime), radiance sampled back at the material's nodes, optional\n"
                "relative Gaussian noise and held-out spot lights in DATASET/holdout/.",
                "translume simulate"};
   std::string material_path, lights = "4x4", setup = "back", backend = "cpu", out;
   SimulateOptions o;
   app.add_option("material", material_path, "Material file (.vdb): the truth, on the recovery grid")->required();
-  app.add_option("--lights", lights, "Training lights: NxN regions of the lit face")->capture_default_str();
+  app.add_option("--lights", lights, "Training lights: NxN regions of the lit face, or light specs "
+                 "separated by ';' (spot:X,Y,R mm, region:I,J/N, uniform)")->capture_default_str();
   app.add_option("--setup", setup, "back (lit back face) or front")->capture_default_str();
   app.add_option("--noise", o.noise, "Relative Gaussian noise sigma per pixel (0.01 = 1 %; at most 1)")->capture_default_str();
   app.add_option("--oversample", o.oversample, "Forward grid refinement factor per axis")->capture_default_str();
@@ -142,7 +143,7 @@ int RunSimulate(int argc, char** argv) {
   app.add_option("-o,--output", out, "Output dataset folder")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  o.lights = RegionLights(lights);
+  o.lights = TrainingLights(lights);
   o.setup = ParseSetup(setup);
   o.backend = ParseBackend(backend);
   if (o.backend == Backend::kGl) GlContext::Get();  // fail before any output
