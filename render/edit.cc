@@ -60,6 +60,7 @@ void EditOptions::ParseDepth(const std::string& text) {
 }
 
 void EditOptions::ParseChannels(const std::string& text) {
+  if (text.empty()) throw InputError("--channels: name at least one of r, g, b");
   static constexpr char kLetters[] = "rgb";
   std::array<bool, 3> chosen{false, false, false};
   for (char ch : text) {
@@ -69,7 +70,6 @@ void EditOptions::ParseChannels(const std::string& text) {
     if (c) throw InputError(fmt::format("--channels {}: '{}' is named twice", text, ch));
     c = true;
   }
-  if (text.empty()) throw InputError("--channels: name at least one of r, g, b");
   channels = chosen;
 }
 

@@ -69,6 +69,9 @@ int64_t FileNumber(const std::string& path) {
   return s >> v ? v : -1;
 }
 
+// The lesser of two amounts where -1 means unknown.
+int64_t LeastKnown(int64_t a, int64_t b) { return a < 0 ? b : b < 0 ? a : std::min(a, b); }
+
 struct CgroupFiles {
   const char* limit;
   const char* usage;
@@ -89,8 +92,7 @@ int64_t CgroupPathAvailable(const std::string& base, std::string path, const Cgr
   int64_t least = -1;
   while (true) {
     while (path.size() > 1 && path.back() == '/') path.pop_back();
-    const int64_t a = CgroupDirAvailable(base + (path == "/" ? "" : path), f);
-    if (a >= 0 && (least < 0 || a < least)) least = a;
+    least = LeastKnown(least, CgroupDirAvailable(base + (path == "/" ? "" : path), f));
     if (path.empty() || path == "/") break;
     const size_t slash = path.rfind('/');
     path = slash == std::string::npos || slash == 0 ? "/" : path.substr(0, slash);
@@ -104,9 +106,7 @@ int64_t CgroupAvailableBytes(const std::string& proc_self_cgroup, const std::str
   static constexpr CgroupFiles kV1{"memory.limit_in_bytes", "memory.usage_in_bytes", "total_inactive_file"};
   static constexpr CgroupFiles kV2{"memory.max", "memory.current", "inactive_file"};
   int64_t least = -1;
-  const auto keep = [&](int64_t a) {
-    if (a >= 0 && (least < 0 || a < least)) least = a;
-  };
+  const auto keep = [&](int64_t a) { least = LeastKnown(least, a); };
   std::istringstream lines(proc_self_cgroup);
   std::string line;
   while (std::getline(lines, line)) {
@@ -132,8 +132,7 @@ AvailableMemory ReadAvailableMemory() {
   const int64_t kb = KeyedNumber(ReadFile("/proc/meminfo"), "MemAvailable");
   a.meminfo_bytes = kb < 0 ? -1 : kb * 1024;
   a.cgroup_bytes = CgroupAvailableBytes(ReadFile("/proc/self/cgroup"));
-  if (a.meminfo_bytes < 0) a.bytes = a.cgroup_bytes;
-  else a.bytes = a.cgroup_bytes < 0 ? a.meminfo_bytes : std::min(a.meminfo_bytes, a.cgroup_bytes);
+  a.bytes = LeastKnown(a.meminfo_bytes, a.cgroup_bytes);
   return a;
 }
 
