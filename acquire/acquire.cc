@@ -625,7 +625,9 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
                   {"solves", rep.solve.solves},
                   {"fit_error", rep.solve.fit_error},
                   {"homogeneous_kappa", rep.solve.homogeneous_kappa},
-                  {"homogeneous_mu", rep.solve.homogeneous_mu}};
+                  {"homogeneous_mu", rep.solve.homogeneous_mu},
+                  {"level_mu_factor", rep.solve.level_factor},
+                  {"level_seconds", rep.solve.level_seconds}};
   }
   j["capture"] = cap.file;
   j["material"] = o.solve ? out : "";

@@ -84,6 +84,10 @@ RecoveryBenchRow RunCase(const Case& c, const RecoveryBenchOptions& o, const Rec
   r.seconds = s.seconds;
   r.homogeneous_seconds = s.homogeneous_seconds;
   r.optimizer_seconds = s.optimizer_seconds;
+  r.level_seconds = s.level_seconds;
+  r.level_solves = s.level_solves;
+  r.level_trials = s.level_trials;
+  r.level_factor = s.level_factor;
   r.simulate_seconds = c.simulate_seconds;
   r.iterations = s.iterations;
   r.solves = s.solves;
@@ -111,11 +115,11 @@ std::string Layers(const std::vector<double>& v) {
 }  // namespace
 
 double RecoveryBenchRow::SecondsPerIteration() const {
-  return iterations > 0 ? (seconds - homogeneous_seconds) / iterations : 0.0;
+  return iterations > 0 ? (seconds - homogeneous_seconds - level_seconds) / iterations : 0.0;
 }
 
 double RecoveryBenchRow::OptimizerShare() const {
-  const double t = seconds - homogeneous_seconds;
+  const double t = seconds - homogeneous_seconds - level_seconds;
   return t > 0 ? optimizer_seconds / t : 0.0;
 }
 
@@ -151,14 +155,16 @@ RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
           if (progress)
             progress(fmt::format("{} {}-lit noise {:g} [{}]: held-out E {:.2e} (truth {:.2e}), "
                                  "fit E {:.2e}, {} iterations ({}: {}), {} solves, {:.1f} s "
-                                 "(homogeneous {:.1f} s, {:.3f} s/iteration, {:.0f} % of it in the optimiser; "
+                                 "(homogeneous {:.1f} s, level search {:.1f} s: {} trials, mu x {:.3g} {:.3g} {:.3g}; "
+                                 "{:.3f} s/iteration, {:.0f} % of it in the optimiser; "
                                  "evaluation {:.1f} s); "
                                  "CG iterations per solve {:.2f} in the homogeneous fit, {:.2f} after; "
                                  "peak memory {} (estimate {})",
                                  preset, SetupName(setup), noise, BackendName(backend),
                                  r.holdout_error, r.truth_holdout_error, r.fit_error, r.iterations,
                                  r.termination, r.message, r.solves, r.seconds, r.homogeneous_seconds,
-                                 r.SecondsPerIteration(), 100 * r.OptimizerShare(), r.evaluate_seconds,
+                                 r.level_seconds, r.level_trials, r.level_factor[0], r.level_factor[1],
+                                 r.level_factor[2], r.SecondsPerIteration(), 100 * r.OptimizerShare(), r.evaluate_seconds,
                                  r.HomogeneousIterationsPerSolve(), r.IterationsPerSolve(),
                                  r.peak_memory_bytes >= 0 ? FormatBytes(r.peak_memory_bytes) : "unknown",
                                  FormatBytes(r.memory_estimate_bytes)));
@@ -166,15 +172,18 @@ RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
         }
       }
   if (o.compare_optimizers && !o.presets.empty()) {
-    // Same data, same homogeneous start; compare the heterogeneous phases.
+    // Same data, same homogeneous start (no level search, whose trials would run each
+    // optimiser from its own start); compare the heterogeneous phases.
     const Case c = MakeCase(o, o.presets[0], Setup::kBack, 0.0);
     RecoveryOptions paper = o.recovery;
+    paper.level_search = 0;
     paper.backend = o.backends.front();
     paper.optimizer = OptimizerKind::kPaper;
     paper.max_iterations = o.paper_iterations;
     RecoverySummary ps, ls;
     RecoveryBenchRow pr = RunCase(c, o, paper, o.presets[0], Setup::kBack, 0.0, &ps);
     RecoveryOptions lbfgs = o.recovery;
+    lbfgs.level_search = 0;
     lbfgs.backend = paper.backend;
     lbfgs.optimizer = OptimizerKind::kLbfgs;
     RunCase(c, o, lbfgs, o.presets[0], Setup::kBack, 0.0, &ls);
@@ -245,6 +254,8 @@ std::string RecoveryBenchJson(const RecoveryBenchResult& res) {
                           {"seconds", r.seconds}, {"homogeneous_seconds", r.homogeneous_seconds},
                           {"seconds_per_iteration", r.SecondsPerIteration()},
                           {"optimizer_seconds", r.optimizer_seconds},
+                          {"level_seconds", r.level_seconds}, {"level_solves", r.level_solves},
+                          {"level_trials", r.level_trials}, {"level_mu_factor", r.level_factor},
                           {"simulate_seconds", r.simulate_seconds},
                           {"evaluate_seconds", r.evaluate_seconds},
                           {"iterations", r.iterations}, {"solves", r.solves},

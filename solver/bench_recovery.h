@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <array>
 #include <string>
 #include <vector>
 
@@ -59,6 +60,12 @@ struct RecoveryBenchRow {
   double seconds = 0, homogeneous_seconds = 0, simulate_seconds = 0, evaluate_seconds = 0;
   // Of the heterogeneous phase, the time outside the objective (RecoverySummary).
   double optimizer_seconds = 0;
+  // The absorption level search between the two (RecoverySummary): its seconds, solves, trials
+  // and the mu factor it chose per channel.
+  double level_seconds = 0;
+  int64_t level_solves = 0;
+  int level_trials = 0;
+  std::array<double, 3> level_factor{1, 1, 1};
   int iterations = 0;
   int64_t solves = 0, homogeneous_solves = 0;
   // Conjugate-gradient iterations of all solves and of the homogeneous fit's.
@@ -68,7 +75,8 @@ struct RecoveryBenchRow {
   // Memory: the peak resident set the recovery added to the process (-1 where /proc does not
   // tell), and EstimateMemory's recovery_bytes for it (memory.h; what `solve` checks).
   int64_t peak_memory_bytes = -1, memory_estimate_bytes = 0;
-  // Seconds per iteration of the heterogeneous phase (what scales with the iteration count).
+  // Seconds per iteration of the heterogeneous phase (what scales with the iteration count; the
+  // level search's trials not counted).
   double SecondsPerIteration() const;
   // optimizer_seconds as a share of the heterogeneous phase.
   double OptimizerShare() const;

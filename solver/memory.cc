@@ -158,10 +158,14 @@ int64_t ProcStatusBytes(const std::string& field) {
 int64_t ResidentSetBytes() { return ProcStatusBytes("VmRSS"); }
 int64_t PeakResidentSetBytes() { return ProcStatusBytes("VmHWM"); }
 
-bool ResetPeakResidentSet() {
+void ReleaseFreedMemory() {
 #if defined(__GLIBC__)
   malloc_trim(0);
 #endif
+}
+
+bool ResetPeakResidentSet() {
+  ReleaseFreedMemory();
   std::ofstream clear("/proc/self/clear_refs");
   clear << "5";
   clear.flush();

@@ -59,6 +59,10 @@ int64_t PeakResidentSetBytes();
 // earlier cannot hide what comes next, then resets the peak to the current resident set
 // (/proc/self/clear_refs); false where the kernel does not allow it.
 bool ResetPeakResidentSet();
+// Hands the free heap memory of every thread's arena back to the system (glibc's malloc_trim;
+// a no-op without glibc): after work in other threads, whose arenas the next allocations of
+// this thread cannot reuse.
+void ReleaseFreedMemory();
 
 // Makes glibc's malloc keep freed memory for reuse: large blocks come from the heap instead of
 // fresh mappings, and up to 1 GiB of free memory stays at the heap's top. A recovery's optimiser

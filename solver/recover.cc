@@ -5,12 +5,15 @@
 #include <ceres/gradient_problem_solver.h>
 #include <omp.h>
 
+#include <algorithm>
 #include <chrono>
 #include <climits>
 #include <cmath>
 #include <exception>
 #include <fmt/format.h>
 #include <fstream>
+#include <limits>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <thread>
 
@@ -71,6 +74,17 @@ class RecoveryProblem {
     evaluation_seconds_ += Since(t0);
     return (f[0] + f[1] + f[2]) / 3.0;
   }
+  // f_c and df_c/dx_c of one channel on its own block of the unknowns, x_c = (log kappa_c,
+  // log mu_c) (2 n values; grad_c likewise, may be null), for optimisers that run the channels
+  // as separate problems (the level search's trials). Different channels may be evaluated
+  // at once from different threads (RunChannels).
+  double EvaluateOneChannel(int c, const double* x_c, double* grad_c) { return EvaluateBlock(c, x_c, grad_c); }
+  bool channel_ok(int c) const { return channels_[c]->worst_residual() <= 100 * o_.solve_tolerance; }
+  // body(c) for c = R, G, B: in three threads on cpu, in turn on gl.
+  template <typename F>
+  void RunChannels(F&& body) { ForEachChannel(body); }
+  int64_t nodes() const { return n_; }
+
   // Seconds spent in Evaluate so far.
   double evaluation_seconds() const { return evaluation_seconds_; }
 
@@ -208,9 +222,12 @@ class RecoveryProblem {
   }
 
   double EvaluateChannel(int c, const double* x, double* grad) {
+    return EvaluateBlock(c, x + 2 * c * n_, grad ? grad + 2 * c * n_ : nullptr);
+  }
+
+  double EvaluateBlock(int c, const double* xk, double* g) {
     std::vector<double>& k = kappa_[c];
     std::vector<double>& m = mu_[c];
-    const double* xk = x + 2 * c * n_;
     const double* xm = xk + n_;
     // Parallel for the gl backend, whose channels run in turn on one host thread (Wax I: 7.5 ms
     // an evaluation serial, ~2 % of an H200 iteration); on cpu each channel's threads_.
@@ -219,17 +236,16 @@ class RecoveryProblem {
       k[p] = std::exp(xk[p]);
       m[p] = std::exp(xm[p]);
     }
-    double* gk = grad ? gk_[c].data() : nullptr;
-    double* gm = grad ? gm_[c].data() : nullptr;
+    double* gk = g ? gk_[c].data() : nullptr;
+    double* gm = g ? gm_[c].data() : nullptr;
     double f = channels_[c]->Evaluate(k.data(), m.data(), gk, gm);
     if (o_.lambda > 0) {
       f += o_.lambda * Regularize(d_.shape, k.data(), kappa_scale_[c], o_.regularizer, o_.lambda, gk);
       if (o_.regularize_mu)
         f += o_.lambda * Regularize(d_.shape, m.data(), mu_scale_[c], o_.regularizer, o_.lambda, gm);
     }
-    if (grad) {
+    if (g) {
       // Chain rule through kappa = exp(x), and the 1/3 of the channel mean.
-      double* g = grad + 2 * c * n_;
 #pragma omp parallel for schedule(static)
       for (int64_t p = 0; p < n_; ++p) {
         g[p] = gk[p] * k[p] / 3.0;
@@ -265,17 +281,36 @@ struct OptimizerResult {
   double initial = 0, final = 0;
 };
 
+// The problem for Ceres, times `scale` (f and its gradient; RunOptimizer).
 class CeresFunction : public ceres::FirstOrderFunction {
  public:
-  explicit CeresFunction(RecoveryProblem* p) : p_(p) {}
+  CeresFunction(RecoveryProblem* p, double scale) : p_(p), scale_(scale) {}
   bool Evaluate(const double* x, double* cost, double* grad) const override {
-    *cost = p_->Evaluate(x, grad);
+    *cost = scale_ * p_->Evaluate(x, grad);
+    if (grad && scale_ != 1)
+      for (int64_t i = 0; i < p_->num_parameters(); ++i) grad[i] *= scale_;
     return std::isfinite(*cost) && p_->last_evaluation_ok();
   }
   int NumParameters() const override { return int(p_->num_parameters()); }
 
  private:
   RecoveryProblem* p_;
+  double scale_;
+};
+
+// One channel's problem on its 2 n unknowns (RecoveryProblem::EvaluateOneChannel).
+class ChannelCeresFunction : public ceres::FirstOrderFunction {
+ public:
+  ChannelCeresFunction(RecoveryProblem* p, int c) : p_(p), c_(c) {}
+  bool Evaluate(const double* x, double* cost, double* grad) const override {
+    *cost = p_->EvaluateOneChannel(c_, x, grad);
+    return std::isfinite(*cost) && p_->channel_ok(c_);
+  }
+  int NumParameters() const override { return int(2 * p_->nodes()); }
+
+ private:
+  RecoveryProblem* p_;
+  int c_;
 };
 
 class CeresHook : public ceres::IterationCallback {
@@ -295,9 +330,10 @@ class CeresHook : public ceres::IterationCallback {
   const IterationHook& hook_;
 };
 
-OptimizerResult RunCeres(RecoveryProblem* problem, OptimizerKind kind, int max_iterations, int lbfgs_rank,
-                         double tolerance, std::vector<double>* x, const IterationHook& hook) {
-  ceres::GradientProblem gp(new CeresFunction(problem));
+// Ceres' line-search minimiser on `function` (owned by the call) from *x.
+OptimizerResult RunCeres(ceres::FirstOrderFunction* function, OptimizerKind kind, int max_iterations,
+                         int lbfgs_rank, double tolerance, double* x, const IterationHook& hook) {
+  ceres::GradientProblem gp(function);
   ceres::GradientProblemSolver::Options so;
   so.line_search_direction_type =
       kind == OptimizerKind::kNcg ? ceres::NONLINEAR_CONJUGATE_GRADIENT : ceres::LBFGS;
@@ -318,7 +354,7 @@ OptimizerResult RunCeres(RecoveryProblem* problem, OptimizerKind kind, int max_i
   CeresHook cb(hook);
   so.callbacks.push_back(&cb);
   ceres::GradientProblemSolver::Summary sum;
-  ceres::Solve(so, gp, x->data(), &sum);
+  ceres::Solve(so, gp, x, &sum);
   OptimizerResult r;
   r.iterations = int(sum.iterations.size()) - 1;
   r.initial = sum.initial_cost;
@@ -335,7 +371,14 @@ OptimizerResult RunCeres(RecoveryProblem* problem, OptimizerKind kind, int max_i
 // Table I): bracket the minimum along the direction by golden-ratio expansion or contraction,
 // then shrink the bracket by golden sections; only the accepted point gets a gradient (adjoint
 // solves); line-search points cost forward solves only.
-OptimizerResult RunPaper(RecoveryProblem* problem, int max_iterations, double tolerance,
+// What RunPaper minimises: f(x) and, where g is non-null, df/dx into g; ok: whether the last
+// evaluation's solves converged.
+struct PaperFunction {
+  std::function<double(const double* x, double* g)> evaluate;
+  std::function<bool()> ok;
+};
+
+OptimizerResult RunPaper(const PaperFunction& problem, int max_iterations, double tolerance,
                          std::vector<double>* xp, const IterationHook& hook) {
   constexpr double kGold = 1.618033988749895, kInvGold = 0.618033988749895;
   constexpr int kSectionSteps = 8;
@@ -343,7 +386,7 @@ OptimizerResult RunPaper(RecoveryProblem* problem, int max_iterations, double to
   const size_t n = x.size();
   std::vector<double> g(n), g_new(n), d(n), trial(n);
   OptimizerResult r;
-  double f = problem->Evaluate(x.data(), g.data());
+  double f = problem.evaluate(x.data(), g.data());
   r.initial = f;
   for (size_t i = 0; i < n; ++i) d[i] = -g[i];
   double dmax = 0;
@@ -351,9 +394,8 @@ OptimizerResult RunPaper(RecoveryProblem* problem, int max_iterations, double to
   double step = dmax > 0 ? 0.1 / dmax : 1.0;  // first trial: change a log-parameter by 0.1
   auto at = [&](double a) {
     for (size_t i = 0; i < n; ++i) trial[i] = x[i] + a * d[i];
-    const double v = problem->Evaluate(trial.data(), nullptr);
-    return std::isfinite(v) && problem->last_evaluation_ok() ? v
-                                                             : std::numeric_limits<double>::infinity();
+    const double v = problem.evaluate(trial.data(), nullptr);
+    return std::isfinite(v) && problem.ok() ? v : std::numeric_limits<double>::infinity();
   };
   r.termination = RecoveryTermination::kMaxIterations;
   r.message = fmt::format("reached max_iterations = {}", max_iterations);
@@ -394,7 +436,7 @@ OptimizerResult RunPaper(RecoveryProblem* problem, int max_iterations, double to
       }
     }
     for (size_t i = 0; i < n; ++i) x[i] += b * d[i];
-    const double f_new = problem->Evaluate(x.data(), g_new.data());
+    const double f_new = problem.evaluate(x.data(), g_new.data());
     double num = 0, den = 0;
     for (size_t i = 0; i < n; ++i) {
       num += g_new[i] * (g_new[i] - g[i]);
@@ -427,6 +469,135 @@ OptimizerResult RunPaper(RecoveryProblem* problem, int max_iterations, double to
   }
   r.final = f;
   return r;
+}
+
+// warm: x is not a homogeneous start but a converging iterate (a resumed checkpoint, --init).
+// Ceres' first step is then the gradient itself (no curvature known yet), which late in a fit
+// changes the log-parameters by ~1e-7: the warm-started solves meet their tolerance without an
+// iteration, the objective does not change, the line search finds no decrease and the
+// minimiser stops at once with a zero step (a checkpoint of a 64x48x16 recovery resumed so).
+// The objective is then scaled for Ceres so that the first step changes the largest
+// log-parameter by 0.1 (as RunPaper's first trial; the later steps and Ceres' relative
+// tolerances do not depend on the scale).
+OptimizerResult RunOptimizer(RecoveryProblem* problem, const RecoveryOptions& o, int max_iterations,
+                             std::vector<double>* x, const IterationHook& hook, bool warm = false) {
+  if (o.optimizer == OptimizerKind::kPaper)
+    return RunPaper({[problem](const double* v, double* g) { return problem->Evaluate(v, g); },
+                     [problem] { return problem->last_evaluation_ok(); }},
+                    max_iterations, o.tolerance, x, hook);
+  constexpr double kFirstChange = 0.1;
+  double scale = 1;
+  if (warm) {
+    std::vector<double> g(x->size());
+    problem->Evaluate(x->data(), g.data());
+    double gmax = 0;
+    for (double v : g) gmax = std::max(gmax, std::abs(v));
+    if (gmax > 0 && gmax < kFirstChange) scale = kFirstChange / gmax;
+  }
+  const IterationHook unscaled = [&](int it, double f, double gnorm) {
+    return hook ? hook(it, f / scale, gnorm / scale) : true;
+  };
+  OptimizerResult r = RunCeres(new CeresFunction(problem, scale), o.optimizer, max_iterations, o.lbfgs_rank,
+                               o.tolerance, x->data(), unscaled);
+  r.initial /= scale;
+  r.final /= scale;
+  return r;
+}
+
+// The absorption level search (RecoveryOptions::level_search). The objective is a sum over
+// channels, so one trial tries a level for every channel at once and each channel keeps its
+// own best. Upward only: the homogeneous fit of a heterogeneous volume sees the light that
+// takes the easier paths, more than the mean volume lets through (transmittance and diffuse
+// reflectance are convex in mu), so its mu errs low; downward moves measured on thin slabs were
+// noise (held-out E 1.2x worse). A channel's next level: one lattice step above its best while
+// that is the highest level tried, else none (its search is done). A level other than the
+// homogeneous fit's must lower the channel's objective 1.5x below the homogeneous level's.
+// state->x holds the homogeneous fit on entry and the same with mu scaled by the chosen factors
+// on return. (Not the best trial's iterate: a fresh L-BFGS from there takes a first step of
+// the gradient's own size, which the solves' warm start resolves as no change at all, and
+// stops with a zero step; from the homogeneous start the first gradient is large.)
+struct LevelSearchResult {
+  std::array<double, 3> factor{1, 1, 1};
+  int trials = 0;
+};
+
+LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const RecoveryOptions& o, int64_t n,
+                                        RecoveryState* state) {
+  constexpr double kStep = 0.5, kReach = 2.0;  // decades, up from the homogeneous fit
+  constexpr double kMargin = 1.5;
+  const std::vector<double> start = state->x;
+  std::array<std::map<double, double>, 3> tried;  // level t -> the channel's objective
+  std::array<double, 3> best_f, best_t{};
+  best_f.fill(std::numeric_limits<double>::infinity());
+  LevelSearchResult result;
+  auto trial = [&](const std::array<double, 3>& t, const std::array<bool, 3>& record) {
+    std::vector<double> x = start;
+    std::array<double, 3> mu_scale = state->mu_scale;
+    for (int c = 0; c < 3; ++c) {
+      const double shift = t[c] * std::log(10.0);
+      for (int64_t p = 0; p < n; ++p) x[(2 * c + 1) * n + p] += shift;
+      mu_scale[c] *= std::pow(10.0, t[c]);
+    }
+    problem->set_scales(state->kappa_scale, mu_scale);
+    // Each channel its own optimiser: in one joint run the channel furthest from its level
+    // (largest gradient) sets the line search's steps for all, and the others' objectives
+    // after the trial say more about it than about their own level.
+    std::array<double, 3> f{};
+    problem->RunChannels([&](int c) {
+      if (!record[c]) return;  // this channel's search is done
+      // The run's optimiser on the channel's block (so the trials need no more memory than it).
+      std::vector<double> xc(x.begin() + 2 * c * n, x.begin() + 2 * (c + 1) * n);
+      if (o.optimizer == OptimizerKind::kPaper)
+        RunPaper({[&](const double* v, double* g) { return problem->EvaluateOneChannel(c, v, g); },
+                  [&] { return problem->channel_ok(c); }},
+                 o.level_search, o.tolerance, &xc, {});
+      else
+        RunCeres(new ChannelCeresFunction(problem, c), o.optimizer, o.level_search, o.lbfgs_rank, o.tolerance,
+                 xc.data(), {});
+      f[c] = problem->EvaluateOneChannel(c, xc.data(), nullptr);
+    });
+    // The trial's vectors were freed in the channels' threads, whose arenas the next trial's
+    // threads and the main fit's optimiser need not reuse: without this the recovery's peak
+    // memory rose by 22-28 % (RecoverMemory tests).
+    ReleaseFreedMemory();
+    ++result.trials;
+    for (int c = 0; c < 3; ++c) {
+      if (!record[c]) continue;
+      tried[c][t[c]] = std::isfinite(f[c]) ? f[c] : std::numeric_limits<double>::infinity();
+      if (f[c] < best_f[c]) {
+        best_f[c] = f[c];
+        best_t[c] = t[c];
+      }
+    }
+  };
+  trial({0, 0, 0}, {true, true, true});
+  trial({kStep, kStep, kStep}, {true, true, true});
+  for (int round = 0; round < int(kReach / kStep); ++round) {
+    std::array<double, 3> t = best_t;
+    std::array<bool, 3> record{};
+    for (int c = 0; c < 3; ++c) {
+      const double hi = tried[c].rbegin()->first;
+      if (best_t[c] == hi && hi < kReach) {
+        t[c] = hi + kStep;
+        record[c] = true;
+      }
+    }
+    if (!record[0] && !record[1] && !record[2]) break;
+    trial(t, record);
+  }
+  // A trial's objective depends on the path its few iterations take as well as on the level:
+  // levels 0.1-0.5 decades apart measured 1.3-1.75x apart where the level hardly mattered, and
+  // the homogeneous fit's own level starts the fit at its optimum. Another level must beat it
+  // by more than that.
+  for (int c = 0; c < 3; ++c)
+    if (!(kMargin * best_f[c] < tried[c].at(0.0))) best_t[c] = 0;
+  for (int c = 0; c < 3; ++c) {
+    result.factor[c] = std::pow(10.0, best_t[c]);
+    state->mu_scale[c] *= result.factor[c];
+    for (int64_t p = 0; p < n; ++p) state->x[(2 * c + 1) * n + p] += best_t[c] * std::log(10.0);
+  }
+  problem->set_scales(state->kappa_scale, state->mu_scale);
+  return result;
 }
 
 double GeometricMean(const double* logs, int64_t n) {
@@ -469,6 +640,7 @@ std::string RecoveryOptions::Validate() const {
   if (lbfgs_rank < 1 || lbfgs_rank > 1000) return fmt::format("lbfgs_rank must be in [1, 1000], got {}", lbfgs_rank);
   if (!(tolerance > 0 && tolerance < 1)) return fmt::format("tolerance must be in (0, 1), got {}", tolerance);
   if (homogeneous_iterations < 0) return "homogeneous_iterations must be >= 0";
+  if (level_search < 0 || level_search > 1000) return fmt::format("level_search must be in [0, 1000], got {}", level_search);
   if (!(homogeneous_kappa > 0) || !(homogeneous_mu > 0)) return "the homogeneous start must be > 0";
   if (!(solve_tolerance > 0 && solve_tolerance < 1e-3)) return "solve_tolerance must be in (0, 1e-3)";
   if (threads_per_channel < 0) return "threads_per_channel must be >= 0";
@@ -483,6 +655,9 @@ int64_t RecoveryMemoryBytes(const GridShape& shape, int conditions, const Recove
   int vectors = 6;
   if (o.optimizer == OptimizerKind::kNcg) vectors = 32;
   if (o.optimizer == OptimizerKind::kLbfgs) vectors = 32 + 2 * o.lbfgs_rank;
+  // The level search's start, its trial's iterate and the channels' copies of it; its
+  // optimisers run per channel on a third of the unknowns each, so no more than the main fit.
+  if (o.level_search > 0) vectors += 3;
   return EstimateMemory(shape, conditions, Precision::kDouble, vectors).recovery_bytes;
 }
 
@@ -540,6 +715,7 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
   auto solves = [&] { return solves0 + problem.solves(); };
   auto seconds = [&] { return seconds0 + Since(t0); };
 
+  const bool warm = !state->x.empty();
   if (state->x.empty()) {
     // Homogeneous initialisation: 6 unknowns, same objective on constant volumes.
     std::vector<double> h(6);
@@ -558,7 +734,16 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
     sum.homogeneous_seconds = Since(t0);
     sum.homogeneous_solves = problem.solves();
     sum.homogeneous_cg_iterations = problem.cg_iterations();
+    if (o.level_search > 0 && o.max_iterations > 0) {
+      problem.set_scales(state->kappa_scale, state->mu_scale);
+      const LevelSearchResult level = SearchAbsorptionLevel(&problem, o, n, state);
+      state->level_factor = level.factor;
+      sum.level_trials = level.trials;
+      sum.level_seconds = Since(t0) - sum.homogeneous_seconds;
+      sum.level_solves = problem.solves() - sum.homogeneous_solves;
+    }
   }
+  sum.level_factor = state->level_factor;
   TL_CHECK(int64_t(state->x.size()) == 6 * n);
   problem.set_scales(state->kappa_scale, state->mu_scale);
   sum.homogeneous_kappa = state->homogeneous_kappa;
@@ -586,10 +771,8 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
     r.termination = RecoveryTermination::kMaxIterations;
     r.message = "no iterations left";
     r.initial = r.final = problem.Evaluate(state->x.data(), nullptr);
-  } else if (o.optimizer == OptimizerKind::kPaper) {
-    r = RunPaper(&problem, remaining, o.tolerance, &state->x, hook);
   } else {
-    r = RunCeres(&problem, o.optimizer, remaining, o.lbfgs_rank, o.tolerance, &state->x, hook);
+    r = RunOptimizer(&problem, o, remaining, &state->x, hook, warm);
   }
   sum.optimizer_seconds =
       std::max(0.0, Since(t_optimizer) - (problem.evaluation_seconds() - evaluation0));
@@ -616,6 +799,7 @@ void WriteCheckpoint(const std::string& path, const Dataset& d, const RecoverySt
   j["mu_scale"] = s.mu_scale;
   j["homogeneous_kappa"] = s.homogeneous_kappa;
   j["homogeneous_mu"] = s.homogeneous_mu;
+  j["level_factor"] = s.level_factor;
   j["iteration"] = s.iteration;
   j["solves"] = s.solves;
   j["seconds"] = s.seconds;
@@ -692,6 +876,7 @@ RecoveryState ReadCheckpoint(const std::string& path, const Dataset& d) {
     s.mu_scale = positive("mu_scale");
     s.homogeneous_kappa = positive("homogeneous_kappa");
     s.homogeneous_mu = positive("homogeneous_mu");
+    if (j.contains("level_factor")) s.level_factor = positive("level_factor");  // since 2026-12-02
     const auto count = [&](const nlohmann::json& v, const char* what, int64_t most) {
       if (!v.is_number_integer() || v.get<int64_t>() < 0 || v.get<int64_t>() > most)
         throw corrupt(fmt::format("{} must be a whole number within 0..{}, got {}", what, most, v.dump()));

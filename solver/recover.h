@@ -47,6 +47,15 @@ struct RecoveryOptions {
   // it), then the heterogeneous problem.
   int homogeneous_iterations = 40;
   double homogeneous_kappa = 0.1, homogeneous_mu = 0.01;  // its starting point (mm, 1/mm)
+  // Then search each channel's absorption level: a homogeneous fit to a heterogeneous volume
+  // misjudges mu (wax's red 13x low), and the heterogeneous fit keeps the level it starts
+  // from. Trials scale mu by 10^t (t on a lattice of 0.5 decades up from 0, walking while the
+  // objective falls, up to 2), each running this many iterations of the heterogeneous fit;
+  // per channel the lowest objective wins if it is 1.5x below the homogeneous level's, and the
+  // fit starts from the homogeneous fit with that channel's mu scaled by it (docs/inverse.md,
+  // "The absorption level"). 0 skips it. Only after a homogeneous fit (not --init, not resumed)
+  // and before a heterogeneous one (max_iterations > 0).
+  int level_search = 10;
   // Relative residual of every forward and adjoint solve.
   double solve_tolerance = 1e-8;
   // OpenMP threads inside each channel's solver; 0: max(1, NumThreads() / 3).
@@ -75,6 +84,7 @@ struct RecoveryState {
   std::vector<double> x;
   std::array<double, 3> kappa_scale{}, mu_scale{};  // regulariser reference scales
   std::array<double, 3> homogeneous_kappa{}, homogeneous_mu{};
+  std::array<double, 3> level_factor{1, 1, 1};  // the level search's choice (RecoverySummary)
   int iteration = 0;
   int64_t solves = 0;
   double seconds = 0;
@@ -92,6 +102,13 @@ struct RecoverySummary {
   // evaluations: the optimiser's own vector work and line search, and the callback.
   double optimizer_seconds = 0;
   int64_t homogeneous_solves = 0;  // of `solves`, spent in the homogeneous fit
+  // The absorption level search (RecoveryOptions::level_search): its seconds and solves (of
+  // `seconds` and `solves`), its trials, and the factor it chose per channel (1: the
+  // homogeneous fit's level; all 1 when it did not run).
+  double level_seconds = 0;
+  int64_t level_solves = 0;
+  int level_trials = 0;
+  std::array<double, 3> level_factor{1, 1, 1};
   // Conjugate-gradient iterations of this run's solves (not of a resumed run's earlier ones),
   // and of them the homogeneous fit's.
   int64_t cg_iterations = 0, homogeneous_cg_iterations = 0;

@@ -23,12 +23,17 @@ namespace {
 // The recovery tests run on every backend (gl on Mesa llvmpipe where there is no GPU).
 class RecoverOnBackend : public ::testing::TestWithParam<Backend> {};
 
-TEST_P(RecoverOnBackend, HomogeneousVolumeToOnePerMille) {
-  const Material truth = Material::Constant({12, 10, 5}, 0.5, {0.25f, 0.15f, 0.08f}, {0.01f, 0.03f, 0.06f});
+// Training data of 2x2 back-lit regions simulated on the recovery grid itself (exact data).
+Dataset DataOnTheRecoveryGrid(const Material& truth) {
   SimulateOptions so;
   so.lights = RegionLights("2x2");
   so.oversample = 1;
-  const Dataset d = SimulateDataset(truth, so).training;
+  return SimulateDataset(truth, so).training;
+}
+
+TEST_P(RecoverOnBackend, HomogeneousVolumeToOnePerMille) {
+  const Material truth = Material::Constant({12, 10, 5}, 0.5, {0.25f, 0.15f, 0.08f}, {0.01f, 0.03f, 0.06f});
+  const Dataset d = DataOnTheRecoveryGrid(truth);
   RecoveryOptions ro;
   ro.backend = GetParam();
   ro.max_iterations = 0;  // the homogeneous fit alone
@@ -97,9 +102,15 @@ TEST_P(RecoverOnBackend, HeterogeneousVolumeRelightsHeldOutSpots) {
   RecoveryOptions ro;
   ro.backend = GetParam();
   ro.max_iterations = 30;
+  // The heterogeneous fit itself, from the homogeneous fit (the level search has its own test;
+  // on this thin slab it keeps every level, and its trials cost 4x these 30 iterations, ~8 min
+  // with the gpu shader tuning on llvmpipe).
+  ro.level_search = 0;
   RecoveryState st;
   const RecoverySummary s = Recover(data.training, ro, &st);
-  std::printf("%s\n", s.BriefReport().c_str());
+  std::printf("%s; level search: %d trials, %.1f s, %lld solves, mu x %.3g %.3g %.3g\n", s.BriefReport().c_str(),
+              s.level_trials, s.level_seconds, (long long)s.level_solves, s.level_factor[0], s.level_factor[1],
+              s.level_factor[2]);
   // The optimiser's own time is part of the heterogeneous phase, and not all of it.
   EXPECT_GT(s.optimizer_seconds, 0);
   EXPECT_LT(s.optimizer_seconds, s.seconds - s.homogeneous_seconds);
@@ -156,6 +167,47 @@ TEST_P(RecoverOnBackend, HomogeneousFitStopsWhereTheObjectiveStalls) {
     }
 }
 
+// The absorption level search from a start whose mu is off by a known factor per channel
+// (no homogeneous fit: it would find the truth here), 10x low, right and 3.16x low: on
+// homogeneous data the heterogeneous fit's objective after a trial is least where the level is
+// right, and the search's lattice of 0.5 decades holds the right factors (10 / 1 / 3.16 of the
+// start's 0.01). (Smaller offsets, 2x, the trials' own iterations correct at any level, and
+// the search rightly leaves them.)
+TEST_P(RecoverOnBackend, LevelSearchFindsAKnownAbsorptionLevel) {
+  const Material truth =
+      Material::Constant({12, 10, 5}, 0.5, {0.2f, 0.2f, 0.2f}, {0.1f, 0.01f, float(0.01 * std::sqrt(10.0))});
+  const Dataset d = DataOnTheRecoveryGrid(truth);
+  RecoveryOptions ro;
+  ro.backend = GetParam();
+  ro.homogeneous_iterations = 0;
+  ro.homogeneous_kappa = 0.2;
+  ro.homogeneous_mu = 0.01;
+  ro.max_iterations = 1;
+  RecoveryState st;
+  const RecoverySummary s = Recover(d, ro, &st);
+  std::printf("%s; level search: %d trials, %.1f s, mu x %.3f %.3f %.3f (truth's: 10 1 3.16)\n",
+              s.BriefReport().c_str(), s.level_trials, s.level_seconds, s.level_factor[0], s.level_factor[1],
+              s.level_factor[2]);
+  for (int c = 0; c < 3; ++c) {
+    const double truth_factor = truth.mu[c][0] / ro.homogeneous_mu;
+    EXPECT_NEAR(std::log10(s.level_factor[c] / truth_factor), 0.0, 1e-6) << c;
+    EXPECT_DOUBLE_EQ(st.level_factor[c], s.level_factor[c]);
+    EXPECT_DOUBLE_EQ(st.mu_scale[c], ro.homogeneous_mu * s.level_factor[c]);  // the regulariser's reference
+  }
+  EXPECT_GE(s.level_trials, 3);
+  EXPECT_GT(s.level_solves, 0);
+  EXPECT_GT(s.level_seconds, 0);
+  // Off: the start's level stays, and the heterogeneous fit starts further from the data.
+  ro.level_search = 0;
+  RecoveryState off;
+  const RecoverySummary s0 = Recover(d, ro, &off);
+  std::printf("objective at the start: %.3e with the search, %.3e without\n", s.initial_objective,
+              s0.initial_objective);
+  EXPECT_EQ(s0.level_trials, 0);
+  EXPECT_EQ(s0.level_factor, (std::array<double, 3>{1, 1, 1}));
+  EXPECT_LT(4 * s.initial_objective, s0.initial_objective);  // measured 5.3x (cpu), 5.7x (gl)
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, RecoverOnBackend, ::testing::Values(Backend::kCpu, Backend::kGl),
                          [](const auto& info) { return info.param == Backend::kCpu ? "cpu" : "gl"; });
 
@@ -209,6 +261,28 @@ TEST(Recover, CheckpointResumeMatchesUninterruptedRun) {
 // A checkpoint is a file a user hands back: damage in it is named, never a crash (an empty
 // history row was read past its end, scales of 0 tripped a CHECK, deep nesting overflowed the
 // stack, NaN parameters were blamed on the dataset).
+// A checkpoint written late in a fit resumes with gradients of ~1e-7: L-BFGS' first step, the
+// gradient itself, used to change nothing that the warm-started solves could see, and the
+// resumed fit stopped at once ("Parameter tolerance reached", zero iterations) on 24x18x8 wax
+// as on 64x48x16. It must go on lowering the objective.
+TEST(Recover, LateCheckpointResumesDescending) {
+  const SynthOptions syn{.preset = "wax", .shape = {24, 18, 8}, .spacing_mm = 0.25};
+  SimulateOptions so;
+  so.lights = RegionLights("4x4");
+  const Dataset d = SimulateDataset(SynthesizeMaterial(syn), so).training;
+  RecoveryOptions ro;
+  ro.level_search = 0;
+  ro.max_iterations = 60;
+  RecoveryState st;
+  const RecoverySummary first = Recover(d, ro, &st);
+  ASSERT_EQ(first.iterations, 60);
+  ro.max_iterations = 80;
+  const RecoverySummary resumed = Recover(d, ro, &st);
+  std::printf("first: %s\nresumed: %s\n", first.BriefReport().c_str(), resumed.BriefReport().c_str());
+  EXPECT_EQ(resumed.iterations, 80);
+  EXPECT_LT(resumed.final_objective, 0.8 * first.final_objective);
+}
+
 TEST(Recover, CorruptCheckpointsAreNamed) {
   const Material m = SynthesizeMaterial({.preset = "wax", .shape = {6, 5, 3}});
   SimulateOptions so;
@@ -319,21 +393,28 @@ TEST_P(RecoverMemory, PeakStaysWithinTheEstimate) {
   ro.lbfgs_rank = GetParam().lbfgs_rank;
   ro.max_iterations = 22;
   ro.tolerance = 1e-15;
-  // What the data's simulation freed must not serve the recovery.
-  if (!ResetPeakResidentSet()) GTEST_SKIP() << "cannot reset the peak resident set (/proc/self/clear_refs)";
-  const int64_t before = ResidentSetBytes();
-  ASSERT_GT(before, 0);
-  RecoveryState st;
-  const RecoverySummary s = Recover(d, ro, &st);
-  const int64_t peak = PeakResidentSetBytes();
-  const int64_t estimate = RecoveryMemoryBytes(d.shape, int(d.conditions.size()), ro);
-  const double used = double(peak - before);
-  std::printf("%s, %s, %d conditions, %d iterations: peak %s above the start, estimate %s (%.2f)\n",
-              GetParam().name, d.shape.ToString().c_str(), int(d.conditions.size()), s.iterations,
-              FormatBytes(peak - before).c_str(), FormatBytes(estimate).c_str(), used / double(estimate));
-  EXPECT_EQ(s.iterations, 22);
-  EXPECT_LE(used, double(estimate));
-  EXPECT_GE(used, 0.6 * double(estimate));
+  // Without the level search the estimate is also close (the optimiser's vectors are most of
+  // it); with it (the default), whose trials run in the channels' threads and arenas, the
+  // peak varies more from run to run and only the bound is asserted.
+  for (const int level_search : {0, ro.level_search}) {
+    ro.level_search = level_search;
+    // What the data's simulation and the previous run freed must not serve the recovery.
+    if (!ResetPeakResidentSet()) GTEST_SKIP() << "cannot reset the peak resident set (/proc/self/clear_refs)";
+    const int64_t before = ResidentSetBytes();
+    ASSERT_GT(before, 0);
+    RecoveryState st;
+    const RecoverySummary s = Recover(d, ro, &st);
+    const int64_t peak = PeakResidentSetBytes();
+    const int64_t estimate = RecoveryMemoryBytes(d.shape, int(d.conditions.size()), ro);
+    const double used = double(peak - before);
+    std::printf("%s, level search %d, %s, %d conditions, %d iterations: peak %s above the start, estimate %s "
+                "(%.2f)\n", GetParam().name, level_search, d.shape.ToString().c_str(), int(d.conditions.size()),
+                s.iterations, FormatBytes(peak - before).c_str(), FormatBytes(estimate).c_str(),
+                used / double(estimate));
+    EXPECT_EQ(s.iterations, 22);
+    EXPECT_LE(used, double(estimate));
+    if (level_search == 0) EXPECT_GE(used, 0.6 * double(estimate));
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Optimizers, RecoverMemory,

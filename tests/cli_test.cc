@@ -302,15 +302,23 @@ TEST_F(Cli, ErrorsNameTheFlagsAndEmptyRowsSayWhy) {
                      "The following arguments were not expected: foo bar");
   ExpectOneLineError(Translume("solve " + P("ds") + " --max-iterations -5 -o " + P("r.vdb")), "--max-iterations: must be");
   ExpectOneLineError(Translume("solve " + P("ds") + " --lbfgs-rank 0 -o " + P("r.vdb")), "--lbfgs-rank: must be in [1, 1000]");
+  ExpectOneLineError(Translume("solve " + P("ds") + " --level-search -1 -o " + P("r.vdb")),
+                     "--level-search: must be in [0, 1000], got -1");
   ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --oversample 9 -o " + P("d2")), "--oversample: must be in [1, 8]");
   ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " --exposures 1 -o " + P("c2")), "--exposures: must be in [2, 16]");
   ExpectOneLineError(Translume("demo --lights 9x9 -o " + P("demo")), "--lights: ");
   ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " -o " + P("m.vdb")), "is a file, not a folder");
   ExpectOneLineError(Translume("edit " + P("m.vdb") + " --scale mu=-1 -o " + P("e.vdb")),
                      "--scale: the multipliers must be >= 0 (kappa x1, mu x-1)");
-  // evaluate says why a row is empty.
-  ASSERT_EQ(Translume("solve " + P("ds") + " --max-iterations 2 -o " + P("r.vdb")).status, 0);
-  CommandRun r = Translume("evaluate " + P("r.vdb") + " --truth " + P("m.vdb") + " --dataset " + P("ds"));
+  // evaluate says why a row is empty. (The solve's report has its level search.)
+  CommandRun r = Translume("solve " + P("ds") + " --max-iterations 2 -o " + P("r.vdb"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("then the absorption level search (trials of 10 iterations)"), std::string::npos) << r.output;
+  nlohmann::json report;
+  std::ifstream(P("r.json")) >> report;
+  EXPECT_GE(report["level_search"]["trials"].get<int>(), 2) << report.dump();
+  EXPECT_EQ(report["level_search"]["mu_factor"].size(), 3u);
+  r = Translume("evaluate " + P("r.vdb") + " --truth " + P("m.vdb") + " --dataset " + P("ds"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("has no holdout/ (translume simulate --holdout N writes one)"), std::string::npos) << r.output;
   r = Translume("evaluate " + P("r.vdb") + " --dataset " + P("ds"));
@@ -429,7 +437,7 @@ TEST_F(Cli, SolveTooLargeForTheMemoryNamesTheLowerRank) {
   if (avail < 0 || avail >= RecoveryMemoryBytes(deep, 4, RecoveryOptions{}))
     GTEST_SKIP() << "this machine has the memory for it";
   CommandRun r = Translume("solve " + P("ds") + " -o " + P("r.vdb"));
-  ExpectOneLineError(r, "a recovery on the 32x24x65536 grid with 4 conditions needs about ");
+  ExpectOneLineError(r, P("ds/dataset.json") + ": a recovery on the 32x24x65536 grid with 4 conditions needs about ");
   EXPECT_NE(r.output.find(" (with --lbfgs-rank 5 about "), std::string::npos) << r.output;
   r = Translume("solve " + P("ds") + " --optimizer ncg -o " + P("r.vdb"));
   ExpectOneLineError(r, "needs about ");

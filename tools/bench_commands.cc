@@ -148,6 +148,8 @@ void AddBenchRecovery(CLI::App& bench) {
       ->capture_default_str();
   rec->add_option("--lbfgs-rank", ro.recovery.lbfgs_rank, "L-BFGS history: pairs of vectors kept "
                   "(memory: 96 bytes per node each)")->capture_default_str();
+  rec->add_option("--level-search", ro.recovery.level_search, "Iterations per trial of the absorption level "
+                  "search (0: off)")->capture_default_str();
   rec->add_option("--lambda", ro.recovery.lambda, "lambda for noise-free data")->capture_default_str();
   rec->add_option("--noisy-lambda", ro.noisy_lambda, "lambda for 1 % noise")->capture_default_str();
   rec->add_flag("--comparison-only", f->comparison_only, "Only the paper-vs-lbfgs comparison");

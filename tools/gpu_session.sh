@@ -18,7 +18,8 @@
 # the RGB recoveries with 16 conditions on the Wax I grid (default, cyclic reduction, then 15 s
 # with a GPU-timestamp profile per kernel and grid) and the Marble grid on the gl backend,
 # time-capped at 40 s and 30 s (their seconds per iteration give the time of the bench's full
-# 300 iterations), the bunny's variants (60/30/30 and 20/10/10 Chebyshev steps, the
+# 300 iterations; run with --level-search 0, whose trials the cap would not stop: the level
+# search adds its trials' iterations, docs/inverse.md), the bunny's variants (60/30/30 and 20/10/10 Chebyshev steps, the
 # 2026-11-30 runs' 60/30/30 Jacobi steps, the adaptive depth), and last the Wax I and Marble batches (no peer)
 # under other shader tunings side by side: line smoother blocks of 1 and 8 nodes against the
 # default 4, a coarse tail from 8192 nodes against 4096, cyclic reduction with tails from 1024
@@ -121,10 +122,10 @@ if [ $quick = 1 ]; then
   render_args=(--shapes bunny --resolutions 3,4 --frames 2 --image 64 --skip-coherent --no-error)
   render_profile_args=(--shapes bunny --resolutions 4 --frames 2 --image 64 --skip-coherent --no-error)
   render_variant_args=("${render_profile_args[@]}")
-  wax=(--grid 12x10x5 --max-iterations 3 --max-seconds 60)
-  marble=(--grid 16x16x4 --max-iterations 3 --max-seconds 60)
-  peer=(--grid 12x10x5 --max-iterations 3 --max-seconds 30)
-  profile_recovery=(--grid 24x18x8 --max-iterations 3 --max-seconds 30)
+  wax=(--grid 12x10x5 --max-iterations 3 --max-seconds 60 --level-search 0)
+  marble=(--grid 16x16x4 --max-iterations 3 --max-seconds 60 --level-search 0)
+  peer=(--grid 12x10x5 --max-iterations 3 --max-seconds 30 --level-search 0)
+  profile_recovery=(--grid 24x18x8 --max-iterations 3 --max-seconds 30 --level-search 0)
   limits=(30 30 30)
   tunings=1
 else
@@ -135,16 +136,16 @@ else
   render_args=(--shapes bunny --resolutions 17 --frames 20 --skip-coherent --no-error)
   render_profile_args=(--shapes bunny --resolutions 17 --frames 10 --skip-coherent --no-error)
   render_variant_args=("${render_profile_args[@]}")
-  peer=(--grid 130x53x37 --max-iterations 300 --max-seconds 20)
-  profile_recovery=(--grid 130x53x37 --max-iterations 300 --max-seconds 15)
+  peer=(--grid 130x53x37 --max-iterations 300 --max-seconds 20 --level-search 0)
+  profile_recovery=(--grid 130x53x37 --max-iterations 300 --max-seconds 15 --level-search 0)
   if [ $long = 1 ]; then
-    wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 120)
-    marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 300)
+    wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 120 --level-search 0)
+    marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 300 --level-search 0)
     limits=(150 345 45)
     tunings=0
   else
-    wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 40)
-    marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 30)
+    wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 40 --level-search 0)
+    marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 30 --level-search 0)
     limits=(70 75 0)
     tunings=1
   fi

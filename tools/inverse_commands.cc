@@ -45,6 +45,10 @@ void AddRecoveryFlags(CLI::App& app, RecoveryFlags* f) {
   app.add_option("--lbfgs-rank", f->options.lbfgs_rank,
                  "L-BFGS history: pairs of vectors kept, 96 bytes per node each (lower: less memory)")
       ->capture_default_str();
+  app.add_option("--level-search", f->options.level_search,
+                 "Iterations per trial of the absorption level search after the homogeneous fit (0: off; "
+                 "docs/inverse.md)")
+      ->capture_default_str();
   app.add_option("--tolerance", f->options.tolerance,
                  "Stop when an iteration lowers the objective by less than this fraction")
       ->capture_default_str();
@@ -208,8 +212,9 @@ int RunSolve(int argc, char** argv) {
                                      "report" : "slice " + path));
   }
   CheckRecoveryFitsInMemory(d.shape, int(d.conditions.size()), o,
-                            fmt::format("a recovery on the {} grid with {} conditions", d.shape.ToString(),
-                                        d.conditions.size()));
+                            fmt::format("{}: a recovery on the {} grid with {} conditions",
+                                        (fs::path(dataset_dir) / "dataset.json").string(),
+                                        d.shape.ToString(), d.conditions.size()));
   RecoveryState state;
   std::string resuming;
   if (!checkpoint.empty() && fs::exists(checkpoint)) {
@@ -225,7 +230,10 @@ int RunSolve(int argc, char** argv) {
               d.conditions.size(), SetupName(d.setup), optimizer.c_str(), o.lambda,
               regularizer.c_str(), o.regularize_mu ? " on kappa and mu" : " on kappa",
               NumThreads(), resuming.c_str());
-  if (state.x.empty()) std::printf("homogeneous fit first (6 unknowns)...\n");
+  if (state.x.empty())
+    std::printf("homogeneous fit first (6 unknowns)%s...\n",
+                o.level_search > 0 ? fmt::format(", then the absorption level search (trials of {} iterations)",
+                                                  o.level_search).c_str() : "");
   std::fflush(stdout);
   const bool tty = isatty(fileno(stdout));
   // First Ctrl-C: finish the current iteration, then write the best material so far.
@@ -239,6 +247,9 @@ int RunSolve(int argc, char** argv) {
       std::printf("homogeneous fit: kappa %.4g %.4g %.4g mm, mu %.4g %.4g %.4g /mm\n",
                   s.homogeneous_kappa[0], s.homogeneous_kappa[1], s.homogeneous_kappa[2],
                   s.homogeneous_mu[0], s.homogeneous_mu[1], s.homogeneous_mu[2]);
+      if (s.level_factor != std::array<double, 3>{1, 1, 1})
+        std::printf("absorption level: mu x %.3g %.3g %.3g\n", s.level_factor[0], s.level_factor[1],
+                    s.level_factor[2]);
     }
     const std::string left = time_left(r, o.max_iterations);
     std::printf("%siter %4d  objective %.4e  |grad| %.3e  solves %lld  elapsed %s  left %s%s",
@@ -285,6 +296,9 @@ int RunSolve(int argc, char** argv) {
   j["optimizer_seconds"] = sum.optimizer_seconds;
   j["homogeneous_kappa"] = sum.homogeneous_kappa;
   j["homogeneous_mu"] = sum.homogeneous_mu;
+  j["level_search"] = {{"iterations_per_trial", o.level_search}, {"trials", sum.level_trials},
+                       {"seconds", sum.level_seconds}, {"solves", sum.level_solves},
+                       {"mu_factor", sum.level_factor}};
   j["initial_objective"] = sum.initial_objective;
   j["final_objective"] = sum.final_objective;
   j["fit_error"] = sum.fit_error;

@@ -103,7 +103,7 @@ int RunForward(int argc, char** argv) {
   if (fo.backend == Backend::kGl) GlContext::Get();  // fail before any output
   const Material m = ReadMaterial(material_path);
   CheckFitsInMemory(EstimateMemory(m.shape, 1, fo.precision).forward_bytes,
-                    fmt::format("a forward solve on the {} grid", m.shape.ToString()));
+                    fmt::format("{}: a forward solve on the {} grid", material_path, m.shape.ToString()));
   const FacePattern q = GreyPattern(RasterizeLightFile(spec, m.shape, m.spacing_mm));
   if (std::all_of(q[0].begin(), q[0].end(), [](float v) { return v == 0.0f; }))
     throw InputError(fmt::format("--light {}: lights no node of the {} x {} mm lit face", light,

@@ -41,7 +41,7 @@ const Command kCommands[] = {
     {"bench", translume::RunBench, "Benchmarks: bench forward, recovery, exposure-times, patterns",
      translume::BenchSubcommands},
     {"render", translume::RunRender, "Render a material on a shape (polygrid diffusion, Section 5)"},
-    {"edit", translume::RunEdit, "Edit a material: scale/add kappa, mu in a mask and depth range"},
+    {"edit", translume::RunEdit, "Edit a material: scale/add kappa, mu per channel, in a mask and depth range"},
     {"info", translume::RunInfo, "Version, build, backends, threads, memory estimates"},
 };
 
