@@ -74,16 +74,32 @@ class RecoveryProblem {
     evaluation_seconds_ += Since(t0);
     return (f[0] + f[1] + f[2]) / 3.0;
   }
-  // f_c and df_c/dx_c of one channel on its own block of the unknowns, x_c = (log kappa_c,
-  // log mu_c) (2 n values; grad_c likewise, may be null), for optimisers that run the channels
-  // as separate problems (the level search's trials). Different channels may be evaluated
-  // at once from different threads (RunChannels).
-  double EvaluateOneChannel(int c, const double* x_c, double* grad_c) { return EvaluateBlock(c, x_c, grad_c); }
-  bool channel_ok(int c) const { return channels_[c]->worst_residual() <= 100 * o_.solve_tolerance; }
-  // body(c) for c = R, G, B: in three threads on cpu, in turn on gl.
+
+  // Runs body(c) for the 3 channels in 3 threads, each with threads_ OpenMP threads (on gl in
+  // turn); rethrows the first exception.
   template <typename F>
-  void RunChannels(F&& body) { ForEachChannel(body); }
-  int64_t nodes() const { return n_; }
+  void ForEachChannel(F&& body) {
+    if (o_.backend == Backend::kGl) {
+      // The GL context is current on this thread only; the GPU runs the channels in turn.
+      for (int c = 0; c < 3; ++c) body(c);
+      return;
+    }
+    std::array<std::exception_ptr, 3> errors;
+    auto run = [&](int c) {
+      try {
+        omp_set_num_threads(threads_);
+        body(c);
+      } catch (...) {
+        errors[c] = std::current_exception();
+      }
+    };
+    std::thread t1(run, 1), t2(run, 2);
+    run(0);
+    t1.join();
+    t2.join();
+    for (auto& e : errors)
+      if (e) std::rethrow_exception(e);
+  }
 
   // Seconds spent in Evaluate so far.
   double evaluation_seconds() const { return evaluation_seconds_; }
@@ -91,11 +107,8 @@ class RecoveryProblem {
   // Whether every solve of the last evaluation converged (to within 100x the tolerance). Trial
   // points far outside the physical range can stall the solver; the optimisers then treat the
   // evaluation as failed and shorten the step.
-  bool last_evaluation_ok() const {
-    for (const auto& c : channels_)
-      if (!(c->worst_residual() <= 100 * o_.solve_tolerance)) return false;
-    return true;
-  }
+  bool last_evaluation_ok() const { return channel_ok(0) && channel_ok(1) && channel_ok(2); }
+  bool channel_ok(int c) const { return channels_[c]->worst_residual() <= 100 * o_.solve_tolerance; }
 
   // Levenberg-Marquardt on the homogeneous problem of each channel, (log kappa, log mu)
   // = (h[2c], h[2c+1]), channels in parallel. The residuals' 2-column Jacobian comes from forward
@@ -124,32 +137,6 @@ class RecoveryProblem {
   }
 
  private:
-  // Runs body(c) for the 3 channels in 3 threads, each with threads_ OpenMP threads; rethrows
-  // the first exception.
-  template <typename F>
-  void ForEachChannel(F&& body) {
-    if (o_.backend == Backend::kGl) {
-      // The GL context is current on this thread only; the GPU runs the channels in turn.
-      for (int c = 0; c < 3; ++c) body(c);
-      return;
-    }
-    std::array<std::exception_ptr, 3> errors;
-    auto run = [&](int c) {
-      try {
-        omp_set_num_threads(threads_);
-        body(c);
-      } catch (...) {
-        errors[c] = std::current_exception();
-      }
-    };
-    std::thread t1(run, 1), t2(run, 2);
-    run(0);
-    t1.join();
-    t2.join();
-    for (auto& e : errors)
-      if (e) std::rethrow_exception(e);
-  }
-
   // J of channel c on the constant volume exp(lk), exp(lm); the residuals into r.
   double EvaluateConstant(int c, double lk, double lm, std::vector<double>* r) {
     std::fill(kappa_[c].begin(), kappa_[c].end(), std::exp(lk));
@@ -222,10 +209,15 @@ class RecoveryProblem {
   }
 
   double EvaluateChannel(int c, const double* x, double* grad) {
-    return EvaluateBlock(c, x + 2 * c * n_, grad ? grad + 2 * c * n_ : nullptr);
+    return EvaluateOneChannel(c, x + 2 * c * n_, grad ? grad + 2 * c * n_ : nullptr);
   }
 
-  double EvaluateBlock(int c, const double* xk, double* g) {
+ public:
+  // f_c and df_c/dx_c of one channel on its own block of the unknowns, xk = (log kappa_c,
+  // log mu_c) (2 n values; g likewise, may be null), for optimisers that run the channels as
+  // separate problems (the level search's trials). Different channels may be evaluated at once
+  // from different threads (ForEachChannel).
+  double EvaluateOneChannel(int c, const double* xk, double* g) {
     std::vector<double>& k = kappa_[c];
     std::vector<double>& m = mu_[c];
     const double* xm = xk + n_;
@@ -254,6 +246,8 @@ class RecoveryProblem {
     }
     return f;
   }
+
+ private:
 
   const Dataset& d_;
   const RecoveryOptions& o_;
@@ -306,7 +300,7 @@ class ChannelCeresFunction : public ceres::FirstOrderFunction {
     *cost = p_->EvaluateOneChannel(c_, x, grad);
     return std::isfinite(*cost) && p_->channel_ok(c_);
   }
-  int NumParameters() const override { return int(2 * p_->nodes()); }
+  int NumParameters() const override { return int(p_->num_parameters() / 3); }
 
  private:
   RecoveryProblem* p_;
@@ -527,23 +521,27 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
   constexpr double kMargin = 1.5;
   const std::vector<double> start = state->x;
   std::array<std::map<double, double>, 3> tried;  // level t -> the channel's objective
-  std::array<double, 3> best_f, best_t{};
-  best_f.fill(std::numeric_limits<double>::infinity());
+  // The level with the least objective so far.
+  const auto best = [&](int c) {
+    return std::min_element(tried[c].begin(), tried[c].end(),
+                            [](const auto& a, const auto& b) { return a.second < b.second; })->first;
+  };
+  // mu of channel c in x, and its regulariser scale, times 10^t.
+  const auto scale_mu = [n](std::vector<double>* x, std::array<double, 3>* mu_scale, int c, double t) {
+    for (int64_t p = 0; p < n; ++p) (*x)[(2 * c + 1) * n + p] += t * std::log(10.0);
+    (*mu_scale)[c] *= std::pow(10.0, t);
+  };
   LevelSearchResult result;
   auto trial = [&](const std::array<double, 3>& t, const std::array<bool, 3>& record) {
     std::vector<double> x = start;
     std::array<double, 3> mu_scale = state->mu_scale;
-    for (int c = 0; c < 3; ++c) {
-      const double shift = t[c] * std::log(10.0);
-      for (int64_t p = 0; p < n; ++p) x[(2 * c + 1) * n + p] += shift;
-      mu_scale[c] *= std::pow(10.0, t[c]);
-    }
+    for (int c = 0; c < 3; ++c) scale_mu(&x, &mu_scale, c, t[c]);
     problem->set_scales(state->kappa_scale, mu_scale);
     // Each channel its own optimiser: in one joint run the channel furthest from its level
     // (largest gradient) sets the line search's steps for all, and the others' objectives
     // after the trial say more about it than about their own level.
     std::array<double, 3> f{};
-    problem->RunChannels([&](int c) {
+    problem->ForEachChannel([&](int c) {
       if (!record[c]) return;  // this channel's search is done
       // The run's optimiser on the channel's block (so the trials need no more memory than it).
       std::vector<double> xc(x.begin() + 2 * c * n, x.begin() + 2 * (c + 1) * n);
@@ -561,23 +559,18 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
     // memory rose by 22-28 % (RecoverMemory tests).
     ReleaseFreedMemory();
     ++result.trials;
-    for (int c = 0; c < 3; ++c) {
-      if (!record[c]) continue;
-      tried[c][t[c]] = std::isfinite(f[c]) ? f[c] : std::numeric_limits<double>::infinity();
-      if (f[c] < best_f[c]) {
-        best_f[c] = f[c];
-        best_t[c] = t[c];
-      }
-    }
+    for (int c = 0; c < 3; ++c)
+      if (record[c]) tried[c][t[c]] = std::isfinite(f[c]) ? f[c] : std::numeric_limits<double>::infinity();
   };
   trial({0, 0, 0}, {true, true, true});
   trial({kStep, kStep, kStep}, {true, true, true});
   for (int round = 0; round < int(kReach / kStep); ++round) {
-    std::array<double, 3> t = best_t;
+    std::array<double, 3> t{};
     std::array<bool, 3> record{};
     for (int c = 0; c < 3; ++c) {
       const double hi = tried[c].rbegin()->first;
-      if (best_t[c] == hi && hi < kReach) {
+      t[c] = best(c);
+      if (t[c] == hi && hi < kReach) {
         t[c] = hi + kStep;
         record[c] = true;
       }
@@ -589,12 +582,10 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
   // levels 0.1-0.5 decades apart measured 1.3-1.75x apart where the level hardly mattered, and
   // the homogeneous fit's own level starts the fit at its optimum. Another level must beat it
   // by more than that.
-  for (int c = 0; c < 3; ++c)
-    if (!(kMargin * best_f[c] < tried[c].at(0.0))) best_t[c] = 0;
   for (int c = 0; c < 3; ++c) {
-    result.factor[c] = std::pow(10.0, best_t[c]);
-    state->mu_scale[c] *= result.factor[c];
-    for (int64_t p = 0; p < n; ++p) state->x[(2 * c + 1) * n + p] += best_t[c] * std::log(10.0);
+    const double t = kMargin * tried[c].at(best(c)) < tried[c].at(0.0) ? best(c) : 0.0;
+    result.factor[c] = std::pow(10.0, t);
+    scale_mu(&state->x, &state->mu_scale, c, t);
   }
   problem->set_scales(state->kappa_scale, state->mu_scale);
   return result;
