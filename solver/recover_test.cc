@@ -168,14 +168,16 @@ TEST_P(RecoverOnBackend, HomogeneousFitStopsWhereTheObjectiveStalls) {
 }
 
 // The absorption level search from a start whose mu is off by a known factor per channel
-// (no homogeneous fit: it would find the truth here), 10x low, right and 3.16x low: on
-// homogeneous data the heterogeneous fit's objective after a trial is least where the level is
-// right, and the search's lattice of 0.5 decades holds the right factors (10 / 1 / 3.16 of the
-// start's 0.01). (Smaller offsets, 2x, the trials' own iterations correct at any level, and
-// the search rightly leaves them.)
+// (no homogeneous fit: it would find the truth here), 0.75 decades low, right and 0.25 decades
+// low: on homogeneous data the heterogeneous fit's objective after a trial is least where the
+// level is right; the coarse lattice of 0.5 decades holds neither low factor, its refinement
+// by a quarter decade (down for red from 1 or up from 0.5, up for blue from 0) holds both.
+// (Smaller offsets, 1.5x, the trials' own iterations correct at any level, and the search
+// rightly leaves them.)
 TEST_P(RecoverOnBackend, LevelSearchFindsAKnownAbsorptionLevel) {
   const Material truth =
-      Material::Constant({12, 10, 5}, 0.5, {0.2f, 0.2f, 0.2f}, {0.1f, 0.01f, float(0.01 * std::sqrt(10.0))});
+      Material::Constant({12, 10, 5}, 0.5, {0.2f, 0.2f, 0.2f},
+                         {float(0.01 * std::pow(10.0, 0.75)), 0.01f, float(0.01 * std::pow(10.0, 0.25))});
   const Dataset d = DataOnTheRecoveryGrid(truth);
   RecoveryOptions ro;
   ro.backend = GetParam();
@@ -185,7 +187,7 @@ TEST_P(RecoverOnBackend, LevelSearchFindsAKnownAbsorptionLevel) {
   ro.max_iterations = 1;
   RecoveryState st;
   const RecoverySummary s = Recover(d, ro, &st);
-  std::printf("%s; level search: %d trials, %.1f s, mu x %.3f %.3f %.3f (truth's: 10 1 3.16)\n",
+  std::printf("%s; level search: %d trials, %.1f s, mu x %.3f %.3f %.3f (truth's: 5.62 1 1.78)\n",
               s.BriefReport().c_str(), s.level_trials, s.level_seconds, s.level_factor[0], s.level_factor[1],
               s.level_factor[2]);
   for (int c = 0; c < 3; ++c) {
