@@ -415,7 +415,9 @@ TEST_P(RecoverMemory, PeakStaysWithinTheEstimate) {
                 used / double(estimate));
     EXPECT_EQ(s.iterations, 22);
     EXPECT_LE(used, double(estimate));
-    if (level_search == 0) EXPECT_GE(used, 0.6 * double(estimate));
+    if (level_search == 0) {
+      EXPECT_GE(used, 0.6 * double(estimate));
+    }
   }
 }
 
