@@ -167,32 +167,48 @@ TEST_P(RecoverOnBackend, HomogeneousFitStopsWhereTheObjectiveStalls) {
     }
 }
 
+// A volume whose mu is 0.75, 0 and 0.25 decades above the start's 0.01 (kappa as the start).
+Material KnownLevelTruth(const GridShape& shape) {
+  return Material::Constant(shape, 0.5, {0.2f, 0.2f, 0.2f},
+                            {float(0.01 * std::pow(10.0, 0.75)), 0.01f, float(0.01 * std::pow(10.0, 0.25))});
+}
+
+// Options that start the heterogeneous fit at kappa 0.2, mu 0.01 (no homogeneous fit) after the
+// level search, and stop after one iteration.
+RecoveryOptions KnownLevelOptions(Backend backend) {
+  RecoveryOptions ro;
+  ro.backend = backend;
+  ro.homogeneous_iterations = 0;
+  ro.homogeneous_kappa = 0.2;
+  ro.homogeneous_mu = 0.01;
+  ro.max_iterations = 1;
+  return ro;
+}
+
+// The search's factors against the truth's.
+void ExpectTruthLevel(const Material& truth, const RecoveryOptions& ro, const RecoverySummary& s) {
+  std::printf("level search: %d trials, %.1f s, mu x %.3f %.3f %.3f (truth's: 5.62 1 1.78)\n", s.level_trials,
+              s.level_seconds, s.level_factor[0], s.level_factor[1], s.level_factor[2]);
+  for (int c = 0; c < 3; ++c)
+    EXPECT_NEAR(std::log10(s.level_factor[c] / (truth.mu[c][0] / ro.homogeneous_mu)), 0.0, 1e-6) << c;
+}
+
 // The absorption level search from a start whose mu is off by a known factor per channel
 // (no homogeneous fit: it would find the truth here), 0.75 decades low, right and 0.25 decades
 // low: on homogeneous data the heterogeneous fit's objective after a trial is least where the
 // level is right; the coarse lattice of 0.5 decades holds neither low factor, its refinement
 // by a quarter decade (down for red from 1 or up from 0.5, up for blue from 0) holds both.
-// (Smaller offsets, 1.5x, the trials' own iterations correct at any level, and the search
-// rightly leaves them.)
+// (Offsets of 2x or less the trials' own iterations correct at any level; the search may leave
+// them.)
 TEST_P(RecoverOnBackend, LevelSearchFindsAKnownAbsorptionLevel) {
-  const Material truth =
-      Material::Constant({12, 10, 5}, 0.5, {0.2f, 0.2f, 0.2f},
-                         {float(0.01 * std::pow(10.0, 0.75)), 0.01f, float(0.01 * std::pow(10.0, 0.25))});
+  const Material truth = KnownLevelTruth({12, 10, 5});
   const Dataset d = DataOnTheRecoveryGrid(truth);
-  RecoveryOptions ro;
-  ro.backend = GetParam();
-  ro.homogeneous_iterations = 0;
-  ro.homogeneous_kappa = 0.2;
-  ro.homogeneous_mu = 0.01;
-  ro.max_iterations = 1;
+  RecoveryOptions ro = KnownLevelOptions(GetParam());
   RecoveryState st;
   const RecoverySummary s = Recover(d, ro, &st);
-  std::printf("%s; level search: %d trials, %.1f s, mu x %.3f %.3f %.3f (truth's: 5.62 1 1.78)\n",
-              s.BriefReport().c_str(), s.level_trials, s.level_seconds, s.level_factor[0], s.level_factor[1],
-              s.level_factor[2]);
+  std::printf("%s\n", s.BriefReport().c_str());
+  ExpectTruthLevel(truth, ro, s);
   for (int c = 0; c < 3; ++c) {
-    const double truth_factor = truth.mu[c][0] / ro.homogeneous_mu;
-    EXPECT_NEAR(std::log10(s.level_factor[c] / truth_factor), 0.0, 1e-6) << c;
     EXPECT_DOUBLE_EQ(st.level_factor[c], s.level_factor[c]);
     EXPECT_DOUBLE_EQ(st.mu_scale[c], ro.homogeneous_mu * s.level_factor[c]);  // the regulariser's reference
   }
@@ -208,6 +224,24 @@ TEST_P(RecoverOnBackend, LevelSearchFindsAKnownAbsorptionLevel) {
   EXPECT_EQ(s0.level_trials, 0);
   EXPECT_EQ(s0.level_factor, (std::array<double, 3>{1, 1, 1}));
   EXPECT_LT(4 * s.initial_objective, s0.initial_objective);  // measured 5.3x (cpu), 5.7x (gl)
+}
+
+// The same search on data with 3 % noise: the trials' few iterations leave most of the noise
+// in the residual, a floor common to every level that hides the levels' differences (here,
+// scored by the objective itself, the search kept 1, 1, 1; on wax 64x48x16 with 1 % noise no
+// level came out 1.5x below another). The trials are scored with the residual low-passed, and
+// the search finds the same factors as without noise.
+TEST_P(RecoverOnBackend, LevelSearchSeesThroughNoise) {
+  const Material truth = KnownLevelTruth({24, 20, 5});
+  SimulateOptions so;
+  so.lights = RegionLights("2x2");
+  so.oversample = 1;
+  so.noise = 0.03;
+  RecoveryOptions ro = KnownLevelOptions(GetParam());
+  ro.lambda = 1e-4;
+  ro.regularize_mu = true;
+  RecoveryState st;
+  ExpectTruthLevel(truth, ro, Recover(SimulateDataset(truth, so).training, ro, &st));
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, RecoverOnBackend, ::testing::Values(Backend::kCpu, Backend::kGl),
