@@ -213,10 +213,6 @@ class RecoveryProblem {
   }
 
  public:
-  // f_c and df_c/dx_c of one channel on its own block of the unknowns, xk = (log kappa_c,
-  // log mu_c) (2 n values; g likewise, may be null), for optimisers that run the channels as
-  // separate problems (the level search's trials). Different channels may be evaluated at once
-  // from different threads (ForEachChannel).
   // After channel c's last evaluation: its data term with the residual images low-passed,
   // sum_m |G * r_m|^2 (r as ChannelObjective::Residuals, G a Gaussian of kLowPassNodes nodes'
   // standard deviation over each condition's nx x ny front face, its weights renormalised at
@@ -256,6 +252,10 @@ class RecoveryProblem {
   }
   static constexpr double kLowPassNodes = 2;
 
+  // f_c and df_c/dx_c of one channel on its own block of the unknowns, xk = (log kappa_c,
+  // log mu_c) (2 n values; g likewise, may be null), for optimisers that run the channels as
+  // separate problems (the level search's trials). Different channels may be evaluated at once
+  // from different threads (ForEachChannel).
   double EvaluateOneChannel(int c, const double* xk, double* g) {
     std::vector<double>& k = kappa_[c];
     std::vector<double>& m = mu_[c];
@@ -560,7 +560,7 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
   constexpr double kStep = 0.5, kReach = 2.0;  // decades, up from the homogeneous fit
   constexpr double kMargin = 1.5, kFineMargin = 1.2;
   const std::vector<double> start = state->x;
-  std::array<std::map<double, double>, 3> tried;  // level t -> the channel's objective
+  std::array<std::map<double, double>, 3> tried;  // level t -> the channel's trial score
   // The level with the least objective so far.
   const auto best = [&](int c) {
     return std::min_element(tried[c].begin(), tried[c].end(),
