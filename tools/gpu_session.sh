@@ -18,8 +18,9 @@
 # the RGB recoveries with 16 conditions on the Wax I grid (default, cyclic reduction, then 15 s
 # with a GPU-timestamp profile per kernel and grid) and the Marble grid on the gl backend,
 # time-capped at 40 s and 30 s (their seconds per iteration give the time of the bench's full
-# 300 iterations; run with --level-search 0, whose trials the cap would not stop: the level
-# search adds its trials' iterations, docs/inverse.md), the bunny's variants (60/30/30 and 20/10/10 Chebyshev steps, the
+# 300 iterations; run with --level-search 0, whose trials the cap would not stop), the level
+# search on Wax I (the homogeneous fit, the trials and one iteration: what a default recovery
+# adds to its 300 iterations), the bunny's variants (60/30/30 and 20/10/10 Chebyshev steps, the
 # 2026-11-30 runs' 60/30/30 Jacobi steps, the adaptive depth), and last the Wax I and Marble batches (no peer)
 # under other shader tunings side by side: line smoother blocks of 1 and 8 nodes against the
 # default 4, a coarse tail from 8192 nodes against 4096, cyclic reduction with tails from 1024
@@ -126,6 +127,7 @@ if [ $quick = 1 ]; then
   marble=(--grid 16x16x4 --max-iterations 3 --max-seconds 60 --level-search 0)
   peer=(--grid 12x10x5 --max-iterations 3 --max-seconds 30 --level-search 0)
   profile_recovery=(--grid 24x18x8 --max-iterations 3 --max-seconds 30 --level-search 0)
+  level=(--grid 12x10x5 --max-iterations 1 --level-search 10)
   limits=(30 30 30)
   tunings=1
 else
@@ -138,6 +140,7 @@ else
   render_variant_args=("${render_profile_args[@]}")
   peer=(--grid 130x53x37 --max-iterations 300 --max-seconds 20 --level-search 0)
   profile_recovery=(--grid 130x53x37 --max-iterations 300 --max-seconds 15 --level-search 0)
+  level=(--grid 130x53x37 --max-iterations 1 --level-search 10)
   if [ $long = 1 ]; then
     wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 120 --level-search 0)
     marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 300 --level-search 0)
@@ -203,6 +206,12 @@ if [ $tunings = 1 ]; then
 fi
 step "recovery Marble (marble, gl)" "${limits[1]}" \
   "$run" bench recovery --presets marble "${one_case[@]}" --backend gl "${marble[@]}"
+# The absorption level search on Wax I (on by default in solve and acquire, off above): the
+# homogeneous fit, the search's 3-6 trials of 10 iterations per channel and one iteration, so
+# the row's time is what a default recovery adds to the 300 iterations (session.log's progress
+# line splits it: "homogeneous X s, level search Y s: N trials").
+step "level search Wax I (wax, gl, 1 iteration)" 60 \
+  "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${level[@]}"
 if [ "${limits[2]}" -gt 0 ]; then
   step "recovery Wax I (wax, cpu peer, time-capped)" "${limits[2]}" \
     "$run" bench recovery --presets wax "${one_case[@]}" --backend cpu "${peer[@]}"
