@@ -226,7 +226,7 @@ TEST_P(RecoverOnBackend, LevelSearchFindsAKnownAbsorptionLevel) {
   EXPECT_LT(4 * s.initial_objective, s0.initial_objective);  // measured 5.3x (cpu), 5.7x (gl)
 }
 
-// The same search on data with 3 % noise: the trials' few iterations leave most of the noise
+// The same search on data with 2 % noise: the trials' few iterations leave most of the noise
 // in the residual, a floor common to every level that hides the levels' differences (here,
 // scored by the objective itself, the search kept 1, 1, 1; on wax 64x48x16 with 1 % noise no
 // level came out 1.5x below another). The trials are scored with the residual low-passed, and
@@ -236,7 +236,7 @@ TEST_P(RecoverOnBackend, LevelSearchSeesThroughNoise) {
   SimulateOptions so;
   so.lights = RegionLights("2x2");
   so.oversample = 1;
-  so.noise = 0.03;
+  so.noise = 0.02;
   RecoveryOptions ro = KnownLevelOptions(GetParam());
   ro.lambda = 1e-4;
   ro.regularize_mu = true;
