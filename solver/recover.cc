@@ -314,38 +314,28 @@ struct OptimizerResult {
   double initial = 0, final = 0;
 };
 
-// The problem for Ceres, times `scale` (f and its gradient; RunOptimizer).
-class CeresFunction : public ceres::FirstOrderFunction {
- public:
-  CeresFunction(RecoveryProblem* p, double scale) : p_(p), scale_(scale) {}
-  bool Evaluate(const double* x, double* cost, double* grad) const override {
-    *cost = scale_ * p_->Evaluate(x, grad);
-    if (grad && scale_ != 1)
-      for (int64_t i = 0; i < p_->num_parameters(); ++i) grad[i] *= scale_;
-    return std::isfinite(*cost) && p_->last_evaluation_ok();
-  }
-  int NumParameters() const override { return int(p_->num_parameters()); }
-
- private:
-  RecoveryProblem* p_;
-  double scale_;
+// What the optimisers minimise: f(x) and, where g is non-null, df/dx into g; ok: whether the
+// last evaluation's solves converged (the optimisers treat a point where they did not as failed).
+struct Objective {
+  std::function<double(const double* x, double* g)> evaluate;
+  std::function<bool()> ok;
 };
 
-// One channel's problem on its 2 n unknowns (RecoveryProblem::EvaluateOneChannel).
-class ChannelCeresFunction : public ceres::FirstOrderFunction {
+// An Objective on n unknowns for Ceres, times `scale` (f and its gradient; RunOptimizer).
+class CeresFunction : public ceres::FirstOrderFunction {
  public:
-  ChannelCeresFunction(RecoveryProblem* p, int c, double scale) : p_(p), c_(c), scale_(scale) {}
+  CeresFunction(const Objective& f, int n, double scale) : f_(f), n_(n), scale_(scale) {}
   bool Evaluate(const double* x, double* cost, double* grad) const override {
-    *cost = scale_ * p_->EvaluateOneChannel(c_, x, grad);
+    *cost = scale_ * f_.evaluate(x, grad);
     if (grad && scale_ != 1)
-      for (int i = 0; i < NumParameters(); ++i) grad[i] *= scale_;
-    return std::isfinite(*cost) && p_->channel_ok(c_);
+      for (int i = 0; i < n_; ++i) grad[i] *= scale_;
+    return std::isfinite(*cost) && f_.ok();
   }
-  int NumParameters() const override { return int(p_->num_parameters() / 3); }
+  int NumParameters() const override { return n_; }
 
  private:
-  RecoveryProblem* p_;
-  int c_;
+  const Objective& f_;
+  int n_;
   double scale_;
 };
 
@@ -407,14 +397,7 @@ OptimizerResult RunCeres(ceres::FirstOrderFunction* function, OptimizerKind kind
 // Table I): bracket the minimum along the direction by golden-ratio expansion or contraction,
 // then shrink the bracket by golden sections; only the accepted point gets a gradient (adjoint
 // solves); line-search points cost forward solves only.
-// What RunPaper minimises: f(x) and, where g is non-null, df/dx into g; ok: whether the last
-// evaluation's solves converged.
-struct PaperFunction {
-  std::function<double(const double* x, double* g)> evaluate;
-  std::function<bool()> ok;
-};
-
-OptimizerResult RunPaper(const PaperFunction& problem, int max_iterations, double tolerance,
+OptimizerResult RunPaper(const Objective& problem, int max_iterations, double tolerance,
                          std::vector<double>* xp, const IterationHook& hook) {
   constexpr double kGold = 1.618033988749895, kInvGold = 0.618033988749895;
   constexpr int kSectionSteps = 8;
@@ -507,40 +490,36 @@ OptimizerResult RunPaper(const PaperFunction& problem, int max_iterations, doubl
   return r;
 }
 
-// warm: x is not a homogeneous start but a converging iterate (a resumed checkpoint, --init).
-// Ceres' first step is then the gradient itself (no curvature known yet), which late in a fit
-// changes the log-parameters by ~1e-7: the warm-started solves meet their tolerance without an
-// iteration, the objective does not change, the line search finds no decrease and the
-// minimiser stops at once with a zero step (a checkpoint of a 64x48x16 recovery resumed so).
-// The objective is then scaled for Ceres so that the first step changes the largest
-// log-parameter by 0.1 (as RunPaper's first trial; the later steps and Ceres' relative
-// tolerances do not depend on the scale).
-// The factor on an objective whose gradient at the start is g that makes Ceres' first step
-// (the gradient itself) change the largest log-parameter by 0.1; 1 where it already does more.
-double FirstStepScale(const std::vector<double>& g) {
+// The factor on f that makes Ceres' first step from x (the gradient itself) change the largest
+// log-parameter by 0.1; 1 where it already does more. One evaluation with gradient.
+double FirstStepScale(const Objective& f, const std::vector<double>& x) {
   constexpr double kFirstChange = 0.1;
+  std::vector<double> g(x.size());
+  f.evaluate(x.data(), g.data());
   double gmax = 0;
   for (double v : g) gmax = std::max(gmax, std::abs(v));
   return gmax > 0 && gmax < kFirstChange ? kFirstChange / gmax : 1.0;
 }
 
-OptimizerResult RunOptimizer(RecoveryProblem* problem, const RecoveryOptions& o, int max_iterations,
-                             std::vector<double>* x, const IterationHook& hook, bool warm = false) {
-  if (o.optimizer == OptimizerKind::kPaper)
-    return RunPaper({[problem](const double* v, double* g) { return problem->Evaluate(v, g); },
-                     [problem] { return problem->last_evaluation_ok(); }},
-                    max_iterations, o.tolerance, x, hook);
-  double scale = 1;
-  if (warm) {
-    std::vector<double> g(x->size());
-    problem->Evaluate(x->data(), g.data());
-    scale = FirstStepScale(g);
-  }
-  const IterationHook unscaled = [&](int it, double f, double gnorm) {
-    return hook ? hook(it, f / scale, gnorm / scale) : true;
+// The run's optimiser (o.optimizer) on f from *x.
+// warm: x is not a homogeneous start but a converging iterate (a resumed checkpoint, --init),
+// or a level search trial's start. Ceres' first step is then the gradient itself (no curvature
+// known yet), which late in a fit changes the log-parameters by ~1e-7: the warm-started solves
+// meet their tolerance without an iteration, the objective does not change, the line search
+// finds no decrease and the minimiser stops at once with a zero step (a checkpoint of a
+// 64x48x16 recovery resumed so); from some trial levels it changed them by ~1e-4 and the trial
+// crept (wax 64x48x16's blue at +0.25 decades: 0.404 -> 0.402 in 10 iterations, against 1.7e-3
+// at +0.5). The objective is then scaled for Ceres by FirstStepScale (as RunPaper's first
+// trial; the later steps and Ceres' relative tolerances do not depend on the scale).
+OptimizerResult RunOptimizer(const Objective& f, const RecoveryOptions& o, int max_iterations,
+                             std::vector<double>* x, const IterationHook& hook, bool warm) {
+  if (o.optimizer == OptimizerKind::kPaper) return RunPaper(f, max_iterations, o.tolerance, x, hook);
+  const double scale = warm ? FirstStepScale(f, *x) : 1.0;
+  const IterationHook unscaled = [&](int it, double v, double gnorm) {
+    return hook ? hook(it, v / scale, gnorm / scale) : true;
   };
-  OptimizerResult r = RunCeres(new CeresFunction(problem, scale), o.optimizer, max_iterations, o.lbfgs_rank,
-                               o.tolerance, x->data(), unscaled);
+  OptimizerResult r = RunCeres(new CeresFunction(f, int(x->size()), scale), o.optimizer, max_iterations,
+                               o.lbfgs_rank, o.tolerance, x->data(), unscaled);
   r.initial /= scale;
   r.final /= scale;
   return r;
@@ -570,7 +549,7 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
   constexpr double kMargin = 1.5, kFineMargin = 1.2;
   const std::vector<double> start = state->x;
   std::array<std::map<double, double>, 3> tried;  // level t -> the channel's trial score
-  // The level with the least objective so far.
+  // The level with the least score so far.
   const auto best = [&](int c) {
     return std::min_element(tried[c].begin(), tried[c].end(),
                             [](const auto& a, const auto& b) { return a.second < b.second; })->first;
@@ -592,25 +571,12 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
     std::array<double, 3> f{};
     problem->ForEachChannel([&](int c) {
       if (!record[c]) return;  // this channel's search is done
-      // The run's optimiser on the channel's block (so the trials need no more memory than it).
+      // The run's optimiser on the channel's block (so the trials need no more memory than it),
+      // its first step sized as a warm start's.
       std::vector<double> xc(x.begin() + 2 * c * n, x.begin() + 2 * (c + 1) * n);
-      if (o.optimizer == OptimizerKind::kPaper)
-        RunPaper({[&](const double* v, double* g) { return problem->EvaluateOneChannel(c, v, g); },
-                  [&] { return problem->channel_ok(c); }},
-                 o.level_search, o.tolerance, &xc, {});
-      else {
-        // Scaled as a warm start (RunOptimizer): from a level whose gradient is small for its
-        // objective, the unscaled first step changed nothing and the trial crept (wax 64x48x16's
-        // blue at +0.25 decades: 0.404 -> 0.402 in 10 iterations, against 1.7e-3 at +0.5).
-        double scale = 1;
-        {  // (the gradient freed before Ceres allocates its vectors)
-          std::vector<double> g(xc.size());
-          problem->EvaluateOneChannel(c, xc.data(), g.data());
-          scale = FirstStepScale(g);
-        }
-        RunCeres(new ChannelCeresFunction(problem, c, scale), o.optimizer, o.level_search, o.lbfgs_rank, o.tolerance,
-                 xc.data(), {});
-      }
+      const Objective channel{[&](const double* v, double* g) { return problem->EvaluateOneChannel(c, v, g); },
+                              [&] { return problem->channel_ok(c); }};
+      RunOptimizer(channel, o, o.level_search, &xc, {}, /*warm=*/true);
       // The trial's score: its objective with the data term low-passed. A wrong level leaves a
       // residual as smooth as diffusion makes it; the data's noise, which the trial's few
       // iterations have only begun to fit, is rough, and (1 % on wax 64x48x16) it added ~7e-5 to
@@ -851,7 +817,9 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
     r.message = "no iterations left";
     r.initial = r.final = problem.Evaluate(state->x.data(), nullptr);
   } else {
-    r = RunOptimizer(&problem, o, remaining, &state->x, hook, warm);
+    const Objective whole{[&](const double* v, double* g) { return problem.Evaluate(v, g); },
+                          [&] { return problem.last_evaluation_ok(); }};
+    r = RunOptimizer(whole, o, remaining, &state->x, hook, warm);
   }
   sum.optimizer_seconds =
       std::max(0.0, Since(t_optimizer) - (problem.evaluation_seconds() - evaluation0));

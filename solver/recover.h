@@ -50,8 +50,10 @@ struct RecoveryOptions {
   // Then search each channel's absorption level: a homogeneous fit to a heterogeneous volume
   // misjudges mu (wax's red 13x low), and the heterogeneous fit keeps the level it starts
   // from. Trials scale mu by 10^t (t on a lattice of 0.5 decades up from 0, walking while the
-  // objective falls, up to 2), each running this many iterations of the heterogeneous fit;
-  // per channel the lowest objective wins if it is 1.5x below the homogeneous level's, and the
+  // score falls, up to 2), each running this many iterations of the heterogeneous fit per
+  // channel, scored by the objective with the residual images low-passed (noise is rough, a
+  // wrong level's residual smooth); per channel the lowest score wins if it is 1.5x below the
+  // homogeneous level's, then a quarter decade either side of it wins if 1.2x below, and the
   // fit starts from the homogeneous fit with that channel's mu scaled by it (docs/inverse.md,
   // "The absorption level"). 0 skips it. Only after a homogeneous fit (not --init, not resumed)
   // and before a heterogeneous one (max_iterations > 0).
