@@ -141,10 +141,15 @@ std::string AcquireReport::Table() const {
                    projector_rms_px < 0 ? std::string("-") : fmt::format("{:.3f} px", projector_rms_px),
                    pose_rms_px, white_gains[0], white_gains[1], white_gains[2],
                    exposure_times.empty() ? "-" : calib::Describe(calib::ParseShutterTimes(exposure_times, "report")));
-  s += "condition  measured  saturated  masked   fit error\n";
+  s += "condition  measured  saturated  masked   fit error (validation: not fitted)\n";
   for (const auto& c : conditions)
-    s += fmt::format("  {:<8} {:8d} {:10d} {:7d}   {}\n", c.name, c.measured_nodes, c.saturated_nodes,
-                     c.masked_nodes, c.fit_error < 0 ? std::string("-") : fmt::format("{:.3e}", c.fit_error));
+    s += fmt::format("  {:<8} {:8d} {:10d} {:7d}   {}{}\n", c.name, c.measured_nodes, c.saturated_nodes,
+                     c.masked_nodes, c.fit_error < 0 ? std::string("-") : fmt::format("{:.3e}", c.fit_error),
+                     c.validation ? "  validation" : "");
+  if (solve.validation_checks > 0)
+    s += fmt::format("validation: the result is iteration {}'s iterate of {} (validation E {:.3e}, {} checks, "
+                     "{:.1f} s)\n", solve.validation_iteration, solve.iterations, solve.validation_error,
+                     solve.validation_checks, solve.validation_seconds);
   return s;
 }
 
@@ -489,6 +494,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   d.spacing_mm = h;
   d.C = cap.C;
   d.setup = cap.setup;
+  Dataset validation = d;  // the validation conditions (CaptureSpec::Condition::validation)
   const int64_t F = g.face_size();
   // The black level, subtracted from every condition: saturated (+inf) samples of it, which do
   // not occur in practice, count as 0 so that they cannot hide a condition's own saturation.
@@ -556,6 +562,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     dc.mask = MeasurementMask(g, cap.setup, dc.q, o.mask_margin);
     AcquireConditionReport cr;
     cr.name = c.name;
+    cr.validation = c.validation;
     double brightest = 0;
     for (int64_t f = 0; f < F; ++f) {
       const bool valid = std::isfinite(fsm.value[0][size_t(f)]) && fsm.saturated[size_t(f)] == 0;
@@ -584,13 +591,18 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     for (auto& ch : dc.L)
       for (float& v : ch) v = std::max(v, 0.0f);
     rep.conditions.push_back(cr);
-    d.conditions.push_back(std::move(dc));
+    (c.validation ? validation : d).conditions.push_back(std::move(dc));
   }
   if (std::string why = d.Validate(); !why.empty()) TL_CHECK_MSG(false, why);
   rep.dataset_dir = (work / "dataset").string();
-  WriteDataset(rep.dataset_dir, d);
-  progress(fmt::format("wrote the node-space dataset {}/dataset.json ({} conditions, grid {})",
-                       rep.dataset_dir, d.conditions.size(), g.ToString()));
+  WriteFolderAtomically(rep.dataset_dir, [&](const std::string& tmp) {
+    WriteDataset(tmp, d);
+    if (!validation.conditions.empty()) WriteDataset((fs::path(tmp) / "validation").string(), validation);
+  });
+  progress(fmt::format("wrote the node-space dataset {}/dataset.json ({} conditions{}, grid {})",
+                       rep.dataset_dir, d.conditions.size(),
+                       validation.conditions.empty() ? "" : fmt::format(", {} in validation/", validation.conditions.size()),
+                       g.ToString()));
   stage_done("mapping");
 
   // 5. Solve.
@@ -599,22 +611,27 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     progress("solving for kappa and mu ...");
     solving = true;
     RecoveryState state;
-    rep.solve = Recover(d, o.recovery, &state, iteration);
+    rep.solve = Recover(d, o.recovery, &state, iteration, &validation);
     const Material m = MaterialFromState(d, state, cap.eta);
     WriteMaterial(out, m);
-    for (size_t c = 0; c < rep.conditions.size(); ++c) rep.conditions[c].fit_error = rep.solve.condition_fit_error[c];
     stage_done("solve");
     // Previews: measured vs fitted per condition, kappa and mu slices.
     const fs::path prev = work / "previews";
     fs::create_directories(prev);
+    // Every condition in the capture's order, validation ones included (their E is the
+    // validation error per condition; a fitted condition's is rep.solve's).
+    std::vector<const DatasetCondition*> all;
+    for (size_t c = 0, t = 0, v = 0; c < rep.conditions.size(); ++c)
+      all.push_back(rep.conditions[c].validation ? &validation.conditions[v++] : &d.conditions[t++]);
     std::vector<FacePattern> q;
-    for (const auto& c : d.conditions) q.push_back(c.q);
+    for (const DatasetCondition* c : all) q.push_back(c->q);
     MultigridOptions mg;
     mg.tolerance = 1e-8;
     const auto fitted = RenderFrontFace(m, d.setup, q, mg);
-    for (size_t c = 0; c < d.conditions.size(); ++c) {
-      const std::string p = (prev / fmt::format("fit_{}.png", d.conditions[c].name)).string();
-      WriteComparison(p, g, d.conditions[c].L, fitted[c], d.conditions[c].mask);
+    for (size_t c = 0; c < all.size(); ++c) {
+      rep.conditions[c].fit_error = RelightingError({fitted[c]}, {all[c]->L}, {all[c]->mask});
+      const std::string p = (prev / fmt::format("fit_{}.png", all[c]->name)).string();
+      WriteComparison(p, g, all[c]->L, fitted[c], all[c]->mask);
       rep.previews.push_back(p);
     }
     for (const auto& p : WriteMaterialSlices((prev / "material").string(), m)) rep.previews.push_back(p);
@@ -627,7 +644,9 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
                   {"homogeneous_kappa", rep.solve.homogeneous_kappa},
                   {"homogeneous_mu", rep.solve.homogeneous_mu},
                   {"level_mu_factor", rep.solve.level_factor},
-                  {"level_seconds", rep.solve.level_seconds}};
+                  {"level_seconds", rep.solve.level_seconds},
+                  {"validation_error", rep.solve.validation_error},
+                  {"validation_iteration", rep.solve.validation_iteration}};
   }
   j["capture"] = cap.file;
   j["material"] = o.solve ? out : "";
@@ -649,7 +668,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   nlohmann::json cs = nlohmann::json::array();
   for (const auto& c : rep.conditions)
     cs.push_back({{"name", c.name}, {"measured_nodes", c.measured_nodes}, {"saturated_nodes", c.saturated_nodes},
-                  {"masked_nodes", c.masked_nodes}, {"q_sum", c.q_sum}, {"fit_error", c.fit_error}});
+                  {"masked_nodes", c.masked_nodes}, {"q_sum", c.q_sum}, {"fit_error", c.fit_error},
+                  {"validation", c.validation}});
   j["conditions"] = cs;
   j["previews"] = rep.previews;
   rep.report_json = (work / "report.json").string();

@@ -41,6 +41,7 @@ struct AcquireConditionReport {
   int64_t measured_nodes = 0, saturated_nodes = 0, masked_nodes = 0;
   double q_sum = 0;            // sum of q over the lit face (light delivered, in nodes)
   double fit_error = -1;       // E of the fitted material on this condition
+  bool validation = false;     // a validation condition (not fitted; fit_error is its validation E)
 };
 
 struct AcquireReport {

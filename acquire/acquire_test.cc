@@ -510,8 +510,9 @@ TEST_F(AcquireTest, RegionPatternsFromCalibrationsMatchTheTrueRig) {
   job.corners = corners;
   const PatternSet set = MakeRegionPatterns(job);
   const std::vector<cv::Mat>& patterns = set.images;
-  ASSERT_EQ(patterns.size(), 4u);
-  EXPECT_EQ(set.names, (std::vector<std::string>{"00", "01", "02", "03"}));
+  ASSERT_EQ(patterns.size(), 8u);  // and 4 validation spots
+  EXPECT_EQ(set.names, (std::vector<std::string>{"00", "01", "02", "03", "v00", "v01", "v02", "v03"}));
+  EXPECT_EQ(set.validation, 4);
   EXPECT_LT(set.pose_rms_px, 0.5);
   EXPECT_TRUE(set.warnings.empty());
   job.corners.clear();
@@ -528,6 +529,9 @@ TEST_F(AcquireTest, RegionPatternsFromCalibrationsMatchTheTrueRig) {
   WritePatternFolder(set, folder);
   const nlohmann::json conditions = nlohmann::json::parse(std::ifstream(folder + "conditions.json"));
   EXPECT_EQ(conditions[2]["pattern"], "patterns/02.png");
+  EXPECT_FALSE(conditions[2].contains("validation"));
+  EXPECT_EQ(conditions[5]["pattern"], "patterns/v01.png");
+  EXPECT_EQ(conditions[5]["validation"], true);
   EXPECT_THROW(WritePatternFolder(set, folder), InputError);  // not empty now
   other.K(0, 0) = camera.K(0, 0) * 1.1;
   job.camera = other;
@@ -536,13 +540,14 @@ TEST_F(AcquireTest, RegionPatternsFromCalibrationsMatchTheTrueRig) {
   // A sample 3x as wide reaches past the projector's image (the face spans ~60 % of its width).
   EXPECT_FALSE(LitFaceInsideProjector(proj, projector_from_camera, camera_from_sample,
                                       {3 * cap.size_mm[0], cap.size_mm[1], cap.size_mm[2]}, Setup::kBack));
-  for (int m = 0; m < 4; ++m) {
-    const cv::Mat truth = cv::imread(fmt::format("{}/patterns/{:02d}.png", c, m), cv::IMREAD_GRAYSCALE);
+  for (int m = 0; m < 8; ++m) {
+    const cv::Mat truth = cv::imread(fmt::format("{}/patterns/{}.png", c, set.names[size_t(m)]), cv::IMREAD_GRAYSCALE);
     ASSERT_EQ(truth.size(), patterns[size_t(m)].size());
     const double both = cv::countNonZero(truth & patterns[size_t(m)]);
     const double either = cv::countNonZero(truth | patterns[size_t(m)]);
-    std::printf("region %d: %d projector pixels, %d in the true rig's pattern, intersection over union %.4f\n", m,
-                cv::countNonZero(patterns[size_t(m)]), cv::countNonZero(truth), both / either);
+    std::printf("%s: %d projector pixels, %d in the true rig's pattern, intersection over union %.4f\n",
+                set.names[size_t(m)].c_str(), cv::countNonZero(patterns[size_t(m)]), cv::countNonZero(truth),
+                both / either);
     EXPECT_GT(both / either, 0.97);
   }
   try {
@@ -605,9 +610,15 @@ TEST_F(AcquireTest, LightSpecConditionsNeedNoProjector) {
   const std::string c = Copy(Setup::kBack);
   EditJson(c, [](nlohmann::json& j) {
     j.erase("projector");
-    for (size_t m = 0; m < j["conditions"].size(); ++m) {
+    const auto spots = ValidationSpots(j["sample_mm"].get<std::array<double, 3>>(), 4);
+    for (size_t m = 0, v = 0; m < j["conditions"].size(); ++m) {
       j["conditions"][m].erase("pattern");
-      j["conditions"][m]["light"] = fmt::format("region:{},{}/2", m % 2, m / 2);
+      if (j["conditions"][m].value("validation", false)) {
+        const auto& p = spots.at(v++);
+        j["conditions"][m]["light"] = fmt::format("spot:{},{},{}", p[0], p[1], p[2]);
+      } else {
+        j["conditions"][m]["light"] = fmt::format("region:{},{}/2", m % 2, m / 2);
+      }
     }
   });
   CheckMapping(Setup::kBack, false, c, Out());
@@ -652,6 +663,21 @@ TEST_F(AcquireTest, EndToEndHeldOutError) {
   std::printf("held-out E %.3e (truth's own floor %.3e), fit E %.3e\n", e.holdout_error,
               e.truth_holdout_error, r.solve.fit_error);
   EXPECT_LE(e.holdout_error, 5e-3);
+  // The capture's validation spots: photographed and mapped as the regions, kept out of the fit
+  // (dataset/validation/), checked by the solve; the report and previews name them.
+  const Dataset validation = ReadDataset(r.dataset_dir + "/validation");
+  EXPECT_EQ(validation.conditions.size(), 4u);
+  EXPECT_EQ(ReadDataset(r.dataset_dir).conditions.size(), 4u);
+  EXPECT_GT(r.solve.validation_checks, 1);
+  EXPECT_GE(r.solve.validation_iteration, 0);
+  EXPECT_GT(r.solve.validation_error, 0);
+  int validation_rows = 0;
+  for (const auto& cr : r.conditions) {
+    validation_rows += cr.validation;
+    EXPECT_GE(cr.fit_error, 0) << cr.name;
+  }
+  EXPECT_EQ(validation_rows, 4);
+  EXPECT_TRUE(fs::exists(fs::path(r.work_dir) / "previews/fit_v00.png"));
   // A second run reuses the calibration and HDR stages.
   AcquireOptions again;
   again.solve = false;

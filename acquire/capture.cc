@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "acquire/capture.h"
 
+#include <algorithm>
 #include <fmt/format.h>
 
 #include <cmath>
@@ -282,7 +283,7 @@ CaptureSpec ReadCapture(const std::string& path) {
     const std::string where = fmt::format("conditions[{}]", m);
     const json& c = cs[m];
     if (!c.is_object()) r.Fail(where, "expected an object");
-    r.CheckKeys(c, where, {"name", "stack", "pattern", "light"});
+    r.CheckKeys(c, where, {"name", "stack", "pattern", "light", "validation"});
     CaptureSpec::Condition cond;
     cond.name = r.String(r.Get(c, "name", where + "."), where + ".name");
     // The name becomes file names in the work folder and the node-space dataset: the
@@ -310,8 +311,14 @@ CaptureSpec ReadCapture(const std::string& path) {
       if (light.kind == LightSpec::Kind::kImage && !fs::is_regular_file(light.image_path))
         r.Fail(where + ".light", "file " + light.image_path + " not found");
     }
+    if (c.contains("validation")) {
+      if (!c["validation"].is_boolean()) r.Fail(where + ".validation", "expected true or false");
+      cond.validation = c["validation"].get<bool>();
+    }
     s.conditions.push_back(cond);
   }
+  if (std::none_of(s.conditions.begin(), s.conditions.end(), [](const auto& c) { return !c.validation; }))
+    r.Fail("conditions", "every condition is a validation condition; the fit needs at least one other");
   return s;
 }
 
@@ -363,6 +370,7 @@ std::string CaptureJson(const CaptureSpec& s) {
     json e = {{"name", c.name}, {"stack", rel(c.stack)}};
     if (!c.pattern.empty()) e["pattern"] = rel(c.pattern);
     else e["light"] = c.light;
+    if (c.validation) e["validation"] = true;
     cs.push_back(e);
   }
   j["conditions"] = cs;

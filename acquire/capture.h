@@ -81,6 +81,9 @@ struct CaptureSpec {
     std::string pattern;   // projector image (q through the projector calibration), or
     std::string light;     // a light spec on the lit face (solver/light.h), q taken as given;
                            // an image: file relative to the capture folder (Light())
+    // A validation condition: not fitted; the solve stops on it (RecoveryOptions::
+    // validation_every) and keeps its best iterate.
+    bool validation = false;
     // The parsed light spec, its image: path resolved against the capture folder `dir`.
     LightSpec Light(const std::string& dir) const;
   };

@@ -79,6 +79,14 @@ TEST_F(CaptureTest, ReadsAndRoundTrips) {
   EXPECT_EQ(a.exposure_times, calib::ShutterTimes::kApex);
   std::ofstream(dir_ / "capture.json") << CaptureJson(a);
   EXPECT_EQ(ReadCapture(dir_.string()).exposure_times, calib::ShutterTimes::kApex);
+  // Validation conditions, read and written back.
+  EXPECT_FALSE(s.conditions[1].validation);
+  j["conditions"][1]["validation"] = true;
+  const CaptureSpec v = ReadCapture(Write(j));
+  EXPECT_FALSE(v.conditions[0].validation);
+  EXPECT_TRUE(v.conditions[1].validation);
+  std::ofstream(dir_ / "capture.json") << CaptureJson(v);
+  EXPECT_TRUE(ReadCapture(dir_.string()).conditions[1].validation);
 }
 
 TEST_F(CaptureTest, GridInsteadOfSpacing) {
@@ -104,6 +112,9 @@ TEST_F(CaptureTest, EveryBrokenFieldIsNamed) {
   ExpectError([](auto& j) { j["exposure_times"] = "nominal"; },
               "exposure_times: expected \"auto\", \"labelled\" or \"apex\"");
   ExpectError([](auto& j) { j["conditions"][1]["name"] = "a"; }, "conditions[1].name: duplicate");
+  ExpectError([](auto& j) { j["conditions"][1]["validation"] = "yes"; }, "conditions[1].validation: expected true or false");
+  ExpectError([](auto& j) { j["conditions"][0]["validation"] = j["conditions"][1]["validation"] = true; },
+              "conditions: every condition is a validation condition");
   // Names the node-space dataset would refuse after the HDR stage (it aborted there).
   for (const char* bad : {"lit(0,1)", "r\u00e9gion", "a:b", "..", "x y"})
     ExpectError([&](auto& j) { j["conditions"][1]["name"] = bad; }, "conditions[1].name: '");

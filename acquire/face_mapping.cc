@@ -460,43 +460,97 @@ bool LitFaceInsideProjector(const DeviceIntrinsics& projector, const calib::Pose
   return true;
 }
 
-std::vector<cv::Mat> RegionPatterns(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
-                                    const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
-                                    Setup setup, int n) {
-  TL_CHECK(n >= 1);
+namespace {
+
+// The projector images (CV_8UC1, 255 inside) of `count` lit-face areas: visit(p, hit) calls
+// hit(m) for each area m that the lit-face point p (mm, sample frame) lies in. `what(m)` names
+// area m where no projector pixel lights it (InputError), and where the lit face is turned
+// away from the projector.
+std::vector<cv::Mat> FacePatterns(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
+                                  const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
+                                  Setup setup, int count,
+                                  const std::function<void(const cv::Vec2d&, const std::function<void(int)>&)>& visit,
+                                  const std::function<std::string(int)>& what) {
   const double z = LitFaceZ(size_mm, setup);
   const Setup other = setup == Setup::kBack ? Setup::kFront : Setup::kBack;
   if (!LitFaceFacesProjector(projector_from_camera, camera_from_sample, z, setup))
     throw InputError(fmt::format("the projector is on the {} side of the sample, so it cannot light its {} face: "
                                  "is the setup {}?", SetupName(other), SetupName(setup), SetupName(other)));
   const cv::Mat hits = PlaneHits(projector, projector_from_camera, camera_from_sample, z);
-  // Region I covers [I X / n, (I + 1) X / n]; a pixel on a shared edge lights both. Counted
-  // first, so that regions no pixel lights are named before n^2 images are made.
-  auto for_regions = [&](const std::function<void(int, int, int)>& visit) {
+  auto for_areas = [&](const std::function<void(int, int, int)>& f) {
     for (int y = 0; y < hits.rows; ++y)
       for (int x = 0; x < hits.cols; ++x) {
         const cv::Vec2d p = hits.at<cv::Vec2d>(y, x);
         if (!(p[0] >= 0 && p[0] <= size_mm[0] && p[1] >= 0 && p[1] <= size_mm[1])) continue;
-        // The regions next to the one p's coordinates round into (an edge may round either way).
-        const int i0 = int(p[0] * n / size_mm[0]), j0 = int(p[1] * n / size_mm[1]);
-        for (int J = std::max(0, j0 - 1); J < std::min(n, j0 + 2); ++J)
-          for (int I = std::max(0, i0 - 1); I < std::min(n, i0 + 2); ++I)
-            if (p[0] >= I * size_mm[0] / n && p[0] <= (I + 1) * size_mm[0] / n && p[1] >= J * size_mm[1] / n &&
-                p[1] <= (J + 1) * size_mm[1] / n)
-              visit(I + n * J, x, y);
+        visit(p, [&](int m) { f(m, x, y); });
       }
   };
-  std::vector<int64_t> count(size_t(n * n), 0);
-  for_regions([&](int m, int, int) { ++count[size_t(m)]; });
-  for (int m = 0; m < n * n; ++m)
-    if (count[size_t(m)] == 0)
-      throw InputError(fmt::format("no projector pixel lights region {} ({}, {}) of the {} face: the face lies partly "
-                                   "outside the projector's image, or the regions are smaller than its pixels",
-                                   m, m % n, m / n, SetupName(setup)));
+  // Counted first, so that areas no pixel lights are named before the images are made.
+  std::vector<int64_t> lit(size_t(count), 0);
+  for_areas([&](int m, int, int) { ++lit[size_t(m)]; });
+  for (int m = 0; m < count; ++m)
+    if (lit[size_t(m)] == 0)
+      throw InputError(fmt::format("no projector pixel lights {} of the {} face: the face lies partly outside the "
+                                   "projector's image, or the {} smaller than its pixels", what(m),
+                                   SetupName(setup), what(-1)));
   std::vector<cv::Mat> out;
-  for (int m = 0; m < n * n; ++m) out.emplace_back(projector.size, CV_8UC1, cv::Scalar(0));
-  for_regions([&](int m, int x, int y) { out[size_t(m)].at<uint8_t>(y, x) = 255; });
+  for (int m = 0; m < count; ++m) out.emplace_back(projector.size, CV_8UC1, cv::Scalar(0));
+  for_areas([&](int m, int x, int y) { out[size_t(m)].at<uint8_t>(y, x) = 255; });
   return out;
+}
+
+}  // namespace
+
+std::vector<cv::Mat> RegionPatterns(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
+                                    const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
+                                    Setup setup, int n) {
+  TL_CHECK(n >= 1);
+  // Region I covers [I X / n, (I + 1) X / n]; a pixel on a shared edge lights both.
+  const auto visit = [&](const cv::Vec2d& p, const std::function<void(int)>& hit) {
+    // The regions next to the one p's coordinates round into (an edge may round either way).
+    const int i0 = int(p[0] * n / size_mm[0]), j0 = int(p[1] * n / size_mm[1]);
+    for (int J = std::max(0, j0 - 1); J < std::min(n, j0 + 2); ++J)
+      for (int I = std::max(0, i0 - 1); I < std::min(n, i0 + 2); ++I)
+        if (p[0] >= I * size_mm[0] / n && p[0] <= (I + 1) * size_mm[0] / n && p[1] >= J * size_mm[1] / n &&
+            p[1] <= (J + 1) * size_mm[1] / n)
+          hit(I + n * J);
+  };
+  const auto what = [&](int m) {
+    return m < 0 ? std::string("regions are") : fmt::format("region {} ({}, {})", m, m % n, m / n);
+  };
+  return FacePatterns(projector, projector_from_camera, camera_from_sample, size_mm, setup, n * n, visit, what);
+}
+
+std::vector<std::array<double, 3>> ValidationSpots(const std::array<double, 3>& size_mm, int count) {
+  const double r = std::min(size_mm[0], size_mm[1]) / 8;
+  // Halton's sequence in bases 2 and 3 from its second point (the first is the corner (0, 0)).
+  const auto halton = [](int i, int base) {
+    double f = 1, v = 0;
+    for (; i > 0; i /= base) {
+      f /= base;
+      v += f * (i % base);
+    }
+    return v;
+  };
+  std::vector<std::array<double, 3>> spots;
+  for (int i = 1; i <= count; ++i)
+    spots.push_back({r + halton(i, 2) * (size_mm[0] - 2 * r), r + halton(i, 3) * (size_mm[1] - 2 * r), r});
+  return spots;
+}
+
+std::vector<cv::Mat> SpotPatterns(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
+                                  const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
+                                  Setup setup, const std::vector<std::array<double, 3>>& spots) {
+  const auto visit = [&](const cv::Vec2d& p, const std::function<void(int)>& hit) {
+    for (size_t m = 0; m < spots.size(); ++m)
+      if (std::hypot(p[0] - spots[m][0], p[1] - spots[m][1]) <= spots[m][2]) hit(int(m));
+  };
+  const auto what = [&](int m) {
+    return m < 0 ? std::string("spots are")
+                 : fmt::format("spot {} at ({:g}, {:g}) mm", m, spots[size_t(m)][0], spots[size_t(m)][1]);
+  };
+  return FacePatterns(projector, projector_from_camera, camera_from_sample, size_mm, setup, int(spots.size()),
+                      visit, what);
 }
 
 }  // namespace translume::acquire

@@ -106,6 +106,18 @@ std::vector<cv::Mat> RegionPatterns(const DeviceIntrinsics& projector, const cal
                                     const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
                                     Setup setup, int n);
 
+// `count` validation spots on a lit face of X x Y mm (size_mm's first two): discs of radius
+// min(X, Y) / 16 centred on the points of Halton's sequence (bases 2 and 3), inset by the
+// radius: evenly spread, the same for the same block. Each is {x, y, radius} in mm.
+std::vector<std::array<double, 3>> ValidationSpots(const std::array<double, 3>& size_mm, int count);
+
+// The projector images (CV_8UC1, 255 inside) that light each disc {x, y, r} (mm, sample frame) of
+// the lit face: pixels whose centre ray meets the face inside it. Throws InputError as
+// RegionPatterns does.
+std::vector<cv::Mat> SpotPatterns(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,
+                                  const calib::Pose& camera_from_sample, const std::array<double, 3>& size_mm,
+                                  Setup setup, const std::vector<std::array<double, 3>>& spots);
+
 // Whether the lit face's four corners (and so, the face being flat and the projector's distortion
 // mild, the whole face) fall inside the projector's image.
 bool LitFaceInsideProjector(const DeviceIntrinsics& projector, const calib::Pose& projector_from_camera,

@@ -45,6 +45,10 @@ PatternSet MakeRegionPatterns(const PatternJob& job) {
                                        "and the corners (hand-picked corners give 0.1-0.5 px)", set.pose_rms_px));
   try {
     set.images = RegionPatterns(proj, projector_from_camera, camera_from_sample, job.size_mm, job.setup, job.lights);
+    if (job.validation > 0)
+      for (cv::Mat& p : SpotPatterns(proj, projector_from_camera, camera_from_sample, job.size_mm, job.setup,
+                                     ValidationSpots(job.size_mm, job.validation)))
+        set.images.push_back(std::move(p));
   } catch (const InputError& e) {
     throw InputError(fmt::format("{} and {}: {}", job.projector_file, job.corners_source, e.what()));
   }
@@ -53,11 +57,13 @@ PatternSet MakeRegionPatterns(const PatternJob& job) {
   if (!set.face_inside_projector)
     set.warnings.push_back(fmt::format("the {} face reaches outside the projector's image: the regions at its edge are "
                                        "lit only in part", SetupName(job.setup)));
-  // Names of one width that sort in order: 00..15, 000..999, 0000..4095.
-  const int width = std::max<int>(2, int(std::to_string(set.images.size() - 1).size()));
+  // Names of one width that sort in order: 00..15, 000..999, 0000..4095; validation spots v00...
+  const size_t regions = set.images.size() - size_t(job.validation);
+  const int width = std::max<int>(2, int(std::to_string(regions - 1).size()));
+  set.validation = job.validation;
   set.fewest_pixels = std::numeric_limits<int64_t>::max();
   for (size_t m = 0; m < set.images.size(); ++m) {
-    set.names.push_back(fmt::format("{:0{}d}", m, width));
+    set.names.push_back(m < regions ? fmt::format("{:0{}d}", m, width) : fmt::format("v{:02d}", m - regions));
     const int64_t lit = cv::countNonZero(set.images[m]);
     set.fewest_pixels = std::min(set.fewest_pixels, lit);
     set.most_pixels = std::max(set.most_pixels, lit);
@@ -79,8 +85,12 @@ void WritePatternFolder(const PatternSet& set, const std::string& dir) {
   if (path.filename().empty()) path = path.parent_path();
   const std::string folder = path.filename().string();
   nlohmann::json conditions = nlohmann::json::array();
-  for (const std::string& name : set.names)
-    conditions.push_back({{"name", name}, {"stack", "lighting/" + name}, {"pattern", folder + "/" + name + ".png"}});
+  for (size_t m = 0; m < set.names.size(); ++m) {
+    const std::string& name = set.names[m];
+    nlohmann::json c = {{"name", name}, {"stack", "lighting/" + name}, {"pattern", folder + "/" + name + ".png"}};
+    if (m + size_t(set.validation) >= set.names.size()) c["validation"] = true;
+    conditions.push_back(c);
+  }
   WriteFolderAtomically(dir, [&](const std::string& tmp) {
     for (size_t m = 0; m < set.images.size(); ++m)
       calib::WriteImage8((fs::path(tmp) / (set.names[m] + ".png")).string(), set.images[m]);

@@ -13,7 +13,8 @@
 namespace translume::acquire {
 
 // `translume patterns` (docs/capture.md, step 6): the projector images that light N x N regions
-// of a real sample's lit face, from the rig's calibrations and the sample's place.
+// of a real sample's lit face, and a few validation spots (ValidationSpots), from the rig's
+// calibrations and the sample's place.
 struct PatternJob {
   calib::CameraCalibration camera;
   calib::ProjectorCalibration projector;
@@ -21,6 +22,7 @@ struct PatternJob {
   std::array<double, 3> size_mm{};   // the block's extent X, Y, Z
   Setup setup = Setup::kBack;
   int lights = 4;                    // N
+  int validation = 4;                // validation spots after the regions (ValidationSpots)
   // The front face's corners in the camera image (face_corners_px's order), or empty: found in
   // `photo` (linear RGB, CV_32FC3, the camera's size: the sample lit on a dark background).
   std::vector<cv::Point2d> corners;
@@ -29,8 +31,9 @@ struct PatternJob {
 };
 
 struct PatternSet {
-  std::vector<cv::Mat> images;     // CV_8UC1, 255 lit; region m = I + N J (RegionPatterns)
-  std::vector<std::string> names;  // "00".."15"; "000".. from 11 x 11 regions on
+  std::vector<cv::Mat> images;     // CV_8UC1, 255 lit; region m = I + N J (RegionPatterns), then the spots
+  std::vector<std::string> names;  // "00".."15"; "000".. from 11 x 11 regions on; spots "v00"..
+  int validation = 0;              // the last this many are validation spots
   std::vector<cv::Point2d> corners;
   double pose_rms_px = 0;
   bool face_inside_projector = true;

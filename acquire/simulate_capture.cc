@@ -321,6 +321,7 @@ std::string SimulateCaptureOptions::Validate() const {
   if (oversample < 2 || oversample > 8 || oversample % 2) return fmt::format("oversample must be 2, 4, 6 or 8, got {}", oversample);
   if (holdout < 0 || holdout > kMaxHoldout)
     return fmt::format("holdout must be within 0..{}, got {}", kMaxHoldout, holdout);
+  if (validation < 0 || validation > 64) return fmt::format("validation must be within 0..64, got {}", validation);
   if (exposures < 2 || exposures > 16) return fmt::format("exposures must be in [2, 16], got {}", exposures);
   if (camera_views < 5) return "camera_views must be >= 5";
   if (planes < 4) return "planes must be >= 4";
@@ -427,16 +428,24 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     const GridShape& fs_ = fine.shape;
     const double hf = fine.spacing_mm;
     const int N = o.lights;
-    const int M = N * N;
+    const int M = N * N;               // region conditions (fitted)
+    const int P = M + o.validation;    // and validation spots: photographed conditions
+    // Condition m's name: regions "00".., validation spots "v00"..
+    const auto name = [&](int m) { return m < M ? fmt::format("{:02d}", m) : fmt::format("v{:02d}", m - M); };
     std::vector<cv::Mat> patterns;
     std::vector<FacePattern> fine_q;
     // What the projector's light does on the face: its images through its fall-off.
     const cv::Mat falloff = RadialFalloff(rig.projector, rig.projector_falloff);
-    const std::vector<cv::Mat> region_patterns = RegionPatterns(
-        rig.projector, rig.projector_from_camera, rig.camera_from_sample, SampleSize(g.grid, g.h), o.setup, N);
-    for (int m = 0; m < M; ++m) {
-      const cv::Mat& p = region_patterns[size_t(m)];
-      calib::WriteImage8((tmp / "patterns" / fmt::format("{:02d}.png", m)).string(), p);
+    std::vector<cv::Mat> images = RegionPatterns(rig.projector, rig.projector_from_camera, rig.camera_from_sample,
+                                                 SampleSize(g.grid, g.h), o.setup, N);
+    if (o.validation > 0)
+      for (cv::Mat& p : SpotPatterns(rig.projector, rig.projector_from_camera, rig.camera_from_sample,
+                                     SampleSize(g.grid, g.h), o.setup,
+                                     ValidationSpots(SampleSize(g.grid, g.h), o.validation)))
+        images.push_back(std::move(p));
+    for (int m = 0; m < P; ++m) {
+      const cv::Mat& p = images[size_t(m)];
+      calib::WriteImage8((tmp / "patterns" / (name(m) + ".png")).string(), p);
       cv::Mat pf;
       p.convertTo(pf, CV_32F, 1.0 / 255);
       patterns.push_back(pf.mul(falloff));
@@ -454,7 +463,7 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     // Camera sensitivity (aperture, ISO): the brightest diffuse radiance reaches 80 % of full
     // scale in a 1/30 s exposure, the shortest of the stack (as in the paper: 1/30 s and up).
     double brightest = 0;
-    for (int m = 0; m < M; ++m)
+    for (int m = 0; m < P; ++m)
       for (int c = 0; c < 3; ++c)
         for (float v : fine_L[size_t(m)][size_t(c)]) brightest = std::max(brightest, rig.camera_gain[c] * v);
     const cv::Vec3d gain = rig.camera_gain * (0.8 * 30 / brightest);
@@ -474,7 +483,7 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     for (int s = 0; s < 2; ++s) {
       const double q = s == 0 ? 1.0 : rig.projector_black;
       const cv::Mat img = RenderFace(rig, srig, g, [&](double x, double y) {
-        return rig.projector_falloff < 1 ? white_radiance * (q * FaceBilinear(fine_q[size_t(M)][0], fs_, hf, x, y))
+        return rig.projector_falloff < 1 ? white_radiance * (q * FaceBilinear(fine_q[size_t(P)][0], fs_, hf, x, y))
                                          : white_radiance * q;
       }, 3, 0.1 * g.X, LitFaceZ(g.grid, g.h, o.setup));
       sum.photos += shoot((tmp / (s == 0 ? "calib/white" : "calib/white_black")).string(), img,
@@ -523,10 +532,10 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
       return RenderFace(rig, srig, g, [&](double x, double y) {
         cv::Vec3d v;
         for (int c = 0; c < 3; ++c) {
-          double L = black_scale * FaceBilinear(photo_L[size_t(M)][size_t(c)], fs_, hf, x, y);
+          double L = black_scale * FaceBilinear(photo_L[size_t(P)][size_t(c)], fs_, hf, x, y);
           if (m >= 0) L += FaceBilinear(photo_L[size_t(m)][size_t(c)], fs_, hf, x, y);
           if (o.setup == Setup::kFront) {
-            double qf = black_scale * FaceBilinear(fine_q[size_t(M)][0], fs_, hf, x, y);
+            double qf = black_scale * FaceBilinear(fine_q[size_t(P)][0], fs_, hf, x, y);
             if (m >= 0) qf += FaceBilinear(fine_q[size_t(m)][0], fs_, hf, x, y);
             L += surface_albedo * qf / kPi;
           }
@@ -537,10 +546,12 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     };
     CaptureSpec spec;
     spec.dir = tmp.string();
-    for (int m = 0; m < M; ++m) {
-      const std::string d = (tmp / "lighting" / fmt::format("{:02d}", m)).string();
+    for (int m = 0; m < P; ++m) {
+      const std::string d = (tmp / "lighting" / name(m)).string();
       sum.photos += shoot(d, photo(m, rig.projector_black), mtimes, rig.bits, o.seed * 5000 + uint64_t(m));
-      spec.conditions.push_back({fmt::format("{:02d}", m), d, (tmp / "patterns" / fmt::format("{:02d}.png", m)).string(), ""});
+      CaptureSpec::Condition c{name(m), d, (tmp / "patterns" / (name(m) + ".png")).string(), ""};
+      c.validation = m >= M;
+      spec.conditions.push_back(c);
     }
     sum.photos += shoot((tmp / "lighting/black").string(), photo(-1, rig.projector_black), mtimes, rig.bits,
                         o.seed * 5000 + 999);
@@ -551,7 +562,7 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     cv::minMaxLoc(lit.reshape(1), nullptr, &peak);
     sum.photos += shoot((tmp / "calib/sample_lit").string(), lit, exposures(0.8 / peak, o.exposures), rig.bits,
                         o.seed * 5000 + 998);
-    progress(fmt::format("{} exposure stacks of {} photos ({:.3g} s to {:.3g} s)", M + 1,
+    progress(fmt::format("{} exposure stacks of {} photos ({:.3g} s to {:.3g} s)", P + 1,
                          o.exposures, mtimes.front(), mtimes.back()));
 
     // q's unit is the irradiance that the white patch receives (what the white calibration ties
@@ -566,7 +577,7 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
           if (x < kPatchInset * g.X || x > (1 - kPatchInset) * g.X || y < kPatchInset * g.Y ||
               y > (1 - kPatchInset) * g.Y)
             continue;
-          sum += fine_q[size_t(M)][0][size_t(i + fs_.nx * j)];
+          sum += fine_q[size_t(P)][0][size_t(i + fs_.nx * j)];
           ++n;
         }
       patch_irradiance = sum / double(n);
@@ -634,7 +645,7 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     // As a camera's raw metadata states it; 8-bit photos carry it through their response.
     if (rig.bits == 16) spec.sensor_black.fill(rig.noise.offset);
     std::ofstream(tmp / "capture.json") << CaptureJson(spec);
-    sum.conditions = M;
+    sum.conditions = P;
   });
   sum.capture_json = (fs::path(dir).lexically_normal() / "capture.json").string();
   sum.seconds = elapsed();

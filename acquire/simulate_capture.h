@@ -67,6 +67,9 @@ struct SimulateCaptureOptions {
   int lights = 4;          // N x N region conditions on the lit face
   int oversample = 2;      // forward solves on a grid this many times finer per axis (>= 2)
   int holdout = 16;        // held-out spot conditions in the truth dataset
+  // Validation spot conditions, photographed as the regions (patterns/vNN.png, lighting/vNN,
+  // "validation": true in capture.json; ValidationSpots): the solve stops on them.
+  int validation = 4;
   int exposures = 10;      // per stack, one stop apart
   int camera_views = 12;   // board photos for the camera calibration
   int planes = 8;          // plane pairs for the projector calibration

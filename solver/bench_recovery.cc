@@ -38,6 +38,7 @@ Case MakeCase(const RecoveryBenchOptions& o, const std::string& preset, Setup se
   sim.setup = setup;
   sim.noise = noise;
   sim.holdout = o.holdout;
+  sim.validation = o.validation;
   sim.backend = o.data_backend;
   const auto t0 = std::chrono::steady_clock::now();
   c.data = SimulateDataset(c.truth, sim);
@@ -48,22 +49,30 @@ Case MakeCase(const RecoveryBenchOptions& o, const std::string& preset, Setup se
 RecoveryBenchRow RunCase(const Case& c, const RecoveryBenchOptions& o, const RecoveryOptions& ro,
                          const std::string& preset, Setup setup, double noise,
                          RecoverySummary* summary_out) {
+  MultigridOptions mg;
+  mg.tolerance = 1e-9;
+  mg.max_iterations = 300;
   RecoveryState st;
-  RecoveryCallback stop_after;
-  if (o.max_seconds > 0)
-    stop_after = [&](const IterationReport& rep, const RecoveryState&) {
-      return rep.seconds < o.max_seconds;
-    };
+  std::vector<RecoveryCurvePoint> curve;
+  double curve_seconds = 0;  // the curve's evaluations, inside the recovery's clock
+  const RecoveryCallback hook = [&](const IterationReport& rep, const RecoveryState& state) {
+    if (o.holdout_every > 0 && rep.iteration % o.holdout_every == 0) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const EvaluationReport ev = EvaluateRecovery(MaterialFromState(c.data.training, state), &c.truth,
+                                                   c.data.training, c.data.holdout, mg, o.data_backend);
+      curve.push_back({rep.iteration, rep.seconds - curve_seconds, rep.objective, ev.holdout_error,
+                       ev.holdout_condition_error});
+      curve_seconds += Since(t0);
+    }
+    return !(o.max_seconds > 0 && rep.seconds - curve_seconds >= o.max_seconds);
+  };
   // The peak from here on is the recovery's (the data's and earlier cases' freed memory handed
   // back first, so that none of it serves this one).
   const bool peak_reset = ResetPeakResidentSet();
   const int64_t resident_before = ResidentSetBytes();
-  const RecoverySummary s = Recover(c.data.training, ro, &st, stop_after);
+  const RecoverySummary s = Recover(c.data.training, ro, &st, hook, &c.data.validation);
   const int64_t peak = PeakResidentSetBytes();
   const Material rec = MaterialFromState(c.data.training, st);
-  MultigridOptions mg;
-  mg.tolerance = 1e-9;
-  mg.max_iterations = 300;
   const auto t0 = std::chrono::steady_clock::now();
   const EvaluationReport ev =
       EvaluateRecovery(rec, &c.truth, c.data.training, c.data.holdout, mg, o.data_backend);
@@ -81,9 +90,15 @@ RecoveryBenchRow RunCase(const Case& c, const RecoveryBenchOptions& o, const Rec
   r.message = s.termination == RecoveryTermination::kStopped && o.max_seconds > 0
                   ? fmt::format("reached the --max-seconds cap of {:g} s", o.max_seconds)
                   : s.message;
-  r.seconds = s.seconds;
+  r.seconds = s.seconds - curve_seconds;
   r.homogeneous_seconds = s.homogeneous_seconds;
-  r.optimizer_seconds = s.optimizer_seconds;
+  r.optimizer_seconds = s.optimizer_seconds - curve_seconds;
+  r.curve = std::move(curve);
+  r.validation_iteration = s.validation_iteration;
+  r.validation_error = s.validation_error;
+  r.validation_seconds = s.validation_seconds;
+  for (const auto& h : s.history)
+    if (h.validation_error >= 0) r.validation_curve.push_back({h.iteration, h.validation_error});
   r.level_seconds = s.level_seconds;
   r.level_solves = s.level_solves;
   r.level_trials = s.level_trials;
@@ -157,6 +172,7 @@ RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
                                  "fit E {:.2e}, {} iterations ({}: {}), {} solves, {:.1f} s "
                                  "(homogeneous {:.1f} s, level search {:.1f} s: {} trials, mu x {:.3g} {:.3g} {:.3g}; "
                                  "{:.3f} s/iteration, {:.0f} % of it in the optimiser; "
+                                 "validation: result at iteration {}, E {:.2e}, {:.1f} s; "
                                  "evaluation {:.1f} s); "
                                  "CG iterations per solve {:.2f} in the homogeneous fit, {:.2f} after; "
                                  "peak memory {} (estimate {})",
@@ -164,7 +180,8 @@ RecoveryBenchResult RunRecoveryBench(const RecoveryBenchOptions& o,
                                  r.holdout_error, r.truth_holdout_error, r.fit_error, r.iterations,
                                  r.termination, r.message, r.solves, r.seconds, r.homogeneous_seconds,
                                  r.level_seconds, r.level_trials, r.level_factor[0], r.level_factor[1],
-                                 r.level_factor[2], r.SecondsPerIteration(), 100 * r.OptimizerShare(), r.evaluate_seconds,
+                                 r.level_factor[2], r.SecondsPerIteration(), 100 * r.OptimizerShare(),
+                                 r.validation_iteration, r.validation_error, r.validation_seconds, r.evaluate_seconds,
                                  r.HomogeneousIterationsPerSolve(), r.IterationsPerSolve(),
                                  r.peak_memory_bytes >= 0 ? FormatBytes(r.peak_memory_bytes) : "unknown",
                                  FormatBytes(r.memory_estimate_bytes)));
@@ -226,6 +243,13 @@ std::string RecoveryBenchTable(const RecoveryBenchResult& res) {
                      BackendName(r.backend), r.seconds, r.SecondsPerIteration(), 100 * r.OptimizerShare(), r.iterations,
                      r.solves, r.fit_error, r.holdout_error, r.truth_holdout_error,
                      Layers(r.kappa_layer_error), Layers(r.mu_layer_error));
+  for (const auto& r : res.rows) {
+    if (r.curve.empty()) continue;
+    s += fmt::format("\nheld-out E by iteration, {} {}-lit noise {:g} [{}]:", r.preset, SetupName(r.setup),
+                     r.noise, BackendName(r.backend));
+    for (const auto& p : r.curve) s += fmt::format(" {}: {:.3e}", p.iteration, p.holdout_error);
+    s += "\n";
+  }
   const auto& c = res.comparison;
   if (c.ran) {
     s += fmt::format("\npaper optimiser (PR-CG + golden section): objective {:.4e} after {} iterations, "
@@ -241,6 +265,19 @@ std::string RecoveryBenchTable(const RecoveryBenchResult& res) {
   }
   return s;
 }
+
+namespace {
+
+nlohmann::json Curve(const std::vector<RecoveryCurvePoint>& curve) {
+  nlohmann::json j = nlohmann::json::array();
+  for (const auto& p : curve)
+    j.push_back({{"iteration", p.iteration}, {"seconds", p.seconds}, {"objective", p.objective},
+                 {"holdout_error", p.holdout_error},
+                 {"holdout_condition_error", p.holdout_condition_error}});
+  return j;
+}
+
+}  // namespace
 
 std::string RecoveryBenchJson(const RecoveryBenchResult& res) {
   nlohmann::json j;
@@ -268,7 +305,12 @@ std::string RecoveryBenchJson(const RecoveryBenchResult& res) {
                           {"kappa_layer_error", r.kappa_layer_error},
                           {"mu_layer_error", r.mu_layer_error},
                           {"peak_memory_bytes", r.peak_memory_bytes},
-                          {"memory_estimate_bytes", r.memory_estimate_bytes}});
+                          {"memory_estimate_bytes", r.memory_estimate_bytes},
+                          {"validation_iteration", r.validation_iteration},
+                          {"validation_error", r.validation_error},
+                          {"validation_seconds", r.validation_seconds},
+                          {"validation_curve", r.validation_curve},
+                          {"curve", Curve(r.curve)}});
   const auto& c = res.comparison;
   if (c.ran)
     j["optimizer_comparison"] = {{"paper_objective", c.paper_objective},

@@ -25,6 +25,9 @@ struct RecoveryBenchOptions {
   GridShape shape{24, 18, 8};
   double spacing_mm = 0.25;
   int holdout = 16;
+  // Validation spots simulated besides (RecoveryOptions::validation_every stops on them; 0:
+  // none, the recovery runs its max_iterations).
+  int validation = 4;
   RecoveryOptions recovery;  // its backend is ignored: see backends
   // Each case is simulated once and recovered on each of these in turn (gl with the cpu as
   // its peer: {kGl, kCpu}); the optimiser comparison runs on the first.
@@ -35,6 +38,9 @@ struct RecoveryBenchOptions {
   // > 0: stop each recovery after this many seconds (at the end of the iteration that passes
   // it); the row then reports the iterations it made.
   double max_seconds = 0;
+  // > 0: also evaluate the held-out E of the current iterate every this many iterations (the
+  // row's `curve`; its solves run on data_backend and are taken out of the recovery's seconds).
+  int holdout_every = 0;
   // Noisy cases: lambda 1e-4 on kappa and mu (noise-free ones use `recovery`). Against 1e-5 on
   // kappa alone this lowers the held-out E slightly and the front layer's mu error from 3.3 to
   // 0.2 (wax, back-lit, 1 % noise).
@@ -44,6 +50,14 @@ struct RecoveryBenchOptions {
   bool compare_optimizers = true;
   bool run_cases = true;  // false: only the optimiser comparison
   int paper_iterations = 80;
+};
+
+// One point of a recovery's held-out curve (RecoveryBenchOptions::holdout_every).
+struct RecoveryCurvePoint {
+  int iteration = 0;
+  double seconds = 0;  // the recovery's, the curve's evaluations taken out
+  double objective = 0, holdout_error = 0;
+  std::vector<double> holdout_condition_error;  // per held-out condition
 };
 
 struct RecoveryBenchRow {
@@ -72,6 +86,11 @@ struct RecoveryBenchRow {
   int64_t cg_iterations = 0, homogeneous_cg_iterations = 0;
   double objective = 0, fit_error = 0, holdout_error = 0, truth_holdout_error = 0;
   std::vector<double> kappa_layer_error, mu_layer_error;
+  std::vector<RecoveryCurvePoint> curve;  // holdout_every > 0
+  // Validation (RecoverySummary): the result's iteration (-1: none) and error, and the checks' seconds.
+  int validation_iteration = -1;
+  double validation_error = -1, validation_seconds = 0;
+  std::vector<std::pair<int, double>> validation_curve;  // (iteration, validation E) of every check
   // Memory: the peak resident set the recovery added to the process (-1 where /proc does not
   // tell), and EstimateMemory's recovery_bytes for it (memory.h; what `solve` checks).
   int64_t peak_memory_bytes = -1, memory_estimate_bytes = 0;

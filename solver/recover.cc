@@ -18,7 +18,9 @@
 #include <thread>
 
 #include "solver/atomic_file.h"
+#include "solver/evaluate.h"
 #include "solver/memory.h"
+#include "solver/simulate.h"
 #include "solver/status.h"
 #include "solver/threads.h"
 
@@ -650,6 +652,70 @@ double GeometricMean(const double* logs, int64_t n) {
   return std::exp(s / double(n));
 }
 
+// The most validation conditions rendered at once (their solvers' memory: RecoveryMemoryBytes).
+constexpr size_t kValidationBatch = 4;
+
+// The validation conditions' relighting error of the current iterate (RecoveryOptions::
+// validation_every): E = sum w (L^R - L)^2 / sum w L^2 against their measured L, rendered on the
+// recovery's backend from zero to a relative residual of 1e-6 (E to ~1e-12, far below the
+// differences between iterates that it tells apart), kValidationBatch conditions at a time.
+class Validation {
+ public:
+  Validation(const Dataset& d, const Dataset* v, const RecoveryOptions& o) : d_(d), o_(o) {
+    if (!v || v->conditions.empty() || o.validation_every == 0) return;
+    if (std::string err = v->Validate(); !err.empty()) throw InputError("validation dataset: " + err);
+    if (!(v->shape == d.shape) || std::abs(v->spacing_mm - d.spacing_mm) > 1e-9 * d.spacing_mm ||
+        std::abs(v->C - d.C) > 1e-9 * d.C || v->setup != d.setup)
+      throw InputError(fmt::format("validation dataset: its grid {}, spacing {:g} mm, C {:g} and {}-lit setup "
+                                   "differ from the training dataset's {}, {:g} mm, {:g} and {}-lit",
+                                   v->shape.ToString(), v->spacing_mm, v->C, SetupName(v->setup),
+                                   d.shape.ToString(), d.spacing_mm, d.C, SetupName(d.setup)));
+    for (const auto& c : v->conditions) {
+      q_.push_back(c.q);
+      L_.push_back(c.L);
+      w_.push_back(c.mask);
+    }
+  }
+  bool active() const { return !q_.empty(); }
+  // Checks state->x at `iteration`; keeps it as the result (state->best_x) where its E is within
+  // validation_margin of the least so far; returns its E.
+  double Check(int iteration, RecoveryState* state) {
+    const auto t0 = Clock::now();
+    MultigridOptions mg;
+    mg.tolerance = 1e-6;
+    mg.max_iterations = 500;
+    const Material m = MaterialFromState(d_, *state);
+    std::vector<FacePattern> rendered;
+    for (size_t first = 0; first < q_.size(); first += kValidationBatch) {
+      const std::vector<FacePattern> some(q_.begin() + first,
+                                          q_.begin() + std::min(q_.size(), first + kValidationBatch));
+      for (FacePattern& r : RenderFrontFace(m, d_.setup, some, mg, o_.backend)) rendered.push_back(std::move(r));
+    }
+    const double e = RelightingError(rendered, L_, w_);
+    if (state->least_validation_error < 0 || e < state->least_validation_error) state->least_validation_error = e;
+    if (e <= (1 + o_.validation_margin) * state->least_validation_error) {
+      state->best_x = state->x;
+      state->best_iteration = iteration;
+      state->best_validation_error = e;
+    }
+    ++checks_;
+    last_checked_ = iteration;
+    seconds_ += Since(t0);
+    return e;
+  }
+  int checks() const { return checks_; }
+  int last_checked() const { return last_checked_; }
+  double seconds() const { return seconds_; }
+
+ private:
+  const Dataset& d_;
+  const RecoveryOptions& o_;
+  std::vector<FacePattern> q_, L_;
+  std::vector<std::vector<float>> w_;
+  int checks_ = 0, last_checked_ = -1;
+  double seconds_ = 0;
+};
+
 }  // namespace
 
 OptimizerKind ParseOptimizer(const std::string& text) {
@@ -674,6 +740,7 @@ const char* TerminationName(RecoveryTermination t) {
     case RecoveryTermination::kMaxIterations: return "max_iterations";
     case RecoveryTermination::kStopped: return "stopped";
     case RecoveryTermination::kFailed: return "failed";
+    case RecoveryTermination::kValidated: return "validated";
   }
   return "?";
 }
@@ -688,6 +755,10 @@ std::string RecoveryOptions::Validate() const {
   if (!(homogeneous_kappa > 0) || !(homogeneous_mu > 0)) return "the homogeneous start must be > 0";
   if (!(solve_tolerance > 0 && solve_tolerance < 1e-3)) return "solve_tolerance must be in (0, 1e-3)";
   if (threads_per_channel < 0) return "threads_per_channel must be >= 0";
+  if (validation_every < 0) return fmt::format("validation_every must be >= 0, got {}", validation_every);
+  if (validation_patience < 1) return fmt::format("validation_patience must be >= 1, got {}", validation_patience);
+  if (!(validation_margin >= 0 && validation_margin <= 1))
+    return fmt::format("validation_margin must be in [0, 1], got {}", validation_margin);
   return regularizer.Validate();
 }
 
@@ -703,7 +774,15 @@ int64_t RecoveryMemoryBytes(const GridShape& shape, int conditions, const Recove
   // a margin (its peak varied 0.86-0.96 of the estimate in RecoverMemory's rank-20 case); its
   // optimisers run per channel on a third of the unknowns each, so no more than the main fit.
   if (o.level_search > 0) vectors += 4;
-  return EstimateMemory(shape, conditions, Precision::kDouble, vectors).recovery_bytes;
+  // Validation keeps the best iterate (RecoveryState::best_x), and its checks render up to
+  // kValidationBatch conditions at once, one forward solver each (cpu: in parallel threads).
+  int64_t validation = 0;
+  if (o.validation_every > 0) {
+    vectors += 1;
+    const int at_once = o.backend == Backend::kCpu ? std::min<int>(kValidationBatch, NumThreads()) : 1;
+    validation = at_once * EstimateMemory(shape, 1, Precision::kDouble).forward_bytes;
+  }
+  return EstimateMemory(shape, conditions, Precision::kDouble, vectors).recovery_bytes + validation;
 }
 
 std::string RecoverySummary::BriefReport() const {
@@ -747,9 +826,10 @@ Material MaterialFromState(const Dataset& d, const RecoveryState& s, double eta)
 }
 
 RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryState* state,
-                        const RecoveryCallback& callback) {
+                        const RecoveryCallback& callback, const Dataset* validation_data) {
   if (std::string err = o.Validate(); !err.empty()) throw InputError("recovery options: " + err);
   if (std::string err = d.Validate(); !err.empty()) throw InputError("dataset: " + err);
+  Validation validation(d, validation_data, o);
   const auto t0 = Clock::now();
   const int64_t n = d.shape.size();
   RecoveryProblem problem(d, o);
@@ -795,22 +875,30 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
   sum.homogeneous_mu = state->homogeneous_mu;
 
   const int first_iteration = state->iteration;
+  // The start is a candidate too (a fresh fit's, or a resumed one's from before validation).
+  if (validation.active() && state->best_iteration < 0) validation.Check(first_iteration, state);
+  bool validated = false;  // validation_patience iterations since the result's (RecoveryOptions)
   IterationHook hook = [&](int it, double f, double gnorm) {
     IterationReport rep;
     rep.iteration = first_iteration + it;
     rep.objective = f;
     rep.gradient_norm = gnorm;
     rep.solves = solves();
-    rep.seconds = seconds();
     state->iteration = rep.iteration;
+    if (validation.active() && rep.iteration % o.validation_every == 0) {
+      rep.validation_error = validation.Check(rep.iteration, state);
+      validated = rep.iteration - state->best_iteration >= o.validation_patience;
+    }
+    rep.seconds = seconds();
     state->solves = rep.solves;
     state->seconds = rep.seconds;
     state->history.push_back(rep);
-    return callback ? callback(rep, *state) : true;
+    const bool go_on = callback ? callback(rep, *state) : true;
+    return go_on && !validated;
   };
   const int remaining = std::max(0, o.max_iterations - first_iteration);
   const auto t_optimizer = Clock::now();
-  const double evaluation0 = problem.evaluation_seconds();
+  const double evaluation0 = problem.evaluation_seconds(), validation0 = validation.seconds();
   OptimizerResult r;
   if (remaining == 0) {
     r.termination = RecoveryTermination::kMaxIterations;
@@ -821,8 +909,24 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
                           [&] { return problem.last_evaluation_ok(); }};
     r = RunOptimizer(whole, o, remaining, &state->x, hook, warm);
   }
-  sum.optimizer_seconds =
-      std::max(0.0, Since(t_optimizer) - (problem.evaluation_seconds() - evaluation0));
+  sum.optimizer_seconds = std::max(
+      0.0, Since(t_optimizer) - (problem.evaluation_seconds() - evaluation0) -
+                     (validation.seconds() - validation0));
+  if (validation.active()) {
+    if (validation.last_checked() != state->iteration) validation.Check(state->iteration, state);
+    if (state->best_iteration != state->iteration) state->x = state->best_x;
+    sum.validation_error = state->best_validation_error;
+    sum.validation_iteration = state->best_iteration;
+    sum.validation_checks = validation.checks();
+    sum.validation_seconds = validation.seconds();
+    if (validated && r.termination == RecoveryTermination::kStopped) {
+      r.termination = RecoveryTermination::kValidated;
+      r.message = fmt::format("validation E has not come within {:g} % of its least for {} iterations",
+                              100 * o.validation_margin, o.validation_patience);
+    }
+    r.message += fmt::format("; the result is iteration {}'s iterate (validation E {:.3e})",
+                             state->best_iteration, state->best_validation_error);
+  }
   // Final evaluation at the result: fit errors per condition (warm-started, cheap).
   sum.final_objective = problem.Evaluate(state->x.data(), nullptr);
   sum.fit_error = problem.FitError(&sum.condition_fit_error);
@@ -852,8 +956,11 @@ void WriteCheckpoint(const std::string& path, const Dataset& d, const RecoverySt
   j["seconds"] = s.seconds;
   nlohmann::json h = nlohmann::json::array();
   for (const auto& r : s.history)
-    h.push_back({r.iteration, r.objective, r.gradient_norm, r.solves, r.seconds});
+    h.push_back({r.iteration, r.objective, r.gradient_norm, r.solves, r.seconds, r.validation_error});
   j["history"] = h;
+  if (s.best_iteration >= 0)
+    j["validation"] = {{"best_iteration", s.best_iteration}, {"best_error", s.best_validation_error},
+                       {"least_error", s.least_validation_error}, {"best_x", s.best_x}};
   const std::vector<uint8_t> bytes = nlohmann::json::to_cbor(j);
   WriteAtomically(path, [&](const std::string& tmp) {
     std::ofstream out(tmp, std::ios::binary);
@@ -937,18 +1044,37 @@ RecoveryState ReadCheckpoint(const std::string& path, const Dataset& d) {
     if (!history.is_array()) throw corrupt("history must be a list");
     for (size_t r = 0; r < history.size(); ++r) {
       const nlohmann::json& h = history[r];
-      bool numbers = h.is_array() && h.size() == 5;
-      for (size_t k = 0; numbers && k < 5; ++k) numbers = h[k].is_number();
-      if (!numbers) throw corrupt(fmt::format("history row {} must be 5 numbers", r));
+      // 6 since validation (2026-12-02): the validation error, -1 where not checked.
+      bool numbers = h.is_array() && (h.size() == 5 || h.size() == 6);
+      for (size_t k = 0; numbers && k < h.size(); ++k) numbers = h[k].is_number();
+      if (!numbers) throw corrupt(fmt::format("history row {} must be 5 or 6 numbers", r));
       s.history.push_back({int(count(h[0], "a history row's iteration", INT_MAX)), h[1].get<double>(),
                            h[2].get<double>(), count(h[3], "a history row's solves", INT64_MAX),
-                           h[4].get<double>()});
+                           h[4].get<double>(), h.size() == 6 ? h[5].get<double>() : -1.0});
+    }
+    if (j.contains("validation")) {
+      const nlohmann::json& v = j.at("validation");
+      s.best_iteration = int(count(v.at("best_iteration"), "validation best_iteration", s.iteration));
+      s.best_validation_error = v.at("best_error").get<double>();
+      s.least_validation_error = v.at("least_error").get<double>();
+      if (!(s.best_validation_error >= 0 && std::isfinite(s.best_validation_error)))
+        throw corrupt("validation best_error must be finite and >= 0");
+      if (!(s.least_validation_error >= 0 && s.least_validation_error <= s.best_validation_error))
+        throw corrupt("validation least_error must be within 0..best_error");
+      s.best_x = v.at("best_x").get<std::vector<double>>();
+      if (s.best_x.size() != s.x.size()) throw corrupt("validation best_x has the wrong number of parameters");
     }
   } catch (const nlohmann::json::exception& e) {
     throw corrupt(e.what());
   }
   // The parameters are log kappa and log mu: the material they make must be valid.
   if (std::string err = MaterialFromState(d, s).Validate(); !err.empty()) throw corrupt("parameters: " + err);
+  if (!s.best_x.empty()) {
+    RecoveryState best = s;
+    best.x = s.best_x;
+    if (std::string err = MaterialFromState(d, best).Validate(); !err.empty())
+      throw corrupt("validation best_x: " + err);
+  }
   return s;
 }
 

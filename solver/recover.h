@@ -58,6 +58,18 @@ struct RecoveryOptions {
   // "The absorption level"). 0 skips it. Only after a homogeneous fit (not --init, not resumed)
   // and before a heterogeneous one (max_iterations > 0).
   int level_search = 10;
+  // Early stopping on validation conditions (Recover's `validation`: lights that the fit does
+  // not use, e.g. a few spots). Every validation_every iterations the current iterate is
+  // rendered under them and its relighting error against their measured L is taken (SPEC
+  // section 5's E). The result is the latest checked iterate whose error is within
+  // validation_margin of the least so far (differences below it are not told apart; the later
+  // iterate fits the training light better), and the fit stops once validation_patience
+  // iterations have passed without such an iterate: past a point the iterations fit the
+  // training light's noise and the discretisation's error, and relight other light worse
+  // (docs/inverse.md, "Validation"). validation_every 0: off.
+  int validation_every = 10;
+  int validation_patience = 80;
+  double validation_margin = 0.02;
   // Relative residual of every forward and adjoint solve.
   double solve_tolerance = 1e-8;
   // OpenMP threads inside each channel's solver; 0: max(1, NumThreads() / 3).
@@ -71,9 +83,11 @@ struct IterationReport {
   double objective = 0, gradient_norm = 0;
   int64_t solves = 0;    // cumulative, forward + adjoint, all channels
   double seconds = 0;    // cumulative
+  double validation_error = -1;  // E on the validation conditions where checked, else -1
 };
 
-enum class RecoveryTermination { kConverged, kMaxIterations, kStopped, kFailed };
+// kValidated: stopped early by the validation conditions (RecoveryOptions::validation_every).
+enum class RecoveryTermination { kConverged, kMaxIterations, kStopped, kFailed, kValidated };
 const char* TerminationName(RecoveryTermination t);
 
 // The memory a recovery with these options adds to the process (EstimateMemory's recovery_bytes,
@@ -91,6 +105,11 @@ struct RecoveryState {
   int64_t solves = 0;
   double seconds = 0;
   std::vector<IterationReport> history;
+  // The result so far of the validation (RecoveryOptions::validation_margin; empty until an
+  // iterate is checked), its iteration and validation error, and the least error checked.
+  std::vector<double> best_x;
+  int best_iteration = -1;
+  double best_validation_error = -1, least_validation_error = -1;
 };
 
 struct RecoverySummary {
@@ -117,6 +136,13 @@ struct RecoverySummary {
   double initial_objective = 0, final_objective = 0;
   std::array<double, 3> homogeneous_kappa{}, homogeneous_mu{};
   std::vector<IterationReport> history;
+  // Validation (RecoveryOptions::validation_every; all -1 / 0 without validation conditions):
+  // the result's validation error and iteration, the checks made and their seconds (of
+  // `seconds`; their solves are not counted in `solves`).
+  double validation_error = -1;
+  int validation_iteration = -1;
+  int validation_checks = 0;
+  double validation_seconds = 0;
   // Fit error on the training conditions at the result: E over everything and per condition,
   // E = sum w (L^R - L)^2 / sum w L^2 (RGB together).
   double fit_error = 0;
@@ -134,10 +160,13 @@ RecoveryState StateFromMaterial(const Dataset& dataset, const Material& material
 // The material of a state (values rounded to float).
 Material MaterialFromState(const Dataset& dataset, const RecoveryState& state, double eta = 1.3);
 
-// Runs the recovery from `state` (updated in place to the final iterate). Throws InputError on
-// invalid options or data.
+// Runs the recovery from `state` (updated in place to the result: the final iterate, or with
+// validation conditions the best validated one). `validation` (may be null or have no
+// conditions: no validation) must share the dataset's grid, spacing, C and setup. Throws
+// InputError on invalid options or data.
 RecoverySummary Recover(const Dataset& dataset, const RecoveryOptions& options,
-                        RecoveryState* state, const RecoveryCallback& callback = {});
+                        RecoveryState* state, const RecoveryCallback& callback = {},
+                        const Dataset* validation = nullptr);
 
 // Checkpoint file: CBOR (nlohmann) of {"format": "translume-checkpoint/1", grid, x (doubles,
 // exact), scales, counters, history}. Written atomically. Reading throws InputError naming the

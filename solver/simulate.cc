@@ -130,13 +130,16 @@ std::vector<float> MeasurementMask(const GridShape& s, Setup setup, const FacePa
 }
 
 std::string SimulateOptions::Validate() const {
-  if (lights.empty() && holdout == 0) return "at least one light (or held-out condition) is needed";
+  if (lights.empty() && holdout == 0 && validation == 0)
+    return "at least one light (or held-out or validation condition) is needed";
   // Above a relative sigma of 1 the noise outweighs the signal (1e300 overflowed the data to inf).
   if (!(noise >= 0 && noise <= 1))
     return fmt::format("noise must be within 0..1 (a relative sigma: 0.01 = 1 %), got {}", noise);
   if (oversample < 1 || oversample > 8) return fmt::format("oversample must be in [1, 8], got {}", oversample);
   if (holdout < 0 || holdout > kMaxHoldout)
     return fmt::format("holdout must be within 0..{}, got {}", kMaxHoldout, holdout);
+  if (validation < 0 || validation > kMaxHoldout)
+    return fmt::format("validation must be within 0..{}, got {}", kMaxHoldout, validation);
   if (!(tolerance > 0 && tolerance < 1)) return "tolerance must be in (0, 1)";
   if (mask_margin < 0) return "mask_margin must be >= 0";
   return "";
@@ -200,16 +203,19 @@ SimulatedData SimulateDataset(const Material& material, const SimulateOptions& o
   std::mt19937_64 rng(o.seed);
   SimulatedData out;
   if (!o.lights.empty()) out.training = Simulate(material, fine, o, o.lights, "c", &rng);
-  if (o.holdout > 0) {
+  const auto spots = [&](int count, const char* prefix, std::vector<LightSpec>* lights, Dataset* data) {
+    if (count == 0) return;
     const double h = material.spacing_mm;
     const double w = (material.shape.nx - 1) * h, ht = (material.shape.ny - 1) * h;
     std::uniform_real_distribution<double> ux(0.0, w), uy(0.0, ht);
-    for (int i = 0; i < o.holdout; ++i) {
+    for (int i = 0; i < count; ++i) {
       const double x = ux(rng), y = uy(rng);
-      out.holdout_lights.push_back(LightSpec::Parse(fmt::format("spot:{:.4f},{:.4f},{:.4f}", x, y, 3 * h)));
+      lights->push_back(LightSpec::Parse(fmt::format("spot:{:.4f},{:.4f},{:.4f}", x, y, 3 * h)));
     }
-    out.holdout = Simulate(material, fine, o, out.holdout_lights, "h", &rng);
-  }
+    *data = Simulate(material, fine, o, *lights, prefix, &rng);
+  };
+  spots(o.holdout, "h", &out.holdout_lights, &out.holdout);
+  spots(o.validation, "v", &out.validation_lights, &out.validation);
   return out;
 }
 

@@ -41,6 +41,10 @@ struct SimulateOptions {
   double noise = 0;         // relative Gaussian noise sigma per pixel and channel (0.01 = 1 %), <= 1
   int oversample = 2;       // forward solves on a grid this many times finer per axis
   int holdout = 0;          // extra held-out conditions: random spots on the lit face, <= kMaxHoldout
+  // Validation conditions (RecoveryOptions::validation_every): random spots as the held-out
+  // ones, drawn after them (the same seed gives the same training and held-out data with or
+  // without them), <= kMaxHoldout.
+  int validation = 0;
   uint64_t seed = 1;        // noise and holdout spot positions
   double tolerance = 1e-9;  // relative residual of every forward solve
   int mask_margin = 2;      // front-lit: nodes masked around the lit region
@@ -53,12 +57,14 @@ struct SimulatedData {
   Dataset training;  // no conditions when options.lights is empty
   Dataset holdout;  // no conditions when options.holdout == 0
   std::vector<LightSpec> holdout_lights;
+  Dataset validation;  // no conditions when options.validation == 0
+  std::vector<LightSpec> validation_lights;
 };
 
 // Simulates a capture of `material` (the recovery grid): forward solves on the refined grid
 // (RefineMaterial with options.oversample), front-face radiance sampled back at the recovery
 // nodes (fine node (i K, j K)), then noise. q in the dataset is the light rasterised on the
-// recovery grid. Holdout spots have random centres on the lit face and radius 3 h.
+// recovery grid. Holdout and validation spots have random centres on the lit face and radius 3 h.
 SimulatedData SimulateDataset(const Material& material, const SimulateOptions& options);
 
 }  // namespace translume

@@ -211,11 +211,13 @@ TEST_F(Cli, InfoSizesAGridAndRefusesWhatDoesNotFit) {
 
 TEST_F(Cli, SimulateSolveEvaluateAndResume) {
   ASSERT_EQ(Translume("synth --preset wax --grid 12x10x4 -o " + P("m.vdb")).status, 0);
-  CommandRun r = Translume("simulate " + P("m.vdb") + " --lights 2x2 --holdout 3 --noise 0.01 -o " + P("ds"));
+  CommandRun r = Translume("simulate " + P("m.vdb") + " --lights 2x2 --holdout 3 --validation 2 --noise 0.01 -o " +
+                           P("ds"));
   ASSERT_EQ(r.status, 0) << r.output;
   const Dataset d = ReadDataset(P("ds"));
   EXPECT_EQ(d.conditions.size(), 4u);
   EXPECT_EQ(ReadDataset(P("ds/holdout")).conditions.size(), 3u);
+  EXPECT_EQ(ReadDataset(P("ds/validation")).conditions.size(), 2u);
   r = Translume("solve " + P("ds") + " -o " + P("rec.vdb") + " --max-iterations 8 --checkpoint " + P("ck.bin"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("homogeneous fit:"), std::string::npos) << r.output;
@@ -231,6 +233,11 @@ TEST_F(Cli, SimulateSolveEvaluateAndResume) {
   const auto j = nlohmann::json::parse(report);
   EXPECT_EQ(j["history"].size(), 8u);
   EXPECT_EQ(j["condition_fit_error"].size(), 4u);
+  // DATASET/validation/ is used: checked at the start and at the end (every 10 iterations).
+  EXPECT_NE(r.output.find("validation: 2 conditions"), std::string::npos) << r.output;
+  EXPECT_EQ(j["validation"]["conditions"], 2);
+  EXPECT_EQ(j["validation"]["checks"], 2);
+  EXPECT_GT(j["validation"]["error"].get<double>(), 0);
   // Resume: continues at iteration 9.
   r = Translume("solve " + P("ds/dataset.json") + " -o " + P("rec.vdb") + " --max-iterations 10 --optimizer paper --checkpoint " + P("ck.bin"));
   ASSERT_EQ(r.status, 0) << r.output;
@@ -598,23 +605,27 @@ TEST_F(Cli, SamplesReadmeCommandsRun) {
   }
   EXPECT_EQ(ReadMaterial(P("acquired.vdb")).shape, (GridShape{32, 24, 8}));
   EXPECT_TRUE(fs::exists(P("bar_auto.cubes")));
-  // The patterns from the calibrations light what the simulator's own light, but for a few
-  // edge pixels; conditions.json lists them for capture.json.
-  for (int m = 0; m < 4; ++m) {
-    const Image ours = ReadImage(P("patterns/0" + std::to_string(m) + ".png"));
-    const Image truth = ReadImage(P("capture16/patterns/0" + std::to_string(m) + ".png"));
+  // The patterns from the calibrations (the regions and the validation spots) light what the
+  // simulator's own light, but for a few edge pixels; conditions.json lists them for capture.json.
+  const nlohmann::json conditions = nlohmann::json::parse(std::ifstream(P("patterns/conditions.json")));
+  ASSERT_EQ(conditions.size(), 8u);  // 2x2 regions, 4 validation spots
+  for (const auto& c : conditions) {
+    const std::string name = c["name"];
+    const Image ours = ReadImage(P("patterns/" + name + ".png"));
+    const Image truth = ReadImage(P("capture16/patterns/" + name + ".png"));
     ASSERT_EQ(ours.data.size(), truth.data.size());
     double both = 0, either = 0;
     for (size_t k = 0; k < ours.data.size(); ++k) {
       both += ours.data[k] > 0.5f && truth.data[k] > 0.5f;
       either += ours.data[k] > 0.5f || truth.data[k] > 0.5f;
     }
-    EXPECT_GT(both / either, 0.97) << "pattern " << m;
+    EXPECT_GT(both / either, 0.97) << "pattern " << name;
   }
-  const nlohmann::json conditions = nlohmann::json::parse(std::ifstream(P("patterns/conditions.json")));
-  ASSERT_EQ(conditions.size(), 4u);
   EXPECT_EQ(conditions[3]["pattern"], "patterns/03.png");
   EXPECT_EQ(conditions[3]["stack"], "lighting/03");
+  EXPECT_FALSE(conditions[3].contains("validation"));
+  EXPECT_EQ(conditions[4]["name"], "v00");
+  EXPECT_EQ(conditions[4]["validation"], true);
 }
 
 // Ctrl-C in acquire: before the solve it stops at the next stage (the finished ones stay in
@@ -626,7 +637,7 @@ TEST_F(Cli, AcquireStopsCleanlyOnSigint) {
   // Sends SIGINT once `acquire` has printed `line` (polling its log), then waits for it.
   auto interrupt_at = [&](const std::string& out, const std::string& line) {
     return testing_cli::Run(std::string(TRANSLUME_BINARY) + " acquire " + P("cap") + " -o " + P(out) +
-                            " --max-iterations 1000000 --tolerance 1e-15 > " + P("log") + " 2>&1 & pid=$!; "
+                            " --max-iterations 1000000 --tolerance 1e-15 --validation-every 0 > " + P("log") + " 2>&1 & pid=$!; "
                             "for i in $(seq 1200); do grep -q '" + line + "' " + P("log") + " && break; sleep 0.1; done; "
                             "kill -INT $pid; wait $pid; echo exit=$?; cat " + P("log"));
   };

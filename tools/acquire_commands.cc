@@ -47,6 +47,8 @@ int RunSimulateCapture(int argc, char** argv) {
   app.add_option("--lights", lights, "NxN regions of the lit face, one condition each")->capture_default_str();
   app.add_option("--oversample", o.oversample, "Forward solves on a grid this many times finer: 2, 4, 6 or 8")->capture_default_str();
   app.add_option("--holdout", o.holdout, "Held-out spot conditions in truth/dataset/holdout: 0..4096")->capture_default_str();
+  app.add_option("--validation", o.validation, "Validation spot conditions, photographed (lighting/vNN): the "
+                 "solve stops on them; 0..64")->capture_default_str();
   app.add_option("--exposures", o.exposures, "Photos per exposure stack, one stop apart: 2..16")->capture_default_str();
   app.add_flag("--auto-corners", o.auto_corners, "Leave the face corners to acquire's detection");
   app.add_option("--seed", o.seed, "Noise and pose seed")->capture_default_str();
@@ -80,8 +82,9 @@ int RunPatterns(int argc, char** argv) {
   CLI::App app{"Write the projector images that light NxN regions of the sample's lit face, one\n"
                "condition each (docs/capture.md, step 6), from the camera and projector\n"
                "calibrations and the sample's place: its front face's corners in the camera image,\n"
-               "given or found in a photo of the sample on a dark background. Also writes\n"
-               "conditions.json, the conditions list for capture.json.",
+               "given or found in a photo of the sample on a dark background; and the images of a\n"
+               "few validation spots (acquire's solve stops on them). Also writes conditions.json,\n"
+               "the conditions list for capture.json.",
                "translume patterns"};
   std::string camera_path, projector_path, size_text, setup = "back", corners_text, photo, response_path,
       lights = "4x4", out;
@@ -98,6 +101,9 @@ int RunPatterns(int argc, char** argv) {
   corners_opt->excludes(photo_opt);
   app.add_option("--response", response_path, "Response curve for an 8-bit --photo stack");
   app.add_option("--lights", lights, "NxN regions of the lit face, one condition each")->capture_default_str();
+  int validation = 4;
+  app.add_option("--validation", validation, "Validation spots besides (vNN.png, \"validation\": true in "
+                 "conditions.json): acquire's solve stops on them; 0..64")->capture_default_str();
   app.add_option("-o,--output", out, "New folder for NN.png and conditions.json (e.g. CAPTURE/patterns)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
@@ -129,6 +135,8 @@ int RunPatterns(int argc, char** argv) {
   job.size_mm = {size[0], size[1], size[2]};
   job.setup = s;
   job.lights = n;
+  if (validation < 0 || validation > 64) throw InputError("--validation: must be within 0..64");
+  job.validation = validation;
   job.corners = corners;
   job.corners_source = "--corners";
   if (corners.empty()) {
@@ -145,9 +153,10 @@ int RunPatterns(int argc, char** argv) {
   const auto& c = set.corners;
   std::printf("patterns: front face corners (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f), pose RMS %.2f px\n",
               c[0].x, c[0].y, c[1].x, c[1].y, c[2].x, c[2].y, c[3].x, c[3].y, set.pose_rms_px);
-  std::printf("wrote %s: %zu pattern%s (%dx%d regions of the %s face, %lld to %lld projector pixels each) and "
-              "conditions.json for capture.json\n", out.c_str(), set.images.size(), set.images.size() == 1 ? "" : "s",
-              n, n, SetupName(s), (long long)set.fewest_pixels, (long long)set.most_pixels);
+  std::printf("wrote %s: %zu pattern%s (%dx%d regions of the %s face and %d validation spots, %lld to %lld "
+              "projector pixels each) and conditions.json for capture.json\n", out.c_str(), set.images.size(),
+              set.images.size() == 1 ? "" : "s", n, n, SetupName(s), set.validation, (long long)set.fewest_pixels,
+              (long long)set.most_pixels);
   return 0;
 }
 
@@ -230,9 +239,10 @@ int RunAcquire(int argc, char** argv) {
 
 int RunDemo(int argc, char** argv) {
   CLI::App app{"The main job on the embedded default: synthesise a marble sample, simulate a\n"
-               "complete capture of it (calibration photos, 16 back-lit regions as 8-bit exposure\n"
-               "stacks rendered from forward solves on a 2x finer grid), acquire it (calibrate,\n"
-               "merge HDR, find the pose, map the photos onto the grid, solve), report the\n"
+               "complete capture of it (calibration photos, 16 back-lit regions and 4 validation\n"
+               "spots as 8-bit exposure stacks rendered from forward solves on a 2x finer grid),\n"
+               "acquire it (calibrate, merge HDR, find the pose, map the photos onto the grid,\n"
+               "solve, stopping on the validation spots), report the\n"
                "held-out relighting error against the truth, and render the recovered material\n"
                "on a sphere with the polygrid renderer.", "translume demo"};
   std::string out = "out/demo", grid = "32x24x8", setup = "back", lights = "4x4";

@@ -17,6 +17,7 @@
 #include "solver/gl_context.h"
 #include "solver/gl_solver.h"
 #include "solver/memory.h"
+#include "solver/simulate.h"
 #include "solver/status.h"
 #include "solver/synthetic.h"
 #include "solver/threads.h"
@@ -143,6 +144,17 @@ void AddBenchRecovery(CLI::App& bench) {
   rec->add_option("--max-seconds", ro.max_seconds, "Stop each recovery after this many seconds "
                   "(0: no limit); the row reports the iterations made")
       ->capture_default_str();
+  rec->add_option("--validation", ro.validation, "Validation spots simulated per case: the recovery "
+                  "stops on them and keeps its best iterate (0: none, all --max-iterations)")
+      ->capture_default_str();
+  rec->add_option("--validation-patience", ro.recovery.validation_patience, "Iterations without an iterate "
+                  "within --validation-margin of the least validation error before the recovery stops")
+      ->capture_default_str();
+  rec->add_option("--validation-margin", ro.recovery.validation_margin, "Validation errors within this "
+                  "fraction of the least count as equal (the later iterate is kept)")->capture_default_str();
+  rec->add_option("--holdout-every", ro.holdout_every, "Also evaluate the held-out E every this "
+                  "many iterations (its solves are not counted in the recovery's time; 0: off)")
+      ->capture_default_str();
   rec->add_option("--tolerance", ro.recovery.tolerance, "Stop when an iteration lowers the "
                   "objective by less than this fraction (tiny: run all --max-iterations)")
       ->capture_default_str();
@@ -178,6 +190,9 @@ void AddBenchRecovery(CLI::App& bench) {
     if (o.paper_iterations < 0) throw InputError("--paper-iterations: must be >= 0");
     if (!(o.noisy_lambda >= 0) || !std::isfinite(o.noisy_lambda)) throw InputError("--noisy-lambda: must be >= 0");
     if (!(o.max_seconds >= 0)) throw InputError("bench recovery: --max-seconds must be >= 0");
+    if (o.validation < 0 || o.validation > kMaxHoldout)
+      throw InputError(fmt::format("bench recovery: --validation must be within 0..{}", kMaxHoldout));
+    if (o.holdout_every < 0) throw InputError("bench recovery: --holdout-every must be >= 0");
     for (double n : o.noises)
       if (!(n >= 0 && n <= 1)) throw InputError(fmt::format("bench recovery: noise {} must be within 0..1", n));
     if (std::string err = o.recovery.Validate(); !err.empty()) throw OptionsError(*rec, "bench recovery", err);

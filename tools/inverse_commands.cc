@@ -52,6 +52,17 @@ void AddRecoveryFlags(CLI::App& app, RecoveryFlags* f) {
   app.add_option("--tolerance", f->options.tolerance,
                  "Stop when an iteration lowers the objective by less than this fraction")
       ->capture_default_str();
+  app.add_option("--validation-every", f->options.validation_every,
+                 "With validation conditions (DATASET/validation/): check the fit on them every this many "
+                 "iterations, keep the best iterate (0: off; docs/inverse.md, \"Validation\")")
+      ->capture_default_str();
+  app.add_option("--validation-patience", f->options.validation_patience,
+                 "Stop when no iterate in this many iterations came within --validation-margin of the least "
+                 "validation error")
+      ->capture_default_str();
+  app.add_option("--validation-margin", f->options.validation_margin,
+                 "Validation errors within this fraction of the least count as equal; the later iterate is kept")
+      ->capture_default_str();
   app.add_option("--backend", f->backend, "cpu or gl (OpenGL compute shaders; docs/gpu.md)")
       ->capture_default_str();
 }
@@ -96,11 +107,11 @@ std::string FormatSeconds(double s) {
 
 
 // The first entry of `dir` that a dataset does not consist of (dataset.json, q_*.exr, L_*.exr,
-// mask_*.exr and, at the top, holdout/ of the same), or "" if there is none.
+// mask_*.exr and, at the top, holdout/ and validation/ of the same), or "" if there is none.
 std::string ForeignEntry(const fs::path& dir, bool top) {
   for (const fs::directory_entry& e : fs::directory_iterator(dir)) {
     const std::string name = e.path().filename().string();
-    if (top && name == "holdout" && e.is_directory()) {
+    if (top && (name == "holdout" || name == "validation") && e.is_directory()) {
       if (std::string f = ForeignEntry(e.path(), false); !f.empty()) return f;
       continue;
     }
@@ -112,7 +123,7 @@ std::string ForeignEntry(const fs::path& dir, bool top) {
 }
 
 // simulate's -o: a new or empty folder, or an earlier dataset (which the new one replaces
-// whole, holdout/ included) holding nothing else; never the folder that holds the input material.
+// whole, holdout/ and validation/ included) holding nothing else; never the folder that holds the input material.
 void RequireDatasetFolder(const std::string& out, const std::string& material_path) {
   RequireNotInput("-o", out, {material_path});
   if (!fs::exists(out)) return;
@@ -130,7 +141,8 @@ int RunSimulate(int argc, char** argv) {
   CLI::App app{"Simulate a capture of a material into a node-space dataset (docs/formats.md):\n"
                "region or spot lights on the lit face, forward solves on a grid K times finer per axis\n"
                "(no inverse crime), radiance sampled back at the material's nodes, optional\n"
-               "relative Gaussian noise and held-out spot lights in DATASET/holdout/.",
+               "relative Gaussian noise, held-out spot lights in DATASET/holdout/ (for evaluate) and\n"
+               "validation spot lights in DATASET/validation/ (for solve's early stop).",
                "translume simulate"};
   std::string material_path, lights = "4x4", setup = "back", backend = "cpu", out;
   SimulateOptions o;
@@ -141,7 +153,9 @@ int RunSimulate(int argc, char** argv) {
   app.add_option("--noise", o.noise, "Relative Gaussian noise sigma per pixel (0.01 = 1 %; at most 1)")->capture_default_str();
   app.add_option("--oversample", o.oversample, "Forward grid refinement factor per axis")->capture_default_str();
   app.add_option("--holdout", o.holdout, "Held-out spot conditions to write into DATASET/holdout/: 0..4096")->capture_default_str();
-  app.add_option("--seed", o.seed, "Noise and holdout seed")->capture_default_str();
+  app.add_option("--validation", o.validation, "Validation spot conditions to write into DATASET/validation/ "
+                 "(solve stops on them): 0..4096")->capture_default_str();
+  app.add_option("--seed", o.seed, "Noise, holdout and validation seed")->capture_default_str();
   app.add_option("--backend", backend, "cpu or gl (forward solves on the GPU; docs/gpu.md)")
       ->capture_default_str();
   app.add_option("-o,--output", out, "Output dataset folder")->required();
@@ -160,11 +174,14 @@ int RunSimulate(int argc, char** argv) {
   WriteFolderAtomically(out, [&](const std::string& tmp) {
     WriteDataset(tmp, data.training);
     if (!data.holdout.conditions.empty()) WriteDataset((fs::path(tmp) / "holdout").string(), data.holdout);
+    if (!data.validation.conditions.empty())
+      WriteDataset((fs::path(tmp) / "validation").string(), data.validation);
   });
   std::printf("wrote %s: %zu conditions (%s, %s-lit), grid %s, oversampled %dx, noise %g, "
-              "%zu held-out, %.1f s\n", (fs::path(out) / "dataset.json").c_str(),
+              "%zu held-out, %zu validation, %.1f s\n", (fs::path(out) / "dataset.json").c_str(),
               data.training.conditions.size(), lights.c_str(), SetupName(o.setup),
               m.shape.ToString().c_str(), o.oversample, o.noise, data.holdout.conditions.size(),
+              data.validation.conditions.size(),
               std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   return 0;
 }
@@ -190,6 +207,9 @@ int RunSolve(int argc, char** argv) {
   const std::string& optimizer = flags.optimizer;
   const std::string& regularizer = flags.regularizer;
   const Dataset d = ReadDataset(dataset_path);
+  const fs::path vdir = fs::path(DatasetFolder(dataset_path)) / "validation";
+  const Dataset validation = o.validation_every > 0 && fs::exists(vdir / "dataset.json")
+                                 ? ReadDataset(vdir.string()) : Dataset{};
   // Outputs: OUT.vdb, OUT.json and the slices next to them, the checkpoint; none may replace or
   // land in an input, and none may be a folder (found before the solve, not after it).
   const fs::path base = fs::path(out).replace_extension("");
@@ -230,6 +250,10 @@ int RunSolve(int argc, char** argv) {
               d.conditions.size(), SetupName(d.setup), optimizer.c_str(), o.lambda,
               regularizer.c_str(), o.regularize_mu ? " on kappa and mu" : " on kappa",
               NumThreads(), resuming.c_str());
+  if (!validation.conditions.empty())
+    std::printf("validation: %zu conditions in %s, checked every %d iterations; the result is the best "
+                "checked iterate, the fit stops after %d iterations without a better one\n",
+                validation.conditions.size(), vdir.c_str(), o.validation_every, o.validation_patience);
   if (state.x.empty())
     std::printf("homogeneous fit first (6 unknowns)%s...\n",
                 o.level_search > 0 ? fmt::format(", then the absorption level search (trials of {} iterations)",
@@ -241,6 +265,7 @@ int RunSolve(int argc, char** argv) {
   auto last_checkpoint = std::chrono::steady_clock::now();
   bool printed_homogeneous = !state.x.empty();
   TimeLeft time_left;
+  std::string last_validation;
   auto callback = [&](const IterationReport& r, const RecoveryState& s) {
     if (!printed_homogeneous) {
       printed_homogeneous = true;
@@ -252,9 +277,11 @@ int RunSolve(int argc, char** argv) {
                     s.level_factor[2]);
     }
     const std::string left = time_left(r, o.max_iterations);
-    std::printf("%siter %4d  objective %.4e  |grad| %.3e  solves %lld  elapsed %s  left %s%s",
+    if (r.validation_error >= 0) last_validation = fmt::format("  validation E {:.3e} (best {:.3e} at {})",
+        r.validation_error, s.best_validation_error, s.best_iteration);
+    std::printf("%siter %4d  objective %.4e  |grad| %.3e  solves %lld  elapsed %s  left %s%s%s",
                 tty ? "\r" : "", r.iteration, r.objective, r.gradient_norm, (long long)r.solves,
-                FormatSeconds(r.seconds).c_str(), left.c_str(), tty ? "   " : "\n");
+                FormatSeconds(r.seconds).c_str(), left.c_str(), last_validation.c_str(), tty ? "   " : "\n");
     std::fflush(stdout);
     if (!checkpoint.empty() &&
         std::chrono::steady_clock::now() - last_checkpoint > std::chrono::seconds(10)) {
@@ -263,7 +290,7 @@ int RunSolve(int argc, char** argv) {
     }
     return !sigint->interrupted();
   };
-  const RecoverySummary sum = Recover(d, o, &state, callback);
+  const RecoverySummary sum = Recover(d, o, &state, callback, &validation);
   const bool interrupted = sigint->interrupted();
   sigint.reset();  // writing the outputs: Ctrl-C ends at once again
   if (tty) std::printf("\n");
@@ -302,13 +329,19 @@ int RunSolve(int argc, char** argv) {
   j["initial_objective"] = sum.initial_objective;
   j["final_objective"] = sum.final_objective;
   j["fit_error"] = sum.fit_error;
+  if (sum.validation_checks > 0)
+    j["validation"] = {{"conditions", validation.conditions.size()}, {"every", o.validation_every},
+                       {"patience", o.validation_patience}, {"checks", sum.validation_checks},
+                       {"seconds", sum.validation_seconds}, {"error", sum.validation_error},
+                       {"iteration", sum.validation_iteration}};
   nlohmann::json per = nlohmann::json::object();
   for (size_t m2 = 0; m2 < d.conditions.size(); ++m2) per[d.conditions[m2].name] = sum.condition_fit_error[m2];
   j["condition_fit_error"] = per;
   nlohmann::json hist = nlohmann::json::array();
   for (const auto& r : sum.history)
     hist.push_back({{"iteration", r.iteration}, {"objective", r.objective},
-                    {"gradient_norm", r.gradient_norm}, {"solves", r.solves}, {"seconds", r.seconds}});
+                    {"gradient_norm", r.gradient_norm}, {"solves", r.solves}, {"seconds", r.seconds},
+                    {"validation_error", r.validation_error}});
   j["history"] = hist;
   j["slices"] = slices;
   WriteAtomically(report, [&](const std::string& tmp) {
