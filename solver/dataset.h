@@ -37,6 +37,12 @@ struct Dataset {
   std::string Validate() const;
 };
 
+// "" when `other` (a held-out or validation dataset) poses its conditions on the same problem
+// as `training`: the same grid, spacing and C (relative 1e-6), and with same_setup the same lit
+// face; otherwise what differs, as "its grid G, spacing S mm and C c differ from the training
+// dataset's ..." (with same_setup also the setups).
+std::string DifferentProblem(const Dataset& other, const Dataset& training, bool same_setup);
+
 // A condition name that is also safe as part of a file name: 1-100 characters of
 // [A-Za-z0-9_.-], not "." or "..".
 bool IsSafeConditionName(const std::string& name);

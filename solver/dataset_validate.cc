@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // The in-memory half of dataset.h (no file IO), so that code which builds datasets in memory
 // (bench recovery in translume-gpubench) links without OpenImageIO.
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <fmt/format.h>
@@ -59,6 +60,21 @@ std::string Dataset::Validate() const {
                          "RGB"[ch]);
   }
   return "";
+}
+
+std::string DifferentProblem(const Dataset& other, const Dataset& training, bool same_setup) {
+  auto near = [](double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(std::abs(a), std::abs(b)); };
+  if (other.shape == training.shape && near(other.spacing_mm, training.spacing_mm) && near(other.C, training.C) &&
+      (!same_setup || other.setup == training.setup))
+    return "";
+  if (!same_setup)
+    return fmt::format("its grid {}, spacing {:g} mm and C {:g} differ from the training dataset's {}, {:g} mm "
+                       "and {:g}", other.shape.ToString(), other.spacing_mm, other.C, training.shape.ToString(),
+                       training.spacing_mm, training.C);
+  return fmt::format("its grid {}, spacing {:g} mm, C {:g} and {}-lit setup differ from the training dataset's "
+                     "{}, {:g} mm, {:g} and {}-lit", other.shape.ToString(), other.spacing_mm, other.C,
+                     SetupName(other.setup), training.shape.ToString(), training.spacing_mm, training.C,
+                     SetupName(training.setup));
 }
 
 }  // namespace translume

@@ -90,12 +90,9 @@ EvaluationReport EvaluateRecovery(const Material& rec, const Material* truth,
                                   const Dataset& training, const Dataset& holdout,
                                   const MultigridOptions& mg, Backend backend) {
   CheckMatches(rec, training, "recovered");
-  if (!holdout.conditions.empty() &&
-      (!(holdout.shape == training.shape) || !Near(holdout.spacing_mm, training.spacing_mm) ||
-       !Near(holdout.C, training.C)))
-    throw InputError(fmt::format("holdout/: its grid {}, spacing {:g} mm and C {:g} differ from the training "
-                                 "dataset's {}, {:g} mm and {:g}", holdout.shape.ToString(), holdout.spacing_mm,
-                                 holdout.C, training.shape.ToString(), training.spacing_mm, training.C));
+  if (!holdout.conditions.empty())
+    if (std::string err = DifferentProblem(holdout, training, /*same_setup=*/false); !err.empty())
+      throw InputError("holdout/: " + err);
   EvaluationReport r;
   const std::vector<FacePattern> rec_train =
       RenderFrontFace(rec, training.setup, Lights(training), mg, backend);

@@ -653,23 +653,19 @@ double GeometricMean(const double* logs, int64_t n) {
 }
 
 // The most validation conditions rendered at once (their solvers' memory: RecoveryMemoryBytes).
-constexpr size_t kValidationBatch = 4;
+constexpr int kValidationBatch = 4;
 
 // The validation conditions' relighting error of the current iterate (RecoveryOptions::
 // validation_every): E = sum w (L^R - L)^2 / sum w L^2 against their measured L, rendered on the
 // recovery's backend from zero to a relative residual of 1e-6 (E to ~1e-12, far below the
-// differences between iterates that it tells apart), kValidationBatch conditions at a time.
+// differences between iterates that it tells apart), at most kValidationBatch conditions at once.
 class Validation {
  public:
   Validation(const Dataset& d, const Dataset* v, const RecoveryOptions& o) : d_(d), o_(o) {
     if (!v || v->conditions.empty() || o.validation_every == 0) return;
     if (std::string err = v->Validate(); !err.empty()) throw InputError("validation dataset: " + err);
-    if (!(v->shape == d.shape) || std::abs(v->spacing_mm - d.spacing_mm) > 1e-9 * d.spacing_mm ||
-        std::abs(v->C - d.C) > 1e-9 * d.C || v->setup != d.setup)
-      throw InputError(fmt::format("validation dataset: its grid {}, spacing {:g} mm, C {:g} and {}-lit setup "
-                                   "differ from the training dataset's {}, {:g} mm, {:g} and {}-lit",
-                                   v->shape.ToString(), v->spacing_mm, v->C, SetupName(v->setup),
-                                   d.shape.ToString(), d.spacing_mm, d.C, SetupName(d.setup)));
+    if (std::string err = DifferentProblem(*v, d, /*same_setup=*/true); !err.empty())
+      throw InputError("validation dataset: " + err);
     for (const auto& c : v->conditions) {
       q_.push_back(c.q);
       L_.push_back(c.L);
@@ -685,12 +681,7 @@ class Validation {
     mg.tolerance = 1e-6;
     mg.max_iterations = 500;
     const Material m = MaterialFromState(d_, *state);
-    std::vector<FacePattern> rendered;
-    for (size_t first = 0; first < q_.size(); first += kValidationBatch) {
-      const std::vector<FacePattern> some(q_.begin() + first,
-                                          q_.begin() + std::min(q_.size(), first + kValidationBatch));
-      for (FacePattern& r : RenderFrontFace(m, d_.setup, some, mg, o_.backend)) rendered.push_back(std::move(r));
-    }
+    const std::vector<FacePattern> rendered = RenderFrontFace(m, d_.setup, q_, mg, o_.backend, kValidationBatch);
     const double e = RelightingError(rendered, L_, w_);
     if (state->least_validation_error < 0 || e < state->least_validation_error) state->least_validation_error = e;
     if (e <= (1 + o_.validation_margin) * state->least_validation_error) {
@@ -779,7 +770,7 @@ int64_t RecoveryMemoryBytes(const GridShape& shape, int conditions, const Recove
   int64_t validation = 0;
   if (o.validation_every > 0) {
     vectors += 1;
-    const int at_once = o.backend == Backend::kCpu ? std::min<int>(kValidationBatch, NumThreads()) : 1;
+    const int at_once = o.backend == Backend::kCpu ? std::min(kValidationBatch, NumThreads()) : 1;
     validation = at_once * EstimateMemory(shape, 1, Precision::kDouble).forward_bytes;
   }
   return EstimateMemory(shape, conditions, Precision::kDouble, vectors).recovery_bytes + validation;

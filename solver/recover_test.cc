@@ -334,6 +334,32 @@ TEST_P(RecoverOnBackend, ValidationStopsAtTheBestValidatedIterate) {
 INSTANTIATE_TEST_SUITE_P(Backends, RecoverOnBackend, ::testing::Values(Backend::kCpu, Backend::kGl),
                          [](const auto& info) { return info.param == Backend::kCpu ? "cpu" : "gl"; });
 
+// Validation conditions on other terms than the training data's are refused with one line
+// naming both (DifferentProblem): they would be rendered on the wrong grid or face.
+TEST(Recover, RefusesValidationOnOtherTerms) {
+  const Material truth = Material::Constant({8, 6, 4}, 0.5, {0.25f, 0.15f, 0.08f}, {0.01f, 0.03f, 0.06f});
+  const Dataset d = DataOnTheRecoveryGrid(truth);
+  RecoveryOptions ro;
+  ro.max_iterations = 2;
+  auto expect_refused = [&](const Dataset& v, const std::vector<std::string>& what) {
+    RecoveryState st;
+    try {
+      Recover(d, ro, &st, {}, &v);
+      ADD_FAILURE() << "no error";
+    } catch (const InputError& e) {
+      const std::string msg = e.what();
+      EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+      for (const auto& w : what) EXPECT_NE(msg.find(w), std::string::npos) << msg << " lacks " << w;
+    }
+  };
+  Dataset front = d;
+  front.setup = Setup::kFront;
+  expect_refused(front, {"validation dataset", "front-lit", "back-lit"});
+  Dataset coarse = d;
+  coarse.spacing_mm = 2 * d.spacing_mm;
+  expect_refused(coarse, {"validation dataset", "spacing 1 mm", "0.5 mm"});
+}
+
 // Stopping after 15 iterations, writing a checkpoint, reading it back and resuming reaches the
 // same result as one uninterrupted run (both to convergence; the resumed L-BFGS starts with an
 // empty history, so the iterates differ on the way).

@@ -63,7 +63,8 @@ Material RefineMaterial(const Material& m, int K) {
 
 std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
                                          const std::vector<FacePattern>& lights,
-                                         const MultigridOptions& multigrid, Backend backend) {
+                                         const MultigridOptions& multigrid, Backend backend,
+                                         int max_at_once) {
   ForwardOptions fo;
   fo.setup = setup;
   fo.multigrid = multigrid;
@@ -76,7 +77,7 @@ std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
   if (backend == Backend::kGl) {
     // Batches of kGlBatch lights per channel solve (one dispatch per step for all of them);
     // larger batches would add GPU memory (about 40 bytes per node and light) for little gain.
-    constexpr size_t kGlBatch = 16;
+    const size_t kGlBatch = max_at_once > 0 ? std::min(16, max_at_once) : 16;
     for (size_t first = 0; first < lights.size(); first += kGlBatch) {
       const std::vector<FacePattern> some(lights.begin() + first,
                                           lights.begin() + std::min(lights.size(), first + kGlBatch));
@@ -104,7 +105,7 @@ std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
       }
     }
   };
-  const int workers = std::max(1, std::min<int>(NumThreads(), int(lights.size())));
+  const int workers = std::max(1, std::min({NumThreads(), int(lights.size()), max_at_once > 0 ? max_at_once : NumThreads()}));
   std::vector<std::thread> pool;
   for (int t = 1; t < workers; ++t) pool.emplace_back(worker);
   worker();

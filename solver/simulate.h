@@ -19,12 +19,14 @@ Material RefineMaterial(const Material& material, int K);
 GridShape RefineShape(const GridShape& shape, int K);
 
 // Front-face radiance of `material` under each light pattern (L = (phi - q_front) / (2 pi),
-// SPEC section 3), solved on the material's own grid. cpu: conditions in parallel threads; gl:
-// in turn on the calling thread (the one that owns the GL context).
+// SPEC section 3), solved on the material's own grid. cpu: conditions in parallel threads, one
+// solver each; gl: batches of up to 16 conditions per solve, in turn on the calling thread (the
+// one that owns the GL context). max_at_once > 0 caps the solvers held at once (threads on
+// cpu, the batch on gl), and with them the memory (solver/memory.h's forward bytes each).
 std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
                                          const std::vector<FacePattern>& lights,
                                          const MultigridOptions& multigrid,
-                                         Backend backend = Backend::kCpu);
+                                         Backend backend = Backend::kCpu, int max_at_once = 0);
 
 // Front-lit mask: 0 at every front-face node within `margin` nodes (Chebyshev distance) of a
 // node with q > 0 in any channel, 1 elsewhere. All 1 for the back-lit setup.

@@ -22,6 +22,7 @@
 #include "solver/synthetic.h"
 #include "solver/threads.h"
 #include "tools/commands.h"
+#include "tools/recovery_flags.h"
 
 namespace translume {
 
@@ -147,11 +148,7 @@ void AddBenchRecovery(CLI::App& bench) {
   rec->add_option("--validation", ro.validation, "Validation spots simulated per case: the recovery "
                   "stops on them and keeps its best iterate (0: none, all --max-iterations)")
       ->capture_default_str();
-  rec->add_option("--validation-patience", ro.recovery.validation_patience, "Iterations without an iterate "
-                  "within --validation-margin of the least validation error before the recovery stops")
-      ->capture_default_str();
-  rec->add_option("--validation-margin", ro.recovery.validation_margin, "Validation errors within this "
-                  "fraction of the least count as equal (the later iterate is kept)")->capture_default_str();
+  AddValidationFlags(*rec, &ro.recovery);
   rec->add_option("--holdout-every", ro.holdout_every, "Also evaluate the held-out E every this "
                   "many iterations (its solves are not counted in the recovery's time; 0: off)")
       ->capture_default_str();

@@ -15,6 +15,7 @@
 #include "solver/status.h"
 #include "solver/threads.h"
 #include "tools/commands.h"
+#include "tools/recovery_flags.h"
 
 namespace translume {
 namespace {
@@ -195,6 +196,20 @@ std::vector<double> ParseNumbers(const std::string& text, const char* flag, size
     throw InputError(fmt::format("{} {}: expected {} comma-separated numbers", flag, text,
                                  n1 == n2 ? std::to_string(n1) : fmt::format("{} or {}", n1, n2)));
   return v;
+}
+
+void AddValidationFlags(CLI::App& app, RecoveryOptions* o) {
+  app.add_option("--validation-every", o->validation_every,
+                 "With validation conditions: check the fit on them every this many iterations and keep the "
+                 "best iterate (0: off; docs/inverse.md, \"Validation\")")
+      ->capture_default_str();
+  app.add_option("--validation-patience", o->validation_patience,
+                 "Stop when no iterate in this many iterations came within --validation-margin of the least "
+                 "validation error")
+      ->capture_default_str();
+  app.add_option("--validation-margin", o->validation_margin,
+                 "Validation errors within this fraction of the least count as equal; the later iterate is kept")
+      ->capture_default_str();
 }
 
 }  // namespace translume

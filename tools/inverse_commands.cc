@@ -52,17 +52,7 @@ void AddRecoveryFlags(CLI::App& app, RecoveryFlags* f) {
   app.add_option("--tolerance", f->options.tolerance,
                  "Stop when an iteration lowers the objective by less than this fraction")
       ->capture_default_str();
-  app.add_option("--validation-every", f->options.validation_every,
-                 "With validation conditions (DATASET/validation/): check the fit on them every this many "
-                 "iterations, keep the best iterate (0: off; docs/inverse.md, \"Validation\")")
-      ->capture_default_str();
-  app.add_option("--validation-patience", f->options.validation_patience,
-                 "Stop when no iterate in this many iterations came within --validation-margin of the least "
-                 "validation error")
-      ->capture_default_str();
-  app.add_option("--validation-margin", f->options.validation_margin,
-                 "Validation errors within this fraction of the least count as equal; the later iterate is kept")
-      ->capture_default_str();
+  AddValidationFlags(app, &f->options);
   app.add_option("--backend", f->backend, "cpu or gl (OpenGL compute shaders; docs/gpu.md)")
       ->capture_default_str();
 }

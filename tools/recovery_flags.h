@@ -18,6 +18,9 @@ struct RecoveryFlags {
   RecoveryOptions Options(const CLI::App& app, const char* command) const;
 };
 void AddRecoveryFlags(CLI::App& app, RecoveryFlags* flags);
+// --validation-every, --validation-patience and --validation-margin (RecoveryOptions'
+// validation_*), for `solve` and `acquire` (through AddRecoveryFlags) and `bench recovery`.
+void AddValidationFlags(CLI::App& app, RecoveryOptions* options);
 
 // CheckFitsInMemory (solver/memory.h) for a recovery with these options; where a lower
 // --lbfgs-rank would need less, the error says how much.
