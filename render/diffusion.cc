@@ -100,6 +100,14 @@ class CpuHierarchy : public HierarchyRelaxer {
 
 std::unique_ptr<HierarchyRelaxer> MakeGlHierarchy();  // gl_diffusion.cc
 
+void HierarchyRelaxer::SetSource(int, DeviceFloats) {
+  TL_CHECK_MSG(false, "only the gl relaxation reads q from the GPU");
+}
+
+void HierarchyRelaxer::WriteShadedRadiance(DeviceFloats) {
+  TL_CHECK_MSG(false, "only the gl relaxation writes radiance on the GPU");
+}
+
 std::unique_ptr<HierarchyRelaxer> HierarchyRelaxer::Create(DiffusionBackend backend) {
   if (backend == DiffusionBackend::kGl) return MakeGlHierarchy();
   return std::make_unique<CpuHierarchy>();
@@ -348,27 +356,29 @@ PolygridDiffusion::PolygridDiffusion(const std::vector<Polygrid>* levels,
     // larger errors (docs/benchmarks.md, "Chebyshev's radius in one pass").
     if (options_.relaxation == Relaxation::kChebyshev) hl[l].rho = JacobiSpectralRadii(hl[l]);
   }
+  if (options.backend == DiffusionBackend::kGl) {
+    const Polygrid& pg = L[0];
+    hl[0].radiance_scale.resize(pg.num_boundary() * 3);
+    for (int64_t b = 0; b < pg.num_boundary(); ++b)
+      for (int c = 0; c < 3; ++c)
+        hl[0].radiance_scale[b * 3 + c] = float(1 / (2 * kPi * materials_[0].kappa[c][pg.num_interior + b]));
+  }
   relaxer_ = HierarchyRelaxer::Create(options.backend);
   relaxer_->Load(std::move(hl));
 }
 
-const std::vector<float>& PolygridDiffusion::Solve(const std::vector<BoundaryLight>& q,
-                                                   bool boundary_only) {
-  const std::vector<Polygrid>& L = *levels_;
-  const int nl = int(L.size());
-  TL_CHECK(int(q.size()) == nl);
-  phi_.resize(L[0].size() * 3, 0.f);
-  const int64_t first_row = boundary_only ? L[0].num_interior : 0;
+template <typename SetSourceFn>
+void PolygridDiffusion::Relax(const SetSourceFn& set_source) {
+  const int nl = int(levels_->size());
   last_iterations_ = 0;
   if (options_.frame_coherence && have_previous_) {
-    relaxer_->SetSource(0, q[0]);
+    set_source(0);
     relaxer_->Relax(0, false, options_.coherent_iterations);
-    relaxer_->Read(0, first_row, &phi_);
     last_iterations_ = options_.coherent_iterations;
-    return phi_;
+    return;
   }
   for (int l = nl - 1; l >= 0; --l) {  // coarsest first
-    relaxer_->SetSource(l, q[l]);
+    set_source(l);
     if (l == nl - 1)
       relaxer_->Zero(l);
     else
@@ -376,9 +386,24 @@ const std::vector<float>& PolygridDiffusion::Solve(const std::vector<BoundaryLig
     relaxer_->Relax(l, depth_[l] >= 0, iterations_[l]);
     last_iterations_ += iterations_[l];
   }
-  relaxer_->Read(0, first_row, &phi_);
   have_previous_ = true;
+}
+
+const std::vector<float>& PolygridDiffusion::Solve(const std::vector<BoundaryLight>& q,
+                                                   bool boundary_only) {
+  const std::vector<Polygrid>& L = *levels_;
+  TL_CHECK(q.size() == L.size());
+  phi_.resize(L[0].size() * 3, 0.f);
+  Relax([&](int l) { relaxer_->SetSource(l, q[l]); });
+  relaxer_->Read(0, boundary_only ? L[0].num_interior : 0, &phi_);
   return phi_;
+}
+
+void PolygridDiffusion::SolveOnDevice(const std::vector<DeviceFloats>& q, DeviceFloats radiance) {
+  TL_CHECK_MSG(options_.backend == DiffusionBackend::kGl, "SolveOnDevice needs the gl backend");
+  TL_CHECK(q.size() == levels_->size());
+  Relax([&](int l) { relaxer_->SetSource(l, q[l]); });
+  relaxer_->WriteShadedRadiance(radiance);
 }
 
 }  // namespace translume

@@ -80,6 +80,14 @@ std::vector<float> SolveReference(const JacobiSystem& system, int channels = 3,
 
 // Where the relaxation runs.
 enum class DiffusionBackend { kCpu, kGl };
+
+// Floats in a GL buffer of the gl backend: the buffer's name and the index of the first float.
+// render/'s gl code (the passes and the relaxation, in the one headless context) hands a frame's
+// q and radiance on through these, so that they stay on the GPU (Renderer, docs/render.md).
+struct DeviceFloats {
+  uint32_t buffer = 0;
+  int64_t first = 0;
+};
 DiffusionBackend ParseDiffusionBackend(const std::string& text);
 
 // The relaxation of a whole hierarchy on one backend, with the same arithmetic (float): the
@@ -109,6 +117,9 @@ class HierarchyRelaxer {
     // Per channel, the spectral radius of the step's iteration matrix (a) that Chebyshev's
     // semi-iteration assumes (JacobiSpectralRadii); 0: plain Jacobi steps.
     std::array<double, 3> rho{};
+    // The finest level's only, for WriteShadedRadiance: 1 / (2 pi kappa_b) per boundary node and
+    // channel [b * 3 + c] (ShadedRadiance's factor); empty on the other levels.
+    std::vector<float> radiance_scale;
   };
   virtual ~HierarchyRelaxer() = default;
   virtual void Load(std::vector<Level> levels) = 0;
@@ -122,6 +133,11 @@ class HierarchyRelaxer {
   // Rows [first_row, size) of the level's phi' into (*phi)[first_row * 3 ...]; phi holds
   // size * 3 values, the other rows are left as they are.
   virtual void Read(int level, int64_t first_row, std::vector<float>* phi) = 0;
+  // gl only (the others CHECK): SetSource from q on the GPU, q_b,c at float q.first + b * 3 + c;
+  // and ShadedRadiance of the finest level into a GPU buffer, channel-major as the shading pass
+  // reads it: out[out.first + c * num_boundary + b] = max(0, phi'_b,c radiance_scale[b * 3 + c]).
+  virtual void SetSource(int level, DeviceFloats q);
+  virtual void WriteShadedRadiance(DeviceFloats out);
   static std::unique_ptr<HierarchyRelaxer> Create(DiffusionBackend backend);
 };
 
@@ -196,11 +212,20 @@ class PolygridDiffusion {
   // returns the finest level's phi' (n * 3 + c); with boundary_only, only the boundary rows
   // are read back from the backend (the others are stale), which is all that shading needs.
   const std::vector<float>& Solve(const std::vector<BoundaryLight>& q, bool boundary_only = false);
+  // The gl backend's frame without host round trips: Solve from q on the GPU (q[l]: level l's,
+  // as HierarchyRelaxer::SetSource takes it), then the finest level's ShadedRadiance into
+  // `radiance` on the GPU (WriteShadedRadiance's layout). Nothing is read back.
+  void SolveOnDevice(const std::vector<DeviceFloats>& q, DeviceFloats radiance);
   const std::vector<NodeMaterial>& materials() const { return materials_; }
   int last_iterations() const { return last_iterations_; }
   void ResetCoherence() { have_previous_ = false; }
 
  private:
+  // The hierarchy's steps (Section 5.3, or the frame-coherent ones) after set_source(level) for
+  // each level it relaxes.
+  template <typename SetSourceFn>
+  void Relax(const SetSourceFn& set_source);
+
   const std::vector<Polygrid>* levels_;
   std::vector<NodeMaterial> materials_;
   double C_;

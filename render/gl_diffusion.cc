@@ -29,6 +29,25 @@ std::map<GLuint, std::string> program_files;
 
 namespace render_gl {
 
+namespace {
+
+// Dispatches `threads` invocations of the program in use (buffers bound), then a barrier.
+void DispatchBound(int64_t threads) {
+  const int64_t groups = (threads + 255) / 256;
+  const int64_t gx = std::min<int64_t>(groups, 65535), gy = (groups + gx - 1) / gx;
+  gl::Profiler& profile = gl::Profiler::Get();  // (TRANSLUME_GL_PROFILE)
+  if (profile.on()) profile.Before();
+  api.DispatchCompute(GLuint(gx), GLuint(gy), 1);
+  if (profile.on()) {
+    GLint prog = 0;
+    api.GetIntegerv(GL_CURRENT_PROGRAM, &prog);
+    profile.After(program_files[GLuint(prog)]);
+  }
+  api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+}
+
+}  // namespace
+
 GLuint Program(const std::string& file) {
   static std::map<std::string, GLuint> cache;
   if (auto it = cache.find(file); it != cache.end()) return it->second;
@@ -74,17 +93,14 @@ void Dispatch(std::initializer_list<const Ssbo*> buffers, int64_t threads) {
   if (threads <= 0) return;
   GLuint b = 0;
   for (const Ssbo* s : buffers) api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, b++, s->id);
-  const int64_t groups = (threads + 255) / 256;
-  const int64_t gx = std::min<int64_t>(groups, 65535), gy = (groups + gx - 1) / gx;
-  gl::Profiler& profile = gl::Profiler::Get();  // (TRANSLUME_GL_PROFILE)
-  if (profile.on()) profile.Before();
-  api.DispatchCompute(GLuint(gx), GLuint(gy), 1);
-  if (profile.on()) {
-    GLint prog = 0;
-    api.GetIntegerv(GL_CURRENT_PROGRAM, &prog);
-    profile.After(program_files[GLuint(prog)]);
-  }
-  api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+  DispatchBound(threads);
+}
+
+void Dispatch(std::initializer_list<GLuint> buffers, int64_t threads) {
+  if (threads <= 0) return;
+  GLuint b = 0;
+  for (GLuint id : buffers) api.BindBufferBase(GL_SHADER_STORAGE_BUFFER, b++, id);
+  DispatchBound(threads);
 }
 
 }  // namespace render_gl
@@ -101,6 +117,7 @@ class GlHierarchy : public HierarchyRelaxer {
     jacobi_ = render_gl::Program("render/shaders/jacobi.comp");
     source_ = render_gl::Program("render/shaders/source.comp");
     prolong_ = render_gl::Program("render/shaders/prolong.comp");
+    radiance_ = render_gl::Program("render/shaders/radiance.comp");
   }
   void Load(std::vector<Level> levels) override {
     dev_ = std::vector<Device>(levels.size());
@@ -123,6 +140,7 @@ class GlHierarchy : public HierarchyRelaxer {
       d.p_weight.Set(v.prolong.weight);
       for (Ssbo& b : d.phi) b.Set(nullptr, size_t(d.size) * 3 * sizeof(float));
     }
+    if (!levels.empty() && !levels[0].radiance_scale.empty()) radiance_scale_.Set(levels[0].radiance_scale);
   }
   void SetSource(int l, const BoundaryLight& q) override {
     Device& d = dev_[l];
@@ -131,9 +149,25 @@ class GlHierarchy : public HierarchyRelaxer {
     for (int64_t b = 0; b < nb; ++b)
       for (int c = 0; c < 3; ++c) host_q_[b * 3 + c] = q[c][b];
     d.q.Set(host_q_);
+    SetSource(l, DeviceFloats{d.q.id, 0});
+  }
+  void SetSource(int l, DeviceFloats q) override {
+    Device& d = dev_[l];
+    const int64_t nb = d.size - d.num_interior;
     api.UseProgram(source_);
     api.Uniform1i(0, int(nb * 3));
-    render_gl::Dispatch({&d.q, &d.coef, &d.s}, nb * 3);
+    api.Uniform1i(1, int(q.first));
+    render_gl::Dispatch({q.buffer, d.coef.id, d.s.id}, nb * 3);
+  }
+  void WriteShadedRadiance(DeviceFloats out) override {
+    TL_CHECK_MSG(radiance_scale_.id != 0, "no radiance_scale loaded for the finest level");
+    const Device& d = dev_[0];
+    const int64_t nb = d.size - d.num_interior;
+    api.UseProgram(radiance_);
+    api.Uniform1i(0, int(nb));
+    api.Uniform1i(1, int(d.num_interior));
+    api.Uniform1i(2, int(out.first));
+    render_gl::Dispatch({d.phi[d.cur].id, radiance_scale_.id, out.buffer}, nb);
   }
   void Zero(int l) override {
     for (Ssbo& b : dev_[l].phi) b.Zero();
@@ -184,8 +218,9 @@ class GlHierarchy : public HierarchyRelaxer {
     Ssbo nb, a, coef, q, s, active, p_start, p_index, p_weight, phi[3];
     std::array<double, 3> rho{};
   };
-  GLuint jacobi_ = 0, source_ = 0, prolong_ = 0;
+  GLuint jacobi_ = 0, source_ = 0, prolong_ = 0, radiance_ = 0;
   std::vector<Device> dev_;
+  Ssbo radiance_scale_;
   std::vector<float> host_q_;
 };
 

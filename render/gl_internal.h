@@ -59,5 +59,7 @@ struct Ssbo {
 // compute their index as gl_WorkGroupID.y * gl_NumWorkGroups.x * 256 + gl_GlobalInvocationID.x),
 // followed by a shader-storage barrier.
 void Dispatch(std::initializer_list<const Ssbo*> buffers, int64_t threads);
+// The same with buffer names (a buffer another object owns: DeviceFloats::buffer).
+void Dispatch(std::initializer_list<GLuint> buffers, int64_t threads);
 
 }  // namespace translume::render_gl

@@ -2,8 +2,8 @@
 // The gl backend of the renderer's incident-light and shading passes (render_passes.h):
 // compute shaders (render/shaders/raster.comp, incident.comp, shade.comp, with common.glsl) in
 // the solver's headless context. The mesh, the boundary nodes of every level and the vertex ->
-// boundary node weights are uploaded once; per frame the light samples go up, q and the image
-// come back.
+// boundary node weights are uploaded once; per frame the light samples go up and the image
+// comes back, and q and the radiance too unless the frame stays on the GPU (DeviceRenderPasses).
 #include <array>
 #include <cstring>
 #include <fmt/format.h>
@@ -42,7 +42,7 @@ void Fill(const Ssbo& buffer, uint32_t value) {
   api.ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, &value);
 }
 
-class GlRenderPasses : public RenderPasses {
+class GlRenderPasses : public DeviceRenderPasses {
  public:
   explicit GlRenderPasses(const PassScene* scene) : sc_(*scene) {
     loop_budget_ = GlContext::Get().info().loop_budget;
@@ -85,15 +85,24 @@ class GlRenderPasses : public RenderPasses {
       }
     near_.Set(near);
     q_.Set(nullptr, size_t(num_nodes_) * 3 * sizeof(float));
+    num_finest_ = level_start_[1];
+    radiance_.Set(nullptr, size_t(num_finest_) * 3 * sizeof(float));
     ids_.Set(nullptr, 16);  // bound (unused) while drawing shadow maps
   }
 
-  std::vector<BoundaryLight> Incident(const std::vector<LightSample>& samples) override {
+  ~GlRenderPasses() override {
+    if (stamps_[0] != 0) api.DeleteQueries(4, stamps_.data());
+  }
+
+  std::vector<DeviceFloats> IncidentOnDevice(const std::vector<LightSample>& samples) override {
     TL_CHECK(!samples.empty());
     UploadSamples(samples, nullptr);
     map_size_ = samples[0].view.width;
     const size_t texels = size_t(map_size_) * map_size_;
-    shadow_.Set(nullptr, samples.size() * texels * sizeof(uint32_t));
+    if (samples.size() * texels != shadow_texels_) {
+      shadow_texels_ = samples.size() * texels;
+      shadow_.Set(nullptr, shadow_texels_ * sizeof(uint32_t));
+    }
     Fill(shadow_, FarDepth());
     std::vector<std::array<int, 2>> maps;
     for (size_t s = 0; s < samples.size(); ++s) maps.push_back({int(s), int(s * texels)});
@@ -105,6 +114,13 @@ class GlRenderPasses : public RenderPasses {
     api.Uniform1f(3, float(sc_.shadow_bias));
     api.Uniform1f(4, float(sc_.options.eta));
     Dispatch({&samples_, &shadow_, &verts_, &tris_, &ids_, &nodes_, &q_}, num_nodes_);
+    std::vector<DeviceFloats> out;
+    for (size_t l = 0; l + 1 < level_start_.size(); ++l) out.push_back({q_.id, level_start_[l] * 3});
+    return out;
+  }
+
+  std::vector<BoundaryLight> Incident(const std::vector<LightSample>& samples) override {
+    IncidentOnDevice(samples);
     std::vector<float> q(size_t(num_nodes_) * 3);
     q_.Get(q.data(), q.size() * sizeof(float));
     std::vector<BoundaryLight> out(sc_.levels->size());
@@ -116,35 +132,29 @@ class GlRenderPasses : public RenderPasses {
     return out;
   }
 
-  Image Shade(const PassView& cam, const BoundaryLight& radiance,
-              const std::vector<LightSample>& samples) override {
+  DeviceFloats RadianceOnDevice() override { return {radiance_.id, 0}; }
+
+  void ShadeOnDevice(const PassView& cam, const std::vector<LightSample>& samples) override {
     TL_CHECK_MSG(shadow_.id != 0, "Shade before Incident");
     const RenderOptions& o = sc_.options;
     const int ss = o.supersample;
-    Image img;
-    img.width = cam.width / ss;
-    img.height = cam.height / ss;
-    img.channels = 3;
-    img.data.assign(size_t(img.width) * img.height * 3, 0.f);
+    image_width_ = cam.width / ss;
+    image_height_ = cam.height / ss;
     UploadSamples(samples, &cam);
     const size_t pixels = size_t(cam.width) * cam.height;
     if (pixels != cam_pixels_) {
       cam_depth_.Set(nullptr, pixels * sizeof(uint32_t));
       ids_.Set(nullptr, pixels * sizeof(int32_t));
-      image_.Set(nullptr, img.data.size() * sizeof(float));
+      image_.Set(nullptr, size_t(image_width_) * image_height_ * 3 * sizeof(float));
       cam_pixels_ = pixels;
     }
     Fill(cam_depth_, FarDepth());
     Fill(ids_, uint32_t(kNoTriangle));
     for (int mode = 0; mode < 2; ++mode)
       Raster({{int(samples.size()), 0}}, cam.width, cam.height, cam_depth_, mode);
-    const int64_t nb = (*sc_.levels)[0].num_boundary();
-    std::vector<float> rad(size_t(nb) * 3);
-    for (int c = 0; c < 3; ++c) std::copy(radiance[c].begin(), radiance[c].end(), rad.begin() + c * nb);
-    radiance_.Set(rad);
     api.UseProgram(shade_);
-    api.Uniform1i(0, img.width);
-    api.Uniform1i(1, img.height);
+    api.Uniform1i(0, image_width_);
+    api.Uniform1i(1, image_height_);
     api.Uniform1i(2, ss);
     api.Uniform1i(3, int(samples.size()));
     api.Uniform1i(4, map_size_);
@@ -153,7 +163,7 @@ class GlRenderPasses : public RenderPasses {
     api.Uniform1f(7, float(o.specular));
     api.Uniform1f(8, float(o.roughness));
     api.Uniform1f(9, float(o.surface_reflectance));
-    api.Uniform1i(10, int(nb));
+    api.Uniform1i(10, int(num_finest_));
     // The light samples per dispatch: all, or as many as keep an invocation's ss^2 (s1 - s0 +
     // 18) loop iterations (shade.comp) within half the loop budget.
     const int n = int(samples.size());
@@ -162,10 +172,59 @@ class GlRenderPasses : public RenderPasses {
       api.Uniform1i(11, s0);
       api.Uniform1i(12, std::min(n, s0 + per));
       Dispatch({&samples_, &shadow_, &verts_, &tris_, &ids_, &near_, &image_, &radiance_},
-               int64_t(img.width) * img.height);
+               int64_t(image_width_) * image_height_);
     }
+  }
+
+  Image ReadImage() override {
+    Image img;
+    img.width = image_width_;
+    img.height = image_height_;
+    img.channels = 3;
+    img.data.resize(size_t(img.width) * img.height * 3);
     image_.Get(img.data.data(), img.data.size() * sizeof(float));
     return img;
+  }
+
+  Image Shade(const PassView& cam, const BoundaryLight& radiance,
+              const std::vector<LightSample>& samples) override {
+    std::vector<float> rad(size_t(num_finest_) * 3);
+    for (int c = 0; c < 3; ++c) std::copy(radiance[c].begin(), radiance[c].end(), rad.begin() + c * num_finest_);
+    UploadRadiance(rad.data());
+    ShadeOnDevice(cam, samples);
+    return ReadImage();
+  }
+
+  BoundaryLight ReadFinestQ() override {
+    std::vector<float> q(size_t(num_finest_) * 3);
+    q_.Get(q.data(), q.size() * sizeof(float));
+    BoundaryLight out;
+    for (int c = 0; c < 3; ++c) {
+      out[c].resize(num_finest_);
+      for (int64_t b = 0; b < num_finest_; ++b) out[c][b] = q[b * 3 + c];
+    }
+    return out;
+  }
+
+  BoundaryLight ReadRadiance() override {
+    BoundaryLight out;
+    for (int c = 0; c < 3; ++c) {
+      out[c].resize(num_finest_);
+      radiance_.Get(out[c].data(), size_t(num_finest_) * sizeof(float), size_t(c * num_finest_) * sizeof(float));
+    }
+    return out;
+  }
+
+  void Stamp(int k) override {
+    TL_CHECK(k >= 0 && k < 4);
+    if (stamps_[0] == 0) api.GenQueries(4, stamps_.data());
+    api.QueryCounter(stamps_[k], GL_TIMESTAMP);
+  }
+
+  std::array<double, 3> StampSeconds() override {
+    std::array<uint64_t, 4> t{};
+    for (int k = 0; k < 4; ++k) api.GetQueryObjectui64v(stamps_[k], GL_QUERY_RESULT, &t[k]);
+    return {(t[1] - t[0]) * 1e-9, (t[2] - t[1]) * 1e-9, (t[3] - t[2]) * 1e-9};
   }
 
  private:
@@ -222,6 +281,12 @@ class GlRenderPasses : public RenderPasses {
     }
   }
 
+  void UploadRadiance(const float* rad) {
+    api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    api.BindBuffer(GL_SHADER_STORAGE_BUFFER, radiance_.id);
+    api.BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, num_finest_ * 3 * sizeof(float), rad);
+  }
+
   // Sets raster.comp's count of listed tiles to 0.
   void ResetTiles() {
     const uint32_t zero = 0;
@@ -263,8 +328,10 @@ class GlRenderPasses : public RenderPasses {
 
   const PassScene& sc_;
   GLuint raster_ = 0, incident_ = 0, shade_ = 0;
-  int num_tris_ = 0, map_size_ = 0;
-  int64_t num_nodes_ = 0;
+  int num_tris_ = 0, map_size_ = 0, image_width_ = 0, image_height_ = 0;
+  int64_t num_nodes_ = 0, num_finest_ = 0;  // boundary nodes of every level, of the finest
+  size_t shadow_texels_ = 0;
+  std::array<GLuint, 4> stamps_{};
   std::vector<int64_t> level_start_;
   size_t cam_pixels_ = 0;
   // Large triangles drawn in tiles (raster.comp) where GlInfo::loop_budget limits the loop
@@ -277,7 +344,7 @@ class GlRenderPasses : public RenderPasses {
 
 }  // namespace
 
-std::unique_ptr<RenderPasses> MakeGlRenderPasses(const PassScene* scene) {
+std::unique_ptr<DeviceRenderPasses> MakeGlRenderPasses(const PassScene* scene) {
   return std::make_unique<GlRenderPasses>(scene);
 }
 

@@ -540,6 +540,8 @@ struct Renderer::Impl {
   std::unique_ptr<PolygridDiffusion> diffusion;
   PassScene scene;
   std::unique_ptr<RenderPasses> passes;
+  // The gl passes where the diffusion is gl too: the frame stays on the GPU (else null).
+  DeviceRenderPasses* device = nullptr;
   // The environment's direction samples, computed once per environment image.
   const Image* env_source = nullptr;
   TriangleMesh shading_mesh;  // ShadingMesh of the shape's
@@ -620,7 +622,27 @@ Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
     }
     for (int k = 0; k < 4; ++k) sc.near_w[v][k] = float(sc.near_w[v][k] / wsum);
   }
-  I.passes = RenderPasses::Create(diffusion.backend, &sc);
+  if (diffusion.backend == DiffusionBackend::kGl) {
+    std::unique_ptr<DeviceRenderPasses> gl = MakeGlRenderPasses(&sc);
+    if (I.diffusion) I.device = gl.get();
+    I.passes = std::move(gl);
+  } else {
+    I.passes = MakeCpuRenderPasses(&sc);
+  }
+}
+
+const BoundaryLight& Renderer::boundary_light() const {
+  if (on_device_) {
+    q_finest_ = impl_->device->ReadFinestQ();
+    radiance_ = impl_->device->ReadRadiance();
+    on_device_ = false;
+  }
+  return q_finest_;
+}
+
+const BoundaryLight& Renderer::boundary_radiance() const {
+  boundary_light();
+  return radiance_;
 }
 
 Renderer::~Renderer() = default;
@@ -682,6 +704,34 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
       }
     }
   }
+  const int ss = o.supersample;
+  const double az = (o.azimuth_deg + turn_deg) * kPi / 180, el = o.elevation_deg * kPi / 180;
+  const double t = std::tan(o.fov_deg * kPi / 360);
+  const double dist = o.camera_distance_mm > 0 ? o.camera_distance_mm : radius / std::sin(o.fov_deg * kPi / 360) * 1.15;
+  const Vec3 eye = centre + dist * Vec3(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
+  const PassView cam = PassView::LookAt(eye, centre, o.width * ss, o.height * ss, false, 1 / t);
+
+  if (I.device) {
+    // The three passes on the GPU, q and the radiance kept there: the passes' times come from
+    // GPU timestamps between them (the host does not wait between passes), the light samples'
+    // setup counted in the first and the image's transfer in none.
+    const double setup = Seconds(t0);
+    I.device->Stamp(0);
+    const std::vector<DeviceFloats> q = I.device->IncidentOnDevice(samples);
+    I.device->Stamp(1);
+    I.diffusion->SolveOnDevice(q, I.device->RadianceOnDevice());
+    I.device->Stamp(2);
+    I.device->ShadeOnDevice(cam, samples);
+    I.device->Stamp(3);
+    Image img = I.device->ReadImage();
+    on_device_ = true;
+    const std::array<double, 3> gpu = I.device->StampSeconds();
+    times_.incident = setup + gpu[0];
+    times_.diffusion = gpu[1];
+    times_.shading = gpu[2];
+    return img;
+  }
+  on_device_ = false;
   std::vector<BoundaryLight> q = I.passes->Incident(samples);
   times_.incident = Seconds(t0);
 
@@ -706,12 +756,6 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
 
   // Pass 3: shading, supersampled.
   t0 = std::chrono::steady_clock::now();
-  const int ss = o.supersample;
-  const double az = (o.azimuth_deg + turn_deg) * kPi / 180, el = o.elevation_deg * kPi / 180;
-  const double t = std::tan(o.fov_deg * kPi / 360);
-  const double dist = o.camera_distance_mm > 0 ? o.camera_distance_mm : radius / std::sin(o.fov_deg * kPi / 360) * 1.15;
-  const Vec3 eye = centre + dist * Vec3(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
-  const PassView cam = PassView::LookAt(eye, centre, o.width * ss, o.height * ss, false, 1 / t);
   Image img = I.passes->Shade(cam, radiance_, samples);
   times_.shading = Seconds(t0);
   return img;

@@ -60,7 +60,9 @@ struct RenderOptions {
   std::string Validate() const;
 };
 
-// Pass timings of the last frame, seconds.
+// Pass timings of the last frame, seconds: host time (cpu backend, and the dipole model); on
+// the gl backend GPU timestamps between the passes (the host waits only for the image), the
+// incident pass's with the host's setup of the light samples before it.
 struct FrameTimes {
   double incident = 0, diffusion = 0, shading = 0;
 };
@@ -77,14 +79,16 @@ class Renderer {
   Image Render(const RenderLight& light, double turn_deg = 0);
   const FrameTimes& times() const { return times_; }
   // Incident light q and outgoing radiance L at the finest level's boundary nodes (last frame).
-  const BoundaryLight& boundary_light() const { return q_finest_; }
-  const BoundaryLight& boundary_radiance() const { return radiance_; }
+  // The gl backend keeps them on the GPU; the first call after a frame reads them back.
+  const BoundaryLight& boundary_light() const;
+  const BoundaryLight& boundary_radiance() const;
 
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
   FrameTimes times_;
-  BoundaryLight q_finest_, radiance_;
+  mutable BoundaryLight q_finest_, radiance_;
+  mutable bool on_device_ = false;  // the last frame's q and radiance are on the GPU only
 };
 
 // Multiple-scattering radiance at the boundary nodes from the dipole BSSRDF (Jensen et al.

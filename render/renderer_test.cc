@@ -76,10 +76,12 @@ void ExpectGlPassesMatchCpu(const Shape& shape, const std::vector<Polygrid>& lev
   d.backend = DiffusionBackend::kGl;
   Renderer gl(&shape, &levels, mats, ReflectionParameterC(1.3), d, ro);
   const Image b = gl.Render(light, 15);
-  double eq = 0;
+  // (gl keeps q and the radiance on the GPU through the frame: read back here.)
+  double eq = 0, er = 0;
   float most_q = 0;
   for (int c = 0; c < 3; ++c) {
     eq = std::max(eq, RelativeL2(gl.boundary_light()[c], cpu.boundary_light()[c]));
+    er = std::max(er, RelativeL2(gl.boundary_radiance()[c], cpu.boundary_radiance()[c]));
     for (float v : cpu.boundary_light()[c]) most_q = std::max(most_q, v);
   }
   int differ = 0, lit = 0;
@@ -88,11 +90,12 @@ void ExpectGlPassesMatchCpu(const Shape& shape, const std::vector<Polygrid>& lev
     lit += a.data[i] > 0;
   }
   const double ei = RelativeL2(b.data, a.data);
-  std::printf("[gl passes] %s: q relative L2 %.2e, image relative L2 %.2e, %d of %d values "
-              "differ by > 1e-4\n", what.c_str(), eq, ei, differ, lit);
+  std::printf("[gl passes] %s: q relative L2 %.2e, radiance %.2e, image %.2e, %d of %d values "
+              "differ by > 1e-4\n", what.c_str(), eq, er, ei, differ, lit);
   EXPECT_GT(lit, int(a.data.size()) / 5);
   EXPECT_GT(most_q, 0.f);
   EXPECT_LT(eq, 1e-5);
+  EXPECT_LT(er, 1e-5);
   EXPECT_LT(ei, 1e-3);
   EXPECT_LT(differ, int(a.data.size()) / 100);
 }

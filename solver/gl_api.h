@@ -52,6 +52,7 @@ namespace translume::gl {
   X(PFNGLBINDIMAGETEXTUREPROC, BindImageTexture)                         \
   X(PFNGLFINISHPROC, Finish)                                             \
   X(PFNGLGENQUERIESPROC, GenQueries)                                     \
+  X(PFNGLDELETEQUERIESPROC, DeleteQueries)                               \
   X(PFNGLQUERYCOUNTERPROC, QueryCounter)                                 \
   X(PFNGLGETQUERYOBJECTUI64VPROC, GetQueryObjectui64v)
 

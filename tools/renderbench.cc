@@ -91,8 +91,8 @@ int main(int argc, char** argv) {
       throw InputError("--iterations/--depth: " + err);
     d.coherent_iterations = coherent_iterations;
     if (d.backend == DiffusionBackend::kGl) std::printf("%s\n", GlContext::Get().info().ToString().c_str());
-    // Medians over the timed frames: t1 incident light, t2 diffusion, t3 shading (ms); fps =
-    // 1 / median frame time; diff fps = 1 / median t2 (diffusion only); coh: with frame
+    // Medians over the timed frames: t1 incident light, t2 diffusion, t3 shading (ms; gl: GPU
+    // timestamps between the passes, Renderer::times); fps = 1 / median frame time (host); diff fps = 1 / median t2 (diffusion only); coh: with frame
     // coherence (skipped: -). build s: the polygrid hierarchy's construction (once). t2 range:
     // the fastest and slowest frame's diffusion without coherence (a run's spread, to tell it
     // from differences between runs). E: the last frame without coherence against the
