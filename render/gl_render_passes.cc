@@ -121,14 +121,8 @@ class GlRenderPasses : public DeviceRenderPasses {
 
   std::vector<BoundaryLight> Incident(const std::vector<LightSample>& samples) override {
     IncidentOnDevice(samples);
-    std::vector<float> q(size_t(num_nodes_) * 3);
-    q_.Get(q.data(), q.size() * sizeof(float));
-    std::vector<BoundaryLight> out(sc_.levels->size());
-    for (size_t l = 0; l < out.size(); ++l)
-      for (int c = 0; c < 3; ++c) {
-        out[l][c].resize(level_start_[l + 1] - level_start_[l]);
-        for (size_t b = 0; b < out[l][c].size(); ++b) out[l][c][b] = q[(level_start_[l] + b) * 3 + c];
-      }
+    std::vector<BoundaryLight> out;
+    for (size_t l = 0; l < sc_.levels->size(); ++l) out.push_back(ReadQ(l));
     return out;
   }
 
@@ -195,16 +189,7 @@ class GlRenderPasses : public DeviceRenderPasses {
     return ReadImage();
   }
 
-  BoundaryLight ReadFinestQ() override {
-    std::vector<float> q(size_t(num_finest_) * 3);
-    q_.Get(q.data(), q.size() * sizeof(float));
-    BoundaryLight out;
-    for (int c = 0; c < 3; ++c) {
-      out[c].resize(num_finest_);
-      for (int64_t b = 0; b < num_finest_; ++b) out[c][b] = q[b * 3 + c];
-    }
-    return out;
-  }
+  BoundaryLight ReadFinestQ() override { return ReadQ(0); }
 
   BoundaryLight ReadRadiance() override {
     BoundaryLight out;
@@ -279,6 +264,19 @@ class GlRenderPasses : public DeviceRenderPasses {
       api.Uniform1i(5, 1);
       Dispatch({&samples_, &depth, &verts_, &tris_, &ids_, &tiles_}, num_tiles_);
     }
+  }
+
+  // Level l's q from the incident pass's buffer ([node * 3 + c], the levels one after the other).
+  BoundaryLight ReadQ(size_t l) const {
+    const int64_t n = level_start_[l + 1] - level_start_[l];
+    std::vector<float> q(size_t(n) * 3);
+    q_.Get(q.data(), q.size() * sizeof(float), size_t(level_start_[l]) * 3 * sizeof(float));
+    BoundaryLight out;
+    for (int c = 0; c < 3; ++c) {
+      out[c].resize(n);
+      for (int64_t b = 0; b < n; ++b) out[c][b] = q[b * 3 + c];
+    }
+    return out;
   }
 
   void UploadRadiance(const float* rad) {

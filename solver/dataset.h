@@ -37,6 +37,9 @@ struct Dataset {
   std::string Validate() const;
 };
 
+// a and b agree to 1e-6 relative: the same spacing or C, as read back from files.
+bool NearlyEqual(double a, double b);
+
 // "" when `other` (a held-out or validation dataset) poses its conditions on the same problem
 // as `training`: the same grid, spacing and C (relative 1e-6), and with same_setup the same lit
 // face; otherwise what differs, as "its grid G, spacing S mm and C c differ from the training

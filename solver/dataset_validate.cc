@@ -62,9 +62,11 @@ std::string Dataset::Validate() const {
   return "";
 }
 
+bool NearlyEqual(double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(std::abs(a), std::abs(b)); }
+
 std::string DifferentProblem(const Dataset& other, const Dataset& training, bool same_setup) {
-  auto near = [](double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(std::abs(a), std::abs(b)); };
-  if (other.shape == training.shape && near(other.spacing_mm, training.spacing_mm) && near(other.C, training.C) &&
+  if (other.shape == training.shape && NearlyEqual(other.spacing_mm, training.spacing_mm) &&
+      NearlyEqual(other.C, training.C) &&
       (!same_setup || other.setup == training.setup))
     return "";
   if (!same_setup)

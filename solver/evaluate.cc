@@ -31,8 +31,6 @@ std::vector<std::vector<float>> Masks(const Dataset& d) {
   return w;
 }
 
-bool Near(double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(std::abs(a), std::abs(b)); }
-
 // A material is rendered under a dataset's lights on the dataset's terms: the same grid,
 // spacing and boundary parameter C (a material of another spacing or C would be compared with
 // data it cannot reproduce, and its error would say nothing).
@@ -40,10 +38,10 @@ void CheckMatches(const Material& m, const Dataset& d, const char* what) {
   if (!(m.shape == d.shape))
     throw InputError(fmt::format("{}: material grid {} differs from the dataset grid {}", what,
                                  m.shape.ToString(), d.shape.ToString()));
-  if (!Near(m.spacing_mm, d.spacing_mm))
+  if (!NearlyEqual(m.spacing_mm, d.spacing_mm))
     throw InputError(fmt::format("{}: material spacing {:g} mm differs from the dataset's {:g} mm", what,
                                  m.spacing_mm, d.spacing_mm));
-  if (!Near(m.C, d.C))
+  if (!NearlyEqual(m.C, d.C))
     throw InputError(fmt::format("{}: material C = {:g} (eta {:g}) differs from the dataset's C = {:g}", what,
                                  m.C, m.eta, d.C));
 }
