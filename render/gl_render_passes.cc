@@ -4,6 +4,7 @@
 // the solver's headless context. The mesh, the boundary nodes of every level and the vertex ->
 // boundary node weights are uploaded once; per frame the light samples go up and the image
 // comes back, and q and the radiance too unless the frame stays on the GPU (DeviceRenderPasses).
+#include <algorithm>
 #include <array>
 #include <cstring>
 #include <fmt/format.h>
@@ -104,9 +105,7 @@ class GlRenderPasses : public DeviceRenderPasses {
       shadow_.Set(nullptr, shadow_texels_ * sizeof(uint32_t));
     }
     Fill(shadow_, FarDepth());
-    std::vector<std::array<int, 2>> maps;
-    for (size_t s = 0; s < samples.size(); ++s) maps.push_back({int(s), int(s * texels)});
-    Raster(maps, map_size_, map_size_, shadow_, 0);  // depth only
+    Raster(0, int(samples.size()), map_size_, map_size_, shadow_, 0);  // depth only
     api.UseProgram(incident_);
     api.Uniform1i(0, int(num_nodes_));
     api.Uniform1i(1, int(samples.size()));
@@ -145,7 +144,7 @@ class GlRenderPasses : public DeviceRenderPasses {
     Fill(cam_depth_, FarDepth());
     Fill(ids_, uint32_t(kNoTriangle));
     for (int mode = 0; mode < 2; ++mode)
-      Raster({{int(samples.size()), 0}}, cam.width, cam.height, cam_depth_, mode);
+      Raster(int(samples.size()), 1, cam.width, cam.height, cam_depth_, mode);
     api.UseProgram(shade_);
     api.Uniform1i(0, image_width_);
     api.Uniform1i(1, image_height_);
@@ -214,12 +213,12 @@ class GlRenderPasses : public DeviceRenderPasses {
 
  private:
   // Draws the mesh with raster.comp in `mode` (0: depth, 1: triangle ids after mode 0) into
-  // each raster of `rasters` (the index of its view in the samples uploaded, its first texel
-  // in `depth`), all width x height texels. Within llvmpipe's loop budget (tile_ > 0), mode 0
-  // lists the tiles of the triangles larger than a tile, over all the rasters, and both modes
-  // then draw those tiles in a second dispatch (mode 1 the tiles mode 0 listed last).
-  void Raster(const std::vector<std::array<int, 2>>& rasters, int width, int height, const Ssbo& depth,
-              int mode) {
+  // num_rasters rasters of width x height texels, one after the other in `depth`, raster r
+  // seen from the uploaded samples' view first_view + r: one dispatch for all of them. Within
+  // llvmpipe's loop budget (tile_ > 0), mode 0 lists the tiles of the triangles larger than a
+  // tile, over all the rasters, and both modes then draw those tiles in a second dispatch
+  // (mode 1 the tiles mode 0 listed last).
+  void Raster(int first_view, int num_rasters, int width, int height, const Ssbo& depth, int mode) {
     if (tile_ > 0) {
       // One invocation loops over at most tile_^2 pixels plus, in mode 0, the tiles it lists.
       const int64_t most = (int64_t(width) + tile_ - 1) / tile_ * ((int64_t(height) + tile_ - 1) / tile_);
@@ -231,14 +230,19 @@ class GlRenderPasses : public DeviceRenderPasses {
     api.UseProgram(raster_);
     api.Uniform1i(2, mode);
     api.Uniform1i(4, tile_);
+    // As many rasters per dispatch as keep the invocation index an int.
+    const int per = int(std::min<int64_t>(num_rasters, std::max(1, std::numeric_limits<int32_t>::max() / num_tris_)));
     auto triangles = [&] {
-      api.Uniform1i(0, num_tris_);
       api.Uniform1i(5, 0);
       api.Uniform1i(6, int(tile_capacity_));
-      for (const auto& [view, base] : rasters) {
-        api.Uniform1i(1, view);
-        api.Uniform1i(3, base);
-        Dispatch({&samples_, &depth, &verts_, &tris_, &ids_, &tiles_}, num_tris_);
+      api.Uniform1i(7, num_tris_);
+      api.Uniform1i(8, width * height);
+      for (int r0 = 0; r0 < num_rasters; r0 += per) {
+        const int n = std::min(per, num_rasters - r0);
+        api.Uniform1i(0, num_tris_ * n);
+        api.Uniform1i(1, first_view + r0);
+        api.Uniform1i(3, r0 * width * height);
+        Dispatch({&samples_, &depth, &verts_, &tris_, &ids_, &tiles_}, int64_t(num_tris_) * n);
       }
     };
     auto listed = [&] {

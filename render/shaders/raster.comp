@@ -7,6 +7,9 @@
 // covering triangles (atomicMin on the float bits); mode 1 (after mode 0): ids[pixel] = the
 // lowest index among the triangles at that depth (the cpu raster keeps the first one drawn).
 // Both are order-independent, so a triangle may be drawn in parts and a pass may be repeated.
+// One dispatch draws `rasters` rasters (the shadow maps of all light samples): invocation i of
+// pass 0 draws triangle i % triangles into raster r = i / triangles, whose view is
+// samples[view_index + r] and whose first texel is base + r * stride.
 //
 // Large triangles (GlInfo::loop_budget, llvmpipe): with tile > 0, a triangle whose pixel bounds
 // hold more than tile x tile pixels is not drawn by its invocation; in mode 0 it lists its
@@ -19,15 +22,17 @@ layout(std430, binding = 2) readonly buffer Verts { Vertex verts[]; };
 layout(std430, binding = 3) readonly buffer Tris { int tris[]; };
 layout(std430, binding = 4) buffer Ids { int ids[]; };
 // num_tiles: tiles listed (also those beyond capacity, which are not stored); per tile
-// (triangle, tile index, view_index, base).
+// (triangle, tile index, view, first texel of its raster).
 layout(std430, binding = 5) buffer Tiles { uint num_tiles; ivec4 tiles[]; };
-layout(location = 0) uniform int count;       // pass 0: triangles; pass 1: tiles
-layout(location = 1) uniform int view_index;  // into samples[] (pass 0)
+layout(location = 0) uniform int count;       // pass 0: triangles x rasters; pass 1: tiles
+layout(location = 1) uniform int view_index;  // into samples[]: the first raster's view (pass 0)
 layout(location = 2) uniform int mode;
-layout(location = 3) uniform int base;        // first texel of this raster in depth[] (pass 0)
+layout(location = 3) uniform int base;        // the first raster's first texel in depth[] (pass 0)
 layout(location = 4) uniform int tile;        // pixels per tile side; 0: no tiles
 layout(location = 5) uniform int pass;        // 0: one invocation per triangle; 1: per tile
 layout(location = 6) uniform int capacity;    // length of tiles[]
+layout(location = 7) uniform int triangles;   // triangles per raster (pass 0)
+layout(location = 8) uniform int stride;      // texels per raster (pass 0)
 
 // Triangle t in view vw: its homogeneous vertices (homogeneous() in common.glsl) and the pixel
 // bounds (x0, y0, x1, y1, inclusive, clipped to the raster) of its part deeper than the near
@@ -86,7 +91,8 @@ void draw(int t, vec4 a, vec4 b, vec4 c, float near, ivec4 r, int W, int rbase) 
 void main() {
   int i = invocation();
   if (i >= count) return;
-  ivec4 item = pass == 0 ? ivec4(i, 0, view_index, base) : tiles[i];
+  int r = i / triangles;
+  ivec4 item = pass == 0 ? ivec4(i - r * triangles, 0, view_index + r, base + r * stride) : tiles[i];
   View vw = samples[item.z].view;
   vec4 a, b, c;
   ivec4 box;
@@ -102,8 +108,8 @@ void main() {
     int n = ((size.x + tile - 1) / tile) * ((size.y + tile - 1) / tile);
     uint first = atomicAdd(num_tiles, uint(n));
     for (int k = 0; k < n; ++k)
-      if (first + uint(k) < uint(capacity)) tiles[first + uint(k)] = ivec4(item.x, k, view_index, base);
+      if (first + uint(k) < uint(capacity)) tiles[first + uint(k)] = ivec4(item.x, k, item.z, item.w);
   } else {
-    draw(item.x, a, b, c, vw.eye.w, box, W, base);
+    draw(item.x, a, b, c, vw.eye.w, box, W, item.w);
   }
 }
