@@ -231,7 +231,8 @@ class GlRenderPasses : public DeviceRenderPasses {
     api.Uniform1i(2, mode);
     api.Uniform1i(4, tile_);
     // As many rasters per dispatch as keep the invocation index an int.
-    const int per = int(std::min<int64_t>(num_rasters, std::max(1, std::numeric_limits<int32_t>::max() / num_tris_)));
+    const int per =
+        int(std::min<int64_t>(num_rasters, std::max(1, std::numeric_limits<int32_t>::max() / std::max(1, num_tris_))));
     auto triangles = [&] {
       api.Uniform1i(5, 0);
       api.Uniform1i(6, int(tile_capacity_));

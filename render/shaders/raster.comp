@@ -7,9 +7,9 @@
 // covering triangles (atomicMin on the float bits); mode 1 (after mode 0): ids[pixel] = the
 // lowest index among the triangles at that depth (the cpu raster keeps the first one drawn).
 // Both are order-independent, so a triangle may be drawn in parts and a pass may be repeated.
-// One dispatch draws `rasters` rasters (the shadow maps of all light samples): invocation i of
-// pass 0 draws triangle i % triangles into raster r = i / triangles, whose view is
-// samples[view_index + r] and whose first texel is base + r * stride.
+// One dispatch draws count / triangles rasters (the shadow maps of all light samples):
+// invocation i of pass 0 draws triangle i % triangles into raster r = i / triangles, whose view
+// is samples[view_index + r] and whose first texel is base + r * stride.
 //
 // Large triangles (GlInfo::loop_budget, llvmpipe): with tile > 0, a triangle whose pixel bounds
 // hold more than tile x tile pixels is not drawn by its invocation; in mode 0 it lists its
