@@ -50,14 +50,14 @@ class CpuHierarchy : public HierarchyRelaxer {
       }
     for (int k = 1; k < 3; ++k) phi_[l][(cur_[l] + k) % 3] = fine;
   }
-  void Relax(int l, bool adaptive, int iterations) override {
+  void Relax(int l, bool adaptive, int iterations, bool repeated) override {
     const Level& v = L_[l];
     const int64_t na = adaptive ? int64_t(v.active.size()) : v.size, ni = v.num_interior;
     const int32_t* active = v.active.data();
     const float* s = s_[l].data();
     // phi[cur] is the iterate, phi[cur + 2] the one before it (read by Chebyshev's steps from
     // the second on) and phi[cur + 1] the next; all three agree outside the updated nodes.
-    ChebyshevSchedule schedule(v.rho);
+    ChebyshevSchedule schedule(v.rho, iterations, repeated);
     for (int it = 0; it < iterations; ++it) {
       const std::array<float, 3> w = schedule.Next();
       const bool jacobi = ChebyshevSchedule::IsJacobi(w);
@@ -143,11 +143,22 @@ std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& v, int 
 }
 
 std::array<float, 3> ChebyshevSchedule::Next() {
+  if (cycle_left_ == 0) {
+    const int left = std::max(1, steps_ - done_);  // (steps beyond the call's: cycles as if 1 left)
+    const int cycles = (left + kMaxCycle - 1) / kMaxCycle;
+    cycle_left_ = tails_ ? (left + cycles - 1) / cycles : left;
+    run_left_ = tails_ ? cycle_left_ - TailSteps(cycle_left_) : left;
+    k_ = 0;
+  }
+  --cycle_left_;
+  ++done_;
+  if (run_left_ == 0) return {1.f, 1.f, 1.f};
+  --run_left_;
   for (int c = 0; c < 3; ++c) {
     const double r2 = rho_[c] * rho_[c];
-    omega_[c] = step_ == 0 ? 1 : step_ == 1 ? 1 / (1 - r2 / 2) : 1 / (1 - r2 * omega_[c] / 4);
+    omega_[c] = k_ == 0 ? 1 : k_ == 1 ? 1 / (1 - r2 / 2) : 1 / (1 - r2 * omega_[c] / 4);
   }
-  ++step_;
+  ++k_;
   return {float(omega_[0]), float(omega_[1]), float(omega_[2])};
 }
 
@@ -373,7 +384,7 @@ void PolygridDiffusion::Relax(const SetSourceFn& set_source) {
   last_iterations_ = 0;
   if (options_.frame_coherence && have_previous_) {
     set_source(0);
-    relaxer_->Relax(0, false, options_.coherent_iterations);
+    relaxer_->Relax(0, false, options_.coherent_iterations, true);
     last_iterations_ = options_.coherent_iterations;
     return;
   }
@@ -383,7 +394,7 @@ void PolygridDiffusion::Relax(const SetSourceFn& set_source) {
       relaxer_->Zero(l);
     else
       relaxer_->Prolong(l);
-    relaxer_->Relax(l, depth_[l] >= 0, iterations_[l]);
+    relaxer_->Relax(l, depth_[l] >= 0, iterations_[l], false);
     last_iterations_ += iterations_[l];
   }
   have_previous_ = true;

@@ -128,8 +128,9 @@ class HierarchyRelaxer {
   virtual void Prolong(int level) = 0;  // phi'(level) = P phi'(level + 1)
   // `iterations` steps on the level's active nodes (adaptive) or all nodes; the others keep
   // their values. Jacobi's steps, or with Level::rho Chebyshev's, whose sequence starts afresh
-  // in every call. Zero and Prolong set every iterate the backend keeps.
-  virtual void Relax(int level, bool adaptive, int iterations) = 0;
+  // in every call (ChebyshevSchedule; `repeated`: a frame-coherent call, continuing from the
+  // last frame). Zero and Prolong set every iterate the backend keeps.
+  virtual void Relax(int level, bool adaptive, int iterations, bool repeated) = 0;
   // Rows [first_row, size) of the level's phi' into (*phi)[first_row * 3 ...]; phi holds
   // size * 3 values, the other rows are left as they are.
   virtual void Read(int level, int64_t first_row, std::vector<float>* phi) = 0;
@@ -162,9 +163,30 @@ std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& level, 
 // The over-relaxation weights of Chebyshev's semi-iteration for spectral radii rho (per
 // channel): omega_1 = 1, omega_2 = 1 / (1 - rho^2 / 2), omega_(k+1) = 1 / (1 - rho^2 omega_k / 4)
 // (omega_k decreases towards 2 / (1 + sqrt(1 - rho^2))); rho = 0 gives Jacobi (omega = 1).
+//
+// A relaxation call of at most kMaxCycle `steps` runs the sequence; a longer one, or one that
+// is `repeated` (a frame-coherent frame, whose error carries over to the next), runs in cycles
+// of at most kMaxCycle steps (as equal as the count allows), each of L steps ending in
+// TailSteps(L) Jacobi steps (omega = 1) after L - TailSteps(L) steps of the sequence, which the
+// next cycle starts afresh. Why: Chebyshev's steps shrink the error along eigenvalues z of the
+// rows' matrix a inside the ellipse with foci -rho, rho through 1, and amplify it outside. a is not symmetric (the nodes' own Appendix-B weights,
+// the boundary rows' links off the normal); on distorted polygrids some complex eigenvalues lie
+// outside: the bunny's coarsest level at 9^3 under a homogeneous kappa 1 mm, mu 0.1 / mm has 8,
+// the worst -0.146 +- 0.365i against an ellipse of semi-minor axis 0.31, growing ~10 % per step,
+// so that long runs diverged and frame-coherent turntables, whose calls compound, brightened
+// from frame to frame. Those modes sit on a few boundary nodes and their interior neighbours and
+// have |z| 0.33-0.39, so Jacobi's steps shrink them fast: TailSteps(L) = ceil(L / 8) bounds a
+// cycle's gain on them by 1.1^(L - J) 0.4^J, 0.1-0.8 for L <= 60. The smooth modes, which the
+// acceleration is for, lose the J steps' share of it (2x the error after 30 steps), so a
+// frame's calls of up to kMaxCycle steps keep the plain sequence: their gain on those modes is
+// bounded by ~1.1^60 once, not compounded, and `render`'s 60 / 30 / 30 steps are as before
+// (docs/benchmarks.md, "Chebyshev's steps on the bunny").
 class ChebyshevSchedule {
  public:
-  explicit ChebyshevSchedule(const std::array<double, 3>& rho) : rho_(rho) {}
+  static constexpr int kMaxCycle = 60;
+  static int TailSteps(int cycle_length) { return (cycle_length + 7) / 8; }
+  ChebyshevSchedule(const std::array<double, 3>& rho, int steps, bool repeated)
+      : rho_(rho), steps_(steps), tails_(repeated || steps > kMaxCycle) {}
   std::array<float, 3> Next();  // the weights of the next step
   // Every weight 1: the step is Jacobi's and need not read the previous iterate.
   static bool IsJacobi(const std::array<float, 3>& omega) {
@@ -173,7 +195,9 @@ class ChebyshevSchedule {
 
  private:
   std::array<double, 3> rho_, omega_{};
-  int step_ = 0;
+  int steps_ = 0, done_ = 0;                  // the call's steps, those taken
+  bool tails_ = false;                         // cycles with Jacobi tails, or one plain sequence
+  int cycle_left_ = 0, run_left_ = 0, k_ = 0;  // in this cycle: steps left, sequence steps left and taken
 };
 
 enum class Relaxation { kJacobi, kChebyshev };

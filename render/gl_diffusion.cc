@@ -181,7 +181,7 @@ class GlHierarchy : public HierarchyRelaxer {
     for (int k = 1; k < 3; ++k)
       d.phi[(d.cur + k) % 3].CopyFrom(d.phi[d.cur], size_t(d.size) * 3 * sizeof(float));
   }
-  void Relax(int l, bool adaptive, int iterations) override {
+  void Relax(int l, bool adaptive, int iterations, bool repeated) override {
     Device& d = dev_[l];
     const int64_t count = adaptive ? d.num_active : d.size;
     if (count == 0) return;
@@ -193,7 +193,7 @@ class GlHierarchy : public HierarchyRelaxer {
     const Ssbo& list = adaptive ? d.active : d.nb;
     // phi[cur] is the iterate, phi[cur + 2] the one before it (read by Chebyshev's steps from
     // the second on) and phi[cur + 1] the next; all three agree outside the updated nodes.
-    ChebyshevSchedule schedule(d.rho);
+    ChebyshevSchedule schedule(d.rho, iterations, repeated);
     for (int it = 0; it < iterations; ++it) {
       const std::array<float, 3> w = schedule.Next();
       const bool jacobi = ChebyshevSchedule::IsJacobi(w);

@@ -131,9 +131,7 @@ int RunRender(int argc, char** argv) {
   app.add_option("--image", image, "Output size WxH")->capture_default_str();
   app.add_option("--supersample", ro.supersample, "Samples per pixel per axis")->capture_default_str();
   app.add_option("--turntable", turntable, "Frames of a turntable (object rotating under fixed light): 1..3600")->capture_default_str();
-  app.add_flag("--coherence", coherence, "Frame coherence: start each frame from the last solution (on the bunny and other "
-               "strongly distorted polygrids, chebyshev steps can grow from frame to frame under some "
-               "materials: use --relaxation jacobi; docs/render.md)");
+  app.add_flag("--coherence", coherence, "Frame coherence: start each frame from the last solution");
   app.add_option("--model", ro.model, "polygrid or dipole (homogeneous baseline)")->capture_default_str();
   app.add_option("--specular", ro.specular, "Ward rho_s")->capture_default_str();
   app.add_option("--roughness", ro.roughness, "Ward alpha")->capture_default_str();
