@@ -169,9 +169,10 @@ std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& level, 
 // of at most kMaxCycle steps (as equal as the count allows), each of L steps ending in
 // TailSteps(L) Jacobi steps (omega = 1) after L - TailSteps(L) steps of the sequence, which the
 // next cycle starts afresh. Why: Chebyshev's steps shrink the error along eigenvalues z of the
-// rows' matrix a inside the ellipse with foci -rho, rho through 1, and amplify it outside. a is not symmetric (the nodes' own Appendix-B weights,
-// the boundary rows' links off the normal); on distorted polygrids some complex eigenvalues lie
-// outside: the bunny's coarsest level at 9^3 under a homogeneous kappa 1 mm, mu 0.1 / mm has 8,
+// rows' matrix a inside the ellipse with foci -rho, rho through 1, and amplify it outside. a is
+// not symmetric (the nodes' own Appendix-B weights, the boundary rows' links off the normal);
+// on distorted polygrids some complex eigenvalues lie outside: the bunny's coarsest level at
+// 9^3 under a homogeneous kappa 1 mm, mu 0.1 / mm has 8,
 // the worst -0.146 +- 0.365i against an ellipse of semi-minor axis 0.31, growing ~10 % per step,
 // so that long runs diverged and frame-coherent turntables, whose calls compound, brightened
 // from frame to frame. Those modes sit on a few boundary nodes and their interior neighbours and
