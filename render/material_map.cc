@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "solver/status.h"
 
@@ -117,6 +118,21 @@ NodeMaterial ProceduralNodeMaterial(const Polygrid& pg, const std::string& name)
     }
   }
   return m;
+}
+
+bool IsNamedNodeMaterial(const std::string& spec) {
+  return spec.rfind("procedural:", 0) == 0 || spec.rfind("homogeneous:", 0) == 0;
+}
+
+NodeMaterial NamedNodeMaterial(const Polygrid& pg, const std::string& spec) {
+  if (spec.rfind("procedural:", 0) == 0) return ProceduralNodeMaterial(pg, spec.substr(11));
+  float k = 0, u = 0;
+  char comma = 0, rest = 0;
+  if (spec.rfind("homogeneous:", 0) != 0 ||
+      std::sscanf(spec.c_str() + 12, "%f%c%f%c", &k, &comma, &u, &rest) != 3 || comma != ',' || !(k > 0) ||
+      !(u > 0) || !std::isfinite(k) || !std::isfinite(u))
+    throw InputError("material " + spec + ": expected procedural:NAME or homogeneous:KAPPA,MU with both > 0");
+  return ConstantNodeMaterial(pg, {k, k, k}, {u, u, u});
 }
 
 }  // namespace translume

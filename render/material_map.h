@@ -40,4 +40,10 @@ NodeMaterial ConstantNodeMaterial(const Polygrid& pg, const std::array<float, 3>
 // Throws InputError on an unknown name.
 NodeMaterial ProceduralNodeMaterial(const Polygrid& pg, const std::string& name);
 
+// A material named without a file: "procedural:NAME" (ProceduralNodeMaterial) or
+// "homogeneous:KAPPA,MU" (mm, 1/mm, grey, both > 0). IsNamedNodeMaterial: spec has one of the
+// two prefixes; NamedNodeMaterial throws InputError naming spec where it is not one.
+bool IsNamedNodeMaterial(const std::string& spec);
+NodeMaterial NamedNodeMaterial(const Polygrid& pg, const std::string& spec);
+
 }  // namespace translume

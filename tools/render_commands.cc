@@ -41,15 +41,8 @@ std::vector<NodeMaterial> LoadNodeMaterials(const std::string& spec, const std::
   *C = ReflectionParameterC(1.3);
   const Polygrid& finest = levels[0];
   NodeMaterial m;
-  if (spec.rfind("procedural:", 0) == 0) {
-    m = ProceduralNodeMaterial(finest, spec.substr(11));
-  } else if (spec.rfind("homogeneous:", 0) == 0) {
-    float k = 0, u = 0;
-    char comma = 0, rest = 0;
-    if (std::sscanf(spec.c_str() + 12, "%f%c%f%c", &k, &comma, &u, &rest) != 3 || comma != ',' || !(k > 0) ||
-        !(u > 0) || !std::isfinite(k) || !std::isfinite(u))
-      throw InputError("material " + spec + ": expected homogeneous:KAPPA,MU with both > 0");
-    m = ConstantNodeMaterial(finest, {k, k, k}, {u, u, u});
+  if (IsNamedNodeMaterial(spec)) {
+    m = NamedNodeMaterial(finest, spec);
   } else {
     const Material mat = ReadMaterial(spec);
     *C = mat.C;

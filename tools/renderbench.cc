@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // translume-renderbench: frames per second of the polygrid renderer per shape and polygrid size
 // (the yardstick: Wang et al. 2008, Table III; SPEC section 6). Built-in shapes and the
-// procedural marble only, so the binary needs no file IO libraries and can be bundled for a
+// named materials only (`--material`, the procedural marble by default), so the binary needs no
+// file IO libraries and can be bundled for a
 // GPU machine (tools/gpu_bundle.sh translume-renderbench). The paper's Bunny size, 253 cubes x
 // 16^3 cells: `--shapes bunny --resolutions 17` (17 nodes per cube edge, 16 intervals).
 #include <CLI/CLI.hpp>
@@ -50,7 +51,7 @@ int main(int argc, char** argv) {
                "coherence, for each shape and resolution.", "translume-renderbench"};
   std::vector<std::string> shapes = {"sphere", "torus"};
   std::vector<int> resolutions = {9, 17};
-  std::string backend = "gl", relaxation = "chebyshev";
+  std::string backend = "gl", relaxation = "chebyshev", material = "procedural:marble";
   // Chebyshev steps that keep E below 1e-3 on the bunny at 9^3 and 17^3 (5e-4; the paper's
   // Figure 15 allows 5e-3; docs/benchmarks.md, 2026-12-01).
   std::vector<int> iterations = {30, 15, 15};
@@ -60,6 +61,8 @@ int main(int argc, char** argv) {
   app.add_option("--shapes", shapes, "Built-in shapes")->delimiter(',');
   app.add_option("--resolutions", resolutions, "Nodes per cube edge")->delimiter(',');
   app.add_option("--backend", backend, "cpu or gl")->capture_default_str();
+  app.add_option("--material", material, "procedural:NAME or homogeneous:KAPPA,MU (mm, 1/mm, grey)")
+      ->capture_default_str();
   app.add_option("--iterations", iterations, "Relaxation steps per level, coarsest first")
       ->delimiter(',')
       ->capture_default_str();
@@ -110,7 +113,7 @@ int main(int argc, char** argv) {
         const auto levels = BuildPolygridHierarchy(pc, *shape, po, 3);
         const double build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tb).count();
         const std::vector<NodeMaterial> mats =
-            RestrictMaterialHierarchy(levels, ProceduralNodeMaterial(levels[0], "marble"));
+            RestrictMaterialHierarchy(levels, NamedNodeMaterial(levels[0], material));
         const double C = ReflectionParameterC(1.3);
         RenderOptions ro;
         ro.width = ro.height = size;
