@@ -214,7 +214,9 @@ TEST(Diffusion, ChebyshevScheduleWeights) {
     ChebyshevSchedule s(rho, steps, t.repeated);
     for (int length : t.cycles) {
       const int tail = t.repeated || steps > ChebyshevSchedule::kMaxCycle ? ChebyshevSchedule::TailSteps(length) : 0;
-      if (tail > 0) EXPECT_EQ(tail, (length + 7) / 8);
+      if (tail > 0) {
+        EXPECT_EQ(tail, (length + 7) / 8);
+      }
       std::array<double, 3> omega = {1, 1, 1};
       for (int k = 0; k < length - tail; ++k) {
         const std::array<float, 3> w = s.Next();

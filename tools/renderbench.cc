@@ -1,10 +1,9 @@
 // SPDX-License-Identifier: MIT
 // translume-renderbench: frames per second of the polygrid renderer per shape and polygrid size
-// (the yardstick: Wang et al. 2008, Table III; SPEC section 6). Built-in shapes and the
-// named materials only (`--material`, the procedural marble by default), so the binary needs no
-// file IO libraries and can be bundled for a
-// GPU machine (tools/gpu_bundle.sh translume-renderbench). The paper's Bunny size, 253 cubes x
-// 16^3 cells: `--shapes bunny --resolutions 17` (17 nodes per cube edge, 16 intervals).
+// (the yardstick: Wang et al. 2008, Table III; SPEC section 6). Built-in shapes and named
+// materials only (`--material`, the procedural marble by default), so the binary needs no file
+// IO libraries and can be bundled for a GPU machine (tools/gpu_bundle.sh translume-renderbench).
+// The paper's Bunny size, 253 cubes x 16^3 cells: `--shapes bunny --resolutions 17` (17 nodes per cube edge, 16 intervals).
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
