@@ -96,7 +96,7 @@ class StageLog {
 // each node a square of pixels so that the image is at least ~512 pixels wide.
 void WriteComparison(const std::string& path, const GridShape& s, const FacePattern& measured,
                      const FacePattern& fitted, const std::vector<float>& mask) {
-  const int64_t z = std::max<int64_t>(1, 256 / s.nx);  // pixels per node
+  const int64_t z = PreviewPixelsPerNode(s.nx);
   const int64_t W = (2 * s.nx + 2) * z, H = s.ny * z;
   FacePattern both;
   float top = 0;

@@ -154,23 +154,40 @@ std::vector<std::string> MaterialSlicePaths(const std::string& prefix, const Gri
   return paths;
 }
 
+int PreviewPixelsPerNode(int64_t nx) {
+  return int(std::max<int64_t>(1, (256 + std::max<int64_t>(nx, 1) - 1) / std::max<int64_t>(nx, 1)));
+}
+
 std::vector<std::string> WriteMaterialSlices(const std::string& prefix, const Material& m) {
   const GridShape& s = m.shape;
   const std::vector<std::string> paths = MaterialSlicePaths(prefix, s);
   const std::vector<int64_t> depths = SliceDepths(s);
+  const int64_t z = PreviewPixelsPerNode(s.nx), W = s.nx * z, H = s.ny * z;
   size_t next = 0;
   for (const auto* field : {&m.kappa, &m.mu}) {
-    float top = 0;
-    for (const auto& ch : *field) top = std::max(top, *std::max_element(ch.begin(), ch.end()));
+    std::array<std::array<double, 2>, 3> range;  // log values shown as 0 and 1
+    for (int c = 0; c < 3; ++c) {
+      const std::vector<float> q = Quantiles((*field)[c], {kPreviewQuantile, 1 - kPreviewQuantile});
+      double a = std::log(std::max(double(q[0]), 1e-30)), b = std::log(std::max(double(q[1]), 1e-30));
+      if (b - a < std::log(kPreviewMinRatio)) {
+        const double centre = (a + b) / 2, half = std::log(kPreviewMinRatio) / 2;
+        a = centre - half;
+        b = centre + half;
+      }
+      range[c] = {a, b};
+    }
     for (int64_t k : depths) {
       std::array<std::vector<float>, 3> planes;
       for (int c = 0; c < 3; ++c) {
-        planes[c].resize(s.face_size());
-        for (int64_t f = 0; f < s.face_size(); ++f)
-          planes[c][f] = (*field)[c][f + s.face_size() * k] / top;
+        const auto [a, b] = range[c];
+        planes[c].resize(size_t(W * H));
+        for (int64_t y = 0; y < H; ++y)
+          for (int64_t x = 0; x < W; ++x) {
+            const double v = (*field)[c][size_t(x / z + s.nx * (y / z) + s.face_size() * k)];
+            planes[c][size_t(x + W * y)] = float(std::clamp((std::log(std::max(v, 1e-30)) - a) / (b - a), 0.0, 1.0));
+          }
       }
-      WriteImage(paths[next++], ImageFromPlanes(int(s.nx), int(s.ny),
-                                                {planes[0].data(), planes[1].data(), planes[2].data()}));
+      WriteImage(paths[next++], ImageFromPlanes(int(W), int(H), {planes[0].data(), planes[1].data(), planes[2].data()}));
     }
   }
   return paths;

@@ -36,9 +36,18 @@ Image ImageFromPlanes(int width, int height, const std::vector<const float*>& pl
 void WriteRadiancePreview(const std::string& path, const GridShape& shape, const FacePattern& L,
                           float top = 0);
 
-// 8-bit PNG slices of kappa and mu at depths 0, nz/4, nz/2, 3nz/4 and nz-1, RGB = channels,
-// each quantity scaled by its maximum over the volume: PREFIX_kappa_kNN.png, PREFIX_mu_kNN.png.
-// Returns the paths written, MaterialSlicePaths(prefix, material.shape).
+// Pixels per node along each axis of the node-space previews (nearest neighbour: a square block
+// per node), so that a face of nx nodes is at least 256 pixels wide: ceil(256 / nx), at least 1.
+int PreviewPixelsPerNode(int64_t nx);
+
+// 8-bit PNG slices of kappa and mu at depths 0, nz/4, nz/2, 3nz/4 and nz-1 (x right, y down),
+// PreviewPixelsPerNode pixels per node, RGB = channels, each channel on a log scale over its own
+// spread in the whole volume: from its kPreviewQuantile quantile (0) to its 1 - kPreviewQuantile
+// quantile (1), clamped, a range of at least a factor kPreviewMinRatio (material.h; a constant
+// channel is mid-grey). So the structure shows whatever the channels' levels, a few extreme
+// nodes, such as a recovery's corners, do not flatten the rest, and a variation of a few percent
+// stays faint: PREFIX_kappa_kNN.png, PREFIX_mu_kNN.png. Returns the paths written,
+// MaterialSlicePaths(prefix, material.shape).
 std::vector<std::string> WriteMaterialSlices(const std::string& prefix, const Material& material);
 // The paths WriteMaterialSlices writes for a material of this grid: kappa's, then mu's.
 std::vector<std::string> MaterialSlicePaths(const std::string& prefix, const GridShape& shape);

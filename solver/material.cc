@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "solver/material.h"
 
+#include <algorithm>
 #include <cmath>
 #include <fmt/format.h>
 
@@ -47,6 +48,15 @@ std::string Material::Validate() const {
     }
   }
   return "";
+}
+
+std::vector<float> Quantiles(const std::vector<float>& values, const std::vector<double>& q) {
+  std::vector<float> sorted = values, out(q.size(), 0.0f);
+  if (sorted.empty()) return out;
+  std::sort(sorted.begin(), sorted.end());
+  for (size_t i = 0; i < q.size(); ++i)
+    out[i] = sorted[size_t(std::lround(std::clamp(q[i], 0.0, 1.0) * double(sorted.size() - 1)))];
+  return out;
 }
 
 }  // namespace translume

@@ -35,4 +35,15 @@ struct Material {
   std::string Validate() const;
 };
 
+// Quantiles of one channel's values (kappa[c] or mu[c]): for each q in [0, 1] the value of rank
+// round(q (n - 1)) in ascending order (0: the least, 1: the largest); empty values give zeros.
+std::vector<float> Quantiles(const std::vector<float>& values, const std::vector<double>& q);
+
+// The material previews (WriteMaterialSlices) show each channel on a log scale from its
+// kPreviewQuantile quantile (black) to its 1 - kPreviewQuantile quantile (full), a range widened
+// about its geometric centre to a factor of at least kPreviewMinRatio, so that a few percent of
+// variation does not fill the scale; `translume info MATERIAL.vdb` prints the quantiles.
+inline constexpr double kPreviewQuantile = 0.005;
+inline constexpr double kPreviewMinRatio = 2;
+
 }  // namespace translume

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 
@@ -242,6 +243,57 @@ TEST_F(MaterialIo, RefusesToWriteInvalidMaterialAndLeavesNothing) {
   const std::string path = Path("bad.vdb");
   EXPECT_THROW(WriteMaterial(path, bad), InputError);
   EXPECT_FALSE(fs::exists(path));
+}
+
+// The slices that `solve` and `acquire` preview a material with: blocks of nodes at least 256
+// pixels wide; each channel on a log scale over its own spread, so that a kappa inclusion shows at
+// full contrast though the channel's level is small, a single extreme node is clamped instead of
+// flattening the rest, a 20 % variation stays faint (the range spans at least a factor 2) and a
+// constant channel is mid-grey.
+TEST_F(MaterialIo, SlicePreviewsAreLargeAndStretchEachChannel) {
+  EXPECT_EQ(PreviewPixelsPerNode(32), 8);
+  EXPECT_EQ(PreviewPixelsPerNode(130), 2);
+  EXPECT_EQ(PreviewPixelsPerNode(256), 1);
+  EXPECT_EQ(PreviewPixelsPerNode(300), 1);
+  EXPECT_EQ(Quantiles({3, 1, 2, 5, 4}, {0, 0.5, 1, 0.26}), (std::vector<float>{1, 3, 5, 2}));
+
+  const GridShape shape{20, 10, 4};
+  Material m = Material::Constant(shape, 0.5, {0.01f, 0.5f, 0.5f}, {0.02f, 0.02f, 0.02f});
+  for (int64_t j = 2; j < 5; ++j)
+    for (int64_t i = 3; i < 8; ++i) {
+      m.kappa[0][size_t(shape.index(i, j, 0))] = 0.04f;  // red: 4x in a box
+      m.kappa[1][size_t(shape.index(i, j, 0))] = 0.6f;   // green: 20 % above
+    }
+  for (int64_t n = 0; n < shape.size(); ++n) m.mu[2][size_t(n)] = 0.01f * std::pow(4.0f, float(n % shape.nx) / 19);
+  m.mu[2][size_t(shape.index(19, 9, 3))] = 1000;  // one extreme node
+  const std::vector<std::string> paths = WriteMaterialSlices(Path("m"), m);
+  ASSERT_EQ(paths, MaterialSlicePaths(Path("m"), shape));
+  ASSERT_EQ(paths.size(), 8u);  // depths 0, 1, 2, 3 of each quantity
+  EXPECT_EQ(paths[0], Path("m_kappa_k00.png"));
+  const Image kappa0 = ReadImage(paths[0]);
+  const int z = 13;  // ceil(256 / 20)
+  ASSERT_EQ(kappa0.width, 20 * z);
+  ASSERT_EQ(kappa0.height, 10 * z);
+  ASSERT_EQ(kappa0.channels, 3);
+  const auto at = [&](const Image& img, int64_t i, int64_t j, int c, int dx = 0, int dy = 0) {
+    return img.data[size_t(((j * z + dy) * img.width + i * z + dx) * 3 + c)];
+  };
+  const float step = 1 / 255.0f;
+  EXPECT_FLOAT_EQ(at(kappa0, 5, 3, 0), 1.0f);  // the red box: the channel's top
+  EXPECT_FLOAT_EQ(at(kappa0, 7, 4, 0, z - 1, z - 1), 1.0f);
+  EXPECT_FLOAT_EQ(at(kappa0, 8, 4, 0), 0.0f);  // beside it: the channel's bottom
+  EXPECT_FLOAT_EQ(at(kappa0, 0, 0, 0), 0.0f);
+  // Green's 20 %: log 1.2 / log 2 = 0.26 of the scale, about the centre of 0.5 and 0.6.
+  const float faint = float(std::log(1.2) / std::log(2.0));
+  EXPECT_NEAR(at(kappa0, 5, 3, 1), 0.5f + faint / 2, step);
+  EXPECT_NEAR(at(kappa0, 0, 0, 1), 0.5f - faint / 2, step);
+  EXPECT_NEAR(at(kappa0, 0, 0, 2), 0.5f, step);  // constant blue
+  const Image mu3 = ReadImage(paths[7]);
+  EXPECT_NEAR(at(mu3, 0, 0, 0), 0.5f, step);  // constant red
+  EXPECT_FLOAT_EQ(at(mu3, 0, 5, 2), 0.0f);    // blue rises by 4x along x, evenly on the log scale ...
+  EXPECT_NEAR(at(mu3, 10, 5, 2), 10.0f / 19, step);
+  EXPECT_FLOAT_EQ(at(mu3, 19, 5, 2), 1.0f);
+  EXPECT_FLOAT_EQ(at(mu3, 19, 9, 2), 1.0f);  // ... and its extreme node is clamped
 }
 
 }  // namespace

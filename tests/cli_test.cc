@@ -8,6 +8,7 @@
 #include <fstream>
 #include <iterator>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -207,6 +208,20 @@ TEST_F(Cli, InfoSizesAGridAndRefusesWhatDoesNotFit) {
   EXPECT_FALSE(fs::exists(P("huge.vdb")));
   EXPECT_EQ(Translume("--help").status, 0);
   EXPECT_EQ(Translume("forward --help").status, 0);
+  // A material: its block and the spread of its values per channel (the homogeneous preset's).
+  ASSERT_EQ(Translume("synth --preset homogeneous --grid 12x10x4 --spacing 0.5 -o " + P("h.vdb")).status, 0);
+  r = Translume("info " + P("h.vdb"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("12x10x4 nodes, spacing 0.5 mm (a block of 5.5 x 4.5 x 1.5 mm), eta 1.3"),
+            std::string::npos) << r.output;
+  const size_t row = r.output.find("  mu green ");
+  ASSERT_NE(row, std::string::npos) << r.output;
+  std::istringstream values(r.output.substr(row, r.output.find('\n', row) - row));
+  std::string mu, green;
+  double v[5] = {};
+  values >> mu >> green >> v[0] >> v[1] >> v[2] >> v[3] >> v[4];
+  for (double x : v) EXPECT_DOUBLE_EQ(x, 0.0164) << r.output;  // min, 0.5 %, median, 99.5 %, max
+  EXPECT_NE(r.output.find("recovery with 16 conditions"), std::string::npos) << r.output;
 }
 
 TEST_F(Cli, SimulateSolveEvaluateAndResume) {

@@ -121,9 +121,37 @@ int RunForward(int argc, char** argv) {
   return ok ? 0 : 3;
 }
 
+namespace {
+
+// `info MATERIAL.vdb`: the grid, the block's size, eta, and per channel the spread of kappa and
+// mu, with the quantiles between which the previews stretch each channel (WriteMaterialSlices).
+void PrintMaterialSummary(const std::string& path, const Material& m) {
+  const GridShape& s = m.shape;
+  const double h = m.spacing_mm;
+  std::printf("material %s: %s nodes, spacing %g mm (a block of %g x %g x %g mm), eta %g (C %.4f)\n",
+              path.c_str(), s.ToString().c_str(), h, h * double(s.nx - 1), h * double(s.ny - 1),
+              h * double(s.nz - 1), m.eta, m.C);
+  const double p = 100 * kPreviewQuantile;
+  std::printf("  %-12s %11s %11s %11s %11s %11s\n", "", "min", fmt::format("{:g} %", p).c_str(), "median",
+              fmt::format("{:g} %", 100 - p).c_str(), "max");
+  const char* channels[3] = {"red", "green", "blue"};
+  for (const auto& [name, field] : {std::pair{"kappa", &m.kappa}, std::pair{"mu", &m.mu}})
+    for (int c = 0; c < 3; ++c) {
+      const std::vector<float> v = Quantiles((*field)[c], {0, kPreviewQuantile, 0.5, 1 - kPreviewQuantile, 1});
+      std::printf("  %-12s %11.4g %11.4g %11.4g %11.4g %11.4g\n", fmt::format("{} {}", name, channels[c]).c_str(),
+                  v[0], v[1], v[2], v[3], v[4]);
+    }
+  std::printf("  (kappa in mm, mu in 1/mm; the slices that `solve` and `acquire` write show each channel on a "
+              "log scale from its %g %% to its %g %% value, a range of at least a factor %g)\n", p, 100 - p,
+              kPreviewMinRatio);
+}
+
+}  // namespace
+
 int RunInfo(int argc, char** argv) {
   CLI::App app{"Version, build options, backends, threads, and the memory a forward solve and a\n"
-               "recovery need for a material or grid.", "translume info"};
+               "recovery need for a material or grid; for a material also its size and the spread\n"
+               "of kappa and mu per channel.", "translume info"};
   std::string material_path, grid, precision = "double";
   int conditions = 16;
   bool gl = false;
@@ -142,7 +170,11 @@ int RunInfo(int argc, char** argv) {
     throw InputError("info: give a material or --grid, not both");
   // Inputs first: bad input is one line, not a report cut short.
   GridShape shape;
-  if (!material_path.empty()) shape = ReadMaterial(material_path).shape;
+  Material material;
+  if (!material_path.empty()) {
+    material = ReadMaterial(material_path);
+    shape = material.shape;
+  }
   if (!grid.empty()) shape = ParseGridShape(grid, "--grid");
   std::printf("translume %s (%s build)\n", TRANSLUME_VERSION, TRANSLUME_BUILD_TYPE);
   std::printf("backends: cpu (multigrid-preconditioned CG, float and double), gl (OpenGL compute, "
@@ -172,6 +204,7 @@ int RunInfo(int argc, char** argv) {
                     ? fmt::format(" (the cgroup's memory limit; the machine has {} available)",
                                   FormatBytes(memory.meminfo_bytes)).c_str()
                     : "");
+  if (!material_path.empty()) PrintMaterialSummary(material_path, material);
   if (shape.size() > 0) {
     const MemoryEstimate e = EstimateMemory(shape, conditions, sized_precision);
     std::printf("grid %s (%lld nodes), %s:\n", shape.ToString().c_str(), (long long)shape.size(),
