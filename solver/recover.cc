@@ -503,20 +503,22 @@ double FirstStepScale(const Objective& f, const std::vector<double>& x) {
   return gmax > 0 && gmax < kFirstChange ? kFirstChange / gmax : 1.0;
 }
 
-// The run's optimiser (o.optimizer) on f from *x.
-// warm: x is not a homogeneous start but a converging iterate (a resumed checkpoint, --init),
-// or a level search trial's start. Ceres' first step is then the gradient itself (no curvature
-// known yet), which late in a fit changes the log-parameters by ~1e-7: the warm-started solves
-// meet their tolerance without an iteration, the objective does not change, the line search
-// finds no decrease and the minimiser stops at once with a zero step (a checkpoint of a
-// 64x48x16 recovery resumed so); from some trial levels it changed them by ~1e-4 and the trial
-// crept (wax 64x48x16's blue at +0.25 decades: 0.404 -> 0.402 in 10 iterations, against 1.7e-3
-// at +0.5). The objective is then scaled for Ceres by FirstStepScale (as RunPaper's first
-// trial; the later steps and Ceres' relative tolerances do not depend on the scale).
+// The run's optimiser (o.optimizer) on f from *x, the objective scaled for Ceres by
+// FirstStepScale. Ceres' first step is the gradient itself (no curvature known yet), whose size
+// is the objective's and not the problem's: from a homogeneous start on 64x48x16 it changed the
+// log-parameters by ~3e-6 (35000x short of FirstStepScale's 0.1: J is normalised, so the
+// gradient per node falls as the nodes grow in number), and late in a fit (a resumed
+// checkpoint, --init) by ~1e-7. Warm-started solves register so small a change only where their
+// tolerance is far below it: with solves to 1e-6 instead of 1e-8 a fresh 64x48x16 fit stopped
+// at once ("Parameter tolerance reached", zero step; docs/benchmarks.md, "The first step of
+// every fit"), and before the scaling a resumed checkpoint did so with 1e-8 too. From some level
+// search trials it changed them by ~1e-4 and the trial crept (wax 64x48x16's blue at +0.25
+// decades: 0.404 -> 0.402 in 10 iterations, against 1.7e-3 at +0.5). The later steps and Ceres'
+// relative tolerances do not depend on the scale. RunPaper sizes its first trial the same way.
 OptimizerResult RunOptimizer(const Objective& f, const RecoveryOptions& o, int max_iterations,
-                             std::vector<double>* x, const IterationHook& hook, bool warm) {
+                             std::vector<double>* x, const IterationHook& hook) {
   if (o.optimizer == OptimizerKind::kPaper) return RunPaper(f, max_iterations, o.tolerance, x, hook);
-  const double scale = warm ? FirstStepScale(f, *x) : 1.0;
+  const double scale = FirstStepScale(f, *x);
   const IterationHook unscaled = [&](int it, double v, double gnorm) {
     return hook ? hook(it, v / scale, gnorm / scale) : true;
   };
@@ -537,9 +539,8 @@ OptimizerResult RunOptimizer(const Objective& f, const RecoveryOptions& o, int m
 // homogeneous fit's must lower the channel's objective 1.5x below the homogeneous level's. Then
 // a quarter-decade refinement either side of that choice (never below the homogeneous level).
 // state->x holds the homogeneous fit on entry and the same with mu scaled by the chosen factors
-// on return. (Not the best trial's iterate: a fresh L-BFGS from there takes a first step of
-// the gradient's own size, which the solves' warm start resolves as no change at all, and
-// stops with a zero step; from the homogeneous start the first gradient is large.)
+// on return. (Not the best trial's iterate: the trials are short runs for comparing levels,
+// each channel on its own; the fit starts from the level itself, as the search was measured.)
 struct LevelSearchResult {
   std::array<double, 3> factor{1, 1, 1};
   int trials = 0;
@@ -574,11 +575,11 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
     problem->ForEachChannel([&](int c) {
       if (!record[c]) return;  // this channel's search is done
       // The run's optimiser on the channel's block (so the trials need no more memory than it),
-      // its first step sized as a warm start's.
+      // its first step sized by FirstStepScale as every fit's.
       std::vector<double> xc(x.begin() + 2 * c * n, x.begin() + 2 * (c + 1) * n);
       const Objective channel{[&](const double* v, double* g) { return problem->EvaluateOneChannel(c, v, g); },
                               [&] { return problem->channel_ok(c); }};
-      RunOptimizer(channel, o, o.level_search, &xc, {}, /*warm=*/true);
+      RunOptimizer(channel, o, o.level_search, &xc, {});
       // The trial's score: its objective with the data term low-passed. A wrong level leaves a
       // residual as smooth as diffusion makes it; the data's noise, which the trial's few
       // iterations have only begun to fit, is rough, and (1 % on wax 64x48x16) it added ~7e-5 to
@@ -831,7 +832,6 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
   auto solves = [&] { return solves0 + problem.solves(); };
   auto seconds = [&] { return seconds0 + Since(t0); };
 
-  const bool warm = !state->x.empty();
   if (state->x.empty()) {
     // Homogeneous initialisation: 6 unknowns, same objective on constant volumes.
     std::vector<double> h(6);
@@ -898,7 +898,7 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
   } else {
     const Objective whole{[&](const double* v, double* g) { return problem.Evaluate(v, g); },
                           [&] { return problem.last_evaluation_ok(); }};
-    r = RunOptimizer(whole, o, remaining, &state->x, hook, warm);
+    r = RunOptimizer(whole, o, remaining, &state->x, hook);
   }
   sum.optimizer_seconds = std::max(
       0.0, Since(t_optimizer) - (problem.evaluation_seconds() - evaluation0) -
