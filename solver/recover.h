@@ -72,7 +72,7 @@ struct RecoveryOptions {
   double validation_margin = 0.02;
   // Relative residual of every forward and adjoint solve. 1e-7: 7-13 % less time per iteration
   // than 1e-8 at the same held-out E on 64x48x16 (docs/benchmarks.md, "The first step of every
-  // fit, and the solves' tolerance"); 1e-6 also worked there once every first step was sized.
+  // fit, and the solves' tolerance"); 1e-6 also ran normally in the one case tried.
   double solve_tolerance = 1e-7;
   // OpenMP threads inside each channel's solver; 0: max(1, NumThreads() / 3).
   int threads_per_channel = 0;
