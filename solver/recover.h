@@ -70,7 +70,7 @@ struct RecoveryOptions {
   int validation_every = 10;
   int validation_patience = 80;
   double validation_margin = 0.02;
-  // Relative residual of every forward and adjoint solve. 1e-6: on 64x48x16 15-30 % less time
+  // Relative residual of every forward and adjoint solve. 1e-6: on 64x48x16 13-38 % less time
   // per iteration than 1e-7, and 1e-7 7-13 % less than 1e-8 (the default until 2026-12-02), at
   // the same fit and held-out E (docs/benchmarks.md, "The first step of every fit, and the
   // solves' tolerance"); it relies on every fit's first step being sized (RunOptimizer).
