@@ -155,7 +155,8 @@ std::vector<std::string> MaterialSlicePaths(const std::string& prefix, const Gri
 }
 
 int PreviewPixelsPerNode(int64_t nx) {
-  return int(std::max<int64_t>(1, (256 + std::max<int64_t>(nx, 1) - 1) / std::max<int64_t>(nx, 1)));
+  nx = std::max<int64_t>(nx, 1);
+  return int(std::max<int64_t>(1, (256 + nx - 1) / nx));
 }
 
 std::vector<std::string> WriteMaterialSlices(const std::string& prefix, const Material& m) {
@@ -180,12 +181,14 @@ std::vector<std::string> WriteMaterialSlices(const std::string& prefix, const Ma
       std::array<std::vector<float>, 3> planes;
       for (int c = 0; c < 3; ++c) {
         const auto [a, b] = range[c];
+        std::vector<float> node(size_t(s.face_size()));  // the slice's values, one per node
+        for (int64_t f = 0; f < s.face_size(); ++f) {
+          const double v = (*field)[c][size_t(f + s.face_size() * k)];
+          node[size_t(f)] = float(std::clamp((std::log(std::max(v, 1e-30)) - a) / (b - a), 0.0, 1.0));
+        }
         planes[c].resize(size_t(W * H));
         for (int64_t y = 0; y < H; ++y)
-          for (int64_t x = 0; x < W; ++x) {
-            const double v = (*field)[c][size_t(x / z + s.nx * (y / z) + s.face_size() * k)];
-            planes[c][size_t(x + W * y)] = float(std::clamp((std::log(std::max(v, 1e-30)) - a) / (b - a), 0.0, 1.0));
-          }
+          for (int64_t x = 0; x < W; ++x) planes[c][size_t(x + W * y)] = node[size_t(x / z + s.nx * (y / z))];
       }
       WriteImage(paths[next++], ImageFromPlanes(int(W), int(H), {planes[0].data(), planes[1].data(), planes[2].data()}));
     }
