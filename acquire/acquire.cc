@@ -92,33 +92,6 @@ class StageLog {
   nlohmann::json log_;
 };
 
-// Side-by-side preview of measured (left) and fitted (right) radiance, one scale for both,
-// each node a square of pixels so that the image is at least ~512 pixels wide.
-void WriteComparison(const std::string& path, const GridShape& s, const FacePattern& measured,
-                     const FacePattern& fitted, const std::vector<float>& mask) {
-  const int64_t z = PreviewPixelsPerNode(s.nx);
-  const int64_t W = (2 * s.nx + 2) * z, H = s.ny * z;
-  FacePattern both;
-  float top = 0;
-  for (int c = 0; c < 3; ++c) {
-    both[size_t(c)].assign(size_t(W * H), 0.0f);
-    for (int64_t y = 0; y < H; ++y)
-      for (int64_t x = 0; x < W; ++x) {
-        const int64_t i = x / z, j = y / z;
-        float v = 0;
-        if (i < s.nx) {
-          const size_t f = size_t(i + s.nx * j);
-          v = mask[f] > 0 ? measured[size_t(c)][f] : 0.0f;
-          top = std::max(top, v);
-        } else if (i >= s.nx + 2) {
-          v = fitted[size_t(c)][size_t(i - s.nx - 2 + s.nx * j)];
-        }
-        both[size_t(c)][size_t(x + W * y)] = v;
-      }
-  }
-  WriteRadiancePreview(path, {W, H, 1}, both, top);
-}
-
 }  // namespace
 
 std::string AcquireOptions::Validate() const {
@@ -618,7 +591,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     const Material m = MaterialFromState(d, state, cap.eta);
     WriteMaterial(out, m);
     stage_done("solve");
-    // Previews: measured vs fitted per condition, kappa and mu slices.
+    // Previews: measured | fitted | residual per condition, kappa and mu slices.
     const fs::path prev = work / "previews";
     fs::create_directories(prev);
     // Every condition in the capture's order, validation ones included (their E is the
@@ -634,7 +607,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     for (size_t c = 0; c < all.size(); ++c) {
       rep.conditions[c].fit_error = RelightingError({fitted[c]}, {all[c]->L}, {all[c]->mask});
       const std::string p = (prev / fmt::format("fit_{}.png", all[c]->name)).string();
-      WriteComparison(p, g, all[c]->L, fitted[c], all[c]->mask);
+      WriteFitComparison(p, g, all[c]->L, fitted[c], all[c]->mask);
       rep.previews.push_back(p);
     }
     for (const auto& p : WriteMaterialSlices((prev / "material").string(), m)) rep.previews.push_back(p);

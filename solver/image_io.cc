@@ -137,6 +137,50 @@ void WriteRadiancePreview(const std::string& path, const GridShape& s, const Fac
   WriteImage(path, ImageFromPlanes(int(s.nx), int(s.ny), {t[0].data(), t[1].data(), t[2].data()}));
 }
 
+void WriteFitComparison(const std::string& path, const GridShape& s, const FacePattern& measured,
+                        const FacePattern& fitted, const std::vector<float>& mask) {
+  const size_t face = size_t(s.nx * s.ny);
+  TL_CHECK(mask.size() == face);
+  for (int c = 0; c < 3; ++c) TL_CHECK(measured[size_t(c)].size() == face && fitted[size_t(c)].size() == face);
+  float top = 0;
+  for (size_t f = 0; f < face; ++f)
+    if (mask[f] > 0)
+      for (int c = 0; c < 3; ++c) top = std::max(top, measured[size_t(c)][f]);
+  if (!(top > 0)) top = 1e-30f;
+  const float gamma = 1.0f / 2.2f;
+  const auto shown = [&](float v) { return std::pow(std::clamp(v / top, 0.0f, 1.0f), gamma); };
+  // The three panels' node values, each nx x ny, then expanded to pixel blocks.
+  constexpr int kGap = 2;
+  const int64_t z = PreviewPixelsPerNode(s.nx), panel = s.nx + kGap;
+  const int64_t W = (3 * s.nx + 2 * kGap) * z, H = s.ny * z;
+  std::array<std::vector<float>, 3> rgb;
+  for (auto& ch : rgb) ch.assign(size_t(W * H), 0.0f);
+  const std::array<float, 3> kRed{1.0f, 0.15f, 0.1f}, kBlue{0.15f, 0.45f, 1.0f};
+  const float kMasked = 0.35f;
+  for (int64_t j = 0; j < s.ny; ++j)
+    for (int64_t i = 0; i < s.nx; ++i) {
+      const size_t f = size_t(i + s.nx * j);
+      std::array<std::array<float, 3>, 3> node{};  // panel, channel
+      if (mask[f] > 0) {
+        float r = 0;
+        for (int c = 0; c < 3; ++c) {
+          node[0][c] = shown(measured[size_t(c)][f]);
+          r += (fitted[size_t(c)][f] - measured[size_t(c)][f]) / (3 * top);
+        }
+        const float level = std::min(std::abs(r) / kResidualPreviewRange, 1.0f);
+        for (int c = 0; c < 3; ++c) node[2][c] = level * (r > 0 ? kRed : kBlue)[size_t(c)];
+      } else {
+        node[2] = {kMasked, kMasked, kMasked};
+      }
+      for (int c = 0; c < 3; ++c) node[1][c] = shown(fitted[size_t(c)][f]);
+      for (int p = 0; p < 3; ++p)
+        for (int64_t y = j * z; y < (j + 1) * z; ++y)
+          for (int64_t x = (p * panel + i) * z; x < (p * panel + i + 1) * z; ++x)
+            for (int c = 0; c < 3; ++c) rgb[size_t(c)][size_t(x + W * y)] = node[size_t(p)][size_t(c)];
+    }
+  WriteImage(path, ImageFromPlanes(int(W), int(H), {rgb[0].data(), rgb[1].data(), rgb[2].data()}));
+}
+
 namespace {
 
 std::vector<int64_t> SliceDepths(const GridShape& s) {

@@ -36,6 +36,23 @@ Image ImageFromPlanes(int width, int height, const std::vector<const float*>& pl
 void WriteRadiancePreview(const std::string& path, const GridShape& shape, const FacePattern& L,
                           float top = 0);
 
+// The residual panel of WriteFitComparison saturates at this fraction of the measured panel's
+// brightest node.
+inline constexpr float kResidualPreviewRange = 0.05f;
+
+// An 8-bit preview of a fit to one condition, three panels of the face side by side (x right, y
+// down, PreviewPixelsPerNode pixels per node, a 2-node black gap between panels):
+//   measured  `measured` where mask > 0, black where masked; as WriteRadiancePreview with top =
+//             the largest measured value over the unmasked nodes and the three channels;
+//   fitted    `fitted` on the same scale;
+//   residual  r = mean over RGB of (fitted - measured) / top per unmasked node: black at 0, red
+//             (fitted brighter) or blue (fitted darker) rising linearly to full at |r| =
+//             kResidualPreviewRange (clamped); masked nodes mid-grey (neither red nor blue).
+// So a misfit is seen where it lies (an edge misregistered, a region too dark), on one scale for
+// every condition of a capture. Written under a temporary name and renamed.
+void WriteFitComparison(const std::string& path, const GridShape& shape, const FacePattern& measured,
+                        const FacePattern& fitted, const std::vector<float>& mask);
+
 // Pixels per node along each axis of the node-space previews (nearest neighbour: a square block
 // per node), so that a face of nx nodes is at least 256 pixels wide: ceil(256 / nx), at least 1.
 int PreviewPixelsPerNode(int64_t nx);

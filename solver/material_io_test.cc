@@ -296,5 +296,53 @@ TEST_F(MaterialIo, SlicePreviewsAreLargeAndStretchEachChannel) {
   EXPECT_FLOAT_EQ(at(mu3, 19, 9, 2), 1.0f);  // ... and its extreme node is clamped
 }
 
+// acquire's fit previews: measured | fitted | residual, one brightness scale for the first two
+// (the largest unmasked measured value), the residual signed in colour at kResidualPreviewRange
+// of that scale, masked nodes black in the measured panel and grey in the residual.
+TEST_F(MaterialIo, FitComparisonShowsMeasuredFittedAndSignedResidual) {
+  const GridShape shape{10, 4, 3};
+  const size_t face = 40;
+  FacePattern measured, fitted;
+  for (int c = 0; c < 3; ++c) {
+    measured[size_t(c)].assign(face, 0.5f);
+    fitted[size_t(c)].assign(face, 0.5f);
+  }
+  std::vector<float> mask(face, 1.0f);
+  measured[1][size_t(shape.index(0, 0, 0))] = 2.0f;  // the top
+  mask[size_t(shape.index(9, 3, 0))] = 0;           // masked: not the top though brighter
+  for (int c = 0; c < 3; ++c) measured[size_t(c)][size_t(shape.index(9, 3, 0))] = 8.0f;
+  for (int c = 0; c < 3; ++c) fitted[size_t(c)][size_t(shape.index(2, 1, 0))] = 0.5f + 0.05f;    // +2.5 % of top
+  fitted[0][size_t(shape.index(3, 1, 0))] = 0.5f - 3 * 0.2f;                                     // -10 %: clamped
+  const std::string path = Path("fit.png");
+  WriteFitComparison(path, shape, measured, fitted, mask);
+  const Image img = ReadImage(path);
+  const int z = 26;  // ceil(256 / 10)
+  ASSERT_EQ(img.width, (3 * 10 + 4) * z);
+  ASSERT_EQ(img.height, 4 * z);
+  ASSERT_EQ(img.channels, 3);
+  // Node (i, j) of panel p (0 measured, 1 fitted, 2 residual), a pixel inside its block.
+  const auto at = [&](int p, int64_t i, int64_t j, int c) {
+    return img.data[size_t(((j * z + z / 2) * img.width + (p * 12 + i) * z + z / 3) * 3 + c)];
+  };
+  const float step = 1 / 255.0f;
+  const float half = std::pow(0.25f, 1 / 2.2f);  // 0.5 of the top 2
+  EXPECT_NEAR(at(0, 5, 2, 0), half, step);
+  EXPECT_NEAR(at(1, 5, 2, 0), half, step);
+  EXPECT_FLOAT_EQ(at(0, 0, 0, 1), 1.0f);
+  EXPECT_FLOAT_EQ(at(0, 9, 3, 0), 0.0f);  // masked: black in the measured panel ...
+  EXPECT_NEAR(at(1, 9, 3, 0), half, step);  // ... the fit shown as everywhere ...
+  EXPECT_NEAR(at(2, 9, 3, 0), 0.35f, step);  // ... and grey in the residual
+  EXPECT_NEAR(at(2, 9, 3, 2), 0.35f, step);
+  for (int c = 0; c < 3; ++c) EXPECT_FLOAT_EQ(at(2, 5, 2, c), 0.0f);  // a perfect fit: black
+  EXPECT_NEAR(at(2, 0, 0, 0), 0.15f, step);  // the top: fitted 1.5 below in green only, -25 %
+  EXPECT_NEAR(at(2, 0, 0, 2), 1.0f, step);   // of the top over RGB, beyond the range: full blue
+  EXPECT_NEAR(at(2, 2, 1, 0), 0.5f, step);  // +2.5 %: half red
+  EXPECT_NEAR(at(2, 2, 1, 2), 0.05f, step);
+  EXPECT_NEAR(at(2, 3, 1, 2), 1.0f, step);  // -0.6 / 3 / 2 = -10 %: full blue
+  EXPECT_NEAR(at(2, 3, 1, 0), 0.15f, step);
+  for (int c = 0; c < 3; ++c)  // the gap between the panels
+    EXPECT_FLOAT_EQ(img.data[size_t(((z / 2) * img.width + 10 * z + 1) * 3 + c)], 0.0f);
+}
+
 }  // namespace
 }  // namespace translume
