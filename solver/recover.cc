@@ -324,14 +324,35 @@ struct Objective {
 };
 
 // An Objective on n unknowns for Ceres, times `scale` (f and its gradient; RunOptimizer).
+// One evaluation of f with its gradient, kept for the optimiser's first call at the same x.
+struct Evaluation {
+  std::vector<double> x, gradient;
+  double value = 0;
+  bool ok = false;
+};
+
+// f scaled by `scale` for Ceres. Ceres starts by evaluating the starting point, which
+// FirstStepScale has just evaluated: `first` (optional) answers that call, once, if Ceres asks
+// for exactly first->x; the problem's warm-start fields are already those of x.
 class CeresFunction : public ceres::FirstOrderFunction {
  public:
-  CeresFunction(const Objective& f, int n, double scale) : f_(f), n_(n), scale_(scale) {}
+  CeresFunction(const Objective& f, int n, double scale, Evaluation first = {})
+      : f_(f), n_(n), scale_(scale), first_(std::move(first)) {}
   bool Evaluate(const double* x, double* cost, double* grad) const override {
-    *cost = scale_ * f_.evaluate(x, grad);
+    bool ok;
+    if (!first_.x.empty() && std::equal(x, x + n_, first_.x.begin())) {
+      *cost = first_.value;
+      if (grad) std::copy(first_.gradient.begin(), first_.gradient.end(), grad);
+      ok = first_.ok;
+      first_ = {};
+    } else {
+      *cost = f_.evaluate(x, grad);
+      ok = f_.ok();
+    }
+    *cost *= scale_;
     if (grad && scale_ != 1)
       for (int i = 0; i < n_; ++i) grad[i] *= scale_;
-    return std::isfinite(*cost) && f_.ok();
+    return std::isfinite(*cost) && ok;
   }
   int NumParameters() const override { return n_; }
 
@@ -339,6 +360,7 @@ class CeresFunction : public ceres::FirstOrderFunction {
   const Objective& f_;
   int n_;
   double scale_;
+  mutable Evaluation first_;
 };
 
 class CeresHook : public ceres::IterationCallback {
@@ -493,13 +515,16 @@ OptimizerResult RunPaper(const Objective& problem, int max_iterations, double to
 }
 
 // The factor on f that makes Ceres' first step from x (the gradient itself) change the largest
-// log-parameter by 0.1; 1 where it already does more. One evaluation with gradient.
-double FirstStepScale(const Objective& f, const std::vector<double>& x) {
+// log-parameter by 0.1; 1 where it already does more. One evaluation with gradient, returned in
+// *at_x for the optimiser's first call.
+double FirstStepScale(const Objective& f, const std::vector<double>& x, Evaluation* at_x) {
   constexpr double kFirstChange = 0.1;
-  std::vector<double> g(x.size());
-  f.evaluate(x.data(), g.data());
+  at_x->x = x;
+  at_x->gradient.assign(x.size(), 0.0);
+  at_x->value = f.evaluate(x.data(), at_x->gradient.data());
+  at_x->ok = f.ok();
   double gmax = 0;
-  for (double v : g) gmax = std::max(gmax, std::abs(v));
+  for (double v : at_x->gradient) gmax = std::max(gmax, std::abs(v));
   return gmax > 0 && gmax < kFirstChange ? kFirstChange / gmax : 1.0;
 }
 
@@ -518,12 +543,13 @@ double FirstStepScale(const Objective& f, const std::vector<double>& x) {
 OptimizerResult RunOptimizer(const Objective& f, const RecoveryOptions& o, int max_iterations,
                              std::vector<double>* x, const IterationHook& hook) {
   if (o.optimizer == OptimizerKind::kPaper) return RunPaper(f, max_iterations, o.tolerance, x, hook);
-  const double scale = FirstStepScale(f, *x);
+  Evaluation start;
+  const double scale = FirstStepScale(f, *x, &start);
   const IterationHook unscaled = [&](int it, double v, double gnorm) {
     return hook ? hook(it, v / scale, gnorm / scale) : true;
   };
-  OptimizerResult r = RunCeres(new CeresFunction(f, int(x->size()), scale), o.optimizer, max_iterations,
-                               o.lbfgs_rank, o.tolerance, x->data(), unscaled);
+  OptimizerResult r = RunCeres(new CeresFunction(f, int(x->size()), scale, std::move(start)), o.optimizer,
+                               max_iterations, o.lbfgs_rank, o.tolerance, x->data(), unscaled);
   r.initial /= scale;
   r.final /= scale;
   return r;
