@@ -616,6 +616,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
                   {"message", rep.solve.message},
                   {"iterations", rep.solve.iterations},
                   {"solves", rep.solve.solves},
+                  {"solve_tolerance", o.recovery.solve_tolerance},
                   {"fit_error", rep.solve.fit_error},
                   {"homogeneous_kappa", rep.solve.homogeneous_kappa},
                   {"homogeneous_mu", rep.solve.homogeneous_mu},

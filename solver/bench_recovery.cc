@@ -84,6 +84,7 @@ RecoveryBenchRow RunCase(const Case& c, const RecoveryBenchOptions& o, const Rec
   r.shape = c.truth.shape;
   r.optimizer = OptimizerName(ro.optimizer);
   r.lbfgs_rank = ro.optimizer == OptimizerKind::kLbfgs ? ro.lbfgs_rank : 0;
+  r.solve_tolerance = ro.solve_tolerance;
   r.backend = ro.backend;
   r.termination = TerminationName(s.termination);
   // A bench stops a recovery only at its time cap (stop_after above).
@@ -285,7 +286,7 @@ std::string RecoveryBenchJson(const RecoveryBenchResult& res) {
   for (const auto& r : res.rows)
     j["cases"].push_back({{"preset", r.preset}, {"setup", SetupName(r.setup)}, {"noise", r.noise},
                           {"grid", r.shape.ToString()}, {"optimizer", r.optimizer},
-                          {"lbfgs_rank", r.lbfgs_rank},
+                          {"lbfgs_rank", r.lbfgs_rank}, {"solve_tolerance", r.solve_tolerance},
                           {"backend", BackendName(r.backend)}, {"termination", r.termination},
                           {"message", r.message},
                           {"seconds", r.seconds}, {"homogeneous_seconds", r.homogeneous_seconds},

@@ -67,6 +67,7 @@ struct RecoveryBenchRow {
   GridShape shape;
   std::string optimizer;
   int lbfgs_rank = 0;  // L-BFGS' history pairs; 0 for the optimisers that keep none
+  double solve_tolerance = 0;  // RecoveryOptions::solve_tolerance
   Backend backend = Backend::kCpu;
   std::string termination, message;  // why the optimiser stopped (TerminationName; Ceres' words)
   // seconds: the whole recovery (homogeneous fit included); simulate / evaluate: the data and

@@ -332,14 +332,18 @@ TEST_F(Cli, ErrorsNameTheFlagsAndEmptyRowsSayWhy) {
   ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " -o " + P("m.vdb")), "is a file, not a folder");
   ExpectOneLineError(Translume("edit " + P("m.vdb") + " --scale mu=-1 -o " + P("e.vdb")),
                      "--scale: the multipliers must be >= 0 (kappa x1, mu x-1)");
-  // evaluate says why a row is empty. (The solve's report has its level search.)
-  CommandRun r = Translume("solve " + P("ds") + " --max-iterations 2 -o " + P("r.vdb"));
+  ExpectOneLineError(Translume("solve " + P("ds") + " --solve-tolerance 0 -o " + P("r.vdb")),
+                     "--solve-tolerance: must be in (0, 1e-3)");
+  // evaluate says why a row is empty. (The solve's report has its level search and the solves'
+  // tolerance.)
+  CommandRun r = Translume("solve " + P("ds") + " --max-iterations 2 --solve-tolerance 1e-8 -o " + P("r.vdb"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("then the absorption level search (trials of 10 iterations)"), std::string::npos) << r.output;
   nlohmann::json report;
   std::ifstream(P("r.json")) >> report;
   EXPECT_GE(report["level_search"]["trials"].get<int>(), 2) << report.dump();
   EXPECT_EQ(report["level_search"]["mu_factor"].size(), 3u);
+  EXPECT_EQ(report["solve_tolerance"].get<double>(), 1e-8);
   r = Translume("evaluate " + P("r.vdb") + " --truth " + P("m.vdb") + " --dataset " + P("ds"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("has no holdout/ (translume simulate --holdout N writes one)"), std::string::npos) << r.output;
@@ -513,11 +517,12 @@ TEST_F(Cli, GlProfileTimesTheDispatches) {
 
 TEST_F(Cli, BenchRecoverySmoke) {
   const CommandRun r = Translume("bench recovery --grid 8x6x4 --presets wax --max-iterations 3 "
-                                 "--paper-iterations 2 --lbfgs-rank 7 --json");
+                                 "--paper-iterations 2 --lbfgs-rank 7 --solve-tolerance 1e-7 --json");
   ASSERT_EQ(r.status, 0) << r.output;
   const auto j = nlohmann::json::parse(r.output.substr(r.output.find('{')));
   ASSERT_EQ(j["cases"].size(), 5u);  // back/front x 0/1 % noise, and the paper optimiser
   EXPECT_EQ(j["cases"][0]["lbfgs_rank"].get<int>(), 7);
+  EXPECT_EQ(j["cases"][0]["solve_tolerance"].get<double>(), 1e-7);
   EXPECT_EQ(j["cases"][4]["optimizer"].get<std::string>(), "paper");
   EXPECT_EQ(j["cases"][4]["lbfgs_rank"].get<int>(), 0);
   EXPECT_EQ(j["cases"][0]["kappa_layer_error"].size(), 4u);

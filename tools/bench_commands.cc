@@ -149,6 +149,7 @@ void AddBenchRecovery(CLI::App& bench) {
                   "stops on them and keeps its best iterate (0: none, all --max-iterations)")
       ->capture_default_str();
   AddValidationFlags(*rec, &ro.recovery);
+  AddSolveToleranceFlag(*rec, &ro.recovery);
   rec->add_option("--holdout-every", ro.holdout_every, "Also evaluate the held-out E every this "
                   "many iterations (its solves are not counted in the recovery's time; 0: off)")
       ->capture_default_str();

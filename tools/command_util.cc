@@ -212,4 +212,11 @@ void AddValidationFlags(CLI::App& app, RecoveryOptions* o) {
       ->capture_default_str();
 }
 
+void AddSolveToleranceFlag(CLI::App& app, RecoveryOptions* o) {
+  app.add_option("--solve-tolerance", o->solve_tolerance,
+                 "Relative residual of the fit's forward and adjoint solves (tighter: slower iterations, "
+                 "rarely a better fit; docs/inverse.md)")
+      ->capture_default_str();
+}
+
 }  // namespace translume

@@ -53,6 +53,7 @@ void AddRecoveryFlags(CLI::App& app, RecoveryFlags* f) {
                  "Stop when an iteration lowers the objective by less than this fraction")
       ->capture_default_str();
   AddValidationFlags(app, &f->options);
+  AddSolveToleranceFlag(app, &f->options);
   app.add_option("--backend", f->backend, "cpu or gl (OpenGL compute shaders; docs/gpu.md)")
       ->capture_default_str();
 }
@@ -303,6 +304,7 @@ int RunSolve(int argc, char** argv) {
   j["lambda"] = o.lambda;
   j["regularizer"] = RegularizerName(o.regularizer.kind);
   j["regularize_mu"] = o.regularize_mu;
+  j["solve_tolerance"] = o.solve_tolerance;
   j["termination"] = TerminationName(sum.termination);
   j["interrupted"] = interrupted;
   j["message"] = sum.message;

@@ -21,6 +21,8 @@ void AddRecoveryFlags(CLI::App& app, RecoveryFlags* flags);
 // --validation-every, --validation-patience and --validation-margin (RecoveryOptions'
 // validation_*), for `solve` and `acquire` (through AddRecoveryFlags) and `bench recovery`.
 void AddValidationFlags(CLI::App& app, RecoveryOptions* options);
+// --solve-tolerance (RecoveryOptions::solve_tolerance), for the same three commands.
+void AddSolveToleranceFlag(CLI::App& app, RecoveryOptions* options);
 
 // CheckFitsInMemory (solver/memory.h) for a recovery with these options; where a lower
 // --lbfgs-rank would need less, the error says how much.
