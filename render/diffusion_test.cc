@@ -199,6 +199,11 @@ TEST(Diffusion, ChebyshevConvergesFasterToTheSameSolution) {
 TEST(Diffusion, ChebyshevScheduleWeights) {
   ChebyshevSchedule jacobi({0, 0, 0}, 100, false);
   for (int k = 0; k < 100; ++k) EXPECT_TRUE(ChebyshevSchedule::IsJacobi(jacobi.Next()));
+  // rho 0.5 by hand: omega 1, 1 / (1 - 1 / 8) = 8 / 7, 1 / (1 - (8 / 7) / 16) = 14 / 13.
+  ChebyshevSchedule half({0.5, 0.5, 0.5}, 3, false);
+  EXPECT_FLOAT_EQ(half.Next()[0], 1.0f);
+  EXPECT_FLOAT_EQ(half.Next()[1], 8.0f / 7);
+  EXPECT_FLOAT_EQ(half.Next()[2], 14.0f / 13);
   const std::array<double, 3> rho = {0.5, 0.9, 0.999};
   // 30 steps: the sequence only, or repeated one cycle, 26 of the sequence and 4 of Jacobi's;
   // 150 steps: three cycles of 50, 43 and 7 each; 101 steps: cycles of 51 and 50
@@ -206,17 +211,14 @@ TEST(Diffusion, ChebyshevScheduleWeights) {
   struct Case {
     int steps;
     bool repeated;
-    std::vector<int> cycles;
+    std::vector<int> cycles, tails;  // each cycle's length and its Jacobi steps (ceil(L / 8))
   };
-  for (const Case& t : {Case{30, false, {30}}, Case{30, true, {30}}, Case{150, false, {50, 50, 50}},
-                         Case{101, true, {51, 50}}}) {
+  for (const Case& t : {Case{30, false, {30}, {0}}, Case{30, true, {30}, {4}},
+                        Case{150, false, {50, 50, 50}, {7, 7, 7}}, Case{101, true, {51, 50}, {7, 7}}}) {
     const int steps = t.steps;
     ChebyshevSchedule s(rho, steps, t.repeated);
-    for (int length : t.cycles) {
-      const int tail = t.repeated || steps > ChebyshevSchedule::kMaxCycle ? ChebyshevSchedule::TailSteps(length) : 0;
-      if (tail > 0) {
-        EXPECT_EQ(tail, (length + 7) / 8);
-      }
+    for (size_t cycle = 0; cycle < t.cycles.size(); ++cycle) {
+      const int length = t.cycles[cycle], tail = t.tails[cycle];
       std::array<double, 3> omega = {1, 1, 1};
       for (int k = 0; k < length - tail; ++k) {
         const std::array<float, 3> w = s.Next();
