@@ -95,6 +95,7 @@ EvaluationReport EvaluateRecovery(const Material& rec, const Material* truth,
   const std::vector<FacePattern> rec_train =
       RenderFrontFace(rec, training.setup, Lights(training), mg, backend);
   r.fit_error = RelightingError(rec_train, Measured(training), Masks(training));
+  r.training_recovered = rec_train;
   if (!truth) return r;
   CheckMatches(*truth, training, "--truth");
   LayerErrors(rec, *truth, &r.kappa_layer_error, &r.mu_layer_error);
@@ -110,6 +111,8 @@ EvaluationReport EvaluateRecovery(const Material& rec, const Material* truth,
   for (size_t m = 0; m < q.size(); ++m)
     r.holdout_condition_error.push_back(RelightingError({a[m]}, {b[m]}, {w[m]}));
   r.truth_holdout_error = RelightingError(b, Measured(holdout), w);
+  r.holdout_recovered = a;
+  r.holdout_truth = b;
   return r;
 }
 

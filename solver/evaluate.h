@@ -34,6 +34,10 @@ struct EvaluationReport {
   // when the data was oversampled; noise adds to it).
   double truth_holdout_error = -1;
   std::vector<double> kappa_layer_error, mu_layer_error;
+  // The front-face radiance (nx*ny per channel) behind those errors, one per condition in the
+  // datasets' order: the recovered material under the training lights, and with a truth and a
+  // holdout/ the recovered and the true material under the held-out lights.
+  std::vector<FacePattern> training_recovered, holdout_recovered, holdout_truth;
 };
 
 // Evaluates a recovery. `holdout` may have no conditions (its errors stay -1); `truth` may be

@@ -1,11 +1,14 @@
 // SPDX-License-Identifier: MIT
 #include "solver/evaluate.h"
+#include "solver/evaluate_previews.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <limits>
 
+#include "solver/image_io.h"
 #include "solver/material.h"
 #include "solver/multigrid.h"
 #include "solver/status.h"
@@ -155,6 +158,58 @@ TEST(EvaluateRecovery, RefusesMaterialsAndHoldoutsOnOtherTerms) {
   Dataset holdout = train;
   holdout.shape = {2, 3, 2};
   expect_refused(good, &good, holdout, {"holdout", "2x3x2", "3x2x2"});
+}
+
+// The report keeps the renderings behind its errors, and --previews draws them: one image per
+// training condition (measured | recovered | residual) and per held-out one (truth | recovery |
+// residual), each three panels of the face side by side.
+TEST(EvaluateRecovery, KeepsItsRenderingsAndPreviewsThem) {
+  Dataset train = SmallDataset();
+  train.spacing_mm = 0.5;
+  const Material rec = Material::Constant(train.shape, 0.5, {1, 1, 1}, {0.01f, 0.01f, 0.01f});
+  const Material truth = Material::Constant(train.shape, 0.5, {1, 1, 1}, {0.02f, 0.02f, 0.02f});
+  train.C = rec.C;
+  Dataset holdout = train;
+  holdout.conditions.resize(1);
+  holdout.conditions[0].name = "h00";
+  holdout.conditions[0].mask[5] = 0;  // node (2, 1) masked
+  MultigridOptions mg;
+  mg.tolerance = 1e-9;
+  const EvaluationReport only_fit = EvaluateRecovery(rec, nullptr, train, holdout, mg);
+  ASSERT_EQ(only_fit.training_recovered.size(), 2u);
+  EXPECT_TRUE(only_fit.holdout_recovered.empty());
+  const EvaluationReport r = EvaluateRecovery(rec, &truth, train, holdout, mg);
+  ASSERT_EQ(r.holdout_recovered.size(), 1u);
+  ASSERT_EQ(r.holdout_truth.size(), 1u);
+  std::vector<FacePattern> measured;
+  std::vector<std::vector<float>> masks;
+  for (const auto& c : train.conditions) {
+    measured.push_back(c.L);
+    masks.push_back(c.mask);
+  }
+  EXPECT_NEAR(RelightingError(r.training_recovered, measured, masks), r.fit_error, 1e-12);
+  EXPECT_NEAR(RelightingError(r.holdout_recovered, r.holdout_truth, {holdout.conditions[0].mask}), r.holdout_error,
+              1e-12);
+  EXPECT_GT(r.holdout_error, 0);
+
+  const std::string dir = (std::filesystem::temp_directory_path() / "translume_evaluate_previews").string();
+  std::filesystem::remove_all(dir);
+  const std::vector<std::string> paths = WriteEvaluationPreviews(dir, r, train, holdout);
+  ASSERT_EQ(paths, EvaluationPreviewPaths(dir, train, holdout, true));
+  ASSERT_EQ(paths.size(), 3u);
+  EXPECT_EQ(std::filesystem::path(paths[2]).filename(), "holdout_h00.png");
+  const Image img = ReadImage(paths[2]);
+  const int z = 86;  // ceil(256 / 3) pixels per node
+  EXPECT_EQ(img.width, (3 * 3 + 4) * z);
+  EXPECT_EQ(img.height, 2 * z);
+  // Less absorption relights brighter: the residual panel is red, not black.
+  const size_t residual = size_t((z / 2) * img.width + (2 * 5 + 1) * z + z / 2) * 3;
+  EXPECT_GT(img.data[residual], img.data[residual + 2]);
+  const size_t masked = size_t((z + z / 2) * img.width + (2 * 5 + 2) * z + z / 2) * 3;
+  EXPECT_NEAR(img.data[masked], 0.35f, 1 / 255.0f);  // grey
+  EXPECT_NEAR(img.data[masked + 2], 0.35f, 1 / 255.0f);
+  EXPECT_EQ(WriteEvaluationPreviews(dir, only_fit, train, holdout).size(), 2u);  // training only
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -40,7 +40,8 @@ void WriteRadiancePreview(const std::string& path, const GridShape& shape, const
 // brightest node.
 inline constexpr float kResidualPreviewRange = 0.05f;
 
-// An 8-bit preview of a fit to one condition, three panels of the face side by side (x right, y
+// An 8-bit preview of a fit to one condition (or of any rendering against a reference: evaluate's
+// held-out previews pass the truth relit as `measured`), three panels of the face side by side (x right, y
 // down, PreviewPixelsPerNode pixels per node, a 2-node black gap between panels):
 //   measured  `measured` where mask > 0, black where masked; as WriteRadiancePreview with top =
 //             the largest measured value over the unmasked nodes and the three channels;

@@ -347,8 +347,12 @@ TEST_F(Cli, ErrorsNameTheFlagsAndEmptyRowsSayWhy) {
   r = Translume("evaluate " + P("r.vdb") + " --truth " + P("m.vdb") + " --dataset " + P("ds"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("has no holdout/ (translume simulate --holdout N writes one)"), std::string::npos) << r.output;
-  r = Translume("evaluate " + P("r.vdb") + " --dataset " + P("ds"));
+  r = Translume("evaluate " + P("r.vdb") + " --dataset " + P("ds") + " --previews " + P("prev"));
   EXPECT_NE(r.output.find("note: without --truth only the fit error"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("previews: 4 images in"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::exists(P("prev/fit_c00.png")) && fs::exists(P("prev/fit_c03.png")));
+  ExpectOneLineError(Translume("evaluate " + P("r.vdb") + " --dataset " + P("ds") + " --previews " + P("ds/prev")),
+                     "--previews " + P("ds/prev") + "/fit_c00.png: would write into the input folder");
 }
 
 // No command replaces or writes into its inputs, and an output path that names a folder is

@@ -17,6 +17,7 @@
 #include "solver/atomic_file.h"
 #include "solver/dataset.h"
 #include "solver/evaluate.h"
+#include "solver/evaluate_previews.h"
 #include "solver/image_io.h"
 #include "solver/light.h"
 #include "solver/material_io.h"
@@ -359,6 +360,10 @@ int RunEvaluate(int argc, char** argv) {
       ->required();
   app.add_option("--measured", measured_path, "A dataset built from photos (acquire's OUT_work/dataset): "
                  "also print its relative RMS error in L and q against --dataset");
+  std::string previews;
+  app.add_option("--previews", previews, "Write into this folder fit_NAME.png per training condition (measured | "
+                 "recovered | residual) and, with --truth and holdout/, holdout_NAME.png (the truth relit | the "
+                 "recovery relit | residual)");
   app.add_flag("--json", json, "Print JSON instead of a table");
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
@@ -386,6 +391,12 @@ int RunEvaluate(int argc, char** argv) {
   const Material rec = ReadMaterial(rec_path);
   std::optional<Material> truth;
   if (!truth_path.empty()) truth = ReadMaterial(truth_path);
+  if (!previews.empty()) {  // (before the work)
+    RequireFolderPath("--previews", previews);
+    const std::vector<std::string> inputs = {rec_path, truth_path, DatasetFolder(dataset_path), measured_path};
+    for (const std::string& path : EvaluationPreviewPaths(previews, training, holdout, truth.has_value()))
+      RequireNotInput("--previews", path, inputs);
+  }
   MultigridOptions mg;
   mg.tolerance = 1e-9;
   mg.max_iterations = 300;
@@ -394,6 +405,10 @@ int RunEvaluate(int argc, char** argv) {
     r = EvaluateRecovery(rec, truth ? &*truth : nullptr, training, holdout, mg);
   } catch (const InputError& e) {
     throw InputError(fmt::format("{} against --dataset {}: {}", rec_path, dataset_path, e.what()));
+  }
+  if (!previews.empty()) {
+    const auto written = WriteEvaluationPreviews(previews, r, training, holdout);
+    if (!json) std::printf("previews: %zu images in %s\n", written.size(), previews.c_str());
   }
   // The fit against the data the material was fitted to (acquire's), where that is not --dataset.
   double measured_fit = -1;
