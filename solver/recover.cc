@@ -323,7 +323,6 @@ struct Objective {
   std::function<bool()> ok;
 };
 
-// An Objective on n unknowns for Ceres, times `scale` (f and its gradient; RunOptimizer).
 // One evaluation of f with its gradient, kept for the optimiser's first call at the same x.
 struct Evaluation {
   std::vector<double> x, gradient;
@@ -331,9 +330,10 @@ struct Evaluation {
   bool ok = false;
 };
 
-// f scaled by `scale` for Ceres. Ceres starts by evaluating the starting point, which
-// FirstStepScale has just evaluated: `first` (optional) answers that call, once, if Ceres asks
-// for exactly first->x; the problem's warm-start fields are already those of x.
+// An Objective on n unknowns for Ceres, times `scale` (f and its gradient; RunOptimizer).
+// Ceres starts by evaluating the starting point, which FirstStepScale has just evaluated:
+// `first` (optional) answers that call, once, if Ceres asks for exactly first.x; the problem's
+// warm-start fields are already those of that point.
 class CeresFunction : public ceres::FirstOrderFunction {
  public:
   CeresFunction(const Objective& f, int n, double scale, Evaluation first = {})
