@@ -92,6 +92,64 @@ class StageLog {
   nlohmann::json log_;
 };
 
+// Text for an HTML page: & < > " escaped.
+std::string Html(const std::string& text) {
+  std::string out;
+  for (char ch : text) {
+    switch (ch) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      default: out += ch;
+    }
+  }
+  return out;
+}
+
+// previews/index.html: one page with the run's summary, every condition's fit preview beside its
+// numbers, and the material's slices (kappa and mu by depth); links relative to the folder, so
+// that it can be copied or archived whole.
+void WritePreviewIndex(const fs::path& path, const AcquireReport& rep, const std::string& capture) {
+  std::string h = "<!doctype html>\n<html><head><meta charset=\"utf-8\">\n<title>translume acquire: " +
+                  Html(fs::path(rep.material).filename().string()) + "</title>\n"
+                  "<style>body{font-family:sans-serif;background:#1e1e1e;color:#ddd;margin:1.5em}"
+                  "img{image-rendering:pixelated;max-width:100%}td,th{padding:2px 10px;text-align:left;"
+                  "vertical-align:middle}th{color:#aaa;font-weight:normal}code{color:#fc9}</style></head><body>\n";
+  h += "<h1>" + Html(rep.material) + "</h1>\n";
+  h += "<p>capture <code>" + Html(capture) + "</code>; " + Html(rep.solve.BriefReport()) + "</p>\n";
+  h += "<h2>Conditions</h2>\n<p>measured | fitted (one brightness scale) | residual: fitted less measured, "
+       "mean over RGB, relative to the brightest measured node; black: exact, <span style=\"color:#f42\">red"
+       "</span>: the fit brighter, <span style=\"color:#47f\">blue</span>: darker, full colour at " +
+       fmt::format("{:g}", 100 * kResidualPreviewRange) + " %; grey: masked nodes (docs/capture.md).</p>\n"
+       "<table>\n<tr><th>condition</th><th>measured</th><th>saturated</th><th>masked</th><th>E</th><th></th></tr>\n";
+  for (const auto& c : rep.conditions)
+    h += fmt::format("<tr><td>{}{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td><img src=\"{}\" "
+                     "alt=\"{}\"></td></tr>\n", Html(c.name), c.validation ? " (validation)" : "",
+                     c.measured_nodes, c.saturated_nodes, c.masked_nodes,
+                     c.fit_error < 0 ? std::string("-") : fmt::format("{:.3e}", c.fit_error),
+                     Html("fit_" + c.name + ".png"), Html(c.name));
+  h += "</table>\n<h2>Material</h2>\n<p>Each channel on a log scale from its 0.5 % to its 99.5 % value "
+       "(<code>translume info</code> prints them); depth 0 is the lit face's layer.</p>\n<table>\n";
+  for (const char* quantity : {"kappa", "mu"}) {
+    h += fmt::format("<tr><th>{}</th>", quantity);
+    const std::string prefix = fmt::format("material_{}_k", quantity);
+    for (const auto& p : rep.previews) {
+      const std::string name = fs::path(p).filename().string();
+      if (name.starts_with(prefix))
+        h += fmt::format("<td>depth {}<br><img src=\"{}\" alt=\"{}\" width=\"256\"></td>",
+                         std::stoi(name.substr(prefix.size(), name.size() - prefix.size() - 4)), Html(name), Html(name));
+    }
+    h += "</tr>\n";
+  }
+  h += "</table>\n</body></html>\n";
+  WriteAtomically(path.string(), [&](const std::string& tmp) {
+    std::ofstream f(tmp);
+    f << h;
+    if (!f) throw InputError(fmt::format("{}: cannot write", path.string()));
+  });
+}
+
 }  // namespace
 
 std::string AcquireOptions::Validate() const {
@@ -611,6 +669,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       rep.previews.push_back(p);
     }
     for (const auto& p : WriteMaterialSlices((prev / "material").string(), m)) rep.previews.push_back(p);
+    WritePreviewIndex(prev / "index.html", rep, cap.file);
+    rep.previews.push_back((prev / "index.html").string());
     stage_done("previews");
     j["solve"] = {{"termination", TerminationName(rep.solve.termination)},
                   {"message", rep.solve.message},

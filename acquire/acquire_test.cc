@@ -9,6 +9,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -678,6 +679,15 @@ TEST_F(AcquireTest, EndToEndHeldOutError) {
   }
   EXPECT_EQ(validation_rows, 4);
   EXPECT_TRUE(fs::exists(fs::path(r.work_dir) / "previews/fit_v00.png"));
+  // One page shows them all: every preview image, by its name in the same folder.
+  const fs::path index = fs::path(r.work_dir) / "previews/index.html";
+  ASSERT_NE(std::find(r.previews.begin(), r.previews.end(), index.string()), r.previews.end());
+  std::ifstream in(index);
+  const std::string page((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  for (const auto& p : r.previews)
+    if (p != index.string())
+      EXPECT_NE(page.find("src=\"" + fs::path(p).filename().string() + "\""), std::string::npos) << p;
+  EXPECT_NE(page.find("v00 (validation)"), std::string::npos);
   // A second run reuses the calibration and HDR stages.
   AcquireOptions again;
   again.solve = false;

@@ -230,9 +230,11 @@ int RunAcquire(int argc, char** argv) {
   if (tty) std::printf("\n");
   if (o.solve) std::printf("%s\n", rep.solve.BriefReport().c_str());
   std::printf("%s", rep.Table().c_str());
-  std::printf("wrote %s%s, %s/dataset.json and %zu previews in %s/previews%s\n",
-              o.solve ? (out + ", ").c_str() : "", rep.report_json.c_str(), rep.dataset_dir.c_str(),
-              rep.previews.size(), rep.work_dir.c_str(), o.solve ? "" : " (--no-solve: no material)");
+  std::printf("wrote %s%s, %s/dataset.json%s%s\n", o.solve ? (out + ", ").c_str() : "", rep.report_json.c_str(),
+              rep.dataset_dir.c_str(),
+              o.solve ? fmt::format(" and {} previews (open {}/previews/index.html)", rep.previews.size() - 1,
+                                    rep.work_dir).c_str() : "",
+              o.solve ? "" : " (--no-solve: no material)");
   if (interrupted) std::printf("interrupted: %s is the best material so far\n", out.c_str());
   return interrupted ? kInterruptedExit : 0;
 }
@@ -342,7 +344,7 @@ int RunDemo(int argc, char** argv) {
   if (RunRender(int(av.size()), av.data()) != 0) return 1;
   std::printf("demo: 4/4 rendered the recovered material on a sphere, %.1f s in all\n", elapsed());
   std::printf("demo outputs:\n  capture     %s (photos, calibration, truth/)\n  recovered   %s\n"
-              "  work        %s (calibration, HDR, dataset, report.json, previews/)\n  rendering   %s\n",
+              "  work        %s (calibration, HDR, dataset, report.json, previews/index.html)\n  rendering   %s\n",
               capture.c_str(), rec_path.c_str(), rep.work_dir.c_str(), sphere.c_str());
   return 0;
 }
