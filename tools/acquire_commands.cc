@@ -305,8 +305,8 @@ int RunDemo(int argc, char** argv) {
   const auto progress = [&](const IterationReport& r, const RecoveryState&) {
     const std::string left = time_left(r, iterations);
     if (r.iteration % 25 == 0)
-      print(fmt::format("iteration {:4d}  objective {:.3e}  solves {}  {:.1f} s, left {}", r.iteration, r.objective,
-                        r.solves, elapsed(), left));
+      print(fmt::format("iteration {:4d}  objective {:.3e}  solves {}  {:.1f} s into the demo, left {}", r.iteration,
+                        r.objective, r.solves, elapsed(), left));
     return !sigint->interrupted();
   };
   acquire::AcquireReport rep;
