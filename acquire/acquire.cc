@@ -115,8 +115,8 @@ void WritePreviewIndex(const fs::path& path, const AcquireReport& rep, const std
                   Html(fs::path(rep.material).filename().string()) + "</title>\n"
                   "<style>body{font-family:sans-serif;background:#1e1e1e;color:#ddd;margin:1.5em}"
                   "img{image-rendering:pixelated;max-width:100%}td,th{padding:2px 10px;text-align:left;"
-                  "vertical-align:middle;white-space:nowrap}th{color:#aaa;font-weight:normal}code{color:#fc9}</style></head>"
-                  "<body>\n";
+                  "vertical-align:middle;white-space:nowrap}th{color:#aaa;font-weight:normal}code{color:#fc9}"
+                  "</style></head><body>\n";
   h += "<h1>" + Html(rep.material) + "</h1>\n";
   h += "<p>capture <code>" + Html(capture) + "</code>; " + Html(rep.solve.BriefReport()) + "</p>\n";
   h += "<h2>Conditions</h2>\n<p>measured | fitted (one brightness scale) | residual: fitted less measured, "
@@ -131,7 +131,8 @@ void WritePreviewIndex(const fs::path& path, const AcquireReport& rep, const std
                      c.fit_error < 0 ? std::string("-") : fmt::format("{:.3e}", c.fit_error),
                      Html("fit_" + c.name + ".png"), Html(c.name));
   h += "</table>\n<h2>Material</h2>\n<p>Each channel on a log scale from its 0.5 % to its 99.5 % value "
-       "(<code>translume info</code> prints them); depth 0 is the front face's layer (the one the camera sees).</p>\n<table>\n";
+       "(<code>translume info</code> prints them); depth 0 is the front face's layer (the one the camera "
+       "sees).</p>\n<table>\n";
   for (const char* quantity : {"kappa", "mu"}) {
     h += fmt::format("<tr><th>{}</th>", quantity);
     const std::string prefix = fmt::format("material_{}_k", quantity);
@@ -139,7 +140,8 @@ void WritePreviewIndex(const fs::path& path, const AcquireReport& rep, const std
       const std::string name = fs::path(p).filename().string();
       if (name.starts_with(prefix))
         h += fmt::format("<td>depth {}<br><img src=\"{}\" alt=\"{}\" width=\"256\"></td>",
-                         std::stoi(name.substr(prefix.size(), name.size() - prefix.size() - 4)), Html(name), Html(name));
+                         std::stoi(name.substr(prefix.size(), name.size() - prefix.size() - 4)), Html(name),
+                         Html(name));
     }
     h += "</tr>\n";
   }
