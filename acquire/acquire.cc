@@ -648,7 +648,9 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     progress("solving for kappa and mu ...");
     solving = true;
     RecoveryState state;
-    rep.solve = Recover(d, o.recovery, &state, iteration, &validation);
+    RecoveryOptions ro = o.recovery;
+    if (!ro.stop) ro.stop = o.stop;  // the homogeneous fit and the level search
+    rep.solve = Recover(d, ro, &state, iteration, &validation);
     const Material m = MaterialFromState(d, state, cap.eta);
     WriteMaterial(out, m);
     stage_done("solve");

@@ -30,8 +30,9 @@ struct AcquireOptions {
   int mask_margin = 2;       // front-lit: masked nodes around the directly lit ones
   // Polled at every progress line before the solve (between stages, per HDR stack): true stops
   // there with Interrupted (solver/status.h); the finished stages stay in the work folder for a
-  // re-run. The solve itself stops through the iteration callback (the material so far is
-  // written).
+  // re-run. In the solve it is RecoveryOptions::stop (unless recovery.stop is set): the
+  // homogeneous fit and the level search end there; the fit's iterations stop through the
+  // iteration callback. Either way the material so far is written.
   std::function<bool()> stop;
   std::string Validate() const;
 };

@@ -77,6 +77,12 @@ struct RecoveryOptions {
   double solve_tolerance = 1e-6;
   // OpenMP threads inside each channel's solver; 0: max(1, NumThreads() / 3).
   int threads_per_channel = 0;
+  // Polled (from the channels' threads too) during the homogeneous fit, per iteration, and the
+  // absorption level search, per iteration of its trials: true ends them there (the search's
+  // level stays the homogeneous fit's) and skips the heterogeneous fit, whose iterations Recover's
+  // callback stops instead; the result is then the homogeneous fit (termination kStopped). A
+  // first Ctrl-C during the level search of a large grid used to wait for the whole search.
+  std::function<bool()> stop;
 
   std::string Validate() const;
 };
@@ -132,6 +138,7 @@ struct RecoverySummary {
   double level_seconds = 0;
   int64_t level_solves = 0;
   int level_trials = 0;
+  bool level_stopped = false;  // abandoned by RecoveryOptions::stop
   std::array<double, 3> level_factor{1, 1, 1};
   // Conjugate-gradient iterations of this run's solves (not of a resumed run's earlier ones),
   // and of them the homogeneous fit's.

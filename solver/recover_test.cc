@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -435,6 +436,53 @@ TEST(Recover, LateCheckpointResumesDescending) {
   std::printf("first: %s\nresumed: %s\n", first.BriefReport().c_str(), resumed.BriefReport().c_str());
   EXPECT_EQ(resumed.iterations, 80);
   EXPECT_LT(resumed.final_objective, 0.8 * first.final_objective);
+}
+
+// RecoveryOptions::stop (Ctrl-C in solve and acquire) ends the homogeneous fit and the level
+// search where they are, and the fit does not start: the result is the homogeneous fit, at its
+// own level. (A first Ctrl-C in the level search used to wait for the whole search.)
+TEST(Recover, StopEndsTheHomogeneousFitAndTheLevelSearch) {
+  const Dataset d = WaxTraining24x18x8();
+  RecoveryOptions ro;
+  ro.max_iterations = 50;
+  std::atomic<int> polls{0};
+  int stop_after = 1 << 30;
+  ro.stop = [&] { return polls++ >= stop_after; };
+  // The homogeneous fit alone: how many polls it makes.
+  ro.level_search = 0;
+  ro.max_iterations = 0;
+  RecoveryState homogeneous;
+  Recover(d, ro, &homogeneous);
+  const int homogeneous_polls = polls.load();
+  ASSERT_GT(homogeneous_polls, 3);
+  // Stopped 5 polls into the level search: some of its trials ran, none of the fit's iterations.
+  ro.level_search = 10;
+  ro.max_iterations = 50;
+  polls = 0;
+  stop_after = homogeneous_polls + 5;
+  RecoveryState st;
+  const RecoverySummary s = Recover(d, ro, &st);
+  std::printf("%s\n", s.BriefReport().c_str());
+  EXPECT_EQ(s.termination, RecoveryTermination::kStopped);
+  EXPECT_NE(s.message.find("in the absorption level search"), std::string::npos) << s.message;
+  EXPECT_EQ(s.iterations, 0);
+  EXPECT_TRUE(s.level_stopped);
+  EXPECT_GE(s.level_trials, 1);
+  EXPECT_EQ(s.level_factor, (std::array<double, 3>{1, 1, 1}));
+  EXPECT_EQ(st.x, homogeneous.x);  // the homogeneous fit, untouched by the trials
+  // Stopped at once: the starting guess, no trial.
+  polls = 0;
+  stop_after = 0;
+  RecoveryState none;
+  const RecoverySummary s0 = Recover(d, ro, &none);
+  EXPECT_EQ(s0.termination, RecoveryTermination::kStopped);
+  EXPECT_EQ(s0.level_trials, 0);
+  EXPECT_FALSE(s0.level_stopped);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_DOUBLE_EQ(s0.homogeneous_kappa[c], ro.homogeneous_kappa);
+    EXPECT_DOUBLE_EQ(s0.homogeneous_mu[c], ro.homogeneous_mu);
+  }
+  EXPECT_LT(s0.solves, s.solves);
 }
 
 // A fresh fit's first step. Ceres' first step is the gradient itself, which from the homogeneous

@@ -535,7 +535,10 @@ TEST_F(Cli, BenchRecoverySmoke) {
   // The memory a recovery took, beside the estimate `solve` checks (which bounds it).
   const int64_t peak = j["cases"][0]["peak_memory_bytes"].get<int64_t>();
   EXPECT_GT(peak, 0);
+#if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)
+  // (A sanitizer's allocator and shadow memory change the resident set: 88 MB against 18 MB.)
   EXPECT_LE(peak, j["cases"][0]["memory_estimate_bytes"].get<int64_t>());
+#endif
   EXPECT_TRUE(j.contains("optimizer_comparison"));
   ExpectOneLineError(Translume("bench recovery --grid 8x6"), "--grid");
 }

@@ -282,7 +282,9 @@ int RunSolve(int argc, char** argv) {
     }
     return !sigint->interrupted();
   };
-  const RecoverySummary sum = Recover(d, o, &state, callback, &validation);
+  RecoveryOptions ro = o;
+  ro.stop = [&] { return sigint->interrupted(); };  // the homogeneous fit and the level search
+  const RecoverySummary sum = Recover(d, ro, &state, callback, &validation);
   const bool interrupted = sigint->interrupted();
   sigint.reset();  // writing the outputs: Ctrl-C ends at once again
   if (tty) std::printf("\n");
@@ -292,7 +294,17 @@ int RunSolve(int argc, char** argv) {
     throw InputError(fmt::format("{}: the fit failed (objective {:.4g} -> {:.4g}: {}); nothing written. Check the "
                                  "dataset's scale: L, q and spacing_mm", dataset_path, sum.initial_objective,
                                  sum.final_objective, sum.message));
-  if (!checkpoint.empty()) WriteCheckpoint(checkpoint, d, state);
+  if (!printed_homogeneous)  // (stopped before the fit's first iteration, whose callback prints it)
+    std::printf("homogeneous fit: kappa %.4g %.4g %.4g mm, mu %.4g %.4g %.4g /mm\n", sum.homogeneous_kappa[0],
+                sum.homogeneous_kappa[1], sum.homogeneous_kappa[2], sum.homogeneous_mu[0], sum.homogeneous_mu[1],
+                sum.homogeneous_mu[2]);
+  // Stopped before the fit's first iteration: no checkpoint, so that a re-run starts over with
+  // the homogeneous fit and the level search, which a resumed run skips.
+  if (!checkpoint.empty() && state.iteration == 0 && interrupted)
+    std::printf("checkpoint %s not written: stopped before the fit's first iteration (a re-run starts over)\n",
+                checkpoint.c_str());
+  else if (!checkpoint.empty())
+    WriteCheckpoint(checkpoint, d, state);
   const Material m = MaterialFromState(d, state);
   WriteMaterial(out, m);
   std::printf("%s\n", sum.BriefReport().c_str());
