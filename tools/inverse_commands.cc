@@ -237,6 +237,9 @@ int RunSolve(int argc, char** argv) {
   } else if (!init.empty()) {
     state = StateFromMaterial(d, ReadMaterial(init));
   }
+  // First Ctrl-C: finish the current iteration, then write the best material so far. (Installed
+  // before the first line of output, so that a script that waits for it can interrupt.)
+  std::optional<SigintGuard> sigint(std::in_place);
   std::printf("solve: %s, grid %s, %zu conditions, %s-lit, optimizer %s, lambda %g (%s%s), "
               "%d threads\n%s", dataset_path.c_str(), d.shape.ToString().c_str(),
               d.conditions.size(), SetupName(d.setup), optimizer.c_str(), o.lambda,
@@ -252,8 +255,6 @@ int RunSolve(int argc, char** argv) {
                                                   o.level_search).c_str() : "");
   std::fflush(stdout);
   const bool tty = isatty(fileno(stdout));
-  // First Ctrl-C: finish the current iteration, then write the best material so far.
-  std::optional<SigintGuard> sigint(std::in_place);
   auto last_checkpoint = std::chrono::steady_clock::now();
   bool printed_homogeneous = !state.x.empty();
   TimeLeft time_left;
