@@ -110,7 +110,8 @@ std::string Html(const std::string& text) {
 // previews/index.html: one page with the run's summary, every condition's fit preview beside its
 // numbers, and the material's slices (kappa and mu by depth); links relative to the folder, so
 // that it can be copied or archived whole.
-void WritePreviewIndex(const fs::path& path, const AcquireReport& rep, const std::string& capture) {
+void WritePreviewIndex(const fs::path& path, const AcquireReport& rep, const std::string& capture,
+                       const GridShape& shape) {
   std::string h = "<!doctype html>\n<html><head><meta charset=\"utf-8\">\n<title>translume acquire: " +
                   Html(fs::path(rep.material).filename().string()) + "</title>\n"
                   "<style>body{font-family:sans-serif;background:#1e1e1e;color:#ddd;margin:1.5em}"
@@ -133,15 +134,13 @@ void WritePreviewIndex(const fs::path& path, const AcquireReport& rep, const std
   h += "</table>\n<h2>Material</h2>\n<p>Each channel on a log scale from its 0.5 % to its 99.5 % value "
        "(<code>translume info</code> prints them); depth 0 is the front face's layer (the one the camera "
        "sees).</p>\n<table>\n";
-  for (const char* quantity : {"kappa", "mu"}) {
-    h += fmt::format("<tr><th>{}</th>", quantity);
-    const std::string prefix = fmt::format("material_{}_k", quantity);
-    for (const auto& p : rep.previews) {
-      const std::string name = fs::path(p).filename().string();
-      if (name.starts_with(prefix))
-        h += fmt::format("<td>depth {}<br><img src=\"{}\" alt=\"{}\" width=\"256\"></td>",
-                         std::stoi(name.substr(prefix.size(), name.size() - prefix.size() - 4)), Html(name),
-                         Html(name));
+  const std::vector<std::string> slices = MaterialSlicePaths("material", shape);  // kappa's, then mu's
+  const std::vector<int64_t> depths = MaterialSliceDepths(shape);
+  for (size_t q = 0; q < 2; ++q) {
+    h += fmt::format("<tr><th>{}</th>", q == 0 ? "kappa" : "mu");
+    for (size_t k = 0; k < depths.size(); ++k) {
+      const std::string name = Html(slices[q * depths.size() + k]);
+      h += fmt::format("<td>depth {}<br><img src=\"{}\" alt=\"{}\" width=\"256\"></td>", depths[k], name, name);
     }
     h += "</tr>\n";
   }
@@ -674,7 +673,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       rep.previews.push_back(p);
     }
     for (const auto& p : WriteMaterialSlices((prev / "material").string(), m)) rep.previews.push_back(p);
-    WritePreviewIndex(prev / "index.html", rep, cap.file);
+    WritePreviewIndex(prev / "index.html", rep, cap.file, g);
     rep.previews.push_back((prev / "index.html").string());
     stage_done("previews");
     j["solve"] = {{"termination", TerminationName(rep.solve.termination)},

@@ -126,17 +126,6 @@ Image ImageFromPlanes(int width, int height, const std::vector<const float*>& pl
   return img;
 }
 
-void WriteRadiancePreview(const std::string& path, const GridShape& s, const FacePattern& L, float top) {
-  std::vector<float> all;
-  for (const auto& ch : L) all.insert(all.end(), ch.begin(), ch.end());
-  std::sort(all.begin(), all.end());
-  if (!(top > 0)) top = std::max(all[size_t(0.995 * (all.size() - 1))], 1e-30f);
-  FacePattern t = L;
-  for (auto& ch : t)
-    for (float& v : ch) v = std::pow(std::clamp(v / top, 0.0f, 1.0f), 1.0f / 2.2f);
-  WriteImage(path, ImageFromPlanes(int(s.nx), int(s.ny), {t[0].data(), t[1].data(), t[2].data()}));
-}
-
 void WriteFitComparison(const std::string& path, const GridShape& s, const FacePattern& measured,
                         const FacePattern& fitted, const std::vector<float>& mask) {
   const size_t face = size_t(s.nx * s.ny);
@@ -181,20 +170,16 @@ void WriteFitComparison(const std::string& path, const GridShape& s, const FaceP
   WriteImage(path, ImageFromPlanes(int(W), int(H), {rgb[0].data(), rgb[1].data(), rgb[2].data()}));
 }
 
-namespace {
-
-std::vector<int64_t> SliceDepths(const GridShape& s) {
+std::vector<int64_t> MaterialSliceDepths(const GridShape& s) {
   std::vector<int64_t> depths = {0, s.nz / 4, s.nz / 2, 3 * s.nz / 4, s.nz - 1};
   depths.erase(std::unique(depths.begin(), depths.end()), depths.end());
   return depths;
 }
 
-}  // namespace
-
 std::vector<std::string> MaterialSlicePaths(const std::string& prefix, const GridShape& shape) {
   std::vector<std::string> paths;
   for (const char* name : {"kappa", "mu"})
-    for (int64_t k : SliceDepths(shape)) paths.push_back(fmt::format("{}_{}_k{:02d}.png", prefix, name, k));
+    for (int64_t k : MaterialSliceDepths(shape)) paths.push_back(fmt::format("{}_{}_k{:02d}.png", prefix, name, k));
   return paths;
 }
 
@@ -206,7 +191,7 @@ int PreviewPixelsPerNode(int64_t nx) {
 std::vector<std::string> WriteMaterialSlices(const std::string& prefix, const Material& m) {
   const GridShape& s = m.shape;
   const std::vector<std::string> paths = MaterialSlicePaths(prefix, s);
-  const std::vector<int64_t> depths = SliceDepths(s);
+  const std::vector<int64_t> depths = MaterialSliceDepths(s);
   const int64_t z = PreviewPixelsPerNode(s.nx), W = s.nx * z, H = s.ny * z;
   size_t next = 0;
   for (const auto* field : {&m.kappa, &m.mu}) {

@@ -31,11 +31,6 @@ std::vector<float> RasterizeLightFile(const LightSpec& spec, const GridShape& sh
 // Channel-separated planes (each width*height, row-major) to an interleaved image.
 Image ImageFromPlanes(int width, int height, const std::vector<const float*>& planes);
 
-// An 8-bit preview of front-face radiance (nx x ny, RGB): divided by `top` (<= 0: the 99.5th
-// percentile of L), clamped to [0, 1], gamma 1/2.2.
-void WriteRadiancePreview(const std::string& path, const GridShape& shape, const FacePattern& L,
-                          float top = 0);
-
 // The residual panel of WriteFitComparison saturates at this fraction of the measured panel's
 // brightest node.
 inline constexpr float kResidualPreviewRange = 0.05f;
@@ -43,8 +38,9 @@ inline constexpr float kResidualPreviewRange = 0.05f;
 // An 8-bit preview of a fit to one condition (or of any rendering against a reference: evaluate's
 // held-out previews pass the truth relit as `measured`), three panels of the face side by side (x right, y
 // down, PreviewPixelsPerNode pixels per node, a 2-node black gap between panels):
-//   measured  `measured` where mask > 0, black where masked; as WriteRadiancePreview with top =
-//             the largest measured value over the unmasked nodes and the three channels;
+//   measured  `measured` where mask > 0, black where masked: divided by top = the largest
+//             measured value over the unmasked nodes and the three channels, clamped to [0, 1],
+//             gamma 1/2.2;
 //   fitted    `fitted` on the same scale;
 //   residual  r = mean over RGB of (fitted - measured) / top per unmasked node: black at 0, red
 //             (fitted brighter) or blue (fitted darker) rising linearly to full at |r| =
@@ -67,7 +63,10 @@ int PreviewPixelsPerNode(int64_t nx);
 // stays faint: PREFIX_kappa_kNN.png, PREFIX_mu_kNN.png. Returns the paths written,
 // MaterialSlicePaths(prefix, material.shape).
 std::vector<std::string> WriteMaterialSlices(const std::string& prefix, const Material& material);
-// The paths WriteMaterialSlices writes for a material of this grid: kappa's, then mu's.
+// The paths WriteMaterialSlices writes for a material of this grid: kappa's, then mu's, each
+// in the order of MaterialSliceDepths.
 std::vector<std::string> MaterialSlicePaths(const std::string& prefix, const GridShape& shape);
+// The depths k of those slices: 0, nz/4, nz/2, 3nz/4, nz-1 without repeats.
+std::vector<int64_t> MaterialSliceDepths(const GridShape& shape);
 
 }  // namespace translume

@@ -158,7 +158,7 @@ class RecoveryProblem {
     std::vector<double> r0, r1, r2, rt;
     double f0 = EvaluateConstant(c, *lk, *lm, &r0);
     double damping = 1e-3;
-    for (int it = 0; it < max_iterations && f0 > 0 && !(o_.stop && o_.stop()); ++it) {
+    for (int it = 0; it < max_iterations && f0 > 0 && !o_.StopRequested(); ++it) {
       EvaluateConstant(c, *lk + kStep, *lm, &r1);
       EvaluateConstant(c, *lk, *lm + kStep, &r2);
       double a11 = 0, a12 = 0, a22 = 0, g1 = 0, g2 = 0;
@@ -590,7 +590,6 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
     (*mu_scale)[c] *= std::pow(10.0, t);
   };
   LevelSearchResult result;
-  const auto stopped = [&] { return o.stop && o.stop(); };
   // Stopped: state->x and its scales are still the homogeneous fit's (the trials work on copies).
   const auto abandon = [&] {
     problem->set_scales(state->kappa_scale, state->mu_scale);
@@ -613,7 +612,7 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
       std::vector<double> xc(x.begin() + 2 * c * n, x.begin() + 2 * (c + 1) * n);
       const Objective channel{[&](const double* v, double* g) { return problem->EvaluateOneChannel(c, v, g); },
                               [&] { return problem->channel_ok(c); }};
-      RunOptimizer(channel, o, o.level_search, &xc, [&](int, double, double) { return !stopped(); });
+      RunOptimizer(channel, o, o.level_search, &xc, [&](int, double, double) { return !o.StopRequested(); });
       // The trial's score: its objective with the data term low-passed. A wrong level leaves a
       // residual as smooth as diffusion makes it; the data's noise, which the trial's few
       // iterations have only begun to fit, is rough, and (1 % on wax 64x48x16) it added ~7e-5 to
@@ -633,9 +632,9 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
       if (record[c]) tried[c][t[c]] = std::isfinite(f[c]) ? f[c] : std::numeric_limits<double>::infinity();
   };
   trial({0, 0, 0}, {true, true, true});
-  if (stopped()) return abandon();
+  if (o.StopRequested()) return abandon();
   trial({kStep, kStep, kStep}, {true, true, true});
-  if (stopped()) return abandon();
+  if (o.StopRequested()) return abandon();
   for (int round = 0; round < int(kReach / kStep); ++round) {
     std::array<double, 3> t{};
     std::array<bool, 3> record{};
@@ -649,7 +648,7 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
     }
     if (!record[0] && !record[1] && !record[2]) break;
     trial(t, record);
-    if (stopped()) return abandon();
+    if (o.StopRequested()) return abandon();
   }
   // A trial's objective depends on the path its few iterations take as well as on the level:
   // levels 0.1-0.5 decades apart measured 1.3-1.75x apart where the level hardly mattered, and
@@ -673,7 +672,7 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
     }
     if (!record[0] && !record[1] && !record[2]) continue;
     trial(t, record);
-    if (stopped()) return abandon();
+    if (o.StopRequested()) return abandon();
     for (int c = 0; c < 3; ++c)
       if (record[c] && kFineMargin * tried[c].at(t[c]) < tried[c].at(fine[c])) fine[c] = t[c];
   }
@@ -869,7 +868,6 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
   const double seconds0 = state->seconds;
   auto solves = [&] { return solves0 + problem.solves(); };
   auto seconds = [&] { return seconds0 + Since(t0); };
-  const auto stopped = [&] { return o.stop && o.stop(); };
 
   if (state->x.empty()) {
     // Homogeneous initialisation: 6 unknowns, same objective on constant volumes.
@@ -889,7 +887,7 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
     sum.homogeneous_seconds = Since(t0);
     sum.homogeneous_solves = problem.solves();
     sum.homogeneous_cg_iterations = problem.cg_iterations();
-    if (o.level_search > 0 && o.max_iterations > 0 && !stopped()) {
+    if (o.level_search > 0 && o.max_iterations > 0 && !o.StopRequested()) {
       problem.set_scales(state->kappa_scale, state->mu_scale);
       const LevelSearchResult level = SearchAbsorptionLevel(&problem, o, n, state);
       state->level_factor = level.factor;
@@ -931,7 +929,7 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
   const auto t_optimizer = Clock::now();
   const double evaluation0 = problem.evaluation_seconds(), validation0 = validation.seconds();
   OptimizerResult r;
-  if (remaining == 0 || stopped()) {
+  if (remaining == 0 || o.StopRequested()) {
     r.termination = remaining == 0 ? RecoveryTermination::kMaxIterations : RecoveryTermination::kStopped;
     r.message = remaining == 0 ? "no iterations left"
                                : fmt::format("stopped by the caller (e.g. Ctrl-C) before the fit's first iteration{}",

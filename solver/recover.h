@@ -83,6 +83,7 @@ struct RecoveryOptions {
   // callback stops instead; the result is then the homogeneous fit (termination kStopped). A
   // first Ctrl-C during the level search of a large grid used to wait for the whole search.
   std::function<bool()> stop;
+  bool StopRequested() const { return stop && stop(); }
 
   std::string Validate() const;
 };
