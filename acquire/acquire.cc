@@ -665,7 +665,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     for (const DatasetCondition* c : all) q.push_back(c->q);
     MultigridOptions mg;
     mg.tolerance = 1e-8;
-    const auto fitted = RenderFrontFace(m, d.setup, q, mg);
+    const auto fitted = RenderMeasured(m, d.setup, q, mg);
     for (size_t c = 0; c < all.size(); ++c) {
       rep.conditions[c].fit_error = RelightingError({fitted[c]}, {all[c]->L}, {all[c]->mask});
       const std::string p = (prev / fmt::format("fit_{}.png", all[c]->name)).string();

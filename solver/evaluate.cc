@@ -93,20 +93,20 @@ EvaluationReport EvaluateRecovery(const Material& rec, const Material* truth,
       throw InputError("holdout/: " + err);
   EvaluationReport r;
   const std::vector<FacePattern> rec_train =
-      RenderFrontFace(rec, training.setup, Lights(training), mg, backend);
+      RenderMeasured(rec, training.setup, Lights(training), mg, backend);
   r.fit_error = RelightingError(rec_train, Measured(training), Masks(training));
   r.training_recovered = rec_train;
   if (!truth) return r;
   CheckMatches(*truth, training, "--truth");
   LayerErrors(rec, *truth, &r.kappa_layer_error, &r.mu_layer_error);
   r.training_error = RelightingError(
-      rec_train, RenderFrontFace(*truth, training.setup, Lights(training), mg, backend),
+      rec_train, RenderMeasured(*truth, training.setup, Lights(training), mg, backend),
       Masks(training));
   if (holdout.conditions.empty()) return r;
   const auto q = Lights(holdout);
   const auto w = Masks(holdout);
-  const auto a = RenderFrontFace(rec, holdout.setup, q, mg, backend);
-  const auto b = RenderFrontFace(*truth, holdout.setup, q, mg, backend);
+  const auto a = RenderMeasured(rec, holdout.setup, q, mg, backend);
+  const auto b = RenderMeasured(*truth, holdout.setup, q, mg, backend);
   r.holdout_error = RelightingError(a, b, w);
   for (size_t m = 0; m < q.size(); ++m)
     r.holdout_condition_error.push_back(RelightingError({a[m]}, {b[m]}, {w[m]}));

@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 #include <numbers>
 
+#include "solver/face_measurement.h"
 #include "solver/stencil.h"
 #include "solver/status.h"
 
@@ -84,7 +85,7 @@ inline double Rho(const RegularizerOptions& o, double d, double* dr) {
 }  // namespace
 
 FrontFaceObjective::FrontFaceObjective(const Dataset& d, int channel)
-    : nf_(d.shape.face_size()) {
+    : nf_(d.shape.face_size()), nx_(d.shape.nx) {
   const size_t M = d.conditions.size();
   L_.resize(M);
   w_.resize(M);
@@ -106,28 +107,38 @@ FrontFaceObjective::FrontFaceObjective(const Dataset& d, int channel)
                                  "(sum of mask * L^2 is 0)", "RGB"[channel]));
 }
 
-// L^R - L at front-face node f of condition m, from the current phi (paper Eq. (3)).
-double FrontFaceObjective::Misfit(size_t m, int64_t f) const {
+// What the camera would measure of condition m's current phi (paper Eq. (3), MeasureFace).
+void FrontFaceObjective::Measured(size_t m, double* out) const {
   constexpr double kToL = 1.0 / (2 * std::numbers::pi);
-  return (FrontField(m)[f] - q_front_[m][f]) * kToL - L_[m][f];
+  std::vector<double> L(nf_);
+  const double* phi = FrontField(m);
+  for (int64_t f = 0; f < nf_; ++f) L[f] = (phi[f] - q_front_[m][f]) * kToL;
+  MeasureFace(nx_, nf_ / nx_, L.data(), out);
 }
 
 double FrontFaceObjective::ConditionMisfit(size_t m, double* adjoint_source) {
   constexpr double kToL = 1.0 / (2 * std::numbers::pi);
+  std::vector<double> model(nf_), dJ(nf_);
+  Measured(m, model.data());
   double mis = 0;
   for (int64_t f = 0; f < nf_; ++f) {
-    const double r = Misfit(m, f);
+    const double r = model[f] - L_[m][f];
     mis += w_[m][f] * r * r;
-    adjoint_source[f] = 2 * w_[m][f] * r * kToL / denom_;
+    dJ[f] = 2 * w_[m][f] * r * kToL / denom_;
   }
+  MeasureFaceTranspose(nx_, nf_ / nx_, dJ.data(), adjoint_source);
   misfit_[m] = mis;
   return mis;
 }
 
 void FrontFaceObjective::Residuals(std::vector<double>* out) const {
   out->resize(L_.size() * nf_);
-  for (size_t m = 0; m < L_.size(); ++m)
-    for (int64_t f = 0; f < nf_; ++f) (*out)[m * nf_ + f] = std::sqrt(w_[m][f] / denom_) * Misfit(m, f);
+  std::vector<double> model(nf_);
+  for (size_t m = 0; m < L_.size(); ++m) {
+    Measured(m, model.data());
+    for (int64_t f = 0; f < nf_; ++f)
+      (*out)[m * nf_ + f] = std::sqrt(w_[m][f] / denom_) * (model[f] - L_[m][f]);
+  }
 }
 
 void FrontFaceObjective::Track(const SolveSummary& s) {

@@ -59,8 +59,9 @@ class FrontFaceObjective : public ChannelObjective {
   FrontFaceObjective(const Dataset& dataset, int channel);
   // The front face (k = 0, the first nx*ny values) of condition m's current forward field.
   virtual const double* FrontField(size_t m) const = 0;
-  // Stores and returns condition m's misfit sum_p w (L^R - L)^2 (not yet divided by D); writes
-  // the adjoint source dJ/dphi = 2 w (L^R - L) / (2 pi D) at the nx*ny front-face nodes.
+  // Stores and returns condition m's misfit sum_p w (L^R - L)^2 (not yet divided by D), L^R =
+  // M (phi - q_front) / (2 pi) with M the camera's box means (MeasureFace); writes the adjoint
+  // source dJ/dphi = M^T (2 w (L^R - L)) / (2 pi D) at the nx*ny front-face nodes.
   double ConditionMisfit(size_t m, double* adjoint_source);
   // Counts a solve and keeps the worst residual of this evaluation (reset by BeginEvaluation).
   void Track(const SolveSummary& s);
@@ -69,8 +70,8 @@ class FrontFaceObjective : public ChannelObjective {
   double denom() const { return denom_; }
 
  private:
-  double Misfit(size_t m, int64_t f) const;
-  int64_t nf_ = 0;
+  void Measured(size_t m, double* out) const;
+  int64_t nf_ = 0, nx_ = 0;
   std::vector<std::vector<double>> L_, w_, q_front_;
   std::vector<double> misfit_, norm_;
   double denom_ = 0, worst_ = 0;

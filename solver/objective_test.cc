@@ -43,7 +43,7 @@ Dataset RandomDataset(const GridShape& s, Setup setup, bool masks) {
     c.q = GreyPattern(RasterizeLight(LightSpec::Parse(spec), s, d.spacing_mm));
     MultigridOptions mg;
     mg.tolerance = 1e-12;
-    c.L = RenderFrontFace(truth, setup, {c.q}, mg)[0];
+    c.L = RenderMeasured(truth, setup, {c.q}, mg)[0];
     c.mask = MeasurementMask(s, setup, c.q, 1);
     if (masks)
       for (float& w : c.mask) w *= u(rng) < 0.3 ? 0.0f : 1.0f;
@@ -122,7 +122,7 @@ TEST(Objective, ValueIsTheMaskedRelativeMisfitOfTheRenderedFrontFace) {
     mg.tolerance = 1e-12;
     std::vector<FacePattern> lights;
     for (const auto& c : d.conditions) lights.push_back(c.q);
-    const std::vector<FacePattern> rendered = RenderFrontFace(start, setup, lights, mg);
+    const std::vector<FacePattern> rendered = RenderMeasured(start, setup, lights, mg);
     for (int ch = 0; ch < 3; ++ch) {
       auto obj = MakeCpuChannelObjective(d, ch, mg);
       std::vector<double> k(truth.kappa[ch].begin(), truth.kappa[ch].end()), m(truth.mu[ch].begin(), truth.mu[ch].end());

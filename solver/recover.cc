@@ -719,7 +719,7 @@ class Validation {
     mg.tolerance = 1e-6;
     mg.max_iterations = 500;
     const Material m = MaterialFromState(d_, *state);
-    const std::vector<FacePattern> rendered = RenderFrontFace(m, d_.setup, q_, mg, o_.backend, kValidationBatch);
+    const std::vector<FacePattern> rendered = RenderMeasured(m, d_.setup, q_, mg, o_.backend, kValidationBatch);
     const double e = RelightingError(rendered, L_, w_);
     if (state->least_validation_error < 0 || e < state->least_validation_error) state->least_validation_error = e;
     if (e <= (1 + o_.validation_margin) * state->least_validation_error) {

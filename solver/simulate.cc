@@ -10,6 +10,7 @@
 #include <exception>
 #include <omp.h>
 
+#include "solver/face_measurement.h"
 #include "solver/status.h"
 #include "solver/threads.h"
 
@@ -115,6 +116,16 @@ std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
   return out;
 }
 
+std::vector<FacePattern> RenderMeasured(const Material& material, Setup setup,
+                                        const std::vector<FacePattern>& lights,
+                                        const MultigridOptions& multigrid, Backend backend,
+                                        int max_at_once) {
+  std::vector<FacePattern> out = RenderFrontFace(material, setup, lights, multigrid, backend, max_at_once);
+  for (FacePattern& L : out)
+    for (auto& channel : L) channel = MeasureFace(material.shape, channel);
+  return out;
+}
+
 std::vector<float> MeasurementMask(const GridShape& s, Setup setup, const FacePattern& q,
                                    int margin) {
   std::vector<float> mask(s.face_size(), 1.0f);
@@ -136,7 +147,9 @@ std::string SimulateOptions::Validate() const {
   // Above a relative sigma of 1 the noise outweighs the signal (1e300 overflowed the data to inf).
   if (!(noise >= 0 && noise <= 1))
     return fmt::format("noise must be within 0..1 (a relative sigma: 0.01 = 1 %), got {}", noise);
-  if (oversample < 1 || oversample > 8) return fmt::format("oversample must be in [1, 8], got {}", oversample);
+  if (oversample < 1 || oversample > 8 || (oversample > 1 && oversample % 2))
+    return fmt::format("oversample must be 1, 2, 4, 6 or 8 (a node's face box then ends on fine nodes), got {}",
+                       oversample);
   if (holdout < 0 || holdout > kMaxHoldout)
     return fmt::format("holdout must be within 0..{}, got {}", kMaxHoldout, holdout);
   if (validation < 0 || validation > kMaxHoldout)
@@ -181,13 +194,9 @@ Dataset Simulate(const Material& m, const Material& fine, const SimulateOptions&
     c.name = fmt::format("{}{:02d}", prefix, l);
     c.q = GreyPattern(RasterizeLight(lights[l], m.shape, m.spacing_mm));
     for (int ch = 0; ch < 3; ++ch) {
-      c.L[ch].resize(m.shape.face_size());
-      for (int64_t j = 0; j < m.shape.ny; ++j)
-        for (int64_t i = 0; i < m.shape.nx; ++i) {
-          double v = fine_L[l][ch][i * K + fine.shape.nx * (j * K)];
-          if (o.noise > 0) v *= 1.0 + o.noise * gauss(*rng);
-          c.L[ch][i + m.shape.nx * j] = float(v);
-        }
+      c.L[ch] = BoxMeansOfFineFace(m.shape, K, fine_L[l][ch]);
+      if (o.noise > 0)
+        for (float& v : c.L[ch]) v = float(v * (1.0 + o.noise * gauss(*rng)));
     }
     c.mask = MeasurementMask(m.shape, o.setup, c.q, o.mask_margin);
     d.conditions.push_back(std::move(c));

@@ -28,6 +28,14 @@ std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
                                          const MultigridOptions& multigrid,
                                          Backend backend = Backend::kCpu, int max_at_once = 0);
 
+// What a camera measures of each front-face node under each light: RenderFrontFace's radiance
+// averaged over the nodes' face boxes (MeasureFace, solver/face_measurement.h). This is what
+// datasets hold and what the objective fits.
+std::vector<FacePattern> RenderMeasured(const Material& material, Setup setup,
+                                        const std::vector<FacePattern>& lights,
+                                        const MultigridOptions& multigrid,
+                                        Backend backend = Backend::kCpu, int max_at_once = 0);
+
 // Front-lit mask: 0 at every front-face node within `margin` nodes (Chebyshev distance) of a
 // node with q > 0 in any channel, 1 elsewhere. All 1 for the back-lit setup.
 std::vector<float> MeasurementMask(const GridShape& shape, Setup setup, const FacePattern& q,
@@ -41,7 +49,7 @@ struct SimulateOptions {
   std::vector<LightSpec> lights;  // the training conditions (e.g. RegionLights("4x4")); none: holdout only
   Setup setup = Setup::kBack;
   double noise = 0;         // relative Gaussian noise sigma per pixel and channel (0.01 = 1 %), <= 1
-  int oversample = 2;       // forward solves on a grid this many times finer per axis
+  int oversample = 2;       // forward solves on a grid this many times finer per axis: 1, 2, 4, 6, 8
   int holdout = 0;          // extra held-out conditions: random spots on the lit face, <= kMaxHoldout
   // Validation conditions (RecoveryOptions::validation_every): random spots as the held-out
   // ones, drawn after them (the same seed gives the same training and held-out data with or
@@ -64,8 +72,9 @@ struct SimulatedData {
 };
 
 // Simulates a capture of `material` (the recovery grid): forward solves on the refined grid
-// (RefineMaterial with options.oversample), front-face radiance sampled back at the recovery
-// nodes (fine node (i K, j K)), then noise. q in the dataset is the light rasterised on the
+// (RefineMaterial with options.oversample), front-face radiance averaged over each recovery
+// node's face box as a camera measures it (BoxMeansOfFineFace, solver/face_measurement.h), then
+// noise. q in the dataset is the light rasterised on the
 // recovery grid. Holdout and validation spots have random centres on the lit face and radius 3 h.
 SimulatedData SimulateDataset(const Material& material, const SimulateOptions& options);
 

@@ -327,7 +327,8 @@ TEST_F(Cli, ErrorsNameTheFlagsAndEmptyRowsSayWhy) {
   ExpectOneLineError(Translume("solve " + P("ds") + " --lbfgs-rank 0 -o " + P("r.vdb")), "--lbfgs-rank: must be in [1, 1000]");
   ExpectOneLineError(Translume("solve " + P("ds") + " --level-search -1 -o " + P("r.vdb")),
                      "--level-search: must be in [0, 1000], got -1");
-  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --oversample 9 -o " + P("d2")), "--oversample: must be in [1, 8]");
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --oversample 9 -o " + P("d2")), "--oversample: must be 1, 2, 4, 6 or 8");
+  ExpectOneLineError(Translume("simulate " + P("m.vdb") + " --oversample 3 -o " + P("d2")), "--oversample: must be 1, 2, 4, 6 or 8");
   ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " --exposures 1 -o " + P("c2")), "--exposures: must be in [2, 16]");
   ExpectOneLineError(Translume("demo --lights 9x9 -o " + P("demo")), "--lights: ");
   ExpectOneLineError(Translume("simulate-capture " + P("m.vdb") + " -o " + P("m.vdb")), "is a file, not a folder");
