@@ -576,11 +576,14 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
                          "patch's", lo, hi));
     rep.flat_field = {lo, hi};
   }
+  // The pixels across the face's outline also see the dark surround: the border nodes' means
+  // are divided by the face's coverage of their samples (ResampleFrontFace).
+  const cv::Mat coverage = FaceCoverage(cam, camera_from_sample, g, h);
   for (size_t m = 0; m < cap.conditions.size(); ++m) {
     const auto& c = cap.conditions[m];
     cv::Mat img = hdr[m];
     if (!black_level.empty()) img = hdr[m] - black_level;  // inf - finite stays inf (saturated)
-    const FaceSamples fsm = ResampleFrontFace(img, cam, camera_from_sample, g, h, o.face_samples);
+    const FaceSamples fsm = ResampleFrontFace(img, cam, camera_from_sample, g, h, o.face_samples, &coverage);
     DatasetCondition dc;
     dc.name = c.name;
     if (!c.pattern.empty()) {

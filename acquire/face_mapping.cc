@@ -68,6 +68,15 @@ bool Bilinear(const cv::Mat& img, const cv::Point2d& p, cv::Vec3f* v) {
   return true;
 }
 
+// The same for a CV_32FC1 image; p must be inside (Bilinear said so for the same size).
+double BilinearGrey(const cv::Mat& img, const cv::Point2d& p) {
+  const double fx = std::floor(p.x), fy = std::floor(p.y);
+  const int x0 = int(fx), y0 = int(fy);
+  const double ax = p.x - fx, ay = p.y - fy;
+  return (1 - ay) * ((1 - ax) * img.at<float>(y0, x0) + ax * img.at<float>(y0, x0 + 1)) +
+         ay * ((1 - ax) * img.at<float>(y0 + 1, x0) + ax * img.at<float>(y0 + 1, x0 + 1));
+}
+
 // The corners of a face of the block at depth z (sample frame, mm), in CaptureSpec's order:
 // (0, 0, z), (X, 0, z), (X, Y, z), (0, Y, z).
 std::vector<cv::Point3d> FaceCorners(const std::array<double, 3>& size_mm, double z) {
@@ -333,8 +342,9 @@ std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb, const DeviceIntri
 
 FaceSamples ResampleFrontFace(const cv::Mat& img, const DeviceIntrinsics& camera,
                               const calib::Pose& camera_from_sample, const GridShape& g, double h,
-                              int samples) {
+                              int samples, const cv::Mat* coverage) {
   CV_Assert(img.type() == CV_32FC3);
+  CV_Assert(!coverage || (coverage->type() == CV_32FC1 && coverage->size() == img.size()));
   // At least one sample per pixel of the node's footprint (measured around the face's centre
   // and corners), so that every pixel under a node is seen: a box filter over the footprint.
   {
@@ -361,22 +371,89 @@ FaceSamples ResampleFrontFace(const cv::Mat& img, const DeviceIntrinsics& camera
   out.saturated.assign(size_t(F), 0.0f);
   for (int64_t f = 0; f < F; ++f) {
     cv::Vec3d sum(0, 0, 0);
+    double weight = 0;
     int n = 0, sat = 0;
     for (size_t s = 0; s < S; ++s) {
+      const cv::Point2d& at = px[size_t(f) * S + s];
       cv::Vec3f v;
-      if (!Bilinear(img, px[size_t(f) * S + s], &v)) continue;
+      if (!Bilinear(img, at, &v)) continue;
       if (!std::isfinite(v[0] + v[1] + v[2])) {
         ++sat;
         continue;
       }
       sum += cv::Vec3d(v);
       ++n;
+      if (coverage) weight += BilinearGrey(*coverage, at);
     }
+    if (!coverage) weight = n;
     out.saturated[size_t(f)] = float(sat) / float(S);
-    if (n == int(S))
-      for (int c = 0; c < 3; ++c) out.value[size_t(c)][size_t(f)] = float(sum[c] / n);
+    if (n == int(S) && weight > 0)
+      for (int c = 0; c < 3; ++c) out.value[size_t(c)][size_t(f)] = float(sum[c] / weight);
   }
   return out;
+}
+
+cv::Mat FaceCoverage(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample, const GridShape& g,
+                     double h, int s) {
+  cv::Mat cov(camera.size, CV_32FC1, cv::Scalar(0));
+  // The face's bounding box in the image (its outline sampled, for the distortion), 3 px wider.
+  const std::array<double, 3> size = SampleSize(g, h);
+  std::vector<cv::Point3d> outline;
+  for (int k = 0; k <= 64; ++k) {
+    const double t = k / 64.0;
+    for (const cv::Point3d& p : {cv::Point3d(t * size[0], 0, 0), cv::Point3d(t * size[0], size[1], 0),
+                                 cv::Point3d(0, t * size[1], 0), cv::Point3d(size[0], t * size[1], 0)})
+      outline.push_back(p);
+  }
+  const auto opx = camera.Project(Transform(camera_from_sample, outline));
+  cv::Rect2d box = cv::boundingRect(std::vector<cv::Point2f>(opx.begin(), opx.end()));
+  const cv::Rect roi = cv::Rect(int(std::floor(box.x)) - 3, int(std::floor(box.y)) - 3, int(std::ceil(box.width)) + 7,
+                                int(std::ceil(box.height)) + 7) & cv::Rect(cv::Point(0, 0), camera.size);
+  if (roi.empty()) return cov;
+  // Each pixel corner's ray (undistorted, normalised) and where it meets the face's plane.
+  std::vector<cv::Point2d> corners;
+  for (int y = 0; y <= roi.height; ++y)
+    for (int x = 0; x <= roi.width; ++x) corners.emplace_back(roi.x + x - 0.5, roi.y + y - 0.5);
+  std::vector<cv::Point2d> rays;
+  cv::undistortPoints(corners, rays, camera.K, camera.dist);
+  const calib::Pose sample_from_camera = camera_from_sample.Inverse();
+  const cv::Vec3d o = sample_from_camera.t;
+  auto hit = [&](const cv::Point2d& r, cv::Point2d* xy) {
+    const cv::Vec3d d = sample_from_camera.R * cv::Vec3d(r.x, r.y, 1.0);
+    if (std::abs(d[2]) < 1e-12) return false;
+    const double t = -o[2] / d[2];
+    if (t <= 0) return false;
+    *xy = {o[0] + t * d[0], o[1] + t * d[1]};
+    return true;
+  };
+  auto inside = [&](const cv::Point2d& xy) { return xy.x >= 0 && xy.y >= 0 && xy.x <= size[0] && xy.y <= size[1]; };
+  const int W = roi.width + 1;
+  cv::parallel_for_(cv::Range(0, roi.height), [&](const cv::Range& rr) {
+    for (int y = rr.start; y < rr.end; ++y)
+      for (int x = 0; x < roi.width; ++x) {
+        const cv::Point2d r00 = rays[size_t(y * W + x)], r10 = rays[size_t(y * W + x + 1)];
+        const cv::Point2d r01 = rays[size_t((y + 1) * W + x)], r11 = rays[size_t((y + 1) * W + x + 1)];
+        int in = 0;
+        for (const cv::Point2d& r : {r00, r10, r01, r11}) {
+          cv::Point2d xy;
+          in += hit(r, &xy) && inside(xy);
+        }
+        float v = in == 4 ? 1.0f : 0.0f;
+        if (in > 0 && in < 4) {
+          int count = 0;
+          for (int b = 0; b < s; ++b)
+            for (int a = 0; a < s; ++a) {
+              const double fa = (a + 0.5) / s, fb = (b + 0.5) / s;
+              const cv::Point2d r = (1 - fb) * ((1 - fa) * r00 + fa * r10) + fb * ((1 - fa) * r01 + fa * r11);
+              cv::Point2d xy;
+              count += hit(r, &xy) && inside(xy);
+            }
+          v = float(count) / float(s * s);
+        }
+        cov.at<float>(roi.y + y, roi.x + x) = v;
+      }
+  });
+  return cov;
 }
 
 std::vector<float> ProjectPatternOnFace(const cv::Mat& pattern, const DeviceIntrinsics& projector,

@@ -78,9 +78,20 @@ struct FaceSamples {
   FacePattern value;                // RGB, nx * ny (i + nx j); NaN where not measured
   std::vector<float> saturated;     // fraction of the node's samples on saturated pixels
 };
+// With `coverage` (FaceCoverage's image), each node's sum of samples is divided by the sum of
+// the coverage's at the same points instead of by their count (a normalised convolution): the
+// pixels across the face's outline see the dark surround too, and a border node's half box
+// would lose that light (docs/capture.md, "Mapping").
 FaceSamples ResampleFrontFace(const cv::Mat& linear_rgb, const DeviceIntrinsics& camera,
                               const calib::Pose& camera_from_sample, const GridShape& grid,
-                              double h, int samples = 6);
+                              double h, int samples = 6, const cv::Mat* coverage = nullptr);
+
+// The fraction of each camera pixel that sees the front face [0, X] x [0, Y] (z = 0): the image
+// of a uniformly bright face of radiance 1 on a black surround (CV_32FC1, camera.size). Each
+// pixel's rays are interpolated bilinearly between the rays of its corners (through the
+// distortion model), s x s per pixel where its corners do not all agree (inside or outside).
+cv::Mat FaceCoverage(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
+                     const GridShape& grid, double h, int s = 8);
 
 // Incoming light q on the lit face (z = Z back-lit, z = 0 front-lit) from a projector image
 // (CV_32FC1, linear, 1 = full white): each lit-face node gets the mean of the pattern over its

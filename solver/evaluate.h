@@ -33,15 +33,19 @@ struct EvaluationReport {
   // The truth rendered on the recovery grid vs the held-out data (the discretisation floor
   // when the data was oversampled; noise adds to it).
   double truth_holdout_error = -1;
+  // The recovery rendered vs the held-out data (no truth needed): what the truth's own error is
+  // to the truth. Where that floor exceeds holdout_error (front-lit captures on coarse grids),
+  // this one, not holdout_error, tells which of two recoveries predicts the data better.
+  double holdout_data_error = -1;
   std::vector<double> kappa_layer_error, mu_layer_error;
   // The front-face radiance (nx*ny per channel) behind those errors, one per condition in the
-  // datasets' order: the recovered material under the training lights, and with a truth and a
-  // holdout/ the recovered and the true material under the held-out lights.
+  // datasets' order: the recovered material under the training lights and, with a holdout/,
+  // the held-out lights; with a truth and a holdout/ the true material under the held-out lights.
   std::vector<FacePattern> training_recovered, holdout_recovered, holdout_truth;
 };
 
 // Evaluates a recovery. `holdout` may have no conditions (its errors stay -1); `truth` may be
-// null (only the fit error is computed). `backend`: where the forward solves run. Throws
+// null (only the fit error and, with a holdout, holdout_data_error are computed). `backend`: where the forward solves run. Throws
 // InputError on a grid mismatch.
 EvaluationReport EvaluateRecovery(const Material& recovered, const Material* truth,
                                   const Dataset& training, const Dataset& holdout,

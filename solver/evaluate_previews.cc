@@ -22,7 +22,7 @@ std::vector<std::string> EvaluationPreviewPaths(const std::string& folder, const
 std::vector<std::string> WriteEvaluationPreviews(const std::string& folder, const EvaluationReport& r,
                                                  const Dataset& training, const Dataset& holdout) {
   TL_CHECK(r.training_recovered.size() == training.conditions.size());
-  const bool with_holdout = !r.holdout_recovered.empty();
+  const bool with_holdout = !r.holdout_truth.empty();
   TL_CHECK(!with_holdout || (r.holdout_recovered.size() == holdout.conditions.size() &&
                              r.holdout_truth.size() == holdout.conditions.size()));
   const std::vector<std::string> paths = EvaluationPreviewPaths(folder, training, holdout, with_holdout);

@@ -175,10 +175,17 @@ TEST(EvaluateRecovery, KeepsItsRenderingsAndPreviewsThem) {
   holdout.conditions[0].mask[5] = 0;  // node (2, 1) masked
   MultigridOptions mg;
   mg.tolerance = 1e-9;
-  const EvaluationReport only_fit = EvaluateRecovery(rec, nullptr, train, holdout, mg);
-  ASSERT_EQ(only_fit.training_recovered.size(), 2u);
-  EXPECT_TRUE(only_fit.holdout_recovered.empty());
+  // Without a truth: the fit, and the held-out error against the held-out data.
+  const EvaluationReport no_truth = EvaluateRecovery(rec, nullptr, train, holdout, mg);
+  ASSERT_EQ(no_truth.training_recovered.size(), 2u);
+  ASSERT_EQ(no_truth.holdout_recovered.size(), 1u);
+  EXPECT_TRUE(no_truth.holdout_truth.empty());
+  EXPECT_EQ(no_truth.holdout_error, -1);
+  EXPECT_NEAR(RelightingError(no_truth.holdout_recovered, {holdout.conditions[0].L}, {holdout.conditions[0].mask}),
+              no_truth.holdout_data_error, 1e-12);
+  EXPECT_GT(no_truth.holdout_data_error, 0);
   const EvaluationReport r = EvaluateRecovery(rec, &truth, train, holdout, mg);
+  EXPECT_EQ(r.holdout_data_error, no_truth.holdout_data_error);
   ASSERT_EQ(r.holdout_recovered.size(), 1u);
   ASSERT_EQ(r.holdout_truth.size(), 1u);
   std::vector<FacePattern> measured;
@@ -208,7 +215,7 @@ TEST(EvaluateRecovery, KeepsItsRenderingsAndPreviewsThem) {
   const size_t masked = size_t((z + z / 2) * img.width + (2 * 5 + 2) * z + z / 2) * 3;
   EXPECT_NEAR(img.data[masked], 0.35f, 1 / 255.0f);  // grey
   EXPECT_NEAR(img.data[masked + 2], 0.35f, 1 / 255.0f);
-  EXPECT_EQ(WriteEvaluationPreviews(dir, only_fit, train, holdout).size(), 2u);  // training only
+  EXPECT_EQ(WriteEvaluationPreviews(dir, no_truth, train, holdout).size(), 2u);  // training only
   std::filesystem::remove_all(dir);
 }
 

@@ -266,6 +266,7 @@ TEST_F(Cli, SimulateSolveEvaluateAndResume) {
   const auto e = nlohmann::json::parse(r.output);
   EXPECT_GT(e["holdout_error"].get<double>(), 0);
   EXPECT_LT(e["holdout_error"].get<double>(), 0.05);
+  EXPECT_GT(e["holdout_data_error"].get<double>(), 0);
   EXPECT_EQ(e["kappa_layer_error"].size(), 4u);
   r = Translume("evaluate " + P("rec.vdb") + " --dataset " + P("ds"));
   ASSERT_EQ(r.status, 0) << r.output;

@@ -435,7 +435,9 @@ int RunEvaluate(int argc, char** argv) {
   if (!json) {
     std::printf("%s", EvaluationTable(r).c_str());
     if (mapping) std::printf("fit E (vs --measured)    %.3e   (the data it was fitted to)\n", measured_fit);
-    if (!truth) std::printf("note: without --truth only the fit error\n");
+    if (!truth)
+      std::printf("note: without --truth only the fit error%s\n",
+                  holdout.conditions.empty() ? "" : " and the held-out error against the data");
     else if (holdout.conditions.empty())
       std::printf("note: %s has no holdout/ (translume simulate --holdout N writes one): no held-out error\n",
                   DatasetFolder(dataset_path).c_str());
