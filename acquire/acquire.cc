@@ -121,7 +121,8 @@ void WritePreviewIndex(const fs::path& path, const AcquireReport& rep, const std
   h += "<h1>" + Html(rep.material) + "</h1>\n";
   h += "<p>capture <code>" + Html(capture) + "</code>; " + Html(rep.solve.BriefReport()) + "</p>\n";
   h += "<h2>Conditions</h2>\n<p>measured | fitted (one brightness scale) | residual: fitted less measured, "
-       "mean over RGB, relative to the brightest measured node; black: exact, <span style=\"color:#f42\">red"
+       "in the channel that misses most, relative to the brightest measured node; black: exact, "
+       "<span style=\"color:#f42\">red"
        "</span>: the fit brighter, <span style=\"color:#47f\">blue</span>: darker, full colour at " +
        fmt::format("{:g}", 100 * kResidualPreviewRange) + " %; grey: masked nodes (docs/capture.md).</p>\n"
        "<table>\n<tr><th>condition</th><th>measured</th><th>saturated</th><th>masked</th><th>E</th><th></th></tr>\n";

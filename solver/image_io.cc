@@ -151,10 +151,11 @@ void WriteFitComparison(const std::string& path, const GridShape& s, const FaceP
       const size_t f = size_t(i + s.nx * j);
       std::array<std::array<float, 3>, 3> node{};  // panel, channel
       if (mask[f] > 0) {
-        float r = 0;
+        float r = 0;  // the channel that misses most, with its sign
         for (int c = 0; c < 3; ++c) {
           node[0][c] = shown(measured[size_t(c)][f]);
-          r += (fitted[size_t(c)][f] - measured[size_t(c)][f]) / (3 * top);
+          const float rc = (fitted[size_t(c)][f] - measured[size_t(c)][f]) / top;
+          if (std::abs(rc) > std::abs(r)) r = rc;
         }
         const float level = std::min(std::abs(r) / kResidualPreviewRange, 1.0f);
         for (int c = 0; c < 3; ++c) node[2][c] = level * (r > 0 ? kRed : kBlue)[size_t(c)];

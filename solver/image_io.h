@@ -42,8 +42,9 @@ inline constexpr float kResidualPreviewRange = 0.05f;
 //             measured value over the unmasked nodes and the three channels, clamped to [0, 1],
 //             gamma 1/2.2;
 //   fitted    `fitted` on the same scale;
-//   residual  r = mean over RGB of (fitted - measured) / top per unmasked node: black at 0, red
-//             (fitted brighter) or blue (fitted darker) rising linearly to full at |r| =
+//   residual  r = (fitted - measured) / top per unmasked node in the channel where |r| is
+//             largest (so misfits of opposite sign in two channels do not cancel): black at 0,
+//             red (fitted brighter) or blue (fitted darker) rising linearly to full at |r| =
 //             kResidualPreviewRange (clamped); masked nodes mid-grey (neither red nor blue).
 // So a misfit is seen where it lies (an edge misregistered, a region too dark), on one scale for
 // every condition of a capture. Written under a temporary name and renamed.

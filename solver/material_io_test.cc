@@ -312,7 +312,9 @@ TEST_F(MaterialIo, FitComparisonShowsMeasuredFittedAndSignedResidual) {
   mask[size_t(shape.index(9, 3, 0))] = 0;           // masked: not the top though brighter
   for (int c = 0; c < 3; ++c) measured[size_t(c)][size_t(shape.index(9, 3, 0))] = 8.0f;
   for (int c = 0; c < 3; ++c) fitted[size_t(c)][size_t(shape.index(2, 1, 0))] = 0.5f + 0.05f;    // +2.5 % of top
-  fitted[0][size_t(shape.index(3, 1, 0))] = 0.5f - 3 * 0.2f;                                     // -10 %: clamped
+  fitted[0][size_t(shape.index(3, 1, 0))] = 0.5f - 3 * 0.2f;                                     // -30 %: clamped
+  fitted[0][size_t(shape.index(4, 1, 0))] = 0.5f + 0.1f;   // red +5 % and blue -3 %: red shows,
+  fitted[2][size_t(shape.index(4, 1, 0))] = 0.5f - 0.06f;  // not their mean (+0.7 %)
   const std::string path = Path("fit.png");
   WriteFitComparison(path, shape, measured, fitted, mask);
   const Image img = ReadImage(path);
@@ -334,12 +336,14 @@ TEST_F(MaterialIo, FitComparisonShowsMeasuredFittedAndSignedResidual) {
   EXPECT_NEAR(at(2, 9, 3, 0), 0.35f, step);  // ... and grey in the residual
   EXPECT_NEAR(at(2, 9, 3, 2), 0.35f, step);
   for (int c = 0; c < 3; ++c) EXPECT_FLOAT_EQ(at(2, 5, 2, c), 0.0f);  // a perfect fit: black
-  EXPECT_NEAR(at(2, 0, 0, 0), 0.15f, step);  // the top: fitted 1.5 below in green only, -25 %
-  EXPECT_NEAR(at(2, 0, 0, 2), 1.0f, step);   // of the top over RGB, beyond the range: full blue
+  EXPECT_NEAR(at(2, 0, 0, 0), 0.15f, step);  // the top: fitted 1.5 below in green only, -75 %
+  EXPECT_NEAR(at(2, 0, 0, 2), 1.0f, step);   // of the top, beyond the range: full blue
   EXPECT_NEAR(at(2, 2, 1, 0), 0.5f, step);  // +2.5 %: half red
   EXPECT_NEAR(at(2, 2, 1, 2), 0.05f, step);
-  EXPECT_NEAR(at(2, 3, 1, 2), 1.0f, step);  // -0.6 / 3 / 2 = -10 %: full blue
+  EXPECT_NEAR(at(2, 3, 1, 2), 1.0f, step);  // -0.6 / 2 = -30 %: full blue
   EXPECT_NEAR(at(2, 3, 1, 0), 0.15f, step);
+  EXPECT_NEAR(at(2, 4, 1, 0), 1.0f, step);  // +5 % in red: full red
+  EXPECT_NEAR(at(2, 4, 1, 2), 0.1f, step);
   for (int c = 0; c < 3; ++c)  // the gap between the panels
     EXPECT_FLOAT_EQ(img.data[size_t(((z / 2) * img.width + 10 * z + 1) * 3 + c)], 0.0f);
 }
