@@ -143,7 +143,7 @@ int RunSimulate(int argc, char** argv) {
                  "separated by ';' (spot:X,Y,R mm, region:I,J/N, uniform)")->capture_default_str();
   app.add_option("--setup", setup, "back (lit back face) or front")->capture_default_str();
   app.add_option("--noise", o.noise, "Relative Gaussian noise sigma per pixel (0.01 = 1 %; at most 1)")->capture_default_str();
-  app.add_option("--oversample", o.oversample, "Forward grid refinement factor per axis")->capture_default_str();
+  app.add_option("--oversample", o.oversample, "Forward solves on a grid this many times finer per axis: 1, 2, 4, 6 or 8 (the data are the finer face's box means per node)")->capture_default_str();
   app.add_option("--holdout", o.holdout, "Held-out spot conditions to write into DATASET/holdout/: 0..4096")->capture_default_str();
   app.add_option("--validation", o.validation, "Validation spot conditions to write into DATASET/validation/ "
                  "(solve stops on them): 0..4096")->capture_default_str();
