@@ -8,7 +8,7 @@
 
 namespace translume {
 
-// What a camera measures of the front face, per node (docs/solver.md, "What a camera measures").
+// What a camera measures of the front face, per node (docs/inverse.md, "What a camera measures").
 //
 // The forward model's radiance is a value at each node (SPEC section 3: L_p = (phi_p - q_p) /
 // (2 pi)). A camera, through the image-to-grid mapping (acquire/face_mapping.h), and the
@@ -27,8 +27,8 @@ void MeasureFaceTranspose(int64_t nx, int64_t ny, const double* v, double* out);
 std::vector<float> MeasureFace(const GridShape& shape, const std::vector<float>& L);
 
 // The same box means of a face known on a grid K times finer (RefineShape: (n - 1) K + 1 nodes
-// per axis, K = 1 or even, coarse node i at fine node K i): per axis, the fine nodes across each coarse
-// node's box (K intervals inside, K / 2 at the border) are integrated by composite Simpson
+// per axis, K = 1 or even, coarse node i at fine node K i): per axis, the fine nodes across each
+// coarse node's box (K intervals inside, K / 2 at the border) are integrated by composite Simpson
 // (an even number of intervals), Simpson's 3/8 rule (three) or, for one interval, the
 // quadratic through it and the next fine node inwards. K = 1 (the face itself) is MeasureFace.
 // `simulate` makes its data with this.

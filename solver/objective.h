@@ -70,6 +70,7 @@ class FrontFaceObjective : public ChannelObjective {
   double denom() const { return denom_; }
 
  private:
+  // L^R of condition m at the nx*ny front-face nodes: M (phi - q_front) / (2 pi).
   void Measured(size_t m, double* out) const;
   int64_t nf_ = 0, nx_ = 0;
   std::vector<std::vector<double>> L_, w_, q_front_;
