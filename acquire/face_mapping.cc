@@ -54,6 +54,18 @@ std::vector<cv::Point3d> Transform(const calib::Pose& to_from, const std::vector
   return out;
 }
 
+// Where the ray through normalised (undistorted) image point r of a device meets the plane z of
+// the sample frame, sample_from_device the device's pose; false when it does not (parallel, or
+// behind the device).
+bool RayOnPlane(const calib::Pose& sample_from_device, const cv::Point2d& r, double z, cv::Point2d* xy) {
+  const cv::Vec3d o = sample_from_device.t, d = sample_from_device.R * cv::Vec3d(r.x, r.y, 1.0);
+  if (std::abs(d[2]) < 1e-12) return false;
+  const double s = (z - o[2]) / d[2];
+  if (s <= 0) return false;
+  *xy = {o[0] + s * d[0], o[1] + s * d[1]};
+  return true;
+}
+
 // Bilinear sample of a CV_32FC3 image at continuous pixel position p; false outside.
 bool Bilinear(const cv::Mat& img, const cv::Point2d& p, cv::Vec3f* v) {
   const double fx = std::floor(p.x), fy = std::floor(p.y);
@@ -417,16 +429,11 @@ cv::Mat FaceCoverage(const DeviceIntrinsics& camera, const calib::Pose& camera_f
   std::vector<cv::Point2d> rays;
   cv::undistortPoints(corners, rays, camera.K, camera.dist);
   const calib::Pose sample_from_camera = camera_from_sample.Inverse();
-  const cv::Vec3d o = sample_from_camera.t;
-  auto hit = [&](const cv::Point2d& r, cv::Point2d* xy) {
-    const cv::Vec3d d = sample_from_camera.R * cv::Vec3d(r.x, r.y, 1.0);
-    if (std::abs(d[2]) < 1e-12) return false;
-    const double t = -o[2] / d[2];
-    if (t <= 0) return false;
-    *xy = {o[0] + t * d[0], o[1] + t * d[1]};
-    return true;
+  auto sees_face = [&](const cv::Point2d& r) {
+    cv::Point2d xy;
+    return RayOnPlane(sample_from_camera, r, 0.0, &xy) && xy.x >= 0 && xy.y >= 0 && xy.x <= size[0] &&
+           xy.y <= size[1];
   };
-  auto inside = [&](const cv::Point2d& xy) { return xy.x >= 0 && xy.y >= 0 && xy.x <= size[0] && xy.y <= size[1]; };
   const int W = roi.width + 1;
   cv::parallel_for_(cv::Range(0, roi.height), [&](const cv::Range& rr) {
     for (int y = rr.start; y < rr.end; ++y)
@@ -434,10 +441,7 @@ cv::Mat FaceCoverage(const DeviceIntrinsics& camera, const calib::Pose& camera_f
         const cv::Point2d r00 = rays[size_t(y * W + x)], r10 = rays[size_t(y * W + x + 1)];
         const cv::Point2d r01 = rays[size_t((y + 1) * W + x)], r11 = rays[size_t((y + 1) * W + x + 1)];
         int in = 0;
-        for (const cv::Point2d& r : {r00, r10, r01, r11}) {
-          cv::Point2d xy;
-          in += hit(r, &xy) && inside(xy);
-        }
+        for (const cv::Point2d& r : {r00, r10, r01, r11}) in += sees_face(r);
         float v = in == 4 ? 1.0f : 0.0f;
         if (in > 0 && in < 4) {
           int count = 0;
@@ -445,8 +449,7 @@ cv::Mat FaceCoverage(const DeviceIntrinsics& camera, const calib::Pose& camera_f
             for (int a = 0; a < s; ++a) {
               const double fa = (a + 0.5) / s, fb = (b + 0.5) / s;
               const cv::Point2d r = (1 - fb) * ((1 - fa) * r00 + fa * r10) + fb * ((1 - fa) * r01 + fa * r11);
-              cv::Point2d xy;
-              count += hit(r, &xy) && inside(xy);
+              count += sees_face(r);
             }
           v = float(count) / float(s * s);
         }
@@ -493,18 +496,13 @@ cv::Mat PlaneHits(const DeviceIntrinsics& projector, const calib::Pose& projecto
     for (int x = 0; x < projector.size.width; ++x) pix.emplace_back(x, y);
   cv::undistortPoints(pix, norm, projector.K, projector.dist, cv::noArray(), cv::noArray(),
                       cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 50, 1e-12));
-  // Rays in the sample frame: origin o, direction R (x, y, 1).
   const calib::Pose sample_from_projector = camera_from_sample.Inverse() * projector_from_camera.Inverse();
-  const cv::Vec3d o = sample_from_projector.t;
   const double nan = std::numeric_limits<double>::quiet_NaN();
   cv::Mat hits(projector.size, CV_64FC2, cv::Scalar(nan, nan));
   for (size_t k = 0; k < norm.size(); ++k) {
-    const cv::Vec3d d = sample_from_projector.R * cv::Vec3d(norm[k].x, norm[k].y, 1.0);
-    if (std::abs(d[2]) < 1e-12) continue;
-    const double s = (z - o[2]) / d[2];
-    if (s <= 0) continue;
-    hits.at<cv::Vec2d>(int(k) / projector.size.width, int(k) % projector.size.width) =
-        cv::Vec2d(o[0] + s * d[0], o[1] + s * d[1]);
+    cv::Point2d xy;
+    if (RayOnPlane(sample_from_projector, norm[k], z, &xy))
+      hits.at<cv::Vec2d>(int(k) / projector.size.width, int(k) % projector.size.width) = cv::Vec2d(xy.x, xy.y);
   }
   return hits;
 }
