@@ -171,9 +171,10 @@ std::string AcquireReport::Table() const {
     s += fmt::format("  {:<18} {:8.1f}{}\n", name, t,
                      std::find(reused.begin(), reused.end(), name) != reused.end() ? "  (reused)" : "");
   s += fmt::format("calibration: camera RMS {:.3f} px, projector RMS {}, sample pose RMS {:.3f} px, "
-                   "white gains {:.4g} {:.4g} {:.4g}, exposure times {}\n", camera_rms_px,
+                   "lens blur {:.2f} px{}, white gains {:.4g} {:.4g} {:.4g}, exposure times {}\n", camera_rms_px,
                    projector_rms_px < 0 ? std::string("-") : fmt::format("{:.3f} px", projector_rms_px),
-                   pose_rms_px, white_gains[0], white_gains[1], white_gains[2],
+                   pose_rms_px, camera_blur_px, camera_blur_profiles > 0 ? " (found)" : "",
+                   white_gains[0], white_gains[1], white_gains[2],
                    exposure_times.empty() ? "-" : calib::Describe(calib::ParseShutterTimes(exposure_times, "report")));
   s += "condition  measured  saturated  masked   fit error (validation: not fitted)\n";
   for (const auto& c : conditions)
@@ -577,9 +578,29 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
                          "patch's", lo, hi));
     rep.flat_field = {lo, hi};
   }
-  // The pixels across the face's outline also see the dark surround: the border nodes' means
-  // are divided by the face's coverage of their samples (ResampleFrontFace).
-  const cv::Mat coverage = FaceCoverage(cam, camera_from_sample, g, h);
+  // The pixels across the face's outline also see the dark surround, and the lens's blur spreads
+  // the outline further: the border nodes' means are divided by the face's coverage of their
+  // samples, blurred as the lens blurs (ResampleFrontFace).
+  if (cap.camera_blur_px) {
+    rep.camera_blur_px = *cap.camera_blur_px;
+  } else {
+    // Read off the outline in the fitted conditions less the black (front-lit, each condition
+    // saturates where it lights the face, and their sum everywhere).
+    std::vector<cv::Mat> lit;
+    for (size_t m = 0; m < hdr.size(); ++m)
+      if (!cap.conditions[m].validation) lit.push_back(black_level.empty() ? hdr[m] : hdr[m] - black_level);
+    const OutlineBlur b = EstimateOutlineBlur(lit, cam, camera_from_sample, g, h);
+    rep.camera_blur_px = b.sigma_px;
+    rep.camera_blur_profiles = b.profiles;
+    if (b.profiles == 0)
+      progress(fmt::format("{}: camera_blur_px is \"auto\" but the face's outline shows nowhere unsaturated in the "
+                           "photos; taking the lens as sharp (give camera_blur_px)", cap.file));
+    else
+      progress(fmt::format("the lens's blur on the sample's photos: sigma {:.2f} px (from {} profiles across the "
+                           "face's outline; residual {:.2g} against {:.2g} for a sharp lens)",
+                           b.sigma_px, b.profiles, b.rms, b.rms_sharp));
+  }
+  const cv::Mat coverage = FaceCoverage(cam, camera_from_sample, g, h, rep.camera_blur_px);
   for (size_t m = 0; m < cap.conditions.size(); ++m) {
     const auto& c = cap.conditions[m];
     cv::Mat img = hdr[m];
@@ -703,6 +724,9 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   j["projector_rms_px"] = rep.projector_rms_px;
   j["pose_rms_px"] = rep.pose_rms_px;
   j["face_corners_px"] = rep.face_corners_px;
+  j["camera_blur_px"] = rep.camera_blur_px;
+  j["camera_blur"] = cap.camera_blur_px ? "given" : "found";
+  j["camera_blur_profiles"] = rep.camera_blur_profiles;
   j["white_gains"] = rep.white_gains;
   if (cap.white.flat_field && rep.flat_field[1] > 0) j["flat_field"] = rep.flat_field;
   j["exposure_times"] = rep.exposure_times;

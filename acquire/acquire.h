@@ -51,6 +51,11 @@ struct AcquireReport {
   std::vector<std::string> reused;                            // stages taken from the work folder
   double camera_rms_px = -1, projector_rms_px = -1, pose_rms_px = -1;
   std::vector<std::array<double, 2>> face_corners_px;
+  // The lens's blur used for the face's coverage (Gaussian sigma, px): capture.json's, or found
+  // from camera_blur_profiles profiles across the face's outline (0 profiles: given, or none
+  // usable).
+  double camera_blur_px = 0;
+  int camera_blur_profiles = 0;
   std::array<double, 3> white_gains{};
   // white.flat_field: the lowest and highest irradiance on the lit face, relative to the patch's.
   std::array<float, 2> flat_field{};

@@ -119,7 +119,7 @@ CaptureSpec ReadCapture(const std::string& path) {
   const Reader r(s.file, s.dir);
   if (!j.is_object()) r.Fail("(top level)", "expected an object");
   r.CheckKeys(j, "", {"format", "setup", "sample_mm", "spacing_mm", "grid", "eta", "C",
-                      "face_corners_px", "camera", "projector", "response", "white", "black",
+                      "face_corners_px", "camera_blur_px", "camera", "projector", "response", "white", "black",
                       "conditions", "exposure_times", "sensor_black", "camera_flat", "comment"});
   if (r.String(r.Get(j, "format", ""), "format") != kFormat)
     r.Fail("format", fmt::format("expected \"{}\"", kFormat));
@@ -173,6 +173,12 @@ CaptureSpec ReadCapture(const std::string& path) {
   if (s.C < 1) r.Fail("C", "must be >= 1");
   if (j.contains("face_corners_px") && !(j["face_corners_px"].is_string() && j["face_corners_px"] == "auto"))
     s.face_corners_px = r.Corners(j["face_corners_px"], "face_corners_px");
+  if (j.contains("camera_blur_px") && !(j["camera_blur_px"].is_string() && j["camera_blur_px"] == "auto")) {
+    const json& b = j["camera_blur_px"];
+    if (!b.is_number() || !(b.get<double>() >= 0 && b.get<double>() <= 5))
+      r.Fail("camera_blur_px", "expected \"auto\" or a Gaussian sigma in pixels, 0 to 5");
+    s.camera_blur_px = b.get<double>();
+  }
 
   const json& cam = r.Get(j, "camera", "");
   if (cam.is_string()) {
@@ -333,6 +339,8 @@ std::string CaptureJson(const CaptureSpec& s) {
   else j["C"] = s.C;
   if (s.face_corners_px.empty()) j["face_corners_px"] = "auto";
   else j["face_corners_px"] = s.face_corners_px;
+  if (s.camera_blur_px) j["camera_blur_px"] = *s.camera_blur_px;
+  else j["camera_blur_px"] = "auto";
   if (!s.camera.file.empty()) j["camera"] = rel(s.camera.file);
   else j["camera"] = {{"photos", rel(s.camera.photos)}, {"board", s.camera.board}};
   if (!s.projector.file.empty()) {

@@ -79,6 +79,17 @@ TEST_F(CaptureTest, ReadsAndRoundTrips) {
   EXPECT_EQ(a.exposure_times, calib::ShutterTimes::kApex);
   std::ofstream(dir_ / "capture.json") << CaptureJson(a);
   EXPECT_EQ(ReadCapture(dir_.string()).exposure_times, calib::ShutterTimes::kApex);
+  // The lens's blur: "auto" (the default) or a sigma, read and written back.
+  EXPECT_FALSE(s.camera_blur_px.has_value());
+  EXPECT_FALSE(t.camera_blur_px.has_value());
+  j["camera_blur_px"] = 0.8;
+  const CaptureSpec b = ReadCapture(Write(j));
+  ASSERT_TRUE(b.camera_blur_px.has_value());
+  EXPECT_EQ(*b.camera_blur_px, 0.8);
+  std::ofstream(dir_ / "capture.json") << CaptureJson(b);
+  EXPECT_EQ(ReadCapture(dir_.string()).camera_blur_px, 0.8);
+  j["camera_blur_px"] = "auto";
+  EXPECT_FALSE(ReadCapture(Write(j)).camera_blur_px.has_value());
   // Validation conditions, read and written back.
   EXPECT_FALSE(s.conditions[1].validation);
   j["conditions"][1]["validation"] = true;
@@ -107,6 +118,8 @@ TEST_F(CaptureTest, EveryBrokenFieldIsNamed) {
   ExpectError([](auto& j) { j["face_corners_px"] = {{1, 2}}; }, "face_corners_px: expected 4");
   ExpectError([](auto& j) { j["camera"]["photos"] = "nowhere"; }, "camera.photos: folder");
   ExpectError([](auto& j) { j["response"] = 3; }, "response: expected");
+  for (const nlohmann::json bad : {nlohmann::json(-0.5), nlohmann::json(7), nlohmann::json("sharp")})
+    ExpectError([&](auto& j) { j["camera_blur_px"] = bad; }, "camera_blur_px: expected \"auto\" or a Gaussian sigma");
   ExpectError([](auto& j) { j["white"]["albedo"] = 1.5; }, "white.albedo: must be in (0, 1]");
   ExpectError([](auto& j) { j["colour"] = 1; }, "colour: unknown field");
   ExpectError([](auto& j) { j["exposure_times"] = "nominal"; },

@@ -406,7 +406,8 @@ FaceSamples ResampleFrontFace(const cv::Mat& img, const DeviceIntrinsics& camera
 }
 
 cv::Mat FaceCoverage(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample, const GridShape& g,
-                     double h, int s) {
+                     double h, double blur_px, int s) {
+  TL_CHECK(blur_px >= 0 && s >= 1);
   cv::Mat cov(camera.size, CV_32FC1, cv::Scalar(0));
   // The face's bounding box in the image (its outline sampled, for the distortion), 3 px wider.
   const std::array<double, 3> size = SampleSize(g, h);
@@ -456,7 +457,144 @@ cv::Mat FaceCoverage(const DeviceIntrinsics& camera, const calib::Pose& camera_f
         cov.at<float>(roi.y + y, roi.x + x) = v;
       }
   });
+  if (blur_px > 0) {  // on the face's box widened by the kernel's reach (OpenCV's: 4 sigma)
+    const int reach = int(std::ceil(4 * blur_px)) + 1;
+    const cv::Rect wide = cv::Rect(roi.x - reach, roi.y - reach, roi.width + 2 * reach, roi.height + 2 * reach) &
+                          cv::Rect(cv::Point(0, 0), camera.size);
+    cv::Mat part = cov(wide).clone();
+    cv::GaussianBlur(part, part, cv::Size(0, 0), blur_px, blur_px, cv::BORDER_CONSTANT);
+    part.copyTo(cov(wide));
+  }
   return cov;
+}
+
+OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
+                                const calib::Pose& camera_from_sample, const GridShape& g, double h,
+                                double max_sigma_px) {
+  for (const cv::Mat& img : images) CV_Assert(img.type() == CV_32FC3 && img.size() == camera.size);
+  TL_CHECK(max_sigma_px > 0);
+  const double reach = 3 * max_sigma_px + 3;  // a profile's half length, px
+  const int half = int(std::ceil(reach / 0.5));
+  const int nt = 2 * half + 1;
+  std::vector<double> ts(static_cast<size_t>(nt));
+  for (int k = 0; k < nt; ++k) ts[size_t(k)] = 0.5 * (k - half);
+
+  // The profiles: for each, nt image points from inside (t < 0) to outside.
+  const std::vector<cv::Point3d> corners = FrontFaceCorners(g, h);
+  const auto project = [&](const cv::Point3d& p) { return camera.Project(Transform(camera_from_sample, {p}))[0]; };
+  const cv::Point2d centre = project(0.5 * (corners[0] + corners[2]));
+  std::vector<cv::Point2d> points;
+  for (int side = 0; side < 4; ++side) {
+    const cv::Point3d A = corners[size_t(side)], B = corners[size_t((side + 1) % 4)];
+    const cv::Point2d a = project(A), b = project(B);
+    const double length = cv::norm(b - a);
+    const int count = int(length / 1.5);
+    if (count < 2) continue;
+    std::vector<cv::Point3d> along;  // each profile's foot and two points half a pixel either side
+    for (int k = 1; k < count; ++k) {
+      const double u = double(k) / count, du = 0.5 / length;
+      for (double v : {u - du, u, u + du}) along.push_back(A + v * (B - A));
+    }
+    const auto px = camera.Project(Transform(camera_from_sample, along));
+    for (size_t k = 0; k + 2 < px.size(); k += 3) {
+      const cv::Point2d p = px[k + 1], tangent = px[k + 2] - px[k];
+      if (cv::norm(p - a) < reach + 2 || cv::norm(p - b) < reach + 2 || !(cv::norm(tangent) > 0)) continue;
+      cv::Point2d n(tangent.y, -tangent.x);
+      n *= 1.0 / cv::norm(n);
+      if (n.dot(p - centre) < 0) n = -n;
+      const cv::Point2d first = p + ts.front() * n, last = p + ts.back() * n;
+      const auto inside = [&](const cv::Point2d& q) {
+        return q.x >= 0 && q.y >= 0 && q.x <= camera.size.width - 2 && q.y <= camera.size.height - 2;
+      };
+      if (!inside(first) || !inside(last)) continue;
+      for (double t : ts) points.push_back(p + t * n);
+    }
+  }
+  const int P = int(points.size()) / nt;
+
+  // Each image along them (the channels' mean), scaled to its brightest usable profile's
+  // largest value, so that dim profiles weigh less; profiles with a non-finite sample dropped.
+  struct Profile {
+    int geometry;           // index into the P profiles
+    std::vector<double> y;  // nt values
+  };
+  std::vector<Profile> profiles;
+  for (const cv::Mat& img : images) {
+    std::vector<Profile> own;
+    double brightest = 0;
+    for (int p = 0; p < P; ++p) {
+      Profile pr{p, std::vector<double>(static_cast<size_t>(nt))};
+      double top = 0;
+      bool ok = true;
+      for (int k = 0; k < nt && ok; ++k) {
+        cv::Vec3f v;
+        ok = Bilinear(img, points[size_t(p * nt + k)], &v) && std::isfinite(v[0] + v[1] + v[2]);
+        pr.y[size_t(k)] = ok ? (double(v[0]) + v[1] + v[2]) / 3 : 0;
+        top = std::max(top, std::abs(pr.y[size_t(k)]));
+      }
+      if (!ok || !(top > 0)) continue;
+      brightest = std::max(brightest, top);
+      own.push_back(std::move(pr));
+    }
+    for (Profile& pr : own) {
+      for (double& v : pr.y) v /= brightest;
+      profiles.push_back(std::move(pr));
+    }
+  }
+  OutlineBlur out;
+  out.profiles = int(profiles.size());
+  if (profiles.empty()) return out;
+
+  // The coverage on the profiles' box widened by the largest kernel's reach, blurred per sigma.
+  const cv::Mat sharp = FaceCoverage(camera, camera_from_sample, g, h);
+  const int margin = int(std::ceil(4 * max_sigma_px)) + 2;
+  cv::Rect box = cv::boundingRect(std::vector<cv::Point2f>(points.begin(), points.end()));
+  box = cv::Rect(box.x - margin, box.y - margin, box.width + 2 * margin, box.height + 2 * margin) &
+        cv::Rect(cv::Point(0, 0), camera.size);
+  const cv::Mat crop = sharp(box).clone();
+  const cv::Point2d origin(box.x, box.y);
+  const int steps = int(std::floor(max_sigma_px / 0.05 + 1e-9));
+  std::vector<double> cost(size_t(steps + 1), 0);
+  std::vector<cv::Vec3d> rows(static_cast<size_t>(P) * size_t(nt));
+  std::vector<cv::Matx33d> inverse(static_cast<size_t>(P));
+  for (int st = 0; st <= steps; ++st) {
+    const double sigma = 0.05 * st;
+    cv::Mat c;
+    if (sigma > 0) cv::GaussianBlur(crop, c, cv::Size(0, 0), sigma, sigma, cv::BORDER_CONSTANT);
+    else c = crop;
+    // The design (c, t c, 1) of each profile's points and its normal matrix, shared by the images.
+    for (int p = 0; p < P; ++p) {
+      cv::Matx33d AtA = cv::Matx33d::zeros();
+      for (int k = 0; k < nt; ++k) {
+        const size_t i = size_t(p * nt + k);
+        const double cov = BilinearGrey(c, points[i] - origin);
+        rows[i] = cv::Vec3d(cov, ts[size_t(k)] * cov, 1.0);
+        AtA += rows[i] * rows[i].t();
+      }
+      inverse[size_t(p)] = AtA.inv(cv::DECOMP_SVD);
+    }
+    for (const Profile& pr : profiles) {
+      cv::Vec3d Aty(0, 0, 0);
+      for (int k = 0; k < nt; ++k) Aty += pr.y[size_t(k)] * rows[size_t(pr.geometry * nt + k)];
+      const cv::Vec3d coef = inverse[size_t(pr.geometry)] * Aty;
+      for (int k = 0; k < nt; ++k) {
+        const double e = pr.y[size_t(k)] - rows[size_t(pr.geometry * nt + k)].dot(coef);
+        cost[size_t(st)] += e * e;
+      }
+    }
+  }
+  const size_t best = size_t(std::min_element(cost.begin(), cost.end()) - cost.begin());
+  double sigma = 0.05 * double(best);
+  if (best > 0 && best + 1 < cost.size()) {
+    const double l = cost[best - 1], m = cost[best], r = cost[best + 1];
+    const double curvature = l - 2 * m + r;
+    if (curvature > 0) sigma += 0.05 * 0.5 * (l - r) / curvature;
+  }
+  const double samples = double(out.profiles) * nt;
+  out.sigma_px = sigma;
+  out.rms = std::sqrt(cost[best] / samples);
+  out.rms_sharp = std::sqrt(cost[0] / samples);
+  return out;
 }
 
 std::vector<float> ProjectPatternOnFace(const cv::Mat& pattern, const DeviceIntrinsics& projector,

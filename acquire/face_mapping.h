@@ -90,8 +90,34 @@ FaceSamples ResampleFrontFace(const cv::Mat& linear_rgb, const DeviceIntrinsics&
 // of a uniformly bright face of radiance 1 on a black surround (CV_32FC1, camera.size). Each
 // pixel's rays are interpolated bilinearly between the rays of its corners (through the
 // distortion model), s x s per pixel where its corners do not all agree (inside or outside).
+// With blur_px > 0 the image is then blurred by a Gaussian of that sigma (pixels): the lens's
+// blur, which spreads the face's outline further into the dark surround.
 cv::Mat FaceCoverage(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
-                     const GridShape& grid, double h, int s = 8);
+                     const GridShape& grid, double h, double blur_px = 0, int s = 8);
+
+// The lens's blur on photos of the sample, read off the front face's outline in `images`
+// (linear, CV_32FC3, camera.size: photos of the lit sample through the same lens). Profiles
+// cross the four sides along their image normals (every ~1.5 px of a side, away from the
+// corners, t from -(3 max + 3) to 3 max + 3 px in steps of 0.5, t > 0 outside); each image's
+// channel mean along them, scaled to the largest value of that image's brightest profile (dim
+// profiles weigh less; profiles with a non-finite sample, e.g. saturated, are left out), is
+// fitted per profile by least squares as
+//     (a + b t) c_sigma(t) + d,
+// c_sigma the coverage image (FaceCoverage) blurred by a Gaussian of sigma px and sampled at
+// the same points: a radiance linear across the outline, a constant surround. sigma is the
+// one of 0, 0.05, ..., max_sigma_px whose summed squared residual is least, refined by a
+// parabola through its neighbours. The pixels' own area and the bilinear sampling are in both
+// the images and c_sigma, so sigma is the lens's alone. Below ~0.3 px a Gaussian is not told
+// from none on the pixel grid (a sharp lens reads as 0.1-0.3 px).
+struct OutlineBlur {
+  double sigma_px = 0;    // the estimate; 0 when no profile could be fitted
+  int profiles = 0;       // profiles fitted, over all images
+  double rms = 0;         // RMS residual at sigma_px, relative to each image's scale
+  double rms_sharp = 0;   // the same with sigma 0 (no blur)
+};
+OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
+                                const calib::Pose& camera_from_sample, const GridShape& grid, double h,
+                                double max_sigma_px = 3.0);
 
 // Incoming light q on the lit face (z = Z back-lit, z = 0 front-lit) from a projector image
 // (CV_32FC1, linear, 1 = full white): each lit-face node gets the mean of the pattern over its

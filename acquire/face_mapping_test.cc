@@ -246,5 +246,59 @@ TEST(FaceMapping, OutlineCoverageGivesTheBorderNodesTheirLightBack) {
   EXPECT_LT(least_border, 0.49f);  // the plain mean of a border node loses light (measured 0.483: 3.4 %)
 }
 
+// The lens's blur in the coverage: blurring keeps the face's light (the image's sum), and a
+// uniformly bright face seen through the blur reads back exactly, border nodes included.
+TEST(FaceMapping, BlurredCoverageGivesABlurredFaceItsLightBack) {
+  const CaptureRig rig = DefaultCaptureRig(kGrid, kH, Setup::kBack);
+  const cv::Mat sharp = FaceCoverage(rig.camera, rig.camera_from_sample, kGrid, kH);
+  const cv::Mat blurred = FaceCoverage(rig.camera, rig.camera_from_sample, kGrid, kH, 1.2);
+  EXPECT_NEAR(cv::sum(blurred)[0], cv::sum(sharp)[0], 1e-4 * cv::sum(sharp)[0]);
+  cv::Mat lens;  // the photo: the sharp face through a Gaussian lens
+  cv::GaussianBlur(sharp, lens, cv::Size(0, 0), 1.2, 1.2, cv::BORDER_CONSTANT);
+  cv::Mat img;
+  cv::merge(std::vector<cv::Mat>{0.25 * lens, 0.5 * lens, 0.75 * lens}, img);
+  const FaceSamples with = ResampleFrontFace(img, rig.camera, rig.camera_from_sample, kGrid, kH, 6, &blurred);
+  const FaceSamples sharp_only = ResampleFrontFace(img, rig.camera, rig.camera_from_sample, kGrid, kH, 6, &sharp);
+  float least = 1;
+  for (int64_t f = 0; f < kGrid.face_size(); ++f) {
+    EXPECT_NEAR(with.value[1][size_t(f)], 0.5f, 1e-5f) << f;
+    least = std::min(least, sharp_only.value[1][size_t(f)]);
+  }
+  EXPECT_LT(least, 0.48f);  // the sharp coverage leaves the blur's loss at the border
+}
+
+// The lens's blur read off the face's outline: a face whose radiance varies (not linearly) and
+// a dim surround, photographed through Gaussian lenses of known sigma with 0.5 % noise, the
+// pixels integrated more finely than the coverage does (16 x 16 samples).
+TEST(FaceMapping, OutlineBlurRecoversTheLensSigma) {
+  const CaptureRig rig = DefaultCaptureRig(kGrid, kH, Setup::kBack);
+  const cv::Mat fine = FaceCoverage(rig.camera, rig.camera_from_sample, kGrid, kH, 0, 16);
+  cv::Mat radiance(fine.size(), CV_32FC1);
+  for (int y = 0; y < radiance.rows; ++y)
+    for (int x = 0; x < radiance.cols; ++x)
+      radiance.at<float>(y, x) = float(1 + 0.4 * std::sin(x / 37.0) * std::cos(y / 53.0) + 0.3 * std::exp(-x / 90.0));
+  std::mt19937 rng(7);
+  std::normal_distribution<float> noise(0, 0.005f);
+  for (double sigma : {0.0, 0.4, 0.8, 1.5, 2.2}) {
+    cv::Mat photo = fine.mul(radiance);
+    if (sigma > 0) cv::GaussianBlur(photo, photo, cv::Size(0, 0), sigma, sigma, cv::BORDER_CONSTANT);
+    photo += 0.02;
+    for (auto it = photo.begin<float>(); it != photo.end<float>(); ++it) *it += noise(rng);
+    cv::Mat rgb;
+    cv::merge(std::vector<cv::Mat>{photo, 1.5 * photo, 0.5 * photo}, rgb);
+    const OutlineBlur b = EstimateOutlineBlur({rgb}, rig.camera, rig.camera_from_sample, kGrid, kH);
+    std::printf("lens sigma %.2f px: found %.3f px from %d profiles, rms %.4f (sharp %.4f)\n", sigma, b.sigma_px,
+                b.profiles, b.rms, b.rms_sharp);
+    EXPECT_GT(b.profiles, 200);
+    // A sharp lens reads as 0.28 px: a Gaussian narrower than ~0.3 px weights a pixel's
+    // neighbours by less than 0.2 %, and the pixel grid cannot tell it from none.
+    EXPECT_NEAR(b.sigma_px, sigma, sigma > 0 ? 0.05 : 0.3);
+    if (sigma > 0.5) EXPECT_LT(b.rms, 0.5 * b.rms_sharp);
+  }
+  // Saturated (+inf) photos leave nothing to fit, and say so.
+  const cv::Mat saturated(rig.camera.size, CV_32FC3, cv::Scalar::all(std::numeric_limits<float>::infinity()));
+  EXPECT_EQ(EstimateOutlineBlur({saturated}, rig.camera, rig.camera_from_sample, kGrid, kH).profiles, 0);
+}
+
 }  // namespace
 }  // namespace translume::acquire
