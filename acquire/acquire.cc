@@ -588,8 +588,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     // saturates where it lights the face, and their sum everywhere).
     std::vector<cv::Mat> lit;
     for (size_t m = 0; m < hdr.size(); ++m)
-      if (!cap.conditions[m].validation) lit.push_back(black_level.empty() ? hdr[m] : hdr[m] - black_level);
-    const OutlineBlur b = EstimateOutlineBlur(lit, cam, camera_from_sample, g, h);
+      if (!cap.conditions[m].validation) lit.push_back(hdr[m]);
+    const OutlineBlur b = EstimateOutlineBlur(lit, cam, camera_from_sample, g, h, 3.0, black_level);
     rep.camera_blur_px = b.sigma_px;
     rep.camera_blur_profiles = b.profiles;
     if (b.profiles == 0)

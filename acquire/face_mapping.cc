@@ -470,8 +470,9 @@ cv::Mat FaceCoverage(const DeviceIntrinsics& camera, const calib::Pose& camera_f
 
 OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
                                 const calib::Pose& camera_from_sample, const GridShape& g, double h,
-                                double max_sigma_px) {
+                                double max_sigma_px, const cv::Mat& black) {
   for (const cv::Mat& img : images) CV_Assert(img.type() == CV_32FC3 && img.size() == camera.size);
+  CV_Assert(black.empty() || (black.type() == CV_32FC3 && black.size() == camera.size));
   TL_CHECK(max_sigma_px > 0);
   const double reach = 3 * max_sigma_px + 3;  // a profile's half length, px
   const int half = int(std::ceil(reach / 0.5));
@@ -527,8 +528,11 @@ OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const Device
       double top = 0;
       bool ok = true;
       for (int k = 0; k < nt && ok; ++k) {
-        cv::Vec3f v;
-        ok = Bilinear(img, points[size_t(p * nt + k)], &v) && std::isfinite(v[0] + v[1] + v[2]);
+        cv::Vec3f v, b(0, 0, 0);
+        ok = Bilinear(img, points[size_t(p * nt + k)], &v) &&
+             (black.empty() || Bilinear(black, points[size_t(p * nt + k)], &b));
+        v -= b;
+        ok = ok && std::isfinite(v[0] + v[1] + v[2]);
         pr.y[size_t(k)] = ok ? (double(v[0]) + v[1] + v[2]) / 3 : 0;
         top = std::max(top, std::abs(pr.y[size_t(k)]));
       }

@@ -115,9 +115,11 @@ struct OutlineBlur {
   double rms = 0;         // RMS residual at sigma_px, relative to each image's scale
   double rms_sharp = 0;   // the same with sigma 0 (no blur)
 };
+// `black` (CV_32FC3, camera.size; empty: none) is subtracted from every image where sampled, so
+// that a capture's images need not be copied to remove their black level.
 OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
                                 const calib::Pose& camera_from_sample, const GridShape& grid, double h,
-                                double max_sigma_px = 3.0);
+                                double max_sigma_px = 3.0, const cv::Mat& black = cv::Mat());
 
 // Incoming light q on the lit face (z = Z back-lit, z = 0 front-lit) from a projector image
 // (CV_32FC1, linear, 1 = full white): each lit-face node gets the mean of the pattern over its
