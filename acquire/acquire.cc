@@ -517,13 +517,62 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     if (corners.empty())
       throw InputError(fmt::format("{}: face_corners_px is \"auto\" but no four-sided sample was "
                                    "found in the images; give the corners", cap.file));
-    progress(fmt::format("found the front face's corners: ({:.1f}, {:.1f}) ({:.1f}, {:.1f}) "
-                         "({:.1f}, {:.1f}) ({:.1f}, {:.1f})", corners[0].x, corners[0].y, corners[1].x,
+    progress(fmt::format("found the front face's corners: ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) "
+                         "({:.2f}, {:.2f}) ({:.2f}, {:.2f})", corners[0].x, corners[0].y, corners[1].x,
                          corners[1].y, corners[2].x, corners[2].y, corners[3].x, corners[3].y));
   }
-  for (const auto& p : corners) rep.face_corners_px.push_back({p.x, p.y});
-  const calib::Pose camera_from_sample =
+  // The black level, subtracted from every condition: saturated (+inf) samples of it, which do
+  // not occur in practice, count as 0 so that they cannot hide a condition's own saturation.
+  cv::Mat black_level = black.clone();
+  for (auto it = black_level.begin<cv::Vec3f>(); it != black_level.end<cv::Vec3f>(); ++it)
+    for (int k = 0; k < 3; ++k)
+      if (!std::isfinite((*it)[k])) (*it)[k] = 0;
+  calib::Pose camera_from_sample =
       EstimateSamplePose(cam, corners, g, h, cap.file + ": face_corners_px", &rep.pose_rms_px);
+  // The lens's blur: given, or read off the outline in the fitted conditions less the black
+  // (front-lit, each condition saturates where it lights the face, and their sum everywhere).
+  std::vector<cv::Mat> lit;
+  for (size_t m = 0; m < hdr.size(); ++m)
+    if (!cap.conditions[m].validation) lit.push_back(hdr[m]);
+  std::string blur_said;
+  const auto estimate_blur = [&] {
+    const OutlineBlur b = EstimateOutlineBlur(lit, cam, camera_from_sample, g, h, 3.0, black_level);
+    rep.camera_blur_px = b.sigma_px;
+    rep.camera_blur_profiles = b.profiles;
+    blur_said = b.positions == 0
+                    ? fmt::format("{}: camera_blur_px is \"auto\" but the face's outline is too short in the photos, "
+                                  "or too near their border, for profiles across it; taking the lens as sharp (give "
+                                  "camera_blur_px)", cap.file)
+                : b.profiles == 0
+                    ? fmt::format("{}: camera_blur_px is \"auto\" but the face's outline shows nowhere unsaturated "
+                                  "in the photos; taking the lens as sharp (give camera_blur_px)", cap.file)
+                    : fmt::format("the lens's blur on the sample's photos: sigma {:.2f} px (from {} profiles across "
+                                  "the face's outline; residual {:.2g} against {:.2g} for a sharp lens)",
+                                  b.sigma_px, b.profiles, b.rms, b.rms_sharp);
+  };
+  if (cap.camera_blur_px) rep.camera_blur_px = *cap.camera_blur_px;
+  else estimate_blur();
+  // Corners found automatically, refined against every fitted condition's photo through the
+  // blur (RefineFaceCorners); then the pose, and the blur read again along the new outline.
+  if (cap.face_corners_px.empty()) {
+    int points = 0;
+    const std::vector<cv::Point2d> refined = RefineFaceCorners(lit, cam, corners, rep.camera_blur_px, black_level, &points);
+    if (refined.empty()) {
+      progress("the face's corners were not refined: too few profiles across a side show an unsaturated edge");
+    } else {
+      double moved = 0;
+      for (size_t k = 0; k < 4; ++k) moved = std::max(moved, cv::norm(refined[k] - corners[k]));
+      corners = refined;
+      camera_from_sample = EstimateSamplePose(cam, corners, g, h, cap.file + ": face_corners_px", &rep.pose_rms_px);
+      if (!cap.camera_blur_px) estimate_blur();
+      progress(fmt::format("refined the corners on {} edge points through the lens's blur (moved up to {:.2f} px): "
+                           "({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})", points, moved,
+                           corners[0].x, corners[0].y, corners[1].x, corners[1].y, corners[2].x, corners[2].y,
+                           corners[3].x, corners[3].y));
+    }
+  }
+  if (!blur_said.empty()) progress(blur_said);
+  for (const auto& p : corners) rep.face_corners_px.push_back({p.x, p.y});
   stage_done("pose");
 
   // 4. Mapping.
@@ -534,12 +583,6 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   d.setup = cap.setup;
   Dataset validation = d;  // the validation conditions (CaptureSpec::Condition::validation)
   const int64_t F = g.face_size();
-  // The black level, subtracted from every condition: saturated (+inf) samples of it, which do
-  // not occur in practice, count as 0 so that they cannot hide a condition's own saturation.
-  cv::Mat black_level = black.clone();
-  for (auto it = black_level.begin<cv::Vec3f>(); it != black_level.end<cv::Vec3f>(); ++it)
-    for (int k = 0; k < 3; ++k)
-      if (!std::isfinite((*it)[k])) (*it)[k] = 0;
   DeviceIntrinsics proj;
   calib::Pose projector_from_camera;
   if (projector) {
@@ -581,25 +624,6 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   // The pixels across the face's outline also see the dark surround, and the lens's blur spreads
   // the outline further: the border nodes' means are divided by the face's coverage of their
   // samples, blurred as the lens blurs (ResampleFrontFace).
-  if (cap.camera_blur_px) {
-    rep.camera_blur_px = *cap.camera_blur_px;
-  } else {
-    // Read off the outline in the fitted conditions less the black (front-lit, each condition
-    // saturates where it lights the face, and their sum everywhere).
-    std::vector<cv::Mat> lit;
-    for (size_t m = 0; m < hdr.size(); ++m)
-      if (!cap.conditions[m].validation) lit.push_back(hdr[m]);
-    const OutlineBlur b = EstimateOutlineBlur(lit, cam, camera_from_sample, g, h, 3.0, black_level);
-    rep.camera_blur_px = b.sigma_px;
-    rep.camera_blur_profiles = b.profiles;
-    if (b.profiles == 0)
-      progress(fmt::format("{}: camera_blur_px is \"auto\" but the face's outline shows nowhere unsaturated in the "
-                           "photos; taking the lens as sharp (give camera_blur_px)", cap.file));
-    else
-      progress(fmt::format("the lens's blur on the sample's photos: sigma {:.2f} px (from {} profiles across the "
-                           "face's outline; residual {:.2g} against {:.2g} for a sharp lens)",
-                           b.sigma_px, b.profiles, b.rms, b.rms_sharp));
-  }
   const cv::Mat coverage = FaceCoverage(cam, camera_from_sample, g, h, rep.camera_blur_px);
   for (size_t m = 0; m < cap.conditions.size(); ++m) {
     const auto& c = cap.conditions[m];

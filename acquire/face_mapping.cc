@@ -206,6 +206,39 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
 
 namespace {
 
+// The corners where the lines through consecutive sides' edge points (image points of the four
+// sides, in DetectFaceCorners' order: side s runs from corner s to corner s + 1) meet; empty
+// where two lines are parallel. With `camera`, the lines are fitted after undistortion and the
+// corners returned in the distorted image.
+std::vector<cv::Point2d> CornersFromSideEdges(const std::vector<std::vector<cv::Point2f>>& sides,
+                                              const DeviceIntrinsics* camera) {
+  CV_Assert(sides.size() == 4);
+  std::vector<cv::Vec3d> lines;  // a x + b y = c
+  for (std::vector<cv::Point2f> edge : sides) {
+    // The face's sides are straight in the ideal pinhole image, not in a distorted one (barrel
+    // distortion bows them outwards, and lines through their middles meet outside the corners).
+    if (camera) cv::undistortPoints(std::vector<cv::Point2f>(edge), edge, camera->K, camera->dist, cv::noArray(), camera->K);
+    cv::Vec4f l;
+    cv::fitLine(edge, l, cv::DIST_HUBER, 0, 0.01, 0.01);
+    lines.emplace_back(l[1], -l[0], l[1] * l[2] - l[0] * l[3]);
+  }
+  std::vector<cv::Point2d> out;
+  for (int s = 0; s < 4; ++s) {
+    const cv::Vec3d& p = lines[size_t((s + 3) % 4)];
+    const cv::Vec3d& q = lines[size_t(s)];
+    const double det = p[0] * q[1] - p[1] * q[0];
+    if (std::abs(det) < 1e-9) return {};
+    out.emplace_back((p[2] * q[1] - p[1] * q[2]) / det, (p[0] * q[2] - p[2] * q[0]) / det);
+  }
+  if (camera) {  // back into the distorted image
+    std::vector<cv::Point3d> rays;
+    for (const cv::Point2d& u : out)
+      rays.emplace_back((u.x - camera->K(0, 2)) / camera->K(0, 0), (u.y - camera->K(1, 2)) / camera->K(1, 1), 1.0);
+    out = camera->Project(rays);
+  }
+  return out;
+}
+
 // The corners of `quad` (the outline of a bright blob in `lin`, luminance) to sub-pixel
 // accuracy, in DetectFaceCorners' order; empty where an edge does not show along a side.
 std::vector<cv::Point2d> RefineQuadrilateral(const cv::Mat& lin, const std::vector<cv::Point>& quad,
@@ -220,7 +253,7 @@ std::vector<cv::Point2d> RefineQuadrilateral(const cv::Mat& lin, const std::vect
   // Each side: sub-pixel edge points where the image crosses half-way between the values just
   // inside and just outside, along the side's normal; a line through them; corners where
   // consecutive lines meet.
-  std::vector<cv::Vec3d> lines;
+  std::vector<std::vector<cv::Point2f>> sides;
   for (int s = 0; s < 4; ++s) {
     const cv::Point2d a = c[size_t(s)], b = c[size_t((s + 1) % 4)];
     const cv::Point2d d = (b - a) / cv::norm(b - a);
@@ -265,29 +298,9 @@ std::vector<cv::Point2d> RefineQuadrilateral(const cv::Mat& lin, const std::vect
       if (std::isfinite(tt)) edge.emplace_back(p + tt * n);
     }
     if (edge.size() < 4 || edge.size() < size_t(count) / 2) return {};  // no edge along most of the side
-    // The face's sides are straight in the ideal pinhole image, not in a distorted one (barrel
-    // distortion bows them outwards, and lines through their middles meet outside the corners).
-    if (camera) cv::undistortPoints(std::vector<cv::Point2f>(edge), edge, camera->K, camera->dist, cv::noArray(), camera->K);
-    cv::Vec4f l;
-    cv::fitLine(edge, l, cv::DIST_HUBER, 0, 0.01, 0.01);
-    // Line as a x + b y = c.
-    lines.emplace_back(l[1], -l[0], l[1] * l[2] - l[0] * l[3]);
+    sides.push_back(std::move(edge));
   }
-  std::vector<cv::Point2d> out;
-  for (int s = 0; s < 4; ++s) {
-    const cv::Vec3d& p = lines[size_t((s + 3) % 4)];
-    const cv::Vec3d& q = lines[size_t(s)];
-    const double det = p[0] * q[1] - p[1] * q[0];
-    if (std::abs(det) < 1e-9) return {};
-    out.emplace_back((p[2] * q[1] - p[1] * q[2]) / det, (p[0] * q[2] - p[2] * q[0]) / det);
-  }
-  if (camera) {  // back into the distorted image
-    std::vector<cv::Point3d> rays;
-    for (const cv::Point2d& u : out)
-      rays.emplace_back((u.x - camera->K(0, 2)) / camera->K(0, 0), (u.y - camera->K(1, 2)) / camera->K(1, 1), 1.0);
-    out = camera->Project(rays);
-  }
-  return out;
+  return CornersFromSideEdges(sides, camera);
 }
 
 }  // namespace
@@ -350,6 +363,129 @@ std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb, const DeviceIntri
     if (!corners.empty()) return corners;
   }
   return {};
+}
+
+std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
+                                           const std::vector<cv::Point2d>& corners, double blur_px,
+                                           const cv::Mat& black, int* edge_points) {
+  CV_Assert(corners.size() == 4);
+  for (const cv::Mat& img : images) CV_Assert(img.type() == CV_32FC3 && img.size() == camera.size);
+  CV_Assert(black.empty() || (black.type() == CV_32FC3 && black.size() == camera.size));
+  if (edge_points) *edge_points = 0;
+  // The profiles' samples t (px, > 0 outside) and the edge offsets tried, both on a 0.05 px
+  // lattice so that the edge response E(t - t0) comes from one table.
+  constexpr double kLattice = 0.05;
+  const int t_lo = -60, t_hi = 80, t_step = 5;    // t from -3 to 4 px every 0.25
+  const int o_lo = -30, o_hi = 30;                // t0 from -1.5 to 1.5 px every 0.05
+  const double sigma_e = std::sqrt(blur_px * blur_px + 0.25);
+  // E(s) and s E(s) - sigma_e^2 G(s), G the Gaussian: the blurred images of a step and of a ramp
+  // that the step cuts off at s = 0, tabled on the lattice.
+  std::vector<double> step(size_t(t_hi - o_lo - (t_lo - o_hi) + 1)), ramp(step.size());
+  for (size_t k = 0; k < step.size(); ++k) {
+    const double sk = double(int(k) + t_lo - o_hi) * kLattice, u = sk / sigma_e;
+    step[k] = 0.5 * std::erfc(u / std::sqrt(2.0));
+    ramp[k] = sk * step[k] - sigma_e * std::exp(-0.5 * u * u) / std::sqrt(2 * M_PI);
+  }
+  const auto at = [&](int t, int o) { return size_t(t - o - (t_lo - o_hi)); };
+  std::vector<int> ts;
+  for (int t = t_lo; t <= t_hi; t += t_step) ts.push_back(t);
+  const int nt = int(ts.size());
+
+  // The profiles: evenly along each side's middle 70 %, straight in the ideal image.
+  std::vector<cv::Point2f> ideal;
+  cv::undistortPoints(std::vector<cv::Point2f>(corners.begin(), corners.end()), ideal, camera.K, camera.dist,
+                      cv::noArray(), camera.K);
+  const auto distorted = [&](const std::vector<cv::Point2d>& u) {
+    std::vector<cv::Point3d> rays;
+    for (const cv::Point2d& q : u)
+      rays.emplace_back((q.x - camera.K(0, 2)) / camera.K(0, 0), (q.y - camera.K(1, 2)) / camera.K(1, 1), 1.0);
+    return camera.Project(rays);
+  };
+  const cv::Point2d centre = 0.25 * (corners[0] + corners[1] + corners[2] + corners[3]);
+  struct Position {
+    int side;
+    cv::Point2d p, n;  // the foot on the current outline, the outward unit normal
+  };
+  std::vector<Position> positions;
+  for (int side = 0; side < 4; ++side) {
+    const cv::Point2d a = ideal[size_t(side)], b = ideal[size_t((side + 1) % 4)];
+    const double length = cv::norm(b - a);
+    const int count = std::max(8, int(length / 2));
+    std::vector<cv::Point2d> along;
+    for (int k = 0; k < count; ++k) {
+      const double u = 0.15 + 0.7 * (k + 0.5) / count, du = 0.5 / std::max(length, 1.0);
+      for (double v : {u - du, u, u + du}) along.push_back(a + v * (b - a));
+    }
+    const auto px = distorted(along);
+    for (size_t k = 0; k + 2 < px.size(); k += 3) {
+      const cv::Point2d tangent = px[k + 2] - px[k];
+      if (!(cv::norm(tangent) > 0)) continue;
+      cv::Point2d n(tangent.y, -tangent.x);
+      n *= 1.0 / cv::norm(n);
+      if (n.dot(px[k + 1] - centre) < 0) n = -n;
+      positions.push_back({side, px[k + 1], n});
+    }
+  }
+
+  // Each image's profile at each position, fitted for its edge offset.
+  const size_t P = positions.size();
+  std::vector<cv::Point2f> found(images.size() * P, cv::Point2f(NAN, NAN));
+  cv::parallel_for_(cv::Range(0, int(images.size() * P)), [&](const cv::Range& range) {
+    std::vector<double> y(size_t(nt), 0.0), cost(size_t(o_hi - o_lo + 1));
+    for (int job = range.start; job < range.end; ++job) {
+      const cv::Mat& img = images[size_t(job) / P];
+      const Position& pos = positions[size_t(job) % P];
+      bool ok = true;
+      double inside = 0, outside = 0;
+      int n_in = 0, n_out = 0;
+      for (int k = 0; k < nt && ok; ++k) {
+        const cv::Point2d q = pos.p + ts[size_t(k)] * kLattice * pos.n;
+        cv::Vec3f v, b(0, 0, 0);
+        ok = Bilinear(img, q, &v) && (black.empty() || Bilinear(black, q, &b));
+        v -= b;
+        y[size_t(k)] = (double(v[0]) + v[1] + v[2]) / 3;
+        ok = ok && std::isfinite(y[size_t(k)]);
+        if (ts[size_t(k)] * kLattice <= -2.5) inside += y[size_t(k)], ++n_in;
+        if (ts[size_t(k)] * kLattice >= 3) outside += y[size_t(k)], ++n_out;
+      }
+      if (!ok) continue;
+      inside /= n_in;
+      outside /= n_out;
+      if (!(inside > 0 && inside > 4 * std::abs(outside))) continue;  // no edge to speak of
+      for (double& v : y) v /= inside;
+      double yy = 0;
+      for (double v : y) yy += v * v;
+      // a E(s) + b (s E(s) - sigma_e^2 G(s)) + d, s = t - t0: linear least squares per t0; the
+      // residual's sum of squares y'y - c'A'y.
+      for (int o = o_lo; o <= o_hi; ++o) {
+        cv::Matx33d AtA = cv::Matx33d::zeros();
+        cv::Vec3d Aty(0, 0, 0);
+        for (int k = 0; k < nt; ++k) {
+          const size_t i = at(ts[size_t(k)], o);
+          const cv::Vec3d row(step[i], ramp[i], 1.0);
+          AtA += row * row.t();
+          Aty += y[size_t(k)] * row;
+        }
+        cv::Vec3d c;
+        cv::solve(AtA, Aty, c, cv::DECOMP_CHOLESKY);
+        cost[size_t(o - o_lo)] = yy - c.dot(Aty);
+      }
+      const size_t best = size_t(std::min_element(cost.begin(), cost.end()) - cost.begin());
+      if (best == 0 || best + 1 == cost.size()) continue;  // the edge is not within reach
+      const double l = cost[best - 1], m = cost[best], r = cost[best + 1], curvature = l - 2 * m + r;
+      double t0 = (int(best) + o_lo) * kLattice;
+      if (curvature > 0) t0 += kLattice * 0.5 * (l - r) / curvature;
+      found[size_t(job)] = cv::Point2f(pos.p + t0 * pos.n);
+    }
+  });
+  std::vector<std::vector<cv::Point2f>> sides(4);
+  for (size_t j = 0; j < found.size(); ++j)
+    if (std::isfinite(found[j].x)) sides[size_t(positions[j % P].side)].push_back(found[j]);
+  for (const auto& side : sides)
+    if (side.size() < 8) return {};
+  if (edge_points)
+    for (const auto& side : sides) *edge_points += int(side.size());
+  return CornersFromSideEdges(sides, &camera);
 }
 
 FaceSamples ResampleFrontFace(const cv::Mat& img, const DeviceIntrinsics& camera,
@@ -546,6 +682,7 @@ OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const Device
     }
   }
   OutlineBlur out;
+  out.positions = P;
   out.profiles = int(profiles.size());
   if (profiles.empty()) return out;
 
@@ -559,34 +696,37 @@ OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const Device
   const cv::Point2d origin(box.x, box.y);
   const int steps = int(std::floor(max_sigma_px / 0.05 + 1e-9));
   std::vector<double> cost(size_t(steps + 1), 0);
-  std::vector<cv::Vec3d> rows(static_cast<size_t>(P) * size_t(nt));
-  std::vector<cv::Matx33d> inverse(static_cast<size_t>(P));
-  for (int st = 0; st <= steps; ++st) {
-    const double sigma = 0.05 * st;
-    cv::Mat c;
-    if (sigma > 0) cv::GaussianBlur(crop, c, cv::Size(0, 0), sigma, sigma, cv::BORDER_CONSTANT);
-    else c = crop;
-    // The design (c, t c, 1) of each profile's points and its normal matrix, shared by the images.
-    for (int p = 0; p < P; ++p) {
-      cv::Matx33d AtA = cv::Matx33d::zeros();
-      for (int k = 0; k < nt; ++k) {
-        const size_t i = size_t(p * nt + k);
-        const double cov = BilinearGrey(c, points[i] - origin);
-        rows[i] = cv::Vec3d(cov, ts[size_t(k)] * cov, 1.0);
-        AtA += rows[i] * rows[i].t();
+  // One sigma per task: each has its own design rows and normal matrices.
+  cv::parallel_for_(cv::Range(0, steps + 1), [&](const cv::Range& range) {
+    std::vector<cv::Vec3d> rows(static_cast<size_t>(P) * size_t(nt));
+    std::vector<cv::Matx33d> inverse(static_cast<size_t>(P));
+    for (int st = range.start; st < range.end; ++st) {
+      const double sigma = 0.05 * st;
+      cv::Mat c;
+      if (sigma > 0) cv::GaussianBlur(crop, c, cv::Size(0, 0), sigma, sigma, cv::BORDER_CONSTANT);
+      else c = crop;
+      // The design (c, t c, 1) of each profile's points and its normal matrix, shared by the images.
+      for (int p = 0; p < P; ++p) {
+        cv::Matx33d AtA = cv::Matx33d::zeros();
+        for (int k = 0; k < nt; ++k) {
+          const size_t i = size_t(p * nt + k);
+          const double cov = BilinearGrey(c, points[i] - origin);
+          rows[i] = cv::Vec3d(cov, ts[size_t(k)] * cov, 1.0);
+          AtA += rows[i] * rows[i].t();
+        }
+        inverse[size_t(p)] = AtA.inv(cv::DECOMP_SVD);
       }
-      inverse[size_t(p)] = AtA.inv(cv::DECOMP_SVD);
-    }
-    for (const Profile& pr : profiles) {
-      cv::Vec3d Aty(0, 0, 0);
-      for (int k = 0; k < nt; ++k) Aty += pr.y[size_t(k)] * rows[size_t(pr.geometry * nt + k)];
-      const cv::Vec3d coef = inverse[size_t(pr.geometry)] * Aty;
-      for (int k = 0; k < nt; ++k) {
-        const double e = pr.y[size_t(k)] - rows[size_t(pr.geometry * nt + k)].dot(coef);
-        cost[size_t(st)] += e * e;
+      for (const Profile& pr : profiles) {
+        cv::Vec3d Aty(0, 0, 0);
+        for (int k = 0; k < nt; ++k) Aty += pr.y[size_t(k)] * rows[size_t(pr.geometry * nt + k)];
+        const cv::Vec3d coef = inverse[size_t(pr.geometry)] * Aty;
+        for (int k = 0; k < nt; ++k) {
+          const double e = pr.y[size_t(k)] - rows[size_t(pr.geometry * nt + k)].dot(coef);
+          cost[size_t(st)] += e * e;
+        }
       }
     }
-  }
+  });
   const size_t best = size_t(std::min_element(cost.begin(), cost.end()) - cost.begin());
   double sigma = 0.05 * double(best);
   if (best > 0 && best + 1 < cost.size()) {

@@ -69,6 +69,28 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
 // distorted face").
 std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& linear_rgb, const DeviceIntrinsics* camera = nullptr);
 
+// Corners (four image points, side s from corner s to s + 1, e.g. DetectFaceCorners') refined
+// on photos of the lit sample through a lens of Gaussian blur `blur_px` (sigma, pixels;
+// EstimateOutlineBlur): `images` linear CV_32FC3 of camera.size, +inf where saturated, less
+// `black` (CV_32FC3, empty: none) where sampled. Across the middle 70 % of each side, every ~2
+// px, each image's profile (the channels' mean, t from -3 to 4 px along the outward normal,
+// every 0.25 px; profiles with a non-finite sample or without an edge, inside below 4x the
+// surround, left out) is fitted by least squares as
+//     a E(s) + b (s E(s) - sigma_e^2 G(s)) + d,   s = t - t0,
+// E(s) = erfc(s / (sqrt(2) sigma_e)) / 2 and G the Gaussian of sigma_e, sigma_e^2 = blur_px^2
+// + 1/4 (the pixel's area and the bilinear sampling, 1/12 + 1/6): the blurred image of a
+// radiance a + b s inside the edge (s < 0; linear up to it) over a constant surround d, for the
+// edge's offset t0 within 1.5 px (0.05 px steps, parabola-refined). The points p + t0 n,
+// undistorted, are fitted by a line per side (Huber); the corners are where consecutive lines
+// meet. DetectFaceCorners' half-way crossing on a summed image is biased where the sum
+// saturates and where the blur spreads a radiance that falls towards the edge; this is not,
+// but for the radiance's curvature within a few pixels of the edge (docs/capture.md,
+// "Automatic corners"). Empty when a side keeps fewer than 8 points; *edge_points (optional)
+// receives the points used.
+std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
+                                           const std::vector<cv::Point2d>& corners, double blur_px,
+                                           const cv::Mat& black = cv::Mat(), int* edge_points = nullptr);
+
 // Node-space front-face radiance from a linear RGB image (CV_32FC3; +inf = saturated): every
 // front-face node's value is the mean of the image over the node's dual box on the face (the
 // face area the node owns, SPEC section 3), sampled at n x n points per box through the camera
@@ -111,7 +133,8 @@ cv::Mat FaceCoverage(const DeviceIntrinsics& camera, const calib::Pose& camera_f
 // from none on the pixel grid (a sharp lens reads as 0.1-0.3 px).
 struct OutlineBlur {
   double sigma_px = 0;    // the estimate; 0 when no profile could be fitted
-  int profiles = 0;       // profiles fitted, over all images
+  int positions = 0;      // places on the outline that a profile fits in the image (per image)
+  int profiles = 0;       // profiles fitted, over all images (0 with positions > 0: saturated)
   double rms = 0;         // RMS residual at sigma_px, relative to each image's scale
   double rms_sharp = 0;   // the same with sigma 0 (no blur)
 };

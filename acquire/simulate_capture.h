@@ -41,8 +41,9 @@ struct CaptureRig {
   double camera_vignetting = 1.0;
   // The lens's blur on the photos of the sample, the white reference and the sample lit (not
   // the camera flat, an even field): a Gaussian of this sigma (pixels) over the rendered image.
-  // 0: none (the face's outline one pixel sharp; the board photos take blur_sigma_px).
-  double sample_blur_px = 0.0;
+  // The same lens as the board photos' blur_sigma_px by default; 0: none (the face's outline
+  // one pixel sharp).
+  double sample_blur_px = 0.5;
 };
 
 // 1 - (1 - at_corner) r^2 per pixel of a device's image (CV_32FC1, its size), r the distance of
