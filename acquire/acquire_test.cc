@@ -474,9 +474,9 @@ TEST_F(AcquireTest, LensBlurSoftensTheOutline) {
   EXPECT_LE(blurred.L_rms, 0.02);
   // acquire reads the blur off the face's outline ("auto") and gives the border nodes the light
   // it spread into the surround; taken as sharp (camera_blur_px 0), the blurred photos map
-  // worse. Measured: found 1.037 px (sharp lens 0.279), L 0.697 % RMS with it, 0.853 % taken as
-  // sharp, 0.628 % from the sharp lens's photos (the blur also mixes the nodes' light inside the
-  // face: given 0.9 px, 0.63 %).
+  // worse. Measured: found 1.016 px (sharp lens 0.000), L 0.684 % RMS with it, 0.853 % taken as
+  // sharp, 0.627 % from the sharp lens's photos (the blur also mixes the nodes' light inside the
+  // face).
   std::printf("lens blur found: %.3f px (1 px), %.3f px (sharp lens)\n", blurred_report.camera_blur_px,
               sharp_report.camera_blur_px);
   EXPECT_NEAR(blurred_report.camera_blur_px, 1.0, 0.05);

@@ -705,13 +705,20 @@ OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const Device
       cv::Mat c;
       if (sigma > 0) cv::GaussianBlur(crop, c, cv::Size(0, 0), sigma, sigma, cv::BORDER_CONSTANT);
       else c = crop;
-      // The design (c, t c, 1) of each profile's points and its normal matrix, shared by the images.
+      // The design (c, t c + v c', 1) of each profile's points and its normal matrix, shared by
+      // the images: the blurred images of a radiance constant and linear up to the outline (for a
+      // kernel of variance v, K * (t f) = t (K * f) + v (K * f)'; v = sigma^2 + 1/4 px^2 with the
+      // pixel's area and the bilinear sampling), and the surround.
+      const double v = sigma * sigma + 0.25;
       for (int p = 0; p < P; ++p) {
         cv::Matx33d AtA = cv::Matx33d::zeros();
+        for (int k = 0; k < nt; ++k) rows[size_t(p * nt + k)][0] = BilinearGrey(c, points[size_t(p * nt + k)] - origin);
         for (int k = 0; k < nt; ++k) {
           const size_t i = size_t(p * nt + k);
-          const double cov = BilinearGrey(c, points[i] - origin);
-          rows[i] = cv::Vec3d(cov, ts[size_t(k)] * cov, 1.0);
+          const double cov = rows[i][0];
+          const double slope = (rows[size_t(p * nt + std::min(k + 1, nt - 1))][0] - rows[size_t(p * nt + std::max(k - 1, 0))][0]) /
+                               (ts[size_t(std::min(k + 1, nt - 1))] - ts[size_t(std::max(k - 1, 0))]);
+          rows[i] = cv::Vec3d(cov, ts[size_t(k)] * cov + v * slope, 1.0);
           AtA += rows[i] * rows[i].t();
         }
         inverse[size_t(p)] = AtA.inv(cv::DECOMP_SVD);

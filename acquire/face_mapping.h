@@ -124,13 +124,16 @@ cv::Mat FaceCoverage(const DeviceIntrinsics& camera, const calib::Pose& camera_f
 // channel mean along them, scaled to the largest value of that image's brightest profile (dim
 // profiles weigh less; profiles with a non-finite sample, e.g. saturated, are left out), is
 // fitted per profile by least squares as
-//     (a + b t) c_sigma(t) + d,
+//     a c_sigma(t) + b (t c_sigma(t) + v c_sigma'(t)) + d,   v = sigma^2 + 1/4,
 // c_sigma the coverage image (FaceCoverage) blurred by a Gaussian of sigma px and sampled at
-// the same points: a radiance linear across the outline, a constant surround. sigma is the
+// the same points, c_sigma' its slope along the profile (central differences): the blurred
+// images of a radiance a + b t linear up to the outline (for a kernel of variance v,
+// K * (t f) = t (K * f) + v (K * f)'; the pixel's area and the bilinear sampling add 1/4 px^2)
+// over a constant surround d. sigma is the
 // one of 0, 0.05, ..., max_sigma_px whose summed squared residual is least, refined by a
 // parabola through its neighbours. The pixels' own area and the bilinear sampling are in both
 // the images and c_sigma, so sigma is the lens's alone. Below ~0.3 px a Gaussian is not told
-// from none on the pixel grid (a sharp lens reads as 0.1-0.3 px).
+// from none on the pixel grid (a sharp lens reads as 0-0.3 px).
 struct OutlineBlur {
   double sigma_px = 0;    // the estimate; 0 when no profile could be fitted
   int positions = 0;      // places on the outline that a profile fits in the image (per image)
