@@ -273,6 +273,7 @@ int RunDemo(int argc, char** argv) {
   acquire::SimulateCaptureOptions sc;
   sc.setup = ParseSetup(setup);
   sc.lights = RegionLights(lights).front().region_n;
+  sc.auto_corners = true;  // as with real photos: acquire finds the face's corners
   if (std::string why = sc.Validate(); !why.empty()) throw OptionsError(app, "demo", why);
   CheckFitsInMemory(EstimateMemory(RefineShape(so.shape, sc.oversample), 1, Precision::kDouble).forward_bytes +
                         EstimateMemory(so.shape, sc.lights * sc.lights, Precision::kDouble).recovery_bytes,
