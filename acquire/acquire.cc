@@ -170,10 +170,10 @@ std::string AcquireReport::Table() const {
   for (const auto& [name, t] : stage_seconds)
     s += fmt::format("  {:<18} {:8.1f}{}\n", name, t,
                      std::find(reused.begin(), reused.end(), name) != reused.end() ? "  (reused)" : "");
-  s += fmt::format("calibration: camera RMS {:.3f} px, projector RMS {}, sample pose RMS {:.3f} px, "
+  s += fmt::format("calibration: camera RMS {:.3f} px, projector RMS {}, sample pose RMS {:.3f} px (corners {}), "
                    "lens blur {:.2f} px{}, white gains {:.4g} {:.4g} {:.4g}, exposure times {}\n", camera_rms_px,
                    projector_rms_px < 0 ? std::string("-") : fmt::format("{:.3f} px", projector_rms_px),
-                   pose_rms_px, camera_blur_px, camera_blur_profiles > 0 ? " (found)" : "",
+                   pose_rms_px, face_corners, camera_blur_px, camera_blur_profiles > 0 ? " (found)" : "",
                    white_gains[0], white_gains[1], white_gains[2],
                    exposure_times.empty() ? "-" : calib::Describe(calib::ParseShutterTimes(exposure_times, "report")));
   s += "condition  measured  saturated  masked   fit error (validation: not fitted)\n";
@@ -557,9 +557,12 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   if (cap.face_corners_px.empty()) {
     int points = 0;
     const std::vector<cv::Point2d> refined = RefineFaceCorners(lit, cam, corners, rep.camera_blur_px, black_level, &points);
+    rep.face_corners = "found";
     if (refined.empty()) {
       progress("the face's corners were not refined: too few profiles across a side show an unsaturated edge");
     } else {
+      rep.face_corners = "refined";
+      rep.face_corners_edge_points = points;
       double moved = 0;
       for (size_t k = 0; k < 4; ++k) moved = std::max(moved, cv::norm(refined[k] - corners[k]));
       corners = refined;
@@ -748,6 +751,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   j["projector_rms_px"] = rep.projector_rms_px;
   j["pose_rms_px"] = rep.pose_rms_px;
   j["face_corners_px"] = rep.face_corners_px;
+  j["face_corners"] = rep.face_corners;
+  j["face_corners_edge_points"] = rep.face_corners_edge_points;
   j["camera_blur_px"] = rep.camera_blur_px;
   j["camera_blur"] = cap.camera_blur_px ? "given" : "found";
   j["camera_blur_profiles"] = rep.camera_blur_profiles;

@@ -212,6 +212,8 @@ TEST_F(AcquireTest, AutomaticCornersWithinTwoPercent) {
     // summed image alone 0.02-0.08 and 0.14-0.25 px, inwards: the directly lit regions saturate
     // in the sum, and the blur spreads the edge's fall; q 2.27 % RMS front-lit, now 1.42 %).
     const double tolerance = 0.1;
+    EXPECT_EQ(rep["face_corners"], "refined");
+    EXPECT_GT(rep["face_corners_edge_points"].get<int>(), 4 * 100);
     for (size_t k = 0; k < 4; ++k) {
       const double dx = rep["face_corners_px"][k][0].get<double>() - given[k][0];
       const double dy = rep["face_corners_px"][k][1].get<double>() - given[k][1];
@@ -685,6 +687,7 @@ TEST_F(AcquireTest, EndToEndHeldOutError) {
   EXPECT_LE(e.holdout_error, 5e-3);
   // The simulated lens blurs the sample's photos as it blurs the board's (0.5 px); acquire
   // reads that off the face's outline.
+  EXPECT_EQ(r.face_corners, "given");
   std::printf("lens blur found: %.3f px (0.5 px)\n", r.camera_blur_px);
   EXPECT_NEAR(r.camera_blur_px, 0.5, 0.05);
   // The capture's validation spots: photographed and mapped as the regions, kept out of the fit
