@@ -695,46 +695,68 @@ OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const Device
   const cv::Mat crop = sharp(box).clone();
   const cv::Point2d origin(box.x, box.y);
   const int steps = int(std::floor(max_sigma_px / 0.05 + 1e-9));
-  std::vector<double> cost(size_t(steps + 1), 0);
-  // One sigma per task: each has its own design rows and normal matrices.
-  cv::parallel_for_(cv::Range(0, steps + 1), [&](const cv::Range& range) {
-    std::vector<cv::Vec3d> rows(static_cast<size_t>(P) * size_t(nt));
-    std::vector<cv::Matx33d> inverse(static_cast<size_t>(P));
-    for (int st = range.start; st < range.end; ++st) {
-      const double sigma = 0.05 * st;
-      cv::Mat c;
-      if (sigma > 0) cv::GaussianBlur(crop, c, cv::Size(0, 0), sigma, sigma, cv::BORDER_CONSTANT);
-      else c = crop;
-      // The design (c, t c + v c', 1) of each profile's points and its normal matrix, shared by
-      // the images: the blurred images of a radiance constant and linear up to the outline (for a
-      // kernel of variance v, K * (t f) = t (K * f) + v (K * f)'; v = sigma^2 + 1/4 px^2 with the
-      // pixel's area and the bilinear sampling), and the surround.
-      const double v = sigma * sigma + 0.25;
-      for (int p = 0; p < P; ++p) {
-        cv::Matx33d AtA = cv::Matx33d::zeros();
-        for (int k = 0; k < nt; ++k) rows[size_t(p * nt + k)][0] = BilinearGrey(c, points[size_t(p * nt + k)] - origin);
-        for (int k = 0; k < nt; ++k) {
-          const size_t i = size_t(p * nt + k);
-          const double cov = rows[i][0];
-          const double slope = (rows[size_t(p * nt + std::min(k + 1, nt - 1))][0] - rows[size_t(p * nt + std::max(k - 1, 0))][0]) /
-                               (ts[size_t(std::min(k + 1, nt - 1))] - ts[size_t(std::max(k - 1, 0))]);
-          rows[i] = cv::Vec3d(cov, ts[size_t(k)] * cov + v * slope, 1.0);
-          AtA += rows[i] * rows[i].t();
+  // The summed squared residual per trial sigma = 0.05 st (NaN: not tried): every fifth first,
+  // then every step within 0.25 px of the best of those (the cost is smooth in sigma).
+  std::vector<double> cost(size_t(steps + 1), std::numeric_limits<double>::quiet_NaN());
+  const auto evaluate = [&](const std::vector<int>& trials) {
+    // One sigma per task: each has its own design rows and normal matrices.
+    cv::parallel_for_(cv::Range(0, int(trials.size())), [&](const cv::Range& range) {
+      std::vector<cv::Vec3d> rows(static_cast<size_t>(P) * size_t(nt));
+      std::vector<cv::Matx33d> inverse(static_cast<size_t>(P));
+      for (int trial = range.start; trial < range.end; ++trial) {
+        const int st = trials[size_t(trial)];
+        const double sigma = 0.05 * st;
+        double sum = 0;
+        cv::Mat c;
+        if (sigma > 0) cv::GaussianBlur(crop, c, cv::Size(0, 0), sigma, sigma, cv::BORDER_CONSTANT);
+        else c = crop;
+        // The design (c, t c + v c', 1) of each profile's points and its normal matrix, shared by
+        // the images: the blurred images of a radiance constant and linear up to the outline (for a
+        // kernel of variance v, K * (t f) = t (K * f) + v (K * f)'; v = sigma^2 + 1/4 px^2 with the
+        // pixel's area and the bilinear sampling), and the surround.
+        const double v = sigma * sigma + 0.25;
+        for (int p = 0; p < P; ++p) {
+          cv::Matx33d AtA = cv::Matx33d::zeros();
+          for (int k = 0; k < nt; ++k) rows[size_t(p * nt + k)][0] = BilinearGrey(c, points[size_t(p * nt + k)] - origin);
+          for (int k = 0; k < nt; ++k) {
+            const size_t i = size_t(p * nt + k);
+            const double cov = rows[i][0];
+            const double slope = (rows[size_t(p * nt + std::min(k + 1, nt - 1))][0] - rows[size_t(p * nt + std::max(k - 1, 0))][0]) /
+                                 (ts[size_t(std::min(k + 1, nt - 1))] - ts[size_t(std::max(k - 1, 0))]);
+            rows[i] = cv::Vec3d(cov, ts[size_t(k)] * cov + v * slope, 1.0);
+            AtA += rows[i] * rows[i].t();
+          }
+          inverse[size_t(p)] = AtA.inv(cv::DECOMP_SVD);
         }
-        inverse[size_t(p)] = AtA.inv(cv::DECOMP_SVD);
-      }
-      for (const Profile& pr : profiles) {
-        cv::Vec3d Aty(0, 0, 0);
-        for (int k = 0; k < nt; ++k) Aty += pr.y[size_t(k)] * rows[size_t(pr.geometry * nt + k)];
-        const cv::Vec3d coef = inverse[size_t(pr.geometry)] * Aty;
-        for (int k = 0; k < nt; ++k) {
-          const double e = pr.y[size_t(k)] - rows[size_t(pr.geometry * nt + k)].dot(coef);
-          cost[size_t(st)] += e * e;
+        for (const Profile& pr : profiles) {
+          cv::Vec3d Aty(0, 0, 0);
+          for (int k = 0; k < nt; ++k) Aty += pr.y[size_t(k)] * rows[size_t(pr.geometry * nt + k)];
+          const cv::Vec3d coef = inverse[size_t(pr.geometry)] * Aty;
+          for (int k = 0; k < nt; ++k) {
+            const double e = pr.y[size_t(k)] - rows[size_t(pr.geometry * nt + k)].dot(coef);
+            sum += e * e;
+          }
         }
+        cost[size_t(st)] = sum;
       }
-    }
-  });
-  const size_t best = size_t(std::min_element(cost.begin(), cost.end()) - cost.begin());
+    });
+  };
+  const auto least = [&] {
+    size_t best = 0;
+    for (size_t k = 1; k < cost.size(); ++k)
+      if (cost[k] < cost[best]) best = k;  // NaN compares false: untried steps never win
+    return best;
+  };
+  std::vector<int> trials;
+  for (int st = 0; st <= steps; st += 5) trials.push_back(st);
+  if (trials.back() != steps) trials.push_back(steps);
+  evaluate(trials);
+  const int coarse = int(least());
+  trials.clear();
+  for (int st = std::max(0, coarse - 4); st <= std::min(steps, coarse + 4); ++st)
+    if (std::isnan(cost[size_t(st)])) trials.push_back(st);
+  evaluate(trials);
+  const size_t best = least();
   double sigma = 0.05 * double(best);
   if (best > 0 && best + 1 < cost.size()) {
     const double l = cost[best - 1], m = cost[best], r = cost[best + 1];

@@ -130,8 +130,9 @@ cv::Mat FaceCoverage(const DeviceIntrinsics& camera, const calib::Pose& camera_f
 // images of a radiance a + b t linear up to the outline (for a kernel of variance v,
 // K * (t f) = t (K * f) + v (K * f)'; the pixel's area and the bilinear sampling add 1/4 px^2)
 // over a constant surround d. sigma is the
-// one of 0, 0.05, ..., max_sigma_px whose summed squared residual is least, refined by a
-// parabola through its neighbours. The pixels' own area and the bilinear sampling are in both
+// one of 0, 0.05, ..., max_sigma_px whose summed squared residual is least (tried every 0.25
+// px, then every 0.05 px within 0.25 px of the best), refined by a parabola through its
+// neighbours. The pixels' own area and the bilinear sampling are in both
 // the images and c_sigma, so sigma is the lens's alone. Below ~0.3 px a Gaussian is not told
 // from none on the pixel grid (a sharp lens reads as 0-0.3 px).
 struct OutlineBlur {
