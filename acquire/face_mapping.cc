@@ -80,6 +80,30 @@ bool Bilinear(const cv::Mat& img, const cv::Point2d& p, cv::Vec3f* v) {
   return true;
 }
 
+// The channels' mean of `img` less `black` (empty: none) at p, bilinear; false outside the
+// image or where not finite (saturated).
+bool MeanLessBlack(const cv::Mat& img, const cv::Mat& black, const cv::Point2d& p, double* y) {
+  cv::Vec3f v, b(0, 0, 0);
+  if (!Bilinear(img, p, &v) || (!black.empty() && !Bilinear(black, p, &b))) return false;
+  v -= b;
+  *y = (double(v[0]) + v[1] + v[2]) / 3;
+  return std::isfinite(*y);
+}
+
+// Image points and the ideal pinhole image of the same camera (pixels, through K without the
+// distortion): sides of the face are straight lines in the latter.
+std::vector<cv::Point2f> IdealFromImage(const DeviceIntrinsics& camera, const std::vector<cv::Point2f>& px) {
+  std::vector<cv::Point2f> ideal;
+  cv::undistortPoints(px, ideal, camera.K, camera.dist, cv::noArray(), camera.K);
+  return ideal;
+}
+std::vector<cv::Point2d> ImageFromIdeal(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& ideal) {
+  std::vector<cv::Point3d> rays;
+  for (const cv::Point2d& u : ideal)
+    rays.emplace_back((u.x - camera.K(0, 2)) / camera.K(0, 0), (u.y - camera.K(1, 2)) / camera.K(1, 1), 1.0);
+  return camera.Project(rays);
+}
+
 // The same for a CV_32FC1 image; p must be inside (Bilinear said so for the same size).
 double BilinearGrey(const cv::Mat& img, const cv::Point2d& p) {
   const double fx = std::floor(p.x), fy = std::floor(p.y);
@@ -214,10 +238,10 @@ std::vector<cv::Point2d> CornersFromSideEdges(const std::vector<std::vector<cv::
                                               const DeviceIntrinsics* camera) {
   CV_Assert(sides.size() == 4);
   std::vector<cv::Vec3d> lines;  // a x + b y = c
-  for (std::vector<cv::Point2f> edge : sides) {
+  for (const std::vector<cv::Point2f>& side : sides) {
     // The face's sides are straight in the ideal pinhole image, not in a distorted one (barrel
     // distortion bows them outwards, and lines through their middles meet outside the corners).
-    if (camera) cv::undistortPoints(std::vector<cv::Point2f>(edge), edge, camera->K, camera->dist, cv::noArray(), camera->K);
+    const std::vector<cv::Point2f> edge = camera ? IdealFromImage(*camera, side) : side;
     cv::Vec4f l;
     cv::fitLine(edge, l, cv::DIST_HUBER, 0, 0.01, 0.01);
     lines.emplace_back(l[1], -l[0], l[1] * l[2] - l[0] * l[3]);
@@ -230,13 +254,7 @@ std::vector<cv::Point2d> CornersFromSideEdges(const std::vector<std::vector<cv::
     if (std::abs(det) < 1e-9) return {};
     out.emplace_back((p[2] * q[1] - p[1] * q[2]) / det, (p[0] * q[2] - p[2] * q[0]) / det);
   }
-  if (camera) {  // back into the distorted image
-    std::vector<cv::Point3d> rays;
-    for (const cv::Point2d& u : out)
-      rays.emplace_back((u.x - camera->K(0, 2)) / camera->K(0, 0), (u.y - camera->K(1, 2)) / camera->K(1, 1), 1.0);
-    out = camera->Project(rays);
-  }
-  return out;
+  return camera ? ImageFromIdeal(*camera, out) : out;
 }
 
 // The corners of `quad` (the outline of a bright blob in `lin`, luminance) to sub-pixel
@@ -392,15 +410,8 @@ std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, c
   const int nt = int(ts.size());
 
   // The profiles: evenly along each side's middle 70 %, straight in the ideal image.
-  std::vector<cv::Point2f> ideal;
-  cv::undistortPoints(std::vector<cv::Point2f>(corners.begin(), corners.end()), ideal, camera.K, camera.dist,
-                      cv::noArray(), camera.K);
-  const auto distorted = [&](const std::vector<cv::Point2d>& u) {
-    std::vector<cv::Point3d> rays;
-    for (const cv::Point2d& q : u)
-      rays.emplace_back((q.x - camera.K(0, 2)) / camera.K(0, 0), (q.y - camera.K(1, 2)) / camera.K(1, 1), 1.0);
-    return camera.Project(rays);
-  };
+  const std::vector<cv::Point2f> ideal =
+      IdealFromImage(camera, std::vector<cv::Point2f>(corners.begin(), corners.end()));
   const cv::Point2d centre = 0.25 * (corners[0] + corners[1] + corners[2] + corners[3]);
   struct Position {
     int side;
@@ -416,7 +427,7 @@ std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, c
       const double u = 0.15 + 0.7 * (k + 0.5) / count, du = 0.5 / std::max(length, 1.0);
       for (double v : {u - du, u, u + du}) along.push_back(a + v * (b - a));
     }
-    const auto px = distorted(along);
+    const auto px = ImageFromIdeal(camera, along);
     for (size_t k = 0; k + 2 < px.size(); k += 3) {
       const cv::Point2d tangent = px[k + 2] - px[k];
       if (!(cv::norm(tangent) > 0)) continue;
@@ -439,12 +450,7 @@ std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, c
       double inside = 0, outside = 0;
       int n_in = 0, n_out = 0;
       for (int k = 0; k < nt && ok; ++k) {
-        const cv::Point2d q = pos.p + ts[size_t(k)] * kLattice * pos.n;
-        cv::Vec3f v, b(0, 0, 0);
-        ok = Bilinear(img, q, &v) && (black.empty() || Bilinear(black, q, &b));
-        v -= b;
-        y[size_t(k)] = (double(v[0]) + v[1] + v[2]) / 3;
-        ok = ok && std::isfinite(y[size_t(k)]);
+        ok = MeanLessBlack(img, black, pos.p + ts[size_t(k)] * kLattice * pos.n, &y[size_t(k)]);
         if (ts[size_t(k)] * kLattice <= -2.5) inside += y[size_t(k)], ++n_in;
         if (ts[size_t(k)] * kLattice >= 3) outside += y[size_t(k)], ++n_out;
       }
@@ -664,12 +670,8 @@ OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const Device
       double top = 0;
       bool ok = true;
       for (int k = 0; k < nt && ok; ++k) {
-        cv::Vec3f v, b(0, 0, 0);
-        ok = Bilinear(img, points[size_t(p * nt + k)], &v) &&
-             (black.empty() || Bilinear(black, points[size_t(p * nt + k)], &b));
-        v -= b;
-        ok = ok && std::isfinite(v[0] + v[1] + v[2]);
-        pr.y[size_t(k)] = ok ? (double(v[0]) + v[1] + v[2]) / 3 : 0;
+        ok = MeanLessBlack(img, black, points[size_t(p * nt + k)], &pr.y[size_t(k)]);
+        if (!ok) pr.y[size_t(k)] = 0;
         top = std::max(top, std::abs(pr.y[size_t(k)]));
       }
       if (!ok || !(top > 0)) continue;
