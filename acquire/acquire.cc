@@ -556,7 +556,9 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   // blur (RefineFaceCorners); then the pose, and the blur read again along the new outline.
   if (cap.face_corners_px.empty()) {
     int points = 0;
-    const std::vector<cv::Point2d> refined = RefineFaceCorners(lit, cam, corners, rep.camera_blur_px, black_level, &points);
+    double refine_blur = 0;
+    const std::vector<cv::Point2d> refined =
+        RefineFaceCorners(lit, cam, corners, rep.camera_blur_px, black_level, &points, &refine_blur);
     rep.face_corners = "found";
     if (refined.empty()) {
       progress("the face's corners were not refined: too few profiles across a side show an unsaturated edge");
@@ -568,8 +570,9 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       corners = refined;
       camera_from_sample = EstimateSamplePose(cam, corners, g, h, cap.file + ": face_corners_px", &rep.pose_rms_px);
       if (!cap.camera_blur_px) estimate_blur();
-      progress(fmt::format("refined the corners on {} edge points through the lens's blur (moved up to {:.2f} px): "
-                           "({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})", points, moved,
+      progress(fmt::format("refined the corners on {} edge points through a lens blur of {:.2f} px (moved up to "
+                           "{:.2f} px): ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})",
+                           points, refine_blur, moved,
                            corners[0].x, corners[0].y, corners[1].x, corners[1].y, corners[2].x, corners[2].y,
                            corners[3].x, corners[3].y));
     }

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <numeric>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -383,31 +384,84 @@ std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb, const DeviceIntri
   return {};
 }
 
+namespace {
+
+// RefineFaceCorners' model of a profile across the face's outline for one lens, on a lattice of
+// 0.05 px: samples t = t_lo..t_hi (lattice units, every t_step; > 0 outside), edge offsets
+// t0 = -reach..reach, and the model's columns at s = t - t0, tabled once for all profiles:
+//     E(s),  s E(s) - sigma_e^2 G(s),  (s^2 + sigma_e^2) E(s) - sigma_e^2 s G(s),  1:
+// the blurred images (Gaussian of sigma_e) of a step, and of a ramp and a parabola that the step
+// cuts off at s = 0, and a constant surround. The columns' Gram matrix depends on the offset
+// only, not on the profile: its inverse is kept per offset, so that a fit costs one correlation.
+constexpr double kLattice = 0.05;
+struct EdgeModel {
+  int t_lo = 0, t_hi = 0, t_step = 5, reach = 0;
+  std::vector<int> ts;
+  std::vector<cv::Vec4d> table;           // lattice points t_lo - reach .. t_hi + reach
+  std::vector<cv::Matx44d> gram_inverse;  // offsets -reach .. reach
+
+  EdgeModel(double sigma_e, double inside_px, double outside_px, double reach_px) {
+    t_lo = -t_step * int(std::ceil(inside_px / (t_step * kLattice) - 1e-9));
+    t_hi = t_step * int(std::ceil(outside_px / (t_step * kLattice) - 1e-9));
+    reach = int(std::ceil(reach_px / kLattice - 1e-9));
+    for (int t = t_lo; t <= t_hi; t += t_step) ts.push_back(t);
+    for (int k = t_lo - reach; k <= t_hi + reach; ++k) {
+      const double sk = k * kLattice, u = sk / sigma_e;
+      const double e = 0.5 * std::erfc(u / std::sqrt(2.0)), s2g = sigma_e * std::exp(-0.5 * u * u) / std::sqrt(2 * M_PI);
+      table.emplace_back(e, sk * e - s2g, (sk * sk + sigma_e * sigma_e) * e - sk * s2g, 1.0);
+    }
+    for (int o = -reach; o <= reach; ++o) {
+      cv::Matx44d gram = cv::Matx44d::zeros();
+      for (int t : ts) gram += Row(t, o) * Row(t, o).t();
+      cv::Matx44d inverse;
+      if (!cv::invert(gram, inverse, cv::DECOMP_CHOLESKY)) inverse = cv::Matx44d::zeros();
+      gram_inverse.push_back(inverse);
+    }
+  }
+  const cv::Vec4d& Row(int t, int o) const { return table[size_t(t - o - (t_lo - reach))]; }
+  // The residual sum of squares y'y - c'A'y of the least-squares fit at each offset; the best
+  // offset (px, parabola-refined) and its cost. *t0 is NaN where the best is at the reach's end.
+  double Fit(const std::vector<double>& y, double* t0) const {
+    double yy = 0;
+    for (double v : y) yy += v * v;
+    double best = INFINITY, l = 0, r = 0;
+    int at = 0;
+    double previous = INFINITY;
+    for (int o = -reach; o <= reach; ++o) {
+      cv::Vec4d aty(0, 0, 0, 0);
+      for (size_t k = 0; k < ts.size(); ++k) aty += y[k] * Row(ts[k], o);
+      const double cost = yy - aty.dot(gram_inverse[size_t(o + reach)] * aty);
+      if (cost < best) best = cost, at = o, l = previous, r = INFINITY;
+      else if (o == at + 1) r = cost;
+      previous = cost;
+    }
+    *t0 = NAN;
+    if (at == -reach || at == reach) return best;
+    *t0 = at * kLattice;
+    const double curvature = l - 2 * best + r;
+    if (curvature > 0) *t0 += kLattice * 0.5 * (l - r) / curvature;
+    return best;
+  }
+};
+
+}  // namespace
+
 std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
                                            const std::vector<cv::Point2d>& corners, double blur_px,
-                                           const cv::Mat& black, int* edge_points) {
-  CV_Assert(corners.size() == 4);
+                                           const cv::Mat& black, int* edge_points, double* blur_found) {
+  CV_Assert(corners.size() == 4 && blur_px >= 0);
   for (const cv::Mat& img : images) CV_Assert(img.type() == CV_32FC3 && img.size() == camera.size);
   CV_Assert(black.empty() || (black.type() == CV_32FC3 && black.size() == camera.size));
   if (edge_points) *edge_points = 0;
-  // The profiles' samples t (px, > 0 outside) and the edge offsets tried, both on a 0.05 px
-  // lattice so that the edge response E(t - t0) comes from one table.
-  constexpr double kLattice = 0.05;
-  const int t_lo = -60, t_hi = 80, t_step = 5;    // t from -3 to 4 px every 0.25
-  const int o_lo = -30, o_hi = 30;                // t0 from -1.5 to 1.5 px every 0.05
-  const double sigma_e = std::sqrt(blur_px * blur_px + 0.25);
-  // E(s) and s E(s) - sigma_e^2 G(s), G the Gaussian: the blurred images of a step and of a ramp
-  // that the step cuts off at s = 0, tabled on the lattice.
-  std::vector<double> step(size_t(t_hi - o_lo - (t_lo - o_hi) + 1)), ramp(step.size());
-  for (size_t k = 0; k < step.size(); ++k) {
-    const double sk = double(int(k) + t_lo - o_hi) * kLattice, u = sk / sigma_e;
-    step[k] = 0.5 * std::erfc(u / std::sqrt(2.0));
-    ramp[k] = sk * step[k] - sigma_e * std::exp(-0.5 * u * u) / std::sqrt(2 * M_PI);
-  }
-  const auto at = [&](int t, int o) { return size_t(t - o - (t_lo - o_hi)); };
-  std::vector<int> ts;
-  for (int t = t_lo; t <= t_hi; t += t_step) ts.push_back(t);
-  const int nt = int(ts.size());
+  if (blur_found) *blur_found = NAN;
+  // sigma_e^2 = blur^2 + 1/4: the pixel's area and the bilinear sampling (1/12 + 1/6). The
+  // window: t from -max(6, 4 sigma_w) to max(5, 3 sigma_w + 1.5) px, offsets within max(1.5,
+  // sigma_w), sigma_w the sigma_e of `window_blur`.
+  const auto sigma_e = [](double blur) { return std::sqrt(blur * blur + 0.25); };
+  const auto model = [&](double blur, double window_blur) {
+    const double w = sigma_e(window_blur);
+    return EdgeModel(sigma_e(blur), std::max(6.0, 4 * w), std::max(5.0, 3 * w + 1.5), std::max(1.5, w));
+  };
 
   // The profiles: evenly along each side's middle 70 %, straight in the ideal image.
   const std::vector<cv::Point2f> ideal =
@@ -437,51 +491,80 @@ std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, c
       positions.push_back({side, px[k + 1], n});
     }
   }
+  const size_t P = positions.size();
+
+  // Profile j (image j / P at position j % P) sampled at m's ts, less the black, over its
+  // inside's level; false without an edge to speak of (a non-finite sample, or the inside not
+  // above 4x the surround).
+  const auto profile = [&](const EdgeModel& m, size_t j, std::vector<double>* y) {
+    const cv::Mat& img = images[j / P];
+    const Position& pos = positions[j % P];
+    y->resize(m.ts.size());
+    double inside = 0, outside = 0;
+    int n_in = 0, n_out = 0;
+    for (size_t k = 0; k < m.ts.size(); ++k) {
+      if (!MeanLessBlack(img, black, pos.p + m.ts[k] * kLattice * pos.n, &(*y)[k])) return false;
+      if (m.ts[k] - m.t_lo <= 10) inside += (*y)[k], ++n_in;    // the first 0.5 px
+      if (m.t_hi - m.ts[k] <= 20) outside += (*y)[k], ++n_out;  // the last 1 px
+    }
+    inside /= n_in;
+    outside /= n_out;
+    if (!(inside > 0 && inside > 4 * std::abs(outside))) return false;
+    for (double& v : *y) v /= inside;
+    return true;
+  };
+
+  // The lens's blur: t0 moves with a wrong blur (at 2 px, a blur 13 % low moves the outline
+  // ~0.6 px out), and the blur read along an outline that is itself off (EstimateOutlineBlur)
+  // is off. So the blur that fits the profiles best is searched for: the sum of the profiles'
+  // best costs over ~2000 of them, every 0.25 px from 0 to 2 blur + 1 px, then every 0.05 px
+  // within 0.2 px of the best; again with the window of the blur found, until it stays within
+  // 0.1 px (three rounds at most).
+  double blur = blur_px;
+  for (int round = 0; round < 3; ++round) {
+    const double window_blur = blur;
+    const EdgeModel window = model(window_blur, window_blur);
+    const size_t stride = std::max<size_t>(1, images.size() * P / 2000);
+    std::vector<std::vector<double>> subset;
+    std::vector<double> y;
+    for (size_t j = 0; j < images.size() * P; j += stride)
+      if (profile(window, j, &y)) subset.push_back(y);
+    if (subset.empty()) break;
+    const auto cost = [&](double b) {
+      const EdgeModel m(sigma_e(b), -window.t_lo * kLattice, window.t_hi * kLattice, window.reach * kLattice);
+      std::vector<double> costs(subset.size());
+      cv::parallel_for_(cv::Range(0, int(subset.size())), [&](const cv::Range& r) {
+        double t0;
+        for (int i = r.start; i < r.end; ++i) costs[size_t(i)] = m.Fit(subset[size_t(i)], &t0);
+      });
+      return std::accumulate(costs.begin(), costs.end(), 0.0);
+    };
+    double best = INFINITY;
+    for (int k = 0; k <= int(std::floor((2 * window_blur + 1) / 0.25 + 1e-9)); ++k) {
+      const double c = cost(0.25 * k);
+      if (c < best) best = c, blur = 0.25 * k;
+    }
+    const double coarse = blur;
+    for (int k = -4; k <= 4; ++k) {
+      const double b = coarse + 0.05 * k;
+      if (k == 0 || b < 0) continue;
+      const double c = cost(b);
+      if (c < best) best = c, blur = b;
+    }
+    if (blur_found) *blur_found = blur;
+    if (std::abs(blur - window_blur) < 0.1) break;
+  }
 
   // Each image's profile at each position, fitted for its edge offset.
-  const size_t P = positions.size();
+  const EdgeModel m = model(blur, blur);
   std::vector<cv::Point2f> found(images.size() * P, cv::Point2f(NAN, NAN));
   cv::parallel_for_(cv::Range(0, int(images.size() * P)), [&](const cv::Range& range) {
-    std::vector<double> y(size_t(nt), 0.0), cost(size_t(o_hi - o_lo + 1));
+    std::vector<double> y;
     for (int job = range.start; job < range.end; ++job) {
-      const cv::Mat& img = images[size_t(job) / P];
-      const Position& pos = positions[size_t(job) % P];
-      bool ok = true;
-      double inside = 0, outside = 0;
-      int n_in = 0, n_out = 0;
-      for (int k = 0; k < nt && ok; ++k) {
-        ok = MeanLessBlack(img, black, pos.p + ts[size_t(k)] * kLattice * pos.n, &y[size_t(k)]);
-        if (ts[size_t(k)] * kLattice <= -2.5) inside += y[size_t(k)], ++n_in;
-        if (ts[size_t(k)] * kLattice >= 3) outside += y[size_t(k)], ++n_out;
-      }
-      if (!ok) continue;
-      inside /= n_in;
-      outside /= n_out;
-      if (!(inside > 0 && inside > 4 * std::abs(outside))) continue;  // no edge to speak of
-      for (double& v : y) v /= inside;
-      double yy = 0;
-      for (double v : y) yy += v * v;
-      // a E(s) + b (s E(s) - sigma_e^2 G(s)) + d, s = t - t0: linear least squares per t0; the
-      // residual's sum of squares y'y - c'A'y.
-      for (int o = o_lo; o <= o_hi; ++o) {
-        cv::Matx33d AtA = cv::Matx33d::zeros();
-        cv::Vec3d Aty(0, 0, 0);
-        for (int k = 0; k < nt; ++k) {
-          const size_t i = at(ts[size_t(k)], o);
-          const cv::Vec3d row(step[i], ramp[i], 1.0);
-          AtA += row * row.t();
-          Aty += y[size_t(k)] * row;
-        }
-        cv::Vec3d c;
-        cv::solve(AtA, Aty, c, cv::DECOMP_CHOLESKY);
-        cost[size_t(o - o_lo)] = yy - c.dot(Aty);
-      }
-      const size_t best = size_t(std::min_element(cost.begin(), cost.end()) - cost.begin());
-      if (best == 0 || best + 1 == cost.size()) continue;  // the edge is not within reach
-      const double l = cost[best - 1], m = cost[best], r = cost[best + 1], curvature = l - 2 * m + r;
-      double t0 = (int(best) + o_lo) * kLattice;
-      if (curvature > 0) t0 += kLattice * 0.5 * (l - r) / curvature;
-      found[size_t(job)] = cv::Point2f(pos.p + t0 * pos.n);
+      double t0;
+      if (!profile(m, size_t(job), &y)) continue;
+      m.Fit(y, &t0);
+      if (std::isfinite(t0)) found[size_t(job)] = cv::Point2f(positions[size_t(job) % P].p + t0 * positions[size_t(job) % P].n);
     }
   });
   std::vector<std::vector<cv::Point2f>> sides(4);

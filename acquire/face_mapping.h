@@ -70,26 +70,29 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
 std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& linear_rgb, const DeviceIntrinsics* camera = nullptr);
 
 // Corners (four image points, side s from corner s to s + 1, e.g. DetectFaceCorners') refined
-// on photos of the lit sample through a lens of Gaussian blur `blur_px` (sigma, pixels;
-// EstimateOutlineBlur): `images` linear CV_32FC3 of camera.size, +inf where saturated, less
+// on photos of the lit sample through a lens of Gaussian blur near `blur_px` (sigma, pixels;
+// EstimateOutlineBlur's): `images` linear CV_32FC3 of camera.size, +inf where saturated, less
 // `black` (CV_32FC3, empty: none) where sampled. Across the middle 70 % of each side, every ~2
-// px, each image's profile (the channels' mean, t from -3 to 4 px along the outward normal,
-// every 0.25 px; profiles with a non-finite sample or without an edge, inside below 4x the
-// surround, left out) is fitted by least squares as
-//     a E(s) + b (s E(s) - sigma_e^2 G(s)) + d,   s = t - t0,
-// E(s) = erfc(s / (sqrt(2) sigma_e)) / 2 and G the Gaussian of sigma_e, sigma_e^2 = blur_px^2
-// + 1/4 (the pixel's area and the bilinear sampling, 1/12 + 1/6): the blurred image of a
-// radiance a + b s inside the edge (s < 0; linear up to it) over a constant surround d, for the
-// edge's offset t0 within 1.5 px (0.05 px steps, parabola-refined). The points p + t0 n,
-// undistorted, are fitted by a line per side (Huber); the corners are where consecutive lines
-// meet. DetectFaceCorners' half-way crossing on a summed image is biased where the sum
-// saturates and where the blur spreads a radiance that falls towards the edge; this is not,
-// but for the radiance's curvature within a few pixels of the edge (docs/capture.md,
-// "Automatic corners"). Empty when a side keeps fewer than 8 points; *edge_points (optional)
-// receives the points used.
+// px, each image's profile (the channels' mean along the outward normal every 0.25 px, from
+// max(6, 4 sigma_e) px inside to max(5, 3 sigma_e + 1.5) px outside; profiles with a
+// non-finite sample or without an edge, inside below 4x the surround, left out) is fitted by
+// least squares as
+//     a E(s) + b (s E(s) - sigma_e^2 G(s)) + c ((s^2 + sigma_e^2) E(s) - sigma_e^2 s G(s)) + d,
+// s = t - t0, E(s) = erfc(s / (sqrt(2) sigma_e)) / 2 and G the Gaussian of sigma_e, sigma_e^2 =
+// blur^2 + 1/4 (the pixel's area and the bilinear sampling, 1/12 + 1/6): the blurred image of a
+// radiance a + b s + c s^2 inside the edge (s < 0) over a constant surround d, for the edge's
+// offset t0 within max(1.5, sigma_e) px (0.05 px steps, parabola-refined). The blur is the one
+// whose fits cost least in sum over ~2000 profiles (0 to 2 blur_px + 1 px, to 0.05 px; a blur
+// 13 % off moves the edge ~0.6 px at 2 px): *blur_found (optional) receives it. The points p +
+// t0 n, undistorted, are fitted by a line per side (Huber); the corners are where consecutive
+// lines meet. DetectFaceCorners' half-way crossing on a summed image is biased where the sum
+// saturates and where the blur spreads a radiance that falls towards the edge; this is not
+// (docs/capture.md, "Automatic corners"). Empty when a side keeps fewer than 8 points;
+// *edge_points (optional) receives the points used.
 std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
                                            const std::vector<cv::Point2d>& corners, double blur_px,
-                                           const cv::Mat& black = cv::Mat(), int* edge_points = nullptr);
+                                           const cv::Mat& black = cv::Mat(), int* edge_points = nullptr,
+                                           double* blur_found = nullptr);
 
 // Node-space front-face radiance from a linear RGB image (CV_32FC3; +inf = saturated): every
 // front-face node's value is the mean of the image over the node's dual box on the face (the
