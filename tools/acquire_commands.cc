@@ -243,10 +243,11 @@ int RunDemo(int argc, char** argv) {
   CLI::App app{"The main job on the embedded default: synthesise a marble sample, simulate a\n"
                "complete capture of it (calibration photos, 16 back-lit regions and 4 validation\n"
                "spots as 8-bit exposure stacks rendered from forward solves on a 2x finer grid),\n"
-               "acquire it (calibrate, merge HDR, find the pose, map the photos onto the grid,\n"
-               "solve, stopping on the validation spots), report the\n"
-               "held-out relighting error against the truth, and render the recovered material\n"
-               "on a sphere with the polygrid renderer.", "translume demo"};
+               "acquire it (calibrate, merge HDR, find the face's corners in the photos and\n"
+               "refine them through the lens's blur, find the pose, map the photos onto the\n"
+               "grid, solve, stopping on the validation spots), report the held-out\n"
+               "relighting error against the truth, and render the recovered material on a\n"
+               "sphere with the polygrid renderer.", "translume demo"};
   std::string out = "out/demo", grid = "32x24x8", setup = "back", lights = "4x4";
   int iterations = 150;
   app.add_option("-o,--output", out, "Output folder")->capture_default_str();
