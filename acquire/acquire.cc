@@ -552,30 +552,45 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   };
   if (cap.camera_blur_px) rep.camera_blur_px = *cap.camera_blur_px;
   else estimate_blur();
-  // Corners found automatically, refined against every fitted condition's photo through the
-  // blur (RefineFaceCorners); then the pose, and the blur read again along the new outline.
-  if (cap.face_corners_px.empty()) {
-    int points = 0;
-    double refine_blur = 0;
-    const std::vector<cv::Point2d> refined =
-        RefineFaceCorners(lit, cam, corners, rep.camera_blur_px, black_level, &points, &refine_blur);
-    rep.face_corners = "found";
+  // Corners found automatically or given near the face, refined against every fitted
+  // condition's photo through the blur (RefineFaceCorners; corners given near it first with
+  // the edges let within kNearReach of them); then the pose, and the blur read again along the
+  // new outline. Corners given as exact are checked the same way, and left as they are.
+  constexpr double kNearReach = 5;  // px: how far off a corner clicked by hand may be
+  int points = 0;
+  double refine_blur = 0;
+  const auto refine = [&](bool near) {
+    std::vector<cv::Point2d> refined = corners;
+    if (near) refined = RefineFaceCorners(lit, cam, corners, rep.camera_blur_px, black_level, nullptr, &refine_blur, kNearReach);
+    if (!refined.empty())
+      refined = RefineFaceCorners(lit, cam, refined, near ? refine_blur : rep.camera_blur_px, black_level, &points, &refine_blur);
+    double moved = 0;
+    for (size_t k = 0; k < refined.size(); ++k) moved = std::max(moved, cv::norm(refined[k] - corners[k]));
+    return std::make_pair(refined, moved);
+  };
+  if (cap.face_corners_px.empty() || cap.face_corners_near) {
+    const auto [refined, moved] = refine(cap.face_corners_near);
+    rep.face_corners = cap.face_corners_near ? "near" : "found";
     if (refined.empty()) {
-      progress("the face's corners were not refined: too few profiles across a side show an unsaturated edge");
+      progress(fmt::format("the face's corners were not refined: too few profiles across a side show an "
+                           "unsaturated edge; keeping the {} ones", cap.face_corners_near ? "given" : "found"));
     } else {
       rep.face_corners = "refined";
       rep.face_corners_edge_points = points;
-      double moved = 0;
-      for (size_t k = 0; k < 4; ++k) moved = std::max(moved, cv::norm(refined[k] - corners[k]));
       corners = refined;
       camera_from_sample = EstimateSamplePose(cam, corners, g, h, cap.file + ": face_corners_px", &rep.pose_rms_px);
       if (!cap.camera_blur_px) estimate_blur();
       progress(fmt::format("refined the corners on {} edge points through a lens blur of {:.2f} px (moved up to "
                            "{:.2f} px): ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})",
-                           points, refine_blur, moved,
-                           corners[0].x, corners[0].y, corners[1].x, corners[1].y, corners[2].x, corners[2].y,
-                           corners[3].x, corners[3].y));
+                           points, refine_blur, moved, corners[0].x, corners[0].y, corners[1].x, corners[1].y,
+                           corners[2].x, corners[2].y, corners[3].x, corners[3].y));
     }
+  } else if (const auto [refined, moved] = refine(true); !refined.empty() && moved > 1) {
+    progress(fmt::format("warning: {}: face_corners_px lie up to {:.1f} px from the face's outline in the photos "
+                         "(refined: ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})); give them "
+                         "as {{\"near\": [...]}} to have them refined, or \"auto\"", cap.file, moved,
+                         refined[0].x, refined[0].y, refined[1].x, refined[1].y, refined[2].x, refined[2].y,
+                         refined[3].x, refined[3].y));
   }
   if (!blur_said.empty()) progress(blur_said);
   for (const auto& p : corners) rep.face_corners_px.push_back({p.x, p.y});

@@ -51,8 +51,10 @@ struct AcquireReport {
   std::vector<std::string> reused;                            // stages taken from the work folder
   double camera_rms_px = -1, projector_rms_px = -1, pose_rms_px = -1;
   std::vector<std::array<double, 2>> face_corners_px;
-  // How they came: "given" (capture.json), "found" (on the summed conditions) or "refined"
-  // (then through the lens's blur on face_corners_edge_points edge points; RefineFaceCorners).
+  // How they came: "given" (capture.json), "found" (on the summed conditions), "near" (given
+  // near the face, capture.json {"near": ...}, left as given) or "refined" (found or given near,
+  // then fitted through the lens's blur on face_corners_edge_points edge points;
+  // RefineFaceCorners).
   std::string face_corners = "given";
   int face_corners_edge_points = 0;
   // The lens's blur used for the face's coverage (Gaussian sigma, px): capture.json's, or found

@@ -223,6 +223,37 @@ TEST_F(AcquireTest, AutomaticCornersWithinTwoPercent) {
   }
 }
 
+// Corners clicked by hand, up to 3.8 px off: given as {"near": [...]}, acquire refines them as
+// it refines automatic ones (the back-lit test capture: within 0.01-0.09 px of the truth);
+// given as an exact list, it keeps them and warns that they are off the face's outline.
+TEST_F(AcquireTest, CornersGivenNearTheFaceAreRefined) {
+  const std::string c = Copy(Setup::kBack);
+  const auto truth = ReadCapture(c).face_corners_px;
+  const double off[4][2] = {{2.5, -1.8}, {-3.0, 2.2}, {1.6, 2.9}, {-2.2, -2.6}};
+  nlohmann::json clicked;
+  for (size_t k = 0; k < 4; ++k) clicked.push_back({truth[k][0] + off[k][0], truth[k][1] + off[k][1]});
+  EditJson(c, [&](nlohmann::json& j) { j["face_corners_px"] = {{"near", clicked}}; });
+  fs::remove_all(WorkDir(Out()));
+  CheckMapping(Setup::kBack, false, c, Out());
+  const nlohmann::json rep = nlohmann::json::parse(std::ifstream(WorkDir(Out()) + "/report.json"));
+  EXPECT_EQ(rep["face_corners"], "refined");
+  for (size_t k = 0; k < 4; ++k) {
+    const double dx = rep["face_corners_px"][k][0].get<double>() - truth[k][0];
+    const double dy = rep["face_corners_px"][k][1].get<double>() - truth[k][1];
+    std::printf("corner %zu clicked %.2f px off, refined to %.3f px\n", k, std::hypot(off[k][0], off[k][1]),
+                std::hypot(dx, dy));
+    EXPECT_LT(std::hypot(dx, dy), 0.1) << "corner " << k;
+  }
+  EditJson(c, [&](nlohmann::json& j) { j["face_corners_px"] = clicked; });
+  AcquireOptions o;
+  o.solve = false;
+  std::string said;
+  const AcquireReport r = Acquire(ReadCapture(c), Out(), o, [&](const std::string& line) { said += line + "\n"; });
+  EXPECT_EQ(r.face_corners, "given");
+  EXPECT_NE(said.find("warning: " + c + "/capture.json: face_corners_px lie up to 3."), std::string::npos) << said;
+  EXPECT_NE(said.find("give them as {\"near\": [...]}"), std::string::npos) << said;
+}
+
 // A camera that labels its shutter speeds as cameras do (it exposes 1/32 s and writes 1/30;
 // 1/16 s as 1/15): read as labelled, the merge's brightness jumps by 6.7 % between the photos
 // at 1/15 and 1/8. Both an 8-bit capture (the response fit decides) and a 16-bit one (the

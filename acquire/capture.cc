@@ -171,8 +171,18 @@ CaptureSpec ReadCapture(const std::string& path) {
   }
   s.C = j.contains("C") ? r.Positive(j["C"], "C") : ReflectionParameterC(s.eta);
   if (s.C < 1) r.Fail("C", "must be >= 1");
-  if (j.contains("face_corners_px") && !(j["face_corners_px"].is_string() && j["face_corners_px"] == "auto"))
-    s.face_corners_px = r.Corners(j["face_corners_px"], "face_corners_px");
+  if (j.contains("face_corners_px") && !(j["face_corners_px"].is_string() && j["face_corners_px"] == "auto")) {
+    const json& c = j["face_corners_px"];
+    if (c.is_object()) {
+      for (const auto& [k, v] : c.items())
+        if (k != "near") r.Fail("face_corners_px." + k, "unknown field (\"near\" is the one)");
+      if (!c.contains("near")) r.Fail("face_corners_px", "expected \"auto\", four [x, y] corners or {\"near\": four corners}");
+      s.face_corners_px = r.Corners(c["near"], "face_corners_px.near");
+      s.face_corners_near = true;
+    } else {
+      s.face_corners_px = r.Corners(c, "face_corners_px");
+    }
+  }
   if (j.contains("camera_blur_px") && !(j["camera_blur_px"].is_string() && j["camera_blur_px"] == "auto")) {
     const json& b = j["camera_blur_px"];
     if (!b.is_number() || !(b.get<double>() >= 0 && b.get<double>() <= 5))
@@ -338,6 +348,7 @@ std::string CaptureJson(const CaptureSpec& s) {
   if (std::abs(s.C - ReflectionParameterC(s.eta)) < 1e-12) j["eta"] = s.eta;
   else j["C"] = s.C;
   if (s.face_corners_px.empty()) j["face_corners_px"] = "auto";
+  else if (s.face_corners_near) j["face_corners_px"] = {{"near", s.face_corners_px}};
   else j["face_corners_px"] = s.face_corners_px;
   if (s.camera_blur_px) j["camera_blur_px"] = *s.camera_blur_px;
   else j["camera_blur_px"] = "auto";

@@ -31,6 +31,9 @@ struct CaptureSpec {
   // Image positions (pixels, OpenCV convention) of the front face's corners, in the order
   // sample (0, 0), (X, 0), (X, Y), (0, Y); empty: found automatically in the images.
   std::vector<std::array<double, 2>> face_corners_px;
+  // The corners above are only near the face's (capture.json {"near": [...]}, clicked by hand,
+  // within a few pixels): refined in the photos as automatic ones are.
+  bool face_corners_near = false;
   // The lens's blur on the photos of the sample, a Gaussian sigma in pixels (0..5), which
   // spreads the face's outline into the dark surround (docs/capture.md, "Mapping"); empty:
   // "auto", read off the face's outline in the photos (EstimateOutlineBlur).

@@ -90,6 +90,15 @@ TEST_F(CaptureTest, ReadsAndRoundTrips) {
   EXPECT_EQ(ReadCapture(dir_.string()).camera_blur_px, 0.8);
   j["camera_blur_px"] = "auto";
   EXPECT_FALSE(ReadCapture(Write(j)).camera_blur_px.has_value());
+  // Corners given near the face (clicked by hand), read and written back.
+  EXPECT_FALSE(s.face_corners_near);
+  j["face_corners_px"] = {{"near", base_["face_corners_px"]}};
+  const CaptureSpec n = ReadCapture(Write(j));
+  EXPECT_TRUE(n.face_corners_near);
+  EXPECT_EQ(n.face_corners_px, s.face_corners_px);
+  std::ofstream(dir_ / "capture.json") << CaptureJson(n);
+  EXPECT_TRUE(ReadCapture(dir_.string()).face_corners_near);
+  j["face_corners_px"] = base_["face_corners_px"];
   // Validation conditions, read and written back.
   EXPECT_FALSE(s.conditions[1].validation);
   j["conditions"][1]["validation"] = true;
@@ -116,9 +125,12 @@ TEST_F(CaptureTest, EveryBrokenFieldIsNamed) {
   ExpectError([](auto& j) { j["grid"] = {24, 18, 6}; }, "spacing_mm: give exactly one");
   ExpectError([](auto& j) { j["C"] = 2.0; }, "C: give eta or C");
   ExpectError([](auto& j) { j["face_corners_px"] = {{1, 2}}; }, "face_corners_px: expected 4");
+  ExpectError([](auto& j) { j["face_corners_px"] = {{"near", {{1, 2}}}}; }, "face_corners_px.near: expected 4");
+  ExpectError([](auto& j) { j["face_corners_px"] = {{"close", j["face_corners_px"]}}; },
+              "face_corners_px.close: unknown field");
   ExpectError([](auto& j) { j["camera"]["photos"] = "nowhere"; }, "camera.photos: folder");
   ExpectError([](auto& j) { j["response"] = 3; }, "response: expected");
-  for (const nlohmann::json bad : {nlohmann::json(-0.5), nlohmann::json(7), nlohmann::json("sharp")})
+  for (const nlohmann::json& bad : {nlohmann::json(-0.5), nlohmann::json(7), nlohmann::json("sharp")})
     ExpectError([&](auto& j) { j["camera_blur_px"] = bad; }, "camera_blur_px: expected \"auto\" or a Gaussian sigma");
   ExpectError([](auto& j) { j["white"]["albedo"] = 1.5; }, "white.albedo: must be in (0, 1]");
   ExpectError([](auto& j) { j["colour"] = 1; }, "colour: unknown field");

@@ -448,19 +448,21 @@ struct EdgeModel {
 
 std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
                                            const std::vector<cv::Point2d>& corners, double blur_px,
-                                           const cv::Mat& black, int* edge_points, double* blur_found) {
-  CV_Assert(corners.size() == 4 && blur_px >= 0);
+                                           const cv::Mat& black, int* edge_points, double* blur_found,
+                                           double reach_px) {
+  CV_Assert(corners.size() == 4 && blur_px >= 0 && reach_px >= 0);
   for (const cv::Mat& img : images) CV_Assert(img.type() == CV_32FC3 && img.size() == camera.size);
   CV_Assert(black.empty() || (black.type() == CV_32FC3 && black.size() == camera.size));
   if (edge_points) *edge_points = 0;
   if (blur_found) *blur_found = NAN;
   // sigma_e^2 = blur^2 + 1/4: the pixel's area and the bilinear sampling (1/12 + 1/6). The
-  // window: t from -max(6, 4 sigma_w) to max(5, 3 sigma_w + 1.5) px, offsets within max(1.5,
-  // sigma_w), sigma_w the sigma_e of `window_blur`.
+  // window: t from -max(6, 4 sigma_w) to max(5, 3 sigma_w + 1.5) px, offsets within r =
+  // max(1.5, sigma_w), sigma_w the sigma_e of `window_blur`; with reach_px > r, the offsets
+  // within reach_px and the window that much wider at both ends.
   const auto sigma_e = [](double blur) { return std::sqrt(blur * blur + 0.25); };
   const auto model = [&](double blur, double window_blur) {
-    const double w = sigma_e(window_blur);
-    return EdgeModel(sigma_e(blur), std::max(6.0, 4 * w), std::max(5.0, 3 * w + 1.5), std::max(1.5, w));
+    const double w = sigma_e(window_blur), reach = std::max(1.5, w), wider = std::max(0.0, reach_px - reach);
+    return EdgeModel(sigma_e(blur), std::max(6.0, 4 * w) + wider, std::max(5.0, 3 * w + 1.5) + wider, reach + wider);
   };
 
   // The profiles: evenly along each side's middle 70 %, straight in the ideal image.

@@ -88,11 +88,13 @@ std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& linear_rgb, const Devi
 // lines meet. DetectFaceCorners' half-way crossing on a summed image is biased where the sum
 // saturates and where the blur spreads a radiance that falls towards the edge; this is not
 // (docs/capture.md, "Automatic corners"). Empty when a side keeps fewer than 8 points;
-// *edge_points (optional) receives the points used.
+// *edge_points (optional) receives the points used. `reach_px` above max(1.5, sigma_e) lets the
+// edge lie that far off the given outline (corners clicked by hand), the window widened to
+// match; a second call from the result then fits in the usual window.
 std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
                                            const std::vector<cv::Point2d>& corners, double blur_px,
                                            const cv::Mat& black = cv::Mat(), int* edge_points = nullptr,
-                                           double* blur_found = nullptr);
+                                           double* blur_found = nullptr, double reach_px = 0);
 
 // Node-space front-face radiance from a linear RGB image (CV_32FC3; +inf = saturated): every
 // front-face node's value is the mean of the image over the node's dual box on the face (the
