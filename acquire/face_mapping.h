@@ -86,8 +86,9 @@ std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& linear_rgb, const Devi
 // 13 % off moves the edge ~0.6 px at 2 px): *blur_found (optional) receives it. The points p +
 // t0 n, undistorted, are fitted by a line per side (Huber); the corners are where consecutive
 // lines meet. DetectFaceCorners' half-way crossing on a summed image is biased where the sum
-// saturates and where the blur spreads a radiance that falls towards the edge; this is not
-// (docs/capture.md, "Automatic corners"). Empty when a side keeps fewer than 8 points;
+// saturates and where the blur spreads a radiance that falls towards the edge; this is not,
+// but for curvature that a quadratic over the window does not follow (a 60 % fall over 4 px
+// through a 2.5 px lens: 0.6 px; docs/capture.md, "Automatic corners"). Empty when a side keeps fewer than 8 points;
 // *edge_points (optional) receives the points used. `reach_px` above max(1.5, sigma_e) lets the
 // edge lie that far off the given outline (corners clicked by hand), the window widened to
 // match; a second call from the result then fits in the usual window.
