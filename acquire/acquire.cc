@@ -555,7 +555,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   // Corners found automatically or given near the face, refined against every fitted
   // condition's photo through the blur (RefineFaceCorners; corners given near it first with
   // the edges let within kNearReach of them); then the pose, and the blur read again along the
-  // new outline. Corners given as exact are checked the same way, and left as they are.
+  // new outline. Corners given as exact are checked (the usual pass, the near ones where it
+  // moves them by more than a pixel or fails), and left as they are.
   constexpr double kNearReach = 5;  // px: how far off a corner clicked by hand may be
   int points = 0;
   double refine_blur = 0;
@@ -585,12 +586,15 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
                            points, refine_blur, moved, corners[0].x, corners[0].y, corners[1].x, corners[1].y,
                            corners[2].x, corners[2].y, corners[3].x, corners[3].y));
     }
-  } else if (const auto [refined, moved] = refine(true); !refined.empty() && moved > 1) {
-    progress(fmt::format("warning: {}: face_corners_px lie up to {:.1f} px from the face's outline in the photos "
-                         "(refined: ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})); give them "
-                         "as {{\"near\": [...]}} to have them refined, or \"auto\"", cap.file, moved,
-                         refined[0].x, refined[0].y, refined[1].x, refined[1].y, refined[2].x, refined[2].y,
-                         refined[3].x, refined[3].y));
+  } else if (const auto [close, close_moved] = refine(false); close.empty() || close_moved > 1) {
+    // Off by more than a pixel, or by more than the usual pass reaches: the near passes.
+    const auto [refined, moved] = refine(true);
+    if (!refined.empty() && moved > 1)
+      progress(fmt::format("warning: {}: face_corners_px lie up to {:.1f} px from the face's outline in the "
+                           "photos (refined: ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})); "
+                           "give them as {{\"near\": [...]}} to have them refined, or \"auto\"", cap.file, moved,
+                           refined[0].x, refined[0].y, refined[1].x, refined[1].y, refined[2].x, refined[2].y,
+                           refined[3].x, refined[3].y));
   }
   if (!blur_said.empty()) progress(blur_said);
   for (const auto& p : corners) rep.face_corners_px.push_back({p.x, p.y});
