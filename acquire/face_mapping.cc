@@ -386,6 +386,36 @@ std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb, const DeviceIntri
 
 namespace {
 
+// px^2: the spread a profile sampled across an edge has on top of the lens's blur, the pixel's
+// area and the bilinear sampling (1/12 + 1/6).
+constexpr double kSamplingVariance = 0.25;
+
+// The least of a cost smooth in sigma = 0.05 st over the steps st: every fifth step from 0 to
+// coarse_last (and coarse_last), then every step within 4 of the best of those, up to
+// fine_last. `evaluate(trials, &cost)` fills cost[st] for each trial step; cost (NaN where not
+// tried, sized fine_last + 1) and the best step come back.
+size_t CoarseThenFine(int coarse_last, int fine_last,
+                      const std::function<void(const std::vector<int>&, std::vector<double>*)>& evaluate,
+                      std::vector<double>* cost) {
+  cost->assign(size_t(fine_last + 1), std::numeric_limits<double>::quiet_NaN());
+  const auto least = [&] {
+    size_t best = 0;
+    for (size_t k = 1; k < cost->size(); ++k)
+      if ((*cost)[k] < (*cost)[best]) best = k;  // NaN compares false: untried steps never win
+    return best;
+  };
+  std::vector<int> trials;
+  for (int st = 0; st <= coarse_last; st += 5) trials.push_back(st);
+  if (trials.back() != coarse_last) trials.push_back(coarse_last);
+  evaluate(trials, cost);
+  const int coarse = int(least());
+  trials.clear();
+  for (int st = std::max(0, coarse - 4); st <= std::min(fine_last, coarse + 4); ++st)
+    if (std::isnan((*cost)[size_t(st)])) trials.push_back(st);
+  evaluate(trials, cost);
+  return least();
+}
+
 // RefineFaceCorners' model of a profile across the face's outline for one lens, on a lattice of
 // 0.05 px: samples t = t_lo..t_hi (lattice units, every t_step; > 0 outside), edge offsets
 // t0 = -reach..reach, and the model's columns at s = t - t0, tabled once for all profiles:
@@ -455,11 +485,10 @@ std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, c
   CV_Assert(black.empty() || (black.type() == CV_32FC3 && black.size() == camera.size));
   if (edge_points) *edge_points = 0;
   if (blur_found) *blur_found = NAN;
-  // sigma_e^2 = blur^2 + 1/4: the pixel's area and the bilinear sampling (1/12 + 1/6). The
-  // window: t from -max(6, 4 sigma_w) to max(5, 3 sigma_w + 1.5) px, offsets within r =
+  // sigma_e^2 = blur^2 + kSamplingVariance. The window: t from -max(6, 4 sigma_w) to max(5, 3 sigma_w + 1.5) px, offsets within r =
   // max(1.5, sigma_w), sigma_w the sigma_e of `window_blur`; with reach_px > r, the offsets
   // within reach_px and the window that much wider at both ends.
-  const auto sigma_e = [](double blur) { return std::sqrt(blur * blur + 0.25); };
+  const auto sigma_e = [](double blur) { return std::sqrt(blur * blur + kSamplingVariance); };
   const auto model = [&](double blur, double window_blur) {
     const double w = sigma_e(window_blur), reach = std::max(1.5, w), wider = std::max(0.0, reach_px - reach);
     return EdgeModel(sigma_e(blur), std::max(6.0, 4 * w) + wider, std::max(5.0, 3 * w + 1.5) + wider, reach + wider);
@@ -532,27 +561,20 @@ std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, c
     for (size_t j = 0; j < images.size() * P; j += stride)
       if (profile(window, j, &y)) subset.push_back(y);
     if (subset.empty()) break;
-    const auto cost = [&](double b) {
-      const EdgeModel m(sigma_e(b), -window.t_lo * kLattice, window.t_hi * kLattice, window.reach * kLattice);
-      std::vector<double> costs(subset.size());
-      cv::parallel_for_(cv::Range(0, int(subset.size())), [&](const cv::Range& r) {
-        double t0;
-        for (int i = r.start; i < r.end; ++i) costs[size_t(i)] = m.Fit(subset[size_t(i)], &t0);
-      });
-      return std::accumulate(costs.begin(), costs.end(), 0.0);
+    const int last = 5 * int(std::floor((2 * window_blur + 1) / 0.25 + 1e-9));
+    std::vector<double> cost;
+    const auto evaluate = [&](const std::vector<int>& trials, std::vector<double>* sums) {
+      std::vector<double> fits(subset.size());
+      for (int st : trials) {
+        const EdgeModel m(sigma_e(0.05 * st), -window.t_lo * kLattice, window.t_hi * kLattice, window.reach * kLattice);
+        cv::parallel_for_(cv::Range(0, int(subset.size())), [&](const cv::Range& r) {
+          double t0;
+          for (int i = r.start; i < r.end; ++i) fits[size_t(i)] = m.Fit(subset[size_t(i)], &t0);
+        });
+        (*sums)[size_t(st)] = std::accumulate(fits.begin(), fits.end(), 0.0);
+      }
     };
-    double best = INFINITY;
-    for (int k = 0; k <= int(std::floor((2 * window_blur + 1) / 0.25 + 1e-9)); ++k) {
-      const double c = cost(0.25 * k);
-      if (c < best) best = c, blur = 0.25 * k;
-    }
-    const double coarse = blur;
-    for (int k = -4; k <= 4; ++k) {
-      const double b = coarse + 0.05 * k;
-      if (k == 0 || b < 0) continue;
-      const double c = cost(b);
-      if (c < best) best = c, blur = b;
-    }
+    blur = 0.05 * double(CoarseThenFine(last, last + 4, evaluate, &cost));
     if (blur_found) *blur_found = blur;
     if (std::abs(blur - window_blur) < 0.1) break;
   }
@@ -783,9 +805,9 @@ OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const Device
   const cv::Point2d origin(box.x, box.y);
   const int steps = int(std::floor(max_sigma_px / 0.05 + 1e-9));
   // The summed squared residual per trial sigma = 0.05 st (NaN: not tried): every fifth first,
-  // then every step within 0.25 px of the best of those (the cost is smooth in sigma).
-  std::vector<double> cost(size_t(steps + 1), std::numeric_limits<double>::quiet_NaN());
-  const auto evaluate = [&](const std::vector<int>& trials) {
+  // then every step within 0.2 px of the best of those (the cost is smooth in sigma).
+  std::vector<double> cost;
+  const auto evaluate = [&](const std::vector<int>& trials, std::vector<double>* sums) {
     // One sigma per task: each has its own design rows and normal matrices.
     cv::parallel_for_(cv::Range(0, int(trials.size())), [&](const cv::Range& range) {
       std::vector<cv::Vec3d> rows(static_cast<size_t>(P) * size_t(nt));
@@ -801,7 +823,7 @@ OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const Device
         // the images: the blurred images of a radiance constant and linear up to the outline (for a
         // kernel of variance v, K * (t f) = t (K * f) + v (K * f)'; v = sigma^2 + 1/4 px^2 with the
         // pixel's area and the bilinear sampling), and the surround.
-        const double v = sigma * sigma + 0.25;
+        const double v = sigma * sigma + kSamplingVariance;
         for (int p = 0; p < P; ++p) {
           cv::Matx33d AtA = cv::Matx33d::zeros();
           for (int k = 0; k < nt; ++k) rows[size_t(p * nt + k)][0] = BilinearGrey(c, points[size_t(p * nt + k)] - origin);
@@ -824,26 +846,11 @@ OutlineBlur EstimateOutlineBlur(const std::vector<cv::Mat>& images, const Device
             sum += e * e;
           }
         }
-        cost[size_t(st)] = sum;
+        (*sums)[size_t(st)] = sum;
       }
     });
   };
-  const auto least = [&] {
-    size_t best = 0;
-    for (size_t k = 1; k < cost.size(); ++k)
-      if (cost[k] < cost[best]) best = k;  // NaN compares false: untried steps never win
-    return best;
-  };
-  std::vector<int> trials;
-  for (int st = 0; st <= steps; st += 5) trials.push_back(st);
-  if (trials.back() != steps) trials.push_back(steps);
-  evaluate(trials);
-  const int coarse = int(least());
-  trials.clear();
-  for (int st = std::max(0, coarse - 4); st <= std::min(steps, coarse + 4); ++st)
-    if (std::isnan(cost[size_t(st)])) trials.push_back(st);
-  evaluate(trials);
-  const size_t best = least();
+  const size_t best = CoarseThenFine(steps, steps, evaluate, &cost);
   double sigma = 0.05 * double(best);
   if (best > 0 && best + 1 < cost.size()) {
     const double l = cost[best - 1], m = cost[best], r = cost[best + 1];
