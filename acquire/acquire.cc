@@ -554,17 +554,14 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   else estimate_blur();
   // Corners found automatically or given near the face, refined against every fitted
   // condition's photo through the blur (RefineFaceCorners; corners given near it first with
-  // the edges let within kNearReach of them); then the pose, and the blur read again along the
-  // new outline. Corners given as exact are checked (the usual pass, the near ones where it
-  // moves them by more than a pixel or fails), and left as they are.
-  constexpr double kNearReach = 5;  // px: how far off a corner clicked by hand may be
+  // the edges let within kNearCornerReachPx of them); then the pose, and the blur read again
+  // along the new outline. Corners given as exact are checked (the usual pass, the near ones
+  // where it moves them by more than a pixel or fails), and left as they are.
   int points = 0;
   double refine_blur = 0;
   const auto refine = [&](bool near) {
-    std::vector<cv::Point2d> refined = corners;
-    if (near) refined = RefineFaceCorners(lit, cam, corners, rep.camera_blur_px, black_level, nullptr, &refine_blur, kNearReach);
-    if (!refined.empty())
-      refined = RefineFaceCorners(lit, cam, refined, near ? refine_blur : rep.camera_blur_px, black_level, &points, &refine_blur);
+    const std::vector<cv::Point2d> refined = RefineFaceCornersWithin(
+        lit, cam, corners, rep.camera_blur_px, near ? kNearCornerReachPx : 0, black_level, &points, &refine_blur);
     double moved = 0;
     for (size_t k = 0; k < refined.size(); ++k) moved = std::max(moved, cv::norm(refined[k] - corners[k]));
     return std::make_pair(refined, moved);

@@ -578,6 +578,19 @@ TEST_F(AcquireTest, RegionPatternsFromCalibrationsMatchTheTrueRig) {
     std::printf("corner %zu found in the photo %.3f px from the truth\n", k, cv::norm(from_photo.corners[k] - corners[k]));
     EXPECT_LT(cv::norm(from_photo.corners[k] - corners[k]), 0.15) << "corner " << k;
   }
+  EXPECT_TRUE(from_photo.refined);
+  EXPECT_EQ(from_photo.unrefined_corners.size(), 4u);
+  EXPECT_GT(from_photo.refine_blur_px, 0.2);  // the simulated lens: 0.5 px
+  EXPECT_LT(from_photo.refine_blur_px, 0.8);
+  // Corners clicked by hand, 3-4 px off in four directions, refined in the same photo.
+  const std::vector<cv::Point2d> offsets = {{3.5, -1.0}, {-2.0, -3.0}, {-3.0, 2.5}, {1.5, 3.2}};
+  job.corners.clear();
+  for (size_t k = 0; k < 4; ++k) job.corners.push_back(corners[k] + offsets[k]);
+  const PatternSet from_near = MakeRegionPatterns(job);
+  EXPECT_TRUE(from_near.refined);
+  EXPECT_GT(from_near.refine_moved_px, 3.0);
+  for (size_t k = 0; k < 4; ++k) EXPECT_LT(cv::norm(from_near.corners[k] - corners[k]), 0.15) << "corner " << k;
+  job.corners.clear();
   const std::string folder = (dir_ / "cap2" / "patterns").string() + "/";
   WritePatternFolder(set, folder);
   const nlohmann::json conditions = nlohmann::json::parse(std::ifstream(folder + "conditions.json"));

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -109,13 +110,30 @@ PatternsBenchRow RunCase(Setup setup, int seed, int lights, const std::string& r
   const calib::ResponseCurve response = calib::ReadResponse(report.work_dir + "/response.yml");
   job.corners.clear();
   job.photo = calib::ReadHdrOrStack((capture / "calib" / "sample_lit").string(), &response);
+  const auto farthest = [&](const std::vector<cv::Point2d>& corners) {
+    double d = 0;
+    for (size_t k = 0; k < true_corners.size(); ++k) d = std::max(d, cv::norm(corners[k] - true_corners[k]));
+    return d;
+  };
   const PatternSet from_photo = MakeRegionPatterns(job);
-  for (size_t k = 0; k < true_corners.size(); ++k)
-    row.photo_corner_px = std::max(row.photo_corner_px, cv::norm(from_photo.corners[k] - true_corners[k]));
+  row.photo_corner_px = farthest(from_photo.corners);
+  row.photo_found_corner_px = farthest(from_photo.unrefined_corners);
   const Agreement b = Compare(from_photo.images, truth);
   row.photo_iou_min = b.iou_min;
   row.photo_iou_median = b.iou_median;
   row.photo_edge_px = b.edge_px;
+
+  // Corners clicked by hand: each kNearOffsetPx off in a direction of its own, per seed.
+  for (size_t k = 0; k < true_corners.size(); ++k) {
+    const double angle = 1.3 * seed + 2.1 * double(k);
+    job.corners.push_back(true_corners[k] + kNearOffsetPx * cv::Point2d(std::cos(angle), std::sin(angle)));
+  }
+  const PatternSet from_near = MakeRegionPatterns(job);
+  row.near_corner_px = farthest(from_near.corners);
+  const Agreement c = Compare(from_near.images, truth);
+  row.near_iou_min = c.iou_min;
+  row.near_iou_median = c.iou_median;
+  row.near_edge_px = c.edge_px;
   return row;
 }
 
@@ -142,8 +160,9 @@ std::vector<PatternsBenchRow> RunPatternsBench(const PatternsBenchOptions& o,
         fs::remove_all(dir);
         const PatternsBenchRow& r = rows.back();
         if (progress)
-          progress(fmt::format("{} seed {}: intersection over union {:.4f} from the corners, {:.4f} from the photo",
-                               SetupName(setup), seed, r.iou_min, r.photo_iou_min));
+          progress(fmt::format("{} seed {}: intersection over union {:.4f} from the corners, {:.4f} from the photo, "
+                               "{:.4f} from near corners", SetupName(setup), seed, r.iou_min, r.photo_iou_min,
+                               r.near_iou_min));
       }
   } catch (...) {
     std::error_code ec;
@@ -155,20 +174,25 @@ std::vector<PatternsBenchRow> RunPatternsBench(const PatternsBenchOptions& o,
 }
 
 std::string PatternsBenchTable(const std::vector<PatternsBenchRow>& rows) {
-  std::string s = fmt::format("{:>6} {:>4} {:>7} {:>8} {:>8}  {:>8} {:>8} {:>7}  {:>8} {:>8} {:>8} {:>7}  {:>7} {:>7}\n",
+  std::string s = fmt::format("{:>6} {:>4} {:>7} {:>7} {:>7}  {:>7} {:>7} {:>7}  {:>6} {:>6} {:>7} {:>7} {:>7}  "
+                              "{:>6} {:>7} {:>7}  {:>7} {:>7}\n",
                               "setup", "seed", "regions", "cam px", "proj px", "IoU min", "IoU med", "edge px",
-                              "corner", "IoU min", "IoU med", "edge px", "calib s", "ours ms");
+                              "found", "corner", "IoU min", "IoU med", "edge px", "corner", "IoU min", "edge px",
+                              "calib s", "ours ms");
   for (const PatternsBenchRow& r : rows)
-    s += fmt::format("{:>6} {:>4} {:>7} {:>8.3f} {:>8.3f}  {:>8.4f} {:>8.4f} {:>7.3f}  {:>8.3f} {:>8.4f} {:>8.4f} "
-                     "{:>7.3f}  {:>7.1f} {:>7.1f}\n",
+    s += fmt::format("{:>6} {:>4} {:>7} {:>7.3f} {:>7.3f}  {:>7.4f} {:>7.4f} {:>7.3f}  {:>6.3f} {:>6.3f} {:>7.4f} "
+                     "{:>7.4f} {:>7.3f}  {:>6.3f} {:>7.4f} {:>7.3f}  {:>7.1f} {:>7.1f}\n",
                      SetupName(r.setup), r.seed, r.regions, r.camera_rms_px, r.projector_rms_px, r.iou_min,
-                     r.iou_median, r.edge_px, r.photo_corner_px, r.photo_iou_min, r.photo_iou_median, r.photo_edge_px,
+                     r.iou_median, r.edge_px, r.photo_found_corner_px, r.photo_corner_px, r.photo_iou_min,
+                     r.photo_iou_median, r.photo_edge_px, r.near_corner_px, r.near_iou_min, r.near_edge_px,
                      r.calibration_seconds, 1e3 * r.pattern_seconds);
-  s += "(each region's pattern against the true rig's: the worst and median intersection over union, and the\n"
-       " edge shift in projector pixels (pixels lit in one only / the true outlines' length); first from the\n"
-       " true face corners, then from the corners found in the photo of the sample lit (corner: their largest\n"
-       " distance from the true ones, camera px); cam px / proj px: the calibrations' RMS; calib s: acquire's\n"
-       " calibration; ours ms: translume patterns' computation from the corners)";
+  s += fmt::format(
+      "(each region's pattern against the true rig's: the worst and median intersection over union, and the\n"
+      " edge shift in projector pixels (pixels lit in one only / the true outlines' length); first from the\n"
+      " true face corners; then from the corners found in the photo of the sample lit (found: their largest\n"
+      " distance from the true ones, camera px; corner: the same once refined in the photo); then from corners\n"
+      " given {} px off the true ones and refined in the photo; cam px / proj px: the calibrations' RMS;\n"
+      " calib s: acquire's calibration; ours ms: translume patterns' computation from the corners)", kNearOffsetPx);
   return s;
 }
 
@@ -178,7 +202,10 @@ std::string PatternsBenchJson(const std::vector<PatternsBenchRow>& rows) {
     j.push_back({{"setup", SetupName(r.setup)}, {"seed", r.seed}, {"regions", r.regions},
                  {"camera_rms_px", r.camera_rms_px}, {"projector_rms_px", r.projector_rms_px},
                  {"iou_min", r.iou_min}, {"iou_median", r.iou_median}, {"edge_px", r.edge_px},
-                 {"photo_corner_px", r.photo_corner_px}, {"photo_iou_min", r.photo_iou_min},
+                 {"photo_corner_px", r.photo_corner_px}, {"photo_found_corner_px", r.photo_found_corner_px},
+                 {"near_corner_px", r.near_corner_px}, {"near_iou_min", r.near_iou_min},
+                 {"near_iou_median", r.near_iou_median}, {"near_edge_px", r.near_edge_px},
+                 {"photo_iou_min", r.photo_iou_min},
                  {"photo_iou_median", r.photo_iou_median}, {"photo_edge_px", r.photo_edge_px},
                  {"pose_rms_px", r.pose_rms_px}, {"capture_seconds", r.capture_seconds},
                  {"calibration_seconds", r.calibration_seconds}, {"pattern_seconds", r.pattern_seconds}});

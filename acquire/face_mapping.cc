@@ -601,6 +601,18 @@ std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, c
   return CornersFromSideEdges(sides, &camera);
 }
 
+std::vector<cv::Point2d> RefineFaceCornersWithin(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
+                                                 const std::vector<cv::Point2d>& corners, double blur_px,
+                                                 double reach_px, const cv::Mat& black, int* edge_points,
+                                                 double* blur_found) {
+  std::vector<cv::Point2d> refined = corners;
+  double blur = blur_px;
+  if (reach_px > 0) refined = RefineFaceCorners(images, camera, corners, blur_px, black, nullptr, &blur, reach_px);
+  if (refined.empty()) return {};
+  if (!std::isfinite(blur)) blur = blur_px;
+  return RefineFaceCorners(images, camera, refined, blur, black, edge_points, blur_found);
+}
+
 FaceSamples ResampleFrontFace(const cv::Mat& img, const DeviceIntrinsics& camera,
                               const calib::Pose& camera_from_sample, const GridShape& g, double h,
                               int samples, const cv::Mat* coverage) {

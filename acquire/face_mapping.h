@@ -97,6 +97,19 @@ std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, c
                                            const cv::Mat& black = cv::Mat(), int* edge_points = nullptr,
                                            double* blur_found = nullptr, double reach_px = 0);
 
+// How far off a corner clicked by hand may be (px): capture.json's {"near": [...]} and
+// `translume patterns --corners` with `--photo`.
+constexpr double kNearCornerReachPx = 5;
+
+// RefineFaceCorners from corners within reach_px of the outline: with reach_px > 0 a first pass
+// that lets the edges lie that far off, then the usual pass from its result through the blur it
+// found; with reach_px = 0 the usual pass alone. Empty where a pass fails; *edge_points and
+// *blur_found (optional) are the last pass's.
+std::vector<cv::Point2d> RefineFaceCornersWithin(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
+                                                 const std::vector<cv::Point2d>& corners, double blur_px,
+                                                 double reach_px, const cv::Mat& black = cv::Mat(),
+                                                 int* edge_points = nullptr, double* blur_found = nullptr);
+
 // Node-space front-face radiance from a linear RGB image (CV_32FC3; +inf = saturated): every
 // front-face node's value is the mean of the image over the node's dual box on the face (the
 // face area the node owns, SPEC section 3), sampled at n x n points per box through the camera

@@ -29,20 +29,36 @@ PatternSet MakeRegionPatterns(const PatternJob& job) {
   projector_from_camera.t = job.projector.T;
   PatternSet set;
   set.corners = job.corners;
-  if (set.corners.empty()) {
+  if (!job.photo.empty()) {
     if (job.photo.size() != job.camera.image_size)
       throw InputError(fmt::format("{}: the image is {}x{} but the camera calibration is {}x{}", job.corners_source,
                                    job.photo.cols, job.photo.rows, job.camera.image_size.width,
                                    job.camera.image_size.height));
-    set.corners = DetectFaceCorners(job.photo, &cam);
+    if (set.corners.empty()) set.corners = DetectFaceCorners(job.photo, &cam);
     if (set.corners.empty())
       throw InputError(job.corners_source + ": no four-sided sample found on a dark background; give the corners");
+    set.unrefined_corners = set.corners;
+    constexpr double kBlurStartPx = 1;  // the refinement's search spans 0..3 px, then follows what it finds
+    const std::vector<cv::Point2d> refined =
+        RefineFaceCornersWithin({job.photo}, cam, set.corners, kBlurStartPx,
+                                job.corners.empty() ? 0 : kNearCornerReachPx, cv::Mat(), nullptr, &set.refine_blur_px);
+    if (refined.empty()) {
+      set.warnings.push_back(fmt::format("{}: the corners were not refined (too few profiles across a side show an "
+                                         "unsaturated edge); keeping the {} ones", job.corners_source,
+                                         job.corners.empty() ? "found" : "given"));
+    } else {
+      set.refined = true;
+      for (size_t k = 0; k < refined.size(); ++k)
+        set.refine_moved_px = std::max(set.refine_moved_px, cv::norm(refined[k] - set.corners[k]));
+      set.corners = refined;
+    }
   }
   const calib::Pose camera_from_sample =
       EstimateSamplePose(cam, set.corners, job.size_mm, job.corners_source, &set.pose_rms_px);
   if (set.pose_rms_px > 1.0)
     set.warnings.push_back(fmt::format("the sample's pose misses the corners by {:.2f} px RMS: check the sample's size "
-                                       "and the corners (hand-picked corners give 0.1-0.5 px)", set.pose_rms_px));
+                                       "and the corners (hand-picked corners give 0.1-0.5 px{})", set.pose_rms_px,
+                                       job.photo.empty() ? "; with --photo they are refined in it" : ""));
   try {
     set.images = RegionPatterns(proj, projector_from_camera, camera_from_sample, job.size_mm, job.setup, job.lights);
     if (job.validation > 0)

@@ -24,7 +24,10 @@ struct PatternJob {
   int lights = 4;                    // N
   int validation = 4;                // validation spots after the regions (ValidationSpots)
   // The front face's corners in the camera image (face_corners_px's order), or empty: found in
-  // `photo` (linear RGB, CV_32FC3, the camera's size: the sample lit on a dark background).
+  // `photo` (linear RGB, CV_32FC3, the camera's size, +inf where saturated: the sample lit on a
+  // dark background). Corners found in the photo, or given with it (then they may lie up to
+  // kNearCornerReachPx off: clicked by hand), are refined in it (RefineFaceCornersWithin, the
+  // lens's blur searched from 1 px).
   std::vector<cv::Point2d> corners;
   cv::Mat photo;
   std::string corners_source = "the corners";  // names corners or photo in messages
@@ -35,6 +38,12 @@ struct PatternSet {
   std::vector<std::string> names;  // "00".."15"; "000".. from 11 x 11 regions on; spots "v00"..
   int validation = 0;              // the last this many are validation spots
   std::vector<cv::Point2d> corners;
+  // With a photo: the corners before the refinement (found or given), how far it moved them at
+  // most (px), and the lens's blur it found (sigma, px); refined false where it could not be
+  // done (too few unsaturated edge points on a side), the corners then kept as they were.
+  std::vector<cv::Point2d> unrefined_corners;
+  bool refined = false;
+  double refine_moved_px = 0, refine_blur_px = 0;
   double pose_rms_px = 0;
   bool face_inside_projector = true;
   int64_t fewest_pixels = 0, most_pixels = 0;

@@ -568,6 +568,9 @@ TEST_F(Cli, BenchPatternsSmoke) {
   EXPECT_GT(j[0]["iou_min"].get<double>(), 0.98);
   EXPECT_GT(j[0]["photo_iou_min"].get<double>(), 0.95);
   EXPECT_LT(j[0]["photo_corner_px"].get<double>(), 1.0);
+  EXPECT_GT(j[0]["photo_found_corner_px"].get<double>(), 0.0);
+  EXPECT_LT(j[0]["near_corner_px"].get<double>(), 1.0);  // from corners 3.5 px off
+  EXPECT_GT(j[0]["near_iou_min"].get<double>(), 0.95);
   ExpectOneLineError(Translume("bench patterns --setups side"), "side");
   ExpectOneLineError(Translume("bench patterns --lights 0x0"), "--lights");
   ExpectOneLineError(Translume("bench patterns --lights 17x17"), "--lights must be within 1..16");

@@ -92,13 +92,12 @@ int RunPatterns(int argc, char** argv) {
   app.add_option("--projector", projector_path, "Projector calibration (translume calibrate projector)")->required();
   app.add_option("--sample-mm", size_text, "The block's extent X,Y,Z (mm), as sample_mm in capture.json")->required();
   app.add_option("--setup", setup, "back (projector behind the sample) or front")->capture_default_str();
-  auto* corners_opt = app.add_option("--corners", corners_text,
-                                     "Front face corners in the camera image X1,Y1,..,X4,Y4 (node (0,0) first, "
-                                     "clockwise as the camera sees the face)");
-  auto* photo_opt = app.add_option("--photo", photo,
-                                   "Or: a camera photo (or exposure stack folder, or .exr) of the sample, lit, on a "
-                                   "dark background, in which the corners are found");
-  corners_opt->excludes(photo_opt);
+  app.add_option("--corners", corners_text,
+                 "Front face corners in the camera image X1,Y1,..,X4,Y4 (node (0,0) first, clockwise as the camera "
+                 "sees the face); used as given, or with --photo refined in it (then up to 5 px off will do)");
+  app.add_option("--photo", photo,
+                 "A camera photo (or exposure stack folder, or .exr) of the sample, lit, on a dark background, in "
+                 "which the corners are found (or, with --corners, refined) through the lens's blur");
   app.add_option("--response", response_path, "Response curve for an 8-bit --photo stack");
   app.add_option("--lights", lights, "NxN regions of the lit face, one condition each")->capture_default_str();
   int validation = 4;
@@ -107,7 +106,7 @@ int RunPatterns(int argc, char** argv) {
   app.add_option("-o,--output", out, "New folder for NN.png and conditions.json (e.g. CAPTURE/patterns)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
-  if (corners_text.empty() == photo.empty()) throw InputError("give --corners or --photo");
+  if (corners_text.empty() && photo.empty()) throw InputError("give --corners or --photo (or both)");
   if (!response_path.empty() && photo.empty()) throw InputError("--response is for an 8-bit --photo stack");
   const Setup s = ParseSetup(setup);
   const int n = RegionLights(lights).front().region_n;  // validates NxN
@@ -139,20 +138,25 @@ int RunPatterns(int argc, char** argv) {
   job.validation = validation;
   job.corners = corners;
   job.corners_source = "--corners";
-  if (corners.empty()) {
+  if (!photo.empty()) {
     calib::ResponseCurve curve;
     if (!response_path.empty()) curve = calib::ReadResponse(response_path);
     calib::HdrReadInfo info;
     job.photo = calib::ReadHdrOrStack(photo, response_path.empty() ? nullptr : &curve, {}, &info);
     if (!info.time_warning.empty()) std::printf("patterns: warning: %s\n", info.time_warning.c_str());
-    job.corners_source = "--photo " + photo;
+    job.corners_source = corners.empty() ? "--photo " + photo : "--corners in --photo " + photo;
   }
   const acquire::PatternSet set = acquire::MakeRegionPatterns(job);
   for (const std::string& w : set.warnings) std::printf("patterns: warning: %s\n", w.c_str());
   acquire::WritePatternFolder(set, out);
   const auto& c = set.corners;
-  std::printf("patterns: front face corners (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f) (%.1f, %.1f), pose RMS %.2f px\n",
-              c[0].x, c[0].y, c[1].x, c[1].y, c[2].x, c[2].y, c[3].x, c[3].y, set.pose_rms_px);
+  const std::string how =
+      !set.refined ? (corners.empty() ? "found in the photo" : "as given")
+                   : fmt::format("{} in the photo through a lens blur of {:.2f} px (moved up to {:.2f} px)",
+                                 corners.empty() ? "found and refined" : "refined", set.refine_blur_px,
+                                 set.refine_moved_px);
+  std::printf("patterns: front face corners (%.2f, %.2f) (%.2f, %.2f) (%.2f, %.2f) (%.2f, %.2f), %s; pose RMS %.2f "
+              "px\n", c[0].x, c[0].y, c[1].x, c[1].y, c[2].x, c[2].y, c[3].x, c[3].y, how.c_str(), set.pose_rms_px);
   std::printf("wrote %s: %zu pattern%s (%dx%d regions of the %s face and %d validation spots, %lld to %lld "
               "projector pixels each) and conditions.json for capture.json\n", out.c_str(), set.images.size(),
               set.images.size() == 1 ? "" : "s", n, n, SetupName(s), set.validation, (long long)set.fewest_pixels,
