@@ -496,6 +496,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
 
   // 3. Pose.
   std::vector<cv::Point2d> corners;
+  bool outline_unrefined = false;  // corners found: the outline's, its sides not refined
   if (!cap.face_corners_px.empty()) {
     for (const auto& p : cap.face_corners_px) corners.emplace_back(p[0], p[1]);
   } else {
@@ -513,13 +514,21 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
           if ((*it)[c] == -std::numeric_limits<float>::infinity()) (*it)[c] = 0;
       sum += known;
     }
-    corners = DetectFaceCorners(sum, &cam);
+    // Where the camera sees side faces too, the sides of the outline found do not refine; the
+    // outline itself is a start for the block's outline fit below.
+    std::vector<cv::Point2d> outline;
+    corners = DetectFaceCorners(sum, &cam, &outline);
+    if (corners.empty()) {
+      corners = outline;
+      outline_unrefined = true;
+    }
     if (corners.empty())
       throw InputError(fmt::format("{}: face_corners_px is \"auto\" but no four-sided sample was "
                                    "found in the images; give the corners", cap.file));
-    progress(fmt::format("found the front face's corners: ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) "
-                         "({:.2f}, {:.2f}) ({:.2f}, {:.2f})", corners[0].x, corners[0].y, corners[1].x,
-                         corners[1].y, corners[2].x, corners[2].y, corners[3].x, corners[3].y));
+    progress(fmt::format("found the {}: ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})",
+                         outline_unrefined ? "sample's outline" : "front face's corners",
+                         corners[0].x, corners[0].y, corners[1].x, corners[1].y, corners[2].x, corners[2].y,
+                         corners[3].x, corners[3].y));
   }
   // The black level, subtracted from every condition: saturated (+inf) samples of it, which do
   // not occur in practice, count as 0 so that they cannot hide a condition's own saturation.
@@ -550,48 +559,113 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
                                   "the face's outline; residual {:.2g} against {:.2g} for a sharp lens)",
                                   b.sigma_px, b.profiles, b.rms, b.rms_sharp);
   };
-  if (cap.camera_blur_px) rep.camera_blur_px = *cap.camera_blur_px;
-  else estimate_blur();
-  // Corners found automatically or given near the face, refined against every fitted
-  // condition's photo through the blur (RefineFaceCorners; corners given near it first with
-  // the edges let within kNearCornerReachPx of them); then the pose, and the blur read again
-  // along the new outline. Corners given as exact are checked (the usual pass, the near ones
-  // where it moves them by more than a pixel or fails), and left as they are.
-  int points = 0;
-  double refine_blur = 0;
-  const auto refine = [&](bool near) {
-    const std::vector<cv::Point2d> refined = RefineFaceCornersWithin(
-        lit, cam, corners, rep.camera_blur_px, near ? kNearCornerReachPx : 0, black_level, &points, &refine_blur);
+  // A camera beside the projector (the paper's front-lit rig) may see side faces of the block:
+  // the front face's edges next to them do not show, and the outline is the block's.
+  const std::array<double, 3> size = SampleSize(g, h);
+  const std::array<double, 4> side_px = SideFaceWidthsPx(cam, camera_from_sample, size);
+  // Corners found that no block's front face fits (pose RMS above 1 px), or an outline whose
+  // sides did not refine, may be the outline of a block whose side faces show, the pose from
+  // them too far off to tell.
+  const bool exact = !cap.face_corners_px.empty() && !cap.face_corners_near;
+  const bool found = cap.face_corners_px.empty();
+  if (*std::max_element(side_px.begin(), side_px.end()) > kSideFaceShowsPx ||
+      (found && (rep.pose_rms_px > 1 || outline_unrefined))) {
+    const BlockOutlineFit fit =
+        FitBlockOutline(lit, cam, size, camera_from_sample, cap.camera_blur_px.value_or(1.0),
+                        exact ? 0 : std::min(kNearCornerReachPx + 2 * rep.pose_rms_px, 15.0), black_level);
+    const bool settled = fit.ok && fit.converged;
+    std::string shows;
+    const char* names[4] = {"x = 0", "x = X", "y = 0", "y = Y"};
+    const std::array<double, 4> fit_px =
+        SideFaceWidthsPx(cam, settled ? fit.camera_from_sample : camera_from_sample, size);
+    for (int f = 0; f < 4; ++f)
+      if (fit_px[size_t(f)] > kSideFaceShowsPx)
+        shows += fmt::format("{}{} ({:.1f} px wide)", shows.empty() ? "" : ", ", names[f], fit_px[size_t(f)]);
+    if (shows.empty()) shows = "none";
+    progress(fmt::format("the pose is fitted to the block's outline; side faces the camera sees besides the front "
+                         "face: {}", shows));
     double moved = 0;
-    for (size_t k = 0; k < refined.size(); ++k) moved = std::max(moved, cv::norm(refined[k] - corners[k]));
-    return std::make_pair(refined, moved);
-  };
-  if (cap.face_corners_px.empty() || cap.face_corners_near) {
-    const auto [refined, moved] = refine(cap.face_corners_near);
-    rep.face_corners = cap.face_corners_near ? "near" : "found";
-    if (refined.empty()) {
-      progress(fmt::format("the face's corners were not refined: too few profiles across a side show an "
-                           "unsaturated edge; keeping the {} ones", cap.face_corners_near ? "given" : "found"));
+    for (size_t k = 0; k < fit.corners.size(); ++k) moved = std::max(moved, cv::norm(fit.corners[k] - corners[k]));
+    if (!settled) {
+      if (!exact)
+        throw InputError(fmt::format("{}: the sample's outline is not a face's: the camera sees side faces of the "
+                                     "block ({}), and the block's outline fit did not settle (docs/capture.md, "
+                                     "\"Side faces\"); give face_corners_px as measured", cap.file, shows));
+      progress("the block's outline fit did not settle; face_corners_px are used as given, unchecked");
+    } else if (exact) {
+      if (moved > 1)
+        progress(fmt::format("warning: {}: face_corners_px lie up to {:.1f} px from the block's outline fitted in "
+                             "the photos (its front corners: ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) "
+                             "({:.2f}, {:.2f})); give them as {{\"near\": [...]}} to have them refined, or "
+                             "\"auto\"", cap.file, moved, fit.corners[0].x, fit.corners[0].y, fit.corners[1].x,
+                             fit.corners[1].y, fit.corners[2].x, fit.corners[2].y, fit.corners[3].x,
+                             fit.corners[3].y));
     } else {
+      corners = fit.corners;
+      camera_from_sample = fit.camera_from_sample;
+      rep.pose_rms_px = fit.rms_px;
       rep.face_corners = "refined";
-      rep.face_corners_edge_points = points;
-      corners = refined;
-      camera_from_sample = EstimateSamplePose(cam, corners, g, h, cap.file + ": face_corners_px", &rep.pose_rms_px);
-      if (!cap.camera_blur_px) estimate_blur();
-      progress(fmt::format("refined the corners on {} edge points through a lens blur of {:.2f} px (moved up to "
-                           "{:.2f} px): ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})",
-                           points, refine_blur, moved, corners[0].x, corners[0].y, corners[1].x, corners[1].y,
-                           corners[2].x, corners[2].y, corners[3].x, corners[3].y));
+      rep.face_corners_edge_points = fit.edge_points;
+      progress(fmt::format("fitted the block's outline on {} edge points of {} sides (RMS {:.2f} px) through a lens "
+                           "blur of {:.2f} px (the front corners moved up to {:.2f} px): ({:.2f}, {:.2f}) ({:.2f}, "
+                           "{:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})", fit.edge_points, fit.sides, fit.rms_px,
+                           fit.blur_px, moved, corners[0].x, corners[0].y, corners[1].x, corners[1].y, corners[2].x,
+                           corners[2].y, corners[3].x, corners[3].y));
     }
-  } else if (const auto [close, close_moved] = refine(false); close.empty() || close_moved > 1) {
-    // Off by more than a pixel, or by more than the usual pass reaches: the near passes.
-    const auto [refined, moved] = refine(true);
-    if (!refined.empty() && moved > 1)
-      progress(fmt::format("warning: {}: face_corners_px lie up to {:.1f} px from the face's outline in the "
-                           "photos (refined: ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})); "
-                           "give them as {{\"near\": [...]}} to have them refined, or \"auto\"", cap.file, moved,
-                           refined[0].x, refined[0].y, refined[1].x, refined[1].y, refined[2].x, refined[2].y,
-                           refined[3].x, refined[3].y));
+    if (cap.camera_blur_px) {
+      rep.camera_blur_px = *cap.camera_blur_px;
+    } else if (settled) {
+      rep.camera_blur_px = fit.blur_px;
+      rep.camera_blur_profiles = fit.edge_points;
+      blur_said = fmt::format("the lens's blur on the sample's photos: sigma {:.2f} px (from the block's outline)",
+                              fit.blur_px);
+    } else {
+      estimate_blur();
+    }
+  } else {
+    if (cap.camera_blur_px) rep.camera_blur_px = *cap.camera_blur_px;
+    else estimate_blur();
+    // Corners found automatically or given near the face, refined against every fitted
+    // condition's photo through the blur (RefineFaceCorners; corners given near it first with
+    // the edges let within kNearCornerReachPx of them); then the pose, and the blur read again
+    // along the new outline. Corners given as exact are checked (the usual pass, the near ones
+    // where it moves them by more than a pixel or fails), and left as they are.
+    int points = 0;
+    double refine_blur = 0;
+    const auto refine = [&](bool near) {
+      const std::vector<cv::Point2d> refined = RefineFaceCornersWithin(
+          lit, cam, corners, rep.camera_blur_px, near ? kNearCornerReachPx : 0, black_level, &points, &refine_blur);
+      double moved = 0;
+      for (size_t k = 0; k < refined.size(); ++k) moved = std::max(moved, cv::norm(refined[k] - corners[k]));
+      return std::make_pair(refined, moved);
+    };
+    if (cap.face_corners_px.empty() || cap.face_corners_near) {
+      const auto [refined, moved] = refine(cap.face_corners_near);
+      rep.face_corners = cap.face_corners_near ? "near" : "found";
+      if (refined.empty()) {
+        progress(fmt::format("the face's corners were not refined: too few profiles across a side show an "
+                             "unsaturated edge; keeping the {} ones", cap.face_corners_near ? "given" : "found"));
+      } else {
+        rep.face_corners = "refined";
+        rep.face_corners_edge_points = points;
+        corners = refined;
+        camera_from_sample = EstimateSamplePose(cam, corners, g, h, cap.file + ": face_corners_px", &rep.pose_rms_px);
+        if (!cap.camera_blur_px) estimate_blur();
+        progress(fmt::format("refined the corners on {} edge points through a lens blur of {:.2f} px (moved up to "
+                             "{:.2f} px): ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})",
+                             points, refine_blur, moved, corners[0].x, corners[0].y, corners[1].x, corners[1].y,
+                             corners[2].x, corners[2].y, corners[3].x, corners[3].y));
+      }
+    } else if (const auto [close, close_moved] = refine(false); close.empty() || close_moved > 1) {
+      // Off by more than a pixel, or by more than the usual pass reaches: the near passes.
+      const auto [refined, moved] = refine(true);
+      if (!refined.empty() && moved > 1)
+        progress(fmt::format("warning: {}: face_corners_px lie up to {:.1f} px from the face's outline in the "
+                             "photos (refined: ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})); "
+                             "give them as {{\"near\": [...]}} to have them refined, or \"auto\"", cap.file, moved,
+                             refined[0].x, refined[0].y, refined[1].x, refined[1].y, refined[2].x, refined[2].y,
+                             refined[3].x, refined[3].y));
+    }
   }
   if (!blur_said.empty()) progress(blur_said);
   for (const auto& p : corners) rep.face_corners_px.push_back({p.x, p.y});

@@ -1,6 +1,9 @@
 // SPDX-License-Identifier: MIT
 #include "acquire/face_mapping.h"
 
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -260,15 +263,21 @@ std::vector<cv::Point2d> CornersFromSideEdges(const std::vector<std::vector<cv::
 
 // The corners of `quad` (the outline of a bright blob in `lin`, luminance) to sub-pixel
 // accuracy, in DetectFaceCorners' order; empty where an edge does not show along a side.
-std::vector<cv::Point2d> RefineQuadrilateral(const cv::Mat& lin, const std::vector<cv::Point>& quad,
-                                             const DeviceIntrinsics* camera) {
-  // Order: top-left (smallest x + y) first, then clockwise in the image.
+// A quadrilateral's corners in DetectFaceCorners' order: top-left (smallest x + y) first, then
+// clockwise in the image.
+std::vector<cv::Point2d> OrderedQuadrilateral(const std::vector<cv::Point>& quad) {
   std::vector<cv::Point2d> c(quad.begin(), quad.end());
   if ((c[1] - c[0]).cross(c[2] - c[1]) < 0) std::reverse(c.begin(), c.end());
   const auto tl = std::min_element(c.begin(), c.end(), [](const auto& a, const auto& b) {
     return a.x + a.y < b.x + b.y;
   });
   std::rotate(c.begin(), tl, c.end());
+  return c;
+}
+
+std::vector<cv::Point2d> RefineQuadrilateral(const cv::Mat& lin, const std::vector<cv::Point>& quad,
+                                             const DeviceIntrinsics* camera) {
+  const std::vector<cv::Point2d> c = OrderedQuadrilateral(quad);
   // Each side: sub-pixel edge points where the image crosses half-way between the values just
   // inside and just outside, along the side's normal; a line through them; corners where
   // consecutive lines meet.
@@ -324,8 +333,10 @@ std::vector<cv::Point2d> RefineQuadrilateral(const cv::Mat& lin, const std::vect
 
 }  // namespace
 
-std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb, const DeviceIntrinsics* camera) {
+std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb, const DeviceIntrinsics* camera,
+                                           std::vector<cv::Point2d>* outline) {
   CV_Assert(rgb.type() == CV_32FC3);
+  if (outline) outline->clear();
   // Luminance (R + G + B), saturated pixels at the brightest finite value, negatives at 0.
   cv::Mat lin(rgb.size(), CV_32F);
   float top = 0;
@@ -378,6 +389,7 @@ std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& rgb, const DeviceIntri
   for (float floor_fraction : {1e-6f, 1e-4f, 1e-2f, 1e-1f}) {
     const std::vector<cv::Point> quad = quadrilateral(floor_fraction);
     if (quad.empty()) continue;
+    if (outline && outline->empty()) *outline = OrderedQuadrilateral(quad);
     std::vector<cv::Point2d> corners = RefineQuadrilateral(lin, quad, camera);
     if (!corners.empty()) return corners;
   }
@@ -476,14 +488,21 @@ struct EdgeModel {
 
 }  // namespace
 
-std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
-                                           const std::vector<cv::Point2d>& corners, double blur_px,
-                                           const cv::Mat& black, int* edge_points, double* blur_found,
-                                           double reach_px) {
-  CV_Assert(corners.size() == 4 && blur_px >= 0 && reach_px >= 0);
+namespace {
+
+// RefineFaceCorners' edge points along the sides of a convex polygon (`corners` in order, side s
+// from corner s to s + 1, any number of sides): per side, the points p + t0 n found (image px),
+// few or none where the edge does not show. *blur_found (optional) receives the blur searched;
+// search_blur false fits through blur_px as it is.
+std::vector<std::vector<cv::Point2f>> OutlineEdgePoints(const std::vector<cv::Mat>& images,
+                                                        const DeviceIntrinsics& camera,
+                                                        const std::vector<cv::Point2d>& corners, double blur_px,
+                                                        const cv::Mat& black, double* blur_found, double reach_px,
+                                                        bool search_blur = true) {
+  CV_Assert(corners.size() >= 3 && blur_px >= 0 && reach_px >= 0);
   for (const cv::Mat& img : images) CV_Assert(img.type() == CV_32FC3 && img.size() == camera.size);
   CV_Assert(black.empty() || (black.type() == CV_32FC3 && black.size() == camera.size));
-  if (edge_points) *edge_points = 0;
+  const int N = int(corners.size());
   if (blur_found) *blur_found = NAN;
   // sigma_e^2 = blur^2 + kSamplingVariance. The window: t from -max(6, 4 sigma_w) to max(5, 3 sigma_w + 1.5) px, offsets within r =
   // max(1.5, sigma_w), sigma_w the sigma_e of `window_blur`; with reach_px > r, the offsets
@@ -497,14 +516,15 @@ std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, c
   // The profiles: evenly along each side's middle 70 %, straight in the ideal image.
   const std::vector<cv::Point2f> ideal =
       IdealFromImage(camera, std::vector<cv::Point2f>(corners.begin(), corners.end()));
-  const cv::Point2d centre = 0.25 * (corners[0] + corners[1] + corners[2] + corners[3]);
+  cv::Point2d centre(0, 0);
+  for (const cv::Point2d& c : corners) centre += c * (1.0 / N);
   struct Position {
     int side;
     cv::Point2d p, n;  // the foot on the current outline, the outward unit normal
   };
   std::vector<Position> positions;
-  for (int side = 0; side < 4; ++side) {
-    const cv::Point2d a = ideal[size_t(side)], b = ideal[size_t((side + 1) % 4)];
+  for (int side = 0; side < N; ++side) {
+    const cv::Point2d a = ideal[size_t(side)], b = ideal[size_t((side + 1) % N)];
     const double length = cv::norm(b - a);
     const int count = std::max(8, int(length / 2));
     std::vector<cv::Point2d> along;
@@ -552,7 +572,7 @@ std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, c
   // within 0.2 px of the best; again with the window of the blur found, until it stays within
   // 0.1 px (three rounds at most).
   double blur = blur_px;
-  for (int round = 0; round < 3; ++round) {
+  for (int round = 0; round < (search_blur ? 3 : 0); ++round) {
     const double window_blur = blur;
     const EdgeModel window = model(window_blur, window_blur);
     const size_t stride = std::max<size_t>(1, images.size() * P / 2000);
@@ -591,9 +611,22 @@ std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, c
       if (std::isfinite(t0)) found[size_t(job)] = cv::Point2f(positions[size_t(job) % P].p + t0 * positions[size_t(job) % P].n);
     }
   });
-  std::vector<std::vector<cv::Point2f>> sides(4);
+  std::vector<std::vector<cv::Point2f>> sides(static_cast<size_t>(N));
   for (size_t j = 0; j < found.size(); ++j)
     if (std::isfinite(found[j].x)) sides[size_t(positions[j % P].side)].push_back(found[j]);
+  return sides;
+}
+
+}  // namespace
+
+std::vector<cv::Point2d> RefineFaceCorners(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
+                                           const std::vector<cv::Point2d>& corners, double blur_px,
+                                           const cv::Mat& black, int* edge_points, double* blur_found,
+                                           double reach_px) {
+  CV_Assert(corners.size() == 4);
+  if (edge_points) *edge_points = 0;
+  const std::vector<std::vector<cv::Point2f>> sides =
+      OutlineEdgePoints(images, camera, corners, blur_px, black, blur_found, reach_px);
   for (const auto& side : sides)
     if (side.size() < 8) return {};
   if (edge_points)
@@ -611,6 +644,182 @@ std::vector<cv::Point2d> RefineFaceCornersWithin(const std::vector<cv::Mat>& ima
   if (refined.empty()) return {};
   if (!std::isfinite(blur)) blur = blur_px;
   return RefineFaceCorners(images, camera, refined, blur, black, edge_points, blur_found);
+}
+
+namespace {
+
+// The block's corner c (bits: x, y, z) in the sample frame.
+cv::Vec3d BlockCorner(const std::array<double, 3>& size_mm, int c) {
+  return {c & 1 ? size_mm[0] : 0.0, c & 2 ? size_mm[1] : 0.0, c & 4 ? size_mm[2] : 0.0};
+}
+
+// A point's ideal pinhole image (pixels through K, no distortion).
+cv::Point2d IdealImage(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample, const cv::Vec3d& x) {
+  const cv::Vec3d c = camera_from_sample.Apply(x);
+  const cv::Vec3d u = camera.K * cv::Vec3d(c[0] / c[2], c[1] / c[2], 1.0);
+  return {u[0], u[1]};
+}
+
+// One edge point's distance from the line through two box corners' ideal images, as a function
+// of the pose (angle-axis, translation).
+struct OutlineDistance {
+  OutlineDistance(const cv::Matx33d& K, const cv::Vec3d& a, const cv::Vec3d& b, const cv::Point2d& p)
+      : K(K), a(a), b(b), p(p) {}
+  template <typename T>
+  bool operator()(const T* const r, const T* const t, T* residual) const {
+    const auto image = [&](const cv::Vec3d& x, T* u) {
+      const T X[3] = {T(x[0]), T(x[1]), T(x[2])};
+      T c[3];
+      ceres::AngleAxisRotatePoint(r, X, c);
+      for (int k = 0; k < 3; ++k) c[k] += t[k];
+      const T xn = c[0] / c[2], yn = c[1] / c[2];
+      u[0] = K(0, 0) * xn + K(0, 1) * yn + K(0, 2);
+      u[1] = K(1, 1) * yn + K(1, 2);
+    };
+    T ua[2], ub[2];
+    image(a, ua);
+    image(b, ub);
+    const T dx = ub[0] - ua[0], dy = ub[1] - ua[1];
+    residual[0] = (dx * (T(p.y) - ua[1]) - dy * (T(p.x) - ua[0])) / ceres::sqrt(dx * dx + dy * dy);
+    return true;
+  }
+  cv::Matx33d K;
+  cv::Vec3d a, b;
+  cv::Point2d p;
+};
+
+}  // namespace
+
+std::array<double, 4> SideFaceWidthsPx(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
+                                       const std::array<double, 3>& size_mm) {
+  const cv::Vec3d o = camera_from_sample.Inverse().t;  // the camera's centre in the sample frame
+  // Per side face: its front edge's two corners (bits), and whether the camera is outside it.
+  const int edges[4][2] = {{0, 2}, {1, 3}, {0, 1}, {2, 3}};
+  const bool outside[4] = {o[0] < 0, o[0] > size_mm[0], o[1] < 0, o[1] > size_mm[1]};
+  std::array<double, 4> width{};
+  for (int f = 0; f < 4; ++f) {
+    if (!outside[f]) continue;
+    const cv::Point2d a = IdealImage(camera, camera_from_sample, BlockCorner(size_mm, edges[f][0]));
+    const cv::Point2d b = IdealImage(camera, camera_from_sample, BlockCorner(size_mm, edges[f][1]));
+    const cv::Point2d d = (b - a) * (1.0 / std::max(cv::norm(b - a), 1e-12));
+    for (int e : edges[f]) {
+      const cv::Point2d back = IdealImage(camera, camera_from_sample, BlockCorner(size_mm, e | 4));
+      width[size_t(f)] = std::max(width[size_t(f)], std::abs(d.cross(back - a)));
+    }
+  }
+  return width;
+}
+
+namespace {
+
+// FitBlockOutline from one starting pose.
+BlockOutlineFit FitBlockOutlineFrom(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
+                                    const std::array<double, 3>& size_mm, const calib::Pose& camera_from_sample,
+                                    double blur_px, double reach_px, const cv::Mat& black) {
+  BlockOutlineFit fit;
+  fit.camera_from_sample = camera_from_sample;
+  double blur = blur_px;
+  std::vector<cv::Point2d> front;
+  const auto front_corners = [&](const calib::Pose& pose) {
+    std::vector<cv::Point3d> x;
+    for (int c : {0, 1, 3, 2}) {
+      const cv::Vec3d p = pose.Apply(BlockCorner(size_mm, c));
+      x.emplace_back(p[0], p[1], p[2]);
+    }
+    return camera.Project(x);
+  };
+  front = front_corners(fit.camera_from_sample);
+  bool settled = false;
+  for (int round = 0; round < 8; ++round) {
+    // The outline: the convex hull of the eight corners' ideal images, clockwise in the image.
+    std::vector<cv::Point2f> ideal;
+    for (int c = 0; c < 8; ++c) ideal.push_back(IdealImage(camera, fit.camera_from_sample, BlockCorner(size_mm, c)));
+    std::vector<int> hull;
+    cv::convexHull(ideal, hull, /*clockwise=*/false);
+    std::vector<cv::Point2d> polygon;
+    for (int c : hull) polygon.push_back(ImageFromIdeal(camera, {cv::Point2d(ideal[size_t(c)])})[0]);
+    // The wide first round fits through the blur given: a blur search in a window that wide
+    // reads more than the edge.
+    double found_blur = NAN;
+    const std::vector<std::vector<cv::Point2f>> sides = OutlineEdgePoints(
+        images, camera, polygon, blur, black, &found_blur, round == 0 ? reach_px : 0, round > 0);
+    if (std::isfinite(found_blur)) blur = found_blur;
+    ceres::Problem problem;
+    cv::Vec3d r;
+    cv::Rodrigues(fit.camera_from_sample.R, r);
+    double rv[3] = {r[0], r[1], r[2]};
+    double tv[3] = {fit.camera_from_sample.t[0], fit.camera_from_sample.t[1], fit.camera_from_sample.t[2]};
+    fit.sides = fit.edge_points = 0;
+    for (size_t s = 0; s < sides.size(); ++s) {
+      if (sides[s].size() < 8) continue;
+      ++fit.sides;
+      const cv::Vec3d a = BlockCorner(size_mm, hull[s]), b = BlockCorner(size_mm, hull[(s + 1) % hull.size()]);
+      for (const cv::Point2f& p : IdealFromImage(camera, sides[s])) {
+        problem.AddResidualBlock(new ceres::AutoDiffCostFunction<OutlineDistance, 1, 3, 3>(
+                                     new OutlineDistance(camera.K, a, b, cv::Point2d(p))),
+                                 new ceres::HuberLoss(1.0), rv, tv);
+        ++fit.edge_points;
+      }
+    }
+    if (fit.sides < 4) return fit;
+    ceres::Solver::Options options;
+    options.linear_solver_type = ceres::DENSE_QR;
+    options.max_num_iterations = 50;
+    ceres::Solver::Summary summary;
+    ceres::Solve(options, &problem, &summary);
+    fit.camera_from_sample = calib::Pose::FromRodrigues({rv[0], rv[1], rv[2]}, {tv[0], tv[1], tv[2]});
+    fit.rms_px = std::sqrt(2 * summary.final_cost / std::max(1, fit.edge_points));
+    fit.blur_px = blur;
+    const std::vector<cv::Point2d> moved = front_corners(fit.camera_from_sample);
+    double most = 0;
+    for (size_t k = 0; k < 4; ++k) most = std::max(most, cv::norm(moved[k] - front[k]));
+    front = moved;
+    if (round > 0 && most < 0.02) {
+      settled = true;
+      break;
+    }
+  }
+  fit.ok = true;
+  fit.corners = front;
+  fit.converged = settled;
+  return fit;
+}
+
+}  // namespace
+
+BlockOutlineFit FitBlockOutline(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
+                                const std::array<double, 3>& size_mm, const calib::Pose& camera_from_sample,
+                                double blur_px, double reach_px, const cv::Mat& black) {
+  // A block's outline fits two poses nearly as well where the view is close to parallel (the
+  // side face seen may be taken for its neighbour, the block turned the other way): the fit
+  // starts from the given pose and from it turned about the front face's x and y axes through
+  // its centre, both ways, by the angle at which a side face starts to show plus 5 degrees.
+  const cv::Vec3d centre(size_mm[0] / 2, size_mm[1] / 2, 0);
+  const double distance = cv::norm(camera_from_sample.Apply(centre));
+  const double angle = std::atan(0.5 * std::max(size_mm[0], size_mm[1]) / distance) + 5 * CV_PI / 180;
+  std::vector<calib::Pose> starts = {camera_from_sample};
+  for (int axis = 0; axis < 2; ++axis)
+    for (double sign : {-1.0, 1.0}) {
+      cv::Vec3d r(0, 0, 0);
+      r[axis] = sign * angle;
+      calib::Pose turn = calib::Pose::FromRodrigues(r, {0, 0, 0});
+      turn.t = centre - turn.R * centre;  // about the face's centre
+      starts.push_back(camera_from_sample * turn);
+    }
+  std::vector<BlockOutlineFit> fits(starts.size());
+  for (size_t k = 0; k < starts.size(); ++k)
+    fits[k] = FitBlockOutlineFrom(images, camera, size_mm, starts[k], blur_px, reach_px, black);
+  // The fit that explains the most of the outline: the least RMS among those that use at least
+  // 80 % of the most edge points any fit used.
+  int most = 0;
+  for (const BlockOutlineFit& f : fits)
+    if (f.ok) most = std::max(most, f.edge_points);
+  const BlockOutlineFit* best = nullptr;
+  for (const BlockOutlineFit& f : fits)
+    if (f.ok && f.edge_points >= 0.8 * most && (!best || f.converged > best->converged ||
+                                                (f.converged == best->converged && f.rms_px < best->rms_px)))
+      best = &f;
+  return best ? *best : fits.front();
 }
 
 FaceSamples ResampleFrontFace(const cv::Mat& img, const DeviceIntrinsics& camera,

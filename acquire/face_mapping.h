@@ -67,7 +67,10 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
 // as straight lines after undistortion (the corners of a face seen through the simulated rig's
 // barrel distortion were found 0.33 px outside without it: docs/benchmarks.md, "Corners of a
 // distorted face").
-std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& linear_rgb, const DeviceIntrinsics* camera = nullptr);
+// *outline (optional) receives the first quadrilateral outline found, whole pixels, in the same
+// order, also where its sides do not refine (a block whose side faces show: FitBlockOutline).
+std::vector<cv::Point2d> DetectFaceCorners(const cv::Mat& linear_rgb, const DeviceIntrinsics* camera = nullptr,
+                                           std::vector<cv::Point2d>* outline = nullptr);
 
 // Corners (four image points, side s from corner s to s + 1, e.g. DetectFaceCorners') refined
 // on photos of the lit sample through a lens of Gaussian blur near `blur_px` (sigma, pixels;
@@ -109,6 +112,38 @@ std::vector<cv::Point2d> RefineFaceCornersWithin(const std::vector<cv::Mat>& ima
                                                  const std::vector<cv::Point2d>& corners, double blur_px,
                                                  double reach_px, const cv::Mat& black = cv::Mat(),
                                                  int* edge_points = nullptr, double* blur_found = nullptr);
+
+// The side faces a camera sees of a block of `size_mm` at camera_from_sample, besides the front
+// face: per side face (0: x = 0, 1: x = X, 2: y = 0, 3: y = Y), how wide it shows (px: the
+// largest image distance of a back corner from the front edge's line through its front corner),
+// 0 where it is turned away. A camera whose centre lies outside the slab of a side face's plane
+// sees it (the paper's front-lit rig puts the camera beside the projector).
+constexpr double kSideFaceShowsPx = 0.5;  // wider than this, a side face is taken as seen
+std::array<double, 4> SideFaceWidthsPx(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
+                                       const std::array<double, 3>& size_mm);
+
+// The sample's pose from the outline of the whole block in photos of it lit on a dark surround,
+// for a camera that sees side faces too: the outline is then the convex hull of up to six of
+// the block's eight corners (in the ideal pinhole image), and the front face's edges next to a
+// side face do not show. From `camera_from_sample` within ~reach_px of the truth on the image,
+// up to eight rounds of: the hull's sides refined as RefineFaceCorners refines the face's (the
+// same profiles, model and blur search; the first round letting the edges lie up to reach_px
+// off), then the pose whose hull sides (lines through the projected box corners) pass closest
+// to the edge points (Ceres, Huber loss of 1 px on the distances in the ideal image), until it
+// moves the front corners by less than 0.02 px. Sides with fewer than 8 points are left out;
+// fails (ok false) where fewer than 4 sides keep them.
+struct BlockOutlineFit {
+  bool ok = false;
+  calib::Pose camera_from_sample;
+  std::vector<cv::Point2d> corners;  // the front face's corners (FrontFaceCorners' order), image px
+  double rms_px = 0;                 // the edge points' RMS distance from the fitted outline
+  int edge_points = 0, sides = 0;    // points and hull sides used in the last round
+  double blur_px = 0;                // the lens's blur the last round found
+  bool converged = false;            // the last round moved the front corners by less than 0.02 px
+};
+BlockOutlineFit FitBlockOutline(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
+                                const std::array<double, 3>& size_mm, const calib::Pose& camera_from_sample,
+                                double blur_px, double reach_px, const cv::Mat& black = cv::Mat());
 
 // Node-space front-face radiance from a linear RGB image (CV_32FC3; +inf = saturated): every
 // front-face node's value is the mean of the image over the node's dual box on the face (the

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -94,12 +95,40 @@ calib::SyntheticRig ToSyntheticRig(const CaptureRig& r) {
   return s;
 }
 
+// Where a ray from o along d enters the block [0, X] x [0, Y] x [0, Z] (the slab method): the
+// face (0: x = 0, 1: x = X, 2: y = 0, 3: y = Y, 4: z = 0, the front face, 5: z = Z) and the
+// point, or -1 where it misses.
+int EnterBlock(const Geometry& g, const cv::Vec3d& o, const cv::Vec3d& d, cv::Vec3d* at) {
+  const double hi[3] = {g.X, g.Y, g.Z};
+  double t_in = -std::numeric_limits<double>::infinity(), t_out = std::numeric_limits<double>::infinity();
+  int face = -1;
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(d[a]) < 1e-15) {
+      if (o[a] < 0 || o[a] > hi[a]) return -1;
+      continue;
+    }
+    const double t0 = -o[a] / d[a], t1 = (hi[a] - o[a]) / d[a];
+    if (std::min(t0, t1) > t_in) {
+      t_in = std::min(t0, t1);
+      face = 2 * a + (t1 < t0 ? 1 : 0);
+    }
+    t_out = std::min(t_out, std::max(t0, t1));
+  }
+  if (face < 0 || !(t_in < t_out) || t_in <= 0) return -1;
+  *at = o + t_in * d;
+  return face;
+}
+
 // Linear RGB image of the front face of the sample (or of the plane z = plane_z) through the
 // lens's vignetting: shade(x, y) (mm, sample frame) inside the face grown by margin_mm on every
 // side, 0 (a dark room) outside; every pixel the mean of samples x samples rays spread over it.
+// With side_shade (margin 0 and plane_z 0 only), the block itself: rays that enter it through a
+// side face take side_shade(face, u, z) there (face 0..3 as EnterBlock's; u = y on x = 0 and
+// x = X, x on y = 0 and y = Y), those through the front face shade(x, y).
 cv::Mat RenderFace(const CaptureRig& rig, const calib::SyntheticRig& srig, const Geometry& g,
                    const std::function<cv::Vec3d(double, double)>& shade, int samples = 3, double margin_mm = 0,
-                   double plane_z = 0) {
+                   double plane_z = 0, const std::function<cv::Vec3d(int, double, double)>& side_shade = {}) {
+  CV_Assert(!side_shade || (margin_mm == 0 && plane_z == 0));
   const cv::Mat& rays = srig.CameraRays();
   const calib::Pose sample_from_camera = rig.camera_from_sample.Inverse();
   const cv::Vec3d o = sample_from_camera.t;  // camera centre in the sample frame
@@ -115,6 +144,13 @@ cv::Mat RenderFace(const CaptureRig& rig, const calib::SyntheticRig& srig, const
             const double fa = (a + 0.5) / samples, fb = (b + 0.5) / samples;
             const cv::Vec2d q = (1 - fb) * ((1 - fa) * r00 + fa * r10) + fb * ((1 - fa) * r01 + fa * r11);
             const cv::Vec3d d = sample_from_camera.R * cv::Vec3d(q[0], q[1], 1.0);
+            if (side_shade) {
+              cv::Vec3d at;
+              const int face = EnterBlock(g, o, d, &at);
+              if (face == 4) sum += shade(at[0], at[1]);
+              else if (face >= 0 && face < 4) sum += side_shade(face, face < 2 ? at[1] : at[0], at[2]);
+              continue;
+            }
             if (std::abs(d[2]) < 1e-12) continue;
             const double s = (plane_z - o[2]) / d[2];
             if (s <= 0) continue;
@@ -457,7 +493,8 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     MultigridOptions mg;
     mg.tolerance = o.tolerance;
     mg.max_iterations = 300;
-    const std::vector<FacePattern> fine_L = RenderFrontFace(fine, o.setup, fine_q, mg);
+    std::vector<SideFaces> fine_sides;  // what a camera that sees a side face photographs there
+    const std::vector<FacePattern> fine_L = RenderFrontFace(fine, o.setup, fine_q, mg, Backend::kCpu, 0, &fine_sides);
     progress(fmt::format("{} forward solves on the {} grid ({}x finer)", fine_q.size(),
                          fs_.ToString(), K));
     // Camera sensitivity (aperture, ISO): the brightest diffuse radiance reaches 80 % of full
@@ -528,6 +565,25 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
     for (FacePattern& pattern : photo_L)
       for (auto& channel : pattern)
         for (float& v : channel) v = std::max(v, 0.0f);
+    for (SideFaces& sides : fine_sides)
+      for (auto& channel : sides)
+        for (auto& face : channel)
+          for (float& v : face) v = std::max(v, 0.0f);
+    // A side face's field as a face of (u, z) nodes: u along y on x = 0 and x = X, along x on
+    // y = 0 and y = Y.
+    const GridShape side_shape[2] = {{fs_.ny, fs_.nz, 1}, {fs_.nx, fs_.nz, 1}};
+    const auto side_shade = [&](int m, double black_scale) {
+      return [&, m, black_scale](int face, double u, double z) {
+        const GridShape& shape = side_shape[face / 2];
+        cv::Vec3d v;
+        for (int c = 0; c < 3; ++c) {
+          double L = black_scale * FaceBilinear(fine_sides[size_t(P)][size_t(c)][size_t(face)], shape, hf, u, z);
+          if (m >= 0) L += FaceBilinear(fine_sides[size_t(m)][size_t(c)][size_t(face)], shape, hf, u, z);
+          v[c] = gain[c] * L;
+        }
+        return v;
+      };
+    };
     auto photo = [&](int m, double black_scale) {
       return RenderFace(rig, srig, g, [&](double x, double y) {
         cv::Vec3d v;
@@ -542,7 +598,7 @@ SimulateCaptureSummary SimulateCapture(const Material& material, const CaptureRi
           v[c] = gain[c] * L;
         }
         return v;
-      });
+      }, 3, 0, 0, side_shade(m, black_scale));
     };
     CaptureSpec spec;
     spec.dir = tmp.string();

@@ -41,6 +41,28 @@ std::vector<float> FrontRadiance(const GridShape& s, const T* phi, const std::ve
   return L;
 }
 
+template <typename T>
+std::array<std::vector<float>, 4> SideRadiance(const GridShape& s, const T* phi, const std::vector<float>& q,
+                                               Setup setup) {
+  const int64_t k_lit = LitFaceK(setup, s);
+  const auto L = [&](int64_t i, int64_t j, int64_t k) {
+    const double incoming = k == k_lit ? q[size_t(i + s.nx * j)] : 0.0;
+    return float((double(phi[s.index(i, j, k)]) - incoming) / (2 * std::numbers::pi));
+  };
+  std::array<std::vector<float>, 4> out;
+  for (int64_t k = 0; k < s.nz; ++k) {
+    for (int64_t j = 0; j < s.ny; ++j) {
+      out[0].push_back(L(0, j, k));
+      out[1].push_back(L(s.nx - 1, j, k));
+    }
+    for (int64_t i = 0; i < s.nx; ++i) {
+      out[2].push_back(L(i, 0, k));
+      out[3].push_back(L(i, s.ny - 1, k));
+    }
+  }
+  return out;
+}
+
 template <typename Solver, typename T>
 ForwardResult SolveForwardT(const Material& m, const FacePattern& q, const ForwardOptions& o) {
   const GridShape& s = m.shape;
@@ -60,6 +82,7 @@ ForwardResult SolveForwardT(const Material& m, const FacePattern& q, const Forwa
     std::fill(phi.begin(), phi.end(), T(0));
     result.summaries[c] = solver.Solve(b.data(), phi.data());
     result.radiance[c] = FrontRadiance(s, phi.data(), q[c], o.setup);
+    if (o.side_faces) result.sides[c] = SideRadiance(s, phi.data(), q[c], o.setup);
   }
   return result;
 }
@@ -86,6 +109,7 @@ std::vector<ForwardResult> SolveForwardGlBatch(const Material& m,
     for (int l = 0; l < count; ++l) {
       results[l].summaries[c] = sums[l];
       results[l].radiance[c] = FrontRadiance(s, phi.data() + l * n, lights[l][c], o.setup);
+      if (o.side_faces) results[l].sides[c] = SideRadiance(s, phi.data() + l * n, lights[l][c], o.setup);
     }
   }
   return results;

@@ -26,16 +26,25 @@ struct ForwardOptions {
   Backend backend = Backend::kCpu;
   Precision precision = Precision::kDouble;
   MultigridOptions multigrid;
+  bool side_faces = false;  // also the side faces' radiance (ForwardResult::sides)
 };
 
 // One RGB light pattern on the lit face: q[c][i + nx * j], c = R, G, B.
 using FacePattern = std::array<std::vector<float>, 3>;
 FacePattern GreyPattern(const std::vector<float>& q);
 
+// Per channel, the four side faces' values (ForwardResult::sides).
+using SideFaces = std::array<std::array<std::vector<float>, 4>, 3>;
+
 struct ForwardResult {
   // Front-face outgoing radiance L = (phi - q) / (2 pi) at nodes (i, j, 0), SPEC section 3,
   // per channel, nx*ny values (i + nx * j).
   FacePattern radiance;
+  // With ForwardOptions::side_faces: the four side faces' outgoing radiance, per channel, in
+  // the order x = 0, x = X (ny*nz values, j + ny * k), y = 0, y = Y (nx*nz values, i + nx * k):
+  // L = (phi - q) / (2 pi) as on the front face, q the light on the lit face's row (k of
+  // LitFaceK) and 0 elsewhere. What a camera that sees a side face photographs there.
+  SideFaces sides;
   std::array<SolveSummary, 3> summaries;
 };
 

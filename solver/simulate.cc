@@ -65,11 +65,13 @@ Material RefineMaterial(const Material& m, int K) {
 std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
                                          const std::vector<FacePattern>& lights,
                                          const MultigridOptions& multigrid, Backend backend,
-                                         int max_at_once) {
+                                         int max_at_once, std::vector<SideFaces>* sides) {
   ForwardOptions fo;
   fo.setup = setup;
   fo.multigrid = multigrid;
   fo.backend = backend;
+  fo.side_faces = sides != nullptr;
+  if (sides) sides->assign(lights.size(), SideFaces());
   std::vector<FacePattern> out(lights.size());
   auto check = [](const ForwardResult& r) {
     for (const auto& sum : r.summaries)
@@ -86,6 +88,7 @@ std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
       for (size_t l = 0; l < rs.size(); ++l) {
         check(rs[l]);
         out[first + l] = std::move(rs[l].radiance);
+        if (sides) (*sides)[first + l] = std::move(rs[l].sides);
       }
     }
     return out;
@@ -101,6 +104,7 @@ std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
         ForwardResult r = SolveForward(material, lights[l], fo);
         check(r);
         out[l] = std::move(r.radiance);
+        if (sides) (*sides)[l] = std::move(r.sides);
       } catch (...) {
         errors[l] = std::current_exception();
       }

@@ -23,10 +23,12 @@ GridShape RefineShape(const GridShape& shape, int K);
 // solver each; gl: batches of up to 16 conditions per solve, in turn on the calling thread (the
 // one that owns the GL context). max_at_once > 0 caps the solvers held at once (threads on
 // cpu, the batch on gl), and with them the memory (solver/memory.h's forward bytes each).
+// With `sides`, it also receives the side faces' radiance under each light (ForwardResult::sides).
 std::vector<FacePattern> RenderFrontFace(const Material& material, Setup setup,
                                          const std::vector<FacePattern>& lights,
                                          const MultigridOptions& multigrid,
-                                         Backend backend = Backend::kCpu, int max_at_once = 0);
+                                         Backend backend = Backend::kCpu, int max_at_once = 0,
+                                         std::vector<SideFaces>* sides = nullptr);
 
 // What a camera measures of each front-face node under each light: RenderFrontFace's radiance
 // averaged over the nodes' face boxes (MeasureFace, solver/face_measurement.h). This is what
