@@ -536,8 +536,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   for (auto it = black_level.begin<cv::Vec3f>(); it != black_level.end<cv::Vec3f>(); ++it)
     for (int k = 0; k < 3; ++k)
       if (!std::isfinite((*it)[k])) (*it)[k] = 0;
-  calib::Pose camera_from_sample =
-      EstimateSamplePose(cam, corners, g, h, cap.file + ": face_corners_px", &rep.pose_rms_px);
+  calib::Pose camera_from_sample = EstimateSamplePose(cam, corners, g, h, cap.file + ": face_corners_px",
+                                                      &rep.pose_rms_px, !cap.face_corners_px.empty());
   // The lens's blur: given, or read off the outline in the fitted conditions less the black
   // (front-lit, each condition saturates where it lights the face, and their sum everywhere).
   std::vector<cv::Mat> lit;

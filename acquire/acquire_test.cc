@@ -259,12 +259,10 @@ TEST_F(AcquireTest, CornersGivenNearTheFaceAreRefined) {
 
 // A camera turned 12 degrees off the face's normal (the paper's front-lit rig puts it beside
 // the projector) sees a side face too, lit from inside: the outline found is the block's, and
-// the front face's edge next to the side face does not show. Back-lit, the pose is fitted to the
-// block's outline (FitBlockOutline): the corners found come within 0.3 px of the truth and the
-// mapping is as good as with the corners given. Front-lit on this 512x384 capture the fit does
-// not settle (on the 1024x768 default rig it does: docs/benchmarks.md): acquire stops with one
-// line that asks for the corners instead of mapping a wrong face. Corners given exactly draw
-// no warning either way (the usual refinement moved them onto the side face's outline).
+// the front face's edge next to the side face does not show. The pose is fitted to the block's
+// outline (FitBlockOutline): the corners found come within 0.4 px of the truth (the two next to
+// the side face the farthest) and the mapping is within CheckMapping's bounds. Corners given
+// exactly draw no warning (the usual refinement moved them onto the side face's outline).
 TEST_F(AcquireTest, SideFacesSeenByAnObliqueCamera) {
   for (translume::Setup setup : {translume::Setup::kBack, translume::Setup::kFront}) {
     const std::string c = CopyOf(SmallCapture(setup, "_oblique", R"(, "tilt_deg": [4.0, -12.0, 1.5])"));
@@ -278,17 +276,6 @@ TEST_F(AcquireTest, SideFacesSeenByAnObliqueCamera) {
     EXPECT_EQ(said.find("face_corners_px lie"), std::string::npos) << said;
     EditJson(c, [&](nlohmann::json& j) { j["face_corners_px"] = "auto"; });
     fs::remove_all(WorkDir(Out()));
-    if (setup == translume::Setup::kFront) {
-      try {
-        Acquire(ReadCapture(c), Out(), o);
-        ADD_FAILURE() << "no error";
-      } catch (const InputError& e) {
-        EXPECT_NE(std::string(e.what()).find("the camera sees side faces of the block"), std::string::npos)
-            << e.what();
-        EXPECT_NE(std::string(e.what()).find("give face_corners_px as measured"), std::string::npos) << e.what();
-      }
-      continue;
-    }
     CheckMapping(setup, true, c, Out());
     const nlohmann::json rep = nlohmann::json::parse(std::ifstream(WorkDir(Out()) + "/report.json"));
     EXPECT_EQ(rep["face_corners"], "refined");
@@ -296,7 +283,27 @@ TEST_F(AcquireTest, SideFacesSeenByAnObliqueCamera) {
       const double d = std::hypot(rep["face_corners_px"][k][0].get<double>() - truth[k][0],
                                   rep["face_corners_px"][k][1].get<double>() - truth[k][1]);
       std::printf("%s-lit, corner %zu found %.3f px from the truth\n", SetupName(setup), k, d);
-      EXPECT_LT(d, 0.3) << SetupName(setup) << " corner " << k;
+      EXPECT_LT(d, 0.4) << SetupName(setup) << " corner " << k;
+    }
+    // `translume patterns --photo` fits the block's outline in the one photo of the sample
+    // under projector white: fewer points along the side face's short edges than in acquire's
+    // conditions, so the corners next to it are less sure (0.4-1.2 px on the default rig).
+    PatternJob job;
+    const std::string work = WorkDir(Out());
+    job.camera = calib::ReadCameraCalibration(work + "/camera.yml");
+    job.projector_file = work + "/projector.yml";
+    job.projector = calib::ReadProjectorCalibration(job.projector_file);
+    job.size_mm = ReadCapture(c).size_mm;
+    job.setup = setup;
+    job.lights = 2;
+    const calib::ResponseCurve response = calib::ReadResponse(work + "/response.yml");
+    job.photo = calib::ReadHdrOrStack(c + "/calib/sample_lit", &response);
+    const PatternSet set = MakeRegionPatterns(job);
+    EXPECT_TRUE(set.side_faces);
+    for (size_t k = 0; k < 4; ++k) {
+      const double d = std::hypot(set.corners[k].x - truth[k][0], set.corners[k].y - truth[k][1]);
+      std::printf("%s-lit, patterns: corner %zu %.3f px from the truth\n", SetupName(setup), k, d);
+      EXPECT_LT(d, 1.5) << SetupName(setup) << " corner " << k;
     }
   }
 }

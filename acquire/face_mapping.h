@@ -48,12 +48,14 @@ std::string QuadrilateralProblem(const std::vector<cv::Point2d>& corners);
 // camera or shows the face from behind (corners counter-clockwise), or the pose misses the
 // corners by more than max(3 px, 2 % of the face's side in the image) RMS (corners listed from
 // another corner of a non-square face, or a wrong sample size).
+// fit_bound false leaves out the last check (corners found on a block's outline, which
+// FitBlockOutline then fits).
 calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
                                const std::array<double, 3>& size_mm, const std::string& what,
-                               double* rms_px = nullptr);
+                               double* rms_px = nullptr, bool fit_bound = true);
 calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
                                const GridShape& grid, double h, const std::string& what,
-                               double* rms_px = nullptr);
+                               double* rms_px = nullptr, bool fit_bound = true);
 
 // Finds the front face's four corners in a linear image of the lit sample on a dark background
 // (e.g. the sum of every condition's HDR, or a photo whose background is clipped at 0): a
@@ -125,13 +127,19 @@ std::array<double, 4> SideFaceWidthsPx(const DeviceIntrinsics& camera, const cal
 // The sample's pose from the outline of the whole block in photos of it lit on a dark surround,
 // for a camera that sees side faces too: the outline is then the convex hull of up to six of
 // the block's eight corners (in the ideal pinhole image), and the front face's edges next to a
-// side face do not show. From `camera_from_sample` within ~reach_px of the truth on the image,
-// up to eight rounds of: the hull's sides refined as RefineFaceCorners refines the face's (the
-// same profiles, model and blur search; the first round letting the edges lie up to reach_px
-// off), then the pose whose hull sides (lines through the projected box corners) pass closest
-// to the edge points (Ceres, Huber loss of 1 px on the distances in the ideal image), until it
-// moves the front corners by less than 0.02 px. Sides with fewer than 8 points are left out;
-// fails (ok false) where fewer than 4 sides keep them.
+// side face do not show. From `camera_from_sample`, up to sixteen rounds of: the hull's sides
+// refined as RefineFaceCorners refines the face's (OutlineEdgePoints: the same profiles and
+// model; the edges let lie up to reach_px off in the first round, through blur_px, and up to
+// 3 px off later, so that a side the pose misplaces can move; the blur searched in the second
+// round and again once the pose nearly settles), then the pose whose hull sides (lines through
+// the projected box corners) pass closest to the edge points (Ceres, Huber loss of 1 px on the
+// distances in the ideal image); settled when a round moves the front corners by less than
+// 0.02 px. Sides with fewer than 8 points are left out; a round with fewer than 4 such sides
+// ends the fit (ok false). A nearly parallel view fits two poses nearly as well (the side face
+// seen taken for its neighbour, the block turned the other way), so the fit runs from the pose
+// given and from it turned both ways about the front face's x and y axes through its centre
+// (by the angle at which a side face starts to show, plus 5 degrees), and keeps the settled fit
+// of least RMS among those with at least 80 % of the most edge points.
 struct BlockOutlineFit {
   bool ok = false;
   calib::Pose camera_from_sample;

@@ -34,9 +34,34 @@ PatternSet MakeRegionPatterns(const PatternJob& job) {
       throw InputError(fmt::format("{}: the image is {}x{} but the camera calibration is {}x{}", job.corners_source,
                                    job.photo.cols, job.photo.rows, job.camera.image_size.width,
                                    job.camera.image_size.height));
-    if (set.corners.empty()) set.corners = DetectFaceCorners(job.photo, &cam);
+    std::vector<cv::Point2d> outline;
+    if (set.corners.empty()) set.corners = DetectFaceCorners(job.photo, &cam, &outline);
+    const bool outline_unrefined = job.corners.empty() && set.corners.empty() && !outline.empty();
+    if (outline_unrefined) set.corners = outline;
     if (set.corners.empty())
       throw InputError(job.corners_source + ": no four-sided sample found on a dark background; give the corners");
+    // A camera that sees side faces of the block: the outline is the block's (acquire does the same).
+    double rms = 0;
+    const calib::Pose start = EstimateSamplePose(cam, set.corners, job.size_mm, job.corners_source, &rms, false);
+    const std::array<double, 4> side_px = SideFaceWidthsPx(cam, start, job.size_mm);
+    if (*std::max_element(side_px.begin(), side_px.end()) > kSideFaceShowsPx ||
+        (job.corners.empty() && (rms > 1 || outline_unrefined))) {
+      const BlockOutlineFit fit = FitBlockOutline({job.photo}, cam, job.size_mm, start, 1.0,
+                                                  std::min(kNearCornerReachPx + 2 * rms, 15.0));
+      if (!fit.ok || !fit.converged)
+        throw InputError(fmt::format("{}: the camera sees side faces of the block, and the block's outline fit did "
+                                     "not settle (docs/capture.md, \"Side faces\"); give --corners alone, as "
+                                     "measured", job.corners_source));
+      set.unrefined_corners = set.corners;
+      for (size_t k = 0; k < 4; ++k)
+        set.refine_moved_px = std::max(set.refine_moved_px, cv::norm(fit.corners[k] - set.corners[k]));
+      set.corners = fit.corners;
+      set.refined = true;
+      set.refine_blur_px = fit.blur_px;
+      set.side_faces = true;
+    }
+  }
+  if (!job.photo.empty() && !set.side_faces) {
     set.unrefined_corners = set.corners;
     constexpr double kBlurStartPx = 1;  // the refinement's search spans 0..3 px, then follows what it finds
     const std::vector<cv::Point2d> refined =

@@ -27,7 +27,8 @@ struct PatternJob {
   // `photo` (linear RGB, CV_32FC3, the camera's size, +inf where saturated: the sample lit on a
   // dark background). Corners found in the photo, or given with it (then they may lie up to
   // kNearCornerReachPx off: clicked by hand), are refined in it (RefineFaceCornersWithin, the
-  // lens's blur searched from 1 px).
+  // lens's blur searched from 1 px), or, where the camera sees side faces, taken from the
+  // block's outline (FitBlockOutline).
   std::vector<cv::Point2d> corners;
   cv::Mat photo;
   std::string corners_source = "the corners";  // names corners or photo in messages
@@ -44,6 +45,7 @@ struct PatternSet {
   std::vector<cv::Point2d> unrefined_corners;
   bool refined = false;
   double refine_moved_px = 0, refine_blur_px = 0;
+  bool side_faces = false;  // the camera sees side faces: the corners come from FitBlockOutline
   double pose_rms_px = 0;
   bool face_inside_projector = true;
   int64_t fewest_pixels = 0, most_pixels = 0;

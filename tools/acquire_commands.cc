@@ -153,8 +153,9 @@ int RunPatterns(int argc, char** argv) {
   const std::string how =
       !set.refined ? (corners.empty() ? "found in the photo" : "as given")
                    : fmt::format("{} in the photo through a lens blur of {:.2f} px (moved up to {:.2f} px)",
-                                 corners.empty() ? "found and refined" : "refined", set.refine_blur_px,
-                                 set.refine_moved_px);
+                                 set.side_faces ? "from the block's outline (the camera sees side faces)"
+                                 : corners.empty() ? "found and refined" : "refined",
+                                 set.refine_blur_px, set.refine_moved_px);
   std::printf("patterns: front face corners (%.2f, %.2f) (%.2f, %.2f) (%.2f, %.2f) (%.2f, %.2f), %s; pose RMS %.2f "
               "px\n", c[0].x, c[0].y, c[1].x, c[1].y, c[2].x, c[2].y, c[3].x, c[3].y, how.c_str(), set.pose_rms_px);
   std::printf("wrote %s: %zu pattern%s (%dx%d regions of the %s face and %d validation spots, %lld to %lld "
