@@ -49,12 +49,14 @@ struct AcquireReport {
   std::string work_dir, dataset_dir, material, report_json;
   std::vector<std::pair<std::string, double>> stage_seconds;  // in order
   std::vector<std::string> reused;                            // stages taken from the work folder
+  // pose_rms_px: the corners' reprojection RMS; where the pose was fitted to the block's outline
+  // (a camera that sees side faces: FitBlockOutline), the edge points' RMS distance from it.
   double camera_rms_px = -1, projector_rms_px = -1, pose_rms_px = -1;
   std::vector<std::array<double, 2>> face_corners_px;
   // How they came: "given" (capture.json), "found" (on the summed conditions), "near" (given
   // near the face, capture.json {"near": ...}, left as given) or "refined" (found or given near,
   // then fitted through the lens's blur on face_corners_edge_points edge points;
-  // RefineFaceCorners).
+  // RefineFaceCorners, or FitBlockOutline where the camera sees side faces).
   std::string face_corners = "given";
   int face_corners_edge_points = 0;
   // The lens's blur used for the face's coverage (Gaussian sigma, px): capture.json's, or found
