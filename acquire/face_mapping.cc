@@ -493,12 +493,14 @@ namespace {
 // RefineFaceCorners' edge points along the sides of a convex polygon (`corners` in order, side s
 // from corner s to s + 1, any number of sides): per side, the points p + t0 n found (image px),
 // few or none where the edge does not show. *blur_found (optional) receives the blur searched;
-// search_blur false fits through blur_px as it is.
+// search_blur false fits through blur_px as it is. blur_sides (optional, one flag per side):
+// the sides whose profiles the blur is searched on (all where empty).
 std::vector<std::vector<cv::Point2f>> OutlineEdgePoints(const std::vector<cv::Mat>& images,
                                                         const DeviceIntrinsics& camera,
                                                         const std::vector<cv::Point2d>& corners, double blur_px,
                                                         const cv::Mat& black, double* blur_found, double reach_px,
-                                                        bool search_blur = true) {
+                                                        bool search_blur = true,
+                                                        const std::vector<bool>& blur_sides = {}) {
   CV_Assert(corners.size() >= 3 && blur_px >= 0 && reach_px >= 0);
   for (const cv::Mat& img : images) CV_Assert(img.type() == CV_32FC3 && img.size() == camera.size);
   CV_Assert(black.empty() || (black.type() == CV_32FC3 && black.size() == camera.size));
@@ -575,11 +577,14 @@ std::vector<std::vector<cv::Point2f>> OutlineEdgePoints(const std::vector<cv::Ma
   for (int round = 0; round < (search_blur ? 3 : 0); ++round) {
     const double window_blur = blur;
     const EdgeModel window = model(window_blur, window_blur);
-    const size_t stride = std::max<size_t>(1, images.size() * P / 2000);
+    std::vector<size_t> usable;  // profiles on the sides the blur is searched on
+    for (size_t j = 0; j < images.size() * P; ++j)
+      if (blur_sides.empty() || blur_sides[size_t(positions[j % P].side)]) usable.push_back(j);
+    const size_t stride = std::max<size_t>(1, usable.size() / 2000);
     std::vector<std::vector<double>> subset;
     std::vector<double> y;
-    for (size_t j = 0; j < images.size() * P; j += stride)
-      if (profile(window, j, &y)) subset.push_back(y);
+    for (size_t u = 0; u < usable.size(); u += stride)
+      if (profile(window, usable[u], &y)) subset.push_back(y);
     if (subset.empty()) break;
     const int last = 5 * int(std::floor((2 * window_blur + 1) / 0.25 + 1e-9));
     std::vector<double> cost;
@@ -749,8 +754,15 @@ BlockOutlineFit FitBlockOutlineFrom(const std::vector<cv::Mat>& images, const De
     // pixel, and the pose with them, back and forth).
     double found_blur = NAN;
     const bool search = round == 1 || (round > 1 && last_moved < 0.1);
-    const std::vector<std::vector<cv::Point2f>> sides = OutlineEdgePoints(
-        images, camera, polygon, blur, black, &found_blur, round == 0 ? reach_px : kLaterReachPx, search);
+    // The blur is searched on the hull's sides that are front-face edges: across a side face's
+    // outer edge the profile's inside holds the crease, where the radiance's slope along the
+    // image changes (the side face is foreshortened), which a narrow strip puts within the
+    // window and the model does not follow (a strip of a few pixels read the blur as 1.5-2.4 px).
+    std::vector<bool> front_edge;
+    for (size_t k = 0; k < hull.size(); ++k) front_edge.push_back(hull[k] < 4 && hull[(k + 1) % hull.size()] < 4);
+    const std::vector<std::vector<cv::Point2f>> sides =
+        OutlineEdgePoints(images, camera, polygon, blur, black, &found_blur,
+                          round == 0 ? reach_px : kLaterReachPx, search, front_edge);
     const bool blur_moved = std::isfinite(found_blur) && std::abs(found_blur - blur) >= 0.05;
     if (std::isfinite(found_blur)) blur = found_blur;
     ceres::Problem problem;
