@@ -45,6 +45,42 @@ TEST_P(ForwardOnBackend, SymmetricSpotGivesSymmetricRadiance) {
   }
 }
 
+// The side faces' radiance (ForwardOptions::side_faces) is the same field as the front face's:
+// where a side face meets the front face they share nodes, and by the spot's symmetry the four
+// side faces of a square block carry the same values (x = 0 and x = X, y = 0 and y = Y).
+TEST_P(ForwardOnBackend, SideFacesShareTheFrontFacesEdgeAndItsSymmetry) {
+  const Material m = Material::Constant({21, 21, 9}, 0.25, {0.2f, 0.15f, 0.1f}, {0.01f, 0.02f, 0.05f});
+  const FacePattern q = GreyPattern(RasterizeLight(LightSpec::Parse("spot:2.5,2.5,1"), m.shape, 0.25));
+  for (translume::Setup setup : {translume::Setup::kBack, translume::Setup::kFront}) {
+    ForwardOptions o = Options();
+    o.setup = setup;
+    o.side_faces = true;
+    const ForwardResult r = SolveForward(m, q, o);
+    const int64_t n = 21, nz = 9;
+    for (int c = 0; c < 3; ++c) {
+      const auto& sides = r.sides[size_t(c)];
+      for (const auto& face : sides) ASSERT_EQ(int64_t(face.size()), n * nz);
+      double top = 0;  // the largest |L| (front-lit, the lit centre's L is negative)
+      for (float v : r.radiance[size_t(c)]) top = std::max(top, double(std::abs(v)));
+      for (int64_t t = 0; t < n; ++t) {
+        // Row k = 0 of each side face is the front face's edge.
+        EXPECT_NEAR(sides[0][size_t(t)], r.radiance[size_t(c)][size_t(n * t)], 1e-6 * top);
+        EXPECT_NEAR(sides[1][size_t(t)], r.radiance[size_t(c)][size_t(n - 1 + n * t)], 1e-6 * top);
+        EXPECT_NEAR(sides[2][size_t(t)], r.radiance[size_t(c)][size_t(t)], 1e-6 * top);
+        EXPECT_NEAR(sides[3][size_t(t)], r.radiance[size_t(c)][size_t(t + n * (n - 1))], 1e-6 * top);
+        for (int64_t k = 0; k < nz; ++k)
+          for (int f = 1; f < 4; ++f)
+            EXPECT_NEAR(sides[size_t(f)][size_t(t + n * k)], sides[0][size_t(t + n * k)], Tolerance() * top);
+      }
+      // Down the side's middle the radiance is positive and changes with depth (the rows are the
+      // side's own, not copies of the front's edge).
+      for (int64_t k = 0; k < nz; ++k) EXPECT_GT(sides[0][size_t(10 + n * k)], 0) << "k " << k;
+      EXPECT_GT(std::abs(sides[0][size_t(10 + n * 4)] / sides[0][10] - 1), 0.01);
+    }
+    EXPECT_TRUE(SolveForward(m, q, Options()).sides[0][0].empty());  // only when asked
+  }
+}
+
 // SPEC section 3's uniformly lit homogeneous slab of thickness T through SolveForward (the lit
 // face, the source and L = (phi - q) / (2 pi) as a user gets them): phi(z) = A e^{-s z} +
 // B e^{s z} with z from the lit face, so L = (A e^{-sT} + B e^{sT}) / (2 pi) on the front face
