@@ -131,15 +131,16 @@ std::array<double, 4> SideFaceWidthsPx(const DeviceIntrinsics& camera, const cal
 // refined as RefineFaceCorners refines the face's (OutlineEdgePoints: the same profiles and
 // model; the edges let lie up to reach_px off in the first round, through blur_px, and up to
 // 3 px off later, so that a side the pose misplaces can move; the blur searched in the second
-// round and again once the pose nearly settles), then the pose whose hull sides (lines through
+// round and again once the pose nearly settles, on the hull's sides that are front-face edges
+// only: a narrow side face's crease misleads the search), then the pose whose hull sides (lines through
 // the projected box corners) pass closest to the edge points (Ceres, Huber loss of 1 px on the
 // distances in the ideal image); settled when a round moves the front corners by less than
 // 0.02 px. Sides with fewer than 8 points are left out; a round with fewer than 4 such sides
 // ends the fit (ok false). A nearly parallel view fits two poses nearly as well (the side face
 // seen taken for its neighbour, the block turned the other way), so the fit runs from the pose
 // given and from it turned both ways about the front face's x and y axes through its centre
-// (by the angle at which a side face starts to show, plus 5 degrees), and keeps the settled fit
-// of least RMS among those with at least 80 % of the most edge points.
+// (by the angle at which a side face starts to show, plus 5 degrees), and keeps, among the fits
+// with at least 80 % of the most edge points, a settled one before any other, then the least RMS.
 struct BlockOutlineFit {
   bool ok = false;
   calib::Pose camera_from_sample;
