@@ -831,8 +831,8 @@ BlockOutlineFit FitBlockOutline(const std::vector<cv::Mat>& images, const Device
   std::vector<BlockOutlineFit> fits(starts.size());
   for (size_t k = 0; k < starts.size(); ++k)
     fits[k] = FitBlockOutlineFrom(images, camera, size_mm, starts[k], blur_px, reach_px, black);
-  // The fit that explains the most of the outline: the least RMS among those that use at least
-  // 80 % of the most edge points any fit used.
+  // The fit that explains the most of the outline: among those that use at least 80 % of the
+  // most edge points any fit used, a settled one before any other, then the least RMS.
   int most = 0;
   for (const BlockOutlineFit& f : fits)
     if (f.ok) most = std::max(most, f.edge_points);
