@@ -562,17 +562,14 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   // A camera beside the projector (the paper's front-lit rig) may see side faces of the block:
   // the front face's edges next to them do not show, and the outline is the block's.
   const std::array<double, 3> size = SampleSize(g, h);
-  const std::array<double, 4> side_px = SideFaceWidthsPx(cam, camera_from_sample, size);
-  // Corners found that no block's front face fits (pose RMS above 1 px), or an outline whose
-  // sides did not refine, may be the outline of a block whose side faces show, the pose from
-  // them too far off to tell.
   const bool exact = !cap.face_corners_px.empty() && !cap.face_corners_near;
-  const bool found = cap.face_corners_px.empty();
-  if (*std::max_element(side_px.begin(), side_px.end()) > kSideFaceShowsPx ||
-      (found && (rep.pose_rms_px > 1 || outline_unrefined))) {
-    const BlockOutlineFit fit =
-        FitBlockOutline(lit, cam, size, camera_from_sample, cap.camera_blur_px.value_or(1.0),
-                        exact ? 0 : std::min(kNearCornerReachPx + 2 * rep.pose_rms_px, 15.0), black_level);
+  const CornerSource source = exact ? CornerSource::kExact
+                              : cap.face_corners_near ? CornerSource::kNear : CornerSource::kFound;
+  if (const OutlineFitNeed need =
+          NeedsBlockOutlineFit(cam, camera_from_sample, size, source, rep.pose_rms_px, outline_unrefined);
+      need.needed) {
+    const BlockOutlineFit fit = FitBlockOutline(lit, cam, size, camera_from_sample,
+                                                cap.camera_blur_px.value_or(1.0), need.reach_px, black_level);
     const bool settled = fit.ok && fit.converged;
     std::string shows;
     const char* names[4] = {"x = 0", "x = X", "y = 0", "y = Y"};

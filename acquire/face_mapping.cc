@@ -486,10 +486,6 @@ struct EdgeModel {
   }
 };
 
-}  // namespace
-
-namespace {
-
 // RefineFaceCorners' edge points along the sides of a convex polygon (`corners` in order, side s
 // from corner s to s + 1, any number of sides): per side, the points p + t0 n found (image px),
 // few or none where the edge does not show. *blur_found (optional) receives the blur searched;
@@ -506,9 +502,10 @@ std::vector<std::vector<cv::Point2f>> OutlineEdgePoints(const std::vector<cv::Ma
   CV_Assert(black.empty() || (black.type() == CV_32FC3 && black.size() == camera.size));
   const int N = int(corners.size());
   if (blur_found) *blur_found = NAN;
-  // sigma_e^2 = blur^2 + kSamplingVariance. The window: t from -max(6, 4 sigma_w) to max(5, 3 sigma_w + 1.5) px, offsets within r =
-  // max(1.5, sigma_w), sigma_w the sigma_e of `window_blur`; with reach_px > r, the offsets
-  // within reach_px and the window that much wider at both ends.
+  // sigma_e^2 = blur^2 + kSamplingVariance. The window: t from -max(6, 4 sigma_w) to
+  // max(5, 3 sigma_w + 1.5) px, offsets within r = max(1.5, sigma_w), sigma_w the sigma_e of
+  // `window_blur`; with reach_px > r, the offsets within reach_px and the window that much wider
+  // at both ends.
   const auto sigma_e = [](double blur) { return std::sqrt(blur * blur + kSamplingVariance); };
   const auto model = [&](double blur, double window_blur) {
     const double w = sigma_e(window_blur), reach = std::max(1.5, w), wider = std::max(0.0, reach_px - reach);
@@ -573,13 +570,13 @@ std::vector<std::vector<cv::Point2f>> OutlineEdgePoints(const std::vector<cv::Ma
   // best costs over ~2000 of them, every 0.25 px from 0 to 2 blur + 1 px, then every 0.05 px
   // within 0.2 px of the best; again with the window of the blur found, until it stays within
   // 0.1 px (three rounds at most).
+  std::vector<size_t> usable;  // profiles on the sides the blur is searched on
+  for (size_t j = 0; search_blur && j < images.size() * P; ++j)
+    if (blur_sides.empty() || blur_sides[size_t(positions[j % P].side)]) usable.push_back(j);
   double blur = blur_px;
   for (int round = 0; round < (search_blur ? 3 : 0); ++round) {
     const double window_blur = blur;
     const EdgeModel window = model(window_blur, window_blur);
-    std::vector<size_t> usable;  // profiles on the sides the blur is searched on
-    for (size_t j = 0; j < images.size() * P; ++j)
-      if (blur_sides.empty() || blur_sides[size_t(positions[j % P].side)]) usable.push_back(j);
     const size_t stride = std::max<size_t>(1, usable.size() / 2000);
     std::vector<std::vector<double>> subset;
     std::vector<double> y;
@@ -613,7 +610,8 @@ std::vector<std::vector<cv::Point2f>> OutlineEdgePoints(const std::vector<cv::Ma
       double t0;
       if (!profile(m, size_t(job), &y)) continue;
       m.Fit(y, &t0);
-      if (std::isfinite(t0)) found[size_t(job)] = cv::Point2f(positions[size_t(job) % P].p + t0 * positions[size_t(job) % P].n);
+      const Position& pos = positions[size_t(job) % P];
+      if (std::isfinite(t0)) found[size_t(job)] = cv::Point2f(pos.p + t0 * pos.n);
     }
   });
   std::vector<std::vector<cv::Point2f>> sides(static_cast<size_t>(N));
@@ -808,6 +806,17 @@ BlockOutlineFit FitBlockOutlineFrom(const std::vector<cv::Mat>& images, const De
 }
 
 }  // namespace
+
+OutlineFitNeed NeedsBlockOutlineFit(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
+                                    const std::array<double, 3>& size_mm, CornerSource source,
+                                    double pose_rms_px, bool outline_unrefined) {
+  const std::array<double, 4> side_px = SideFaceWidthsPx(camera, camera_from_sample, size_mm);
+  OutlineFitNeed need;
+  need.needed = *std::max_element(side_px.begin(), side_px.end()) > kSideFaceShowsPx ||
+                (source == CornerSource::kFound && (pose_rms_px > 1 || outline_unrefined));
+  need.reach_px = source == CornerSource::kExact ? 0 : std::min(kNearCornerReachPx + 2 * pose_rms_px, 15.0);
+  return need;
+}
 
 BlockOutlineFit FitBlockOutline(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
                                 const std::array<double, 3>& size_mm, const calib::Pose& camera_from_sample,

@@ -124,6 +124,20 @@ constexpr double kSideFaceShowsPx = 0.5;  // wider than this, a side face is tak
 std::array<double, 4> SideFaceWidthsPx(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
                                        const std::array<double, 3>& size_mm);
 
+// Whether the pose from four corners gives way to FitBlockOutline's (acquire and `translume
+// patterns` alike): a side face wider than kSideFaceShowsPx shows at camera_from_sample, or
+// corners found in the photos fit no face (pose RMS above 1 px, or an outline whose sides did
+// not refine), the pose from them too far off to tell. reach_px: FitBlockOutline's first
+// round's, 0 for corners given as exact, else kNearCornerReachPx + 2 pose RMS (at most 15 px).
+enum class CornerSource { kExact, kNear, kFound };
+struct OutlineFitNeed {
+  bool needed = false;
+  double reach_px = 0;
+};
+OutlineFitNeed NeedsBlockOutlineFit(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
+                                    const std::array<double, 3>& size_mm, CornerSource source,
+                                    double pose_rms_px, bool outline_unrefined);
+
 // The sample's pose from the outline of the whole block in photos of it lit on a dark surround,
 // for a camera that sees side faces too: the outline is then the convex hull of up to six of
 // the block's eight corners (in the ideal pinhole image), and the front face's edges next to a

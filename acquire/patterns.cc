@@ -43,11 +43,10 @@ PatternSet MakeRegionPatterns(const PatternJob& job) {
     // A camera that sees side faces of the block: the outline is the block's (acquire does the same).
     double rms = 0;
     const calib::Pose start = EstimateSamplePose(cam, set.corners, job.size_mm, job.corners_source, &rms, false);
-    const std::array<double, 4> side_px = SideFaceWidthsPx(cam, start, job.size_mm);
-    if (*std::max_element(side_px.begin(), side_px.end()) > kSideFaceShowsPx ||
-        (job.corners.empty() && (rms > 1 || outline_unrefined))) {
-      const BlockOutlineFit fit = FitBlockOutline({job.photo}, cam, job.size_mm, start, 1.0,
-                                                  std::min(kNearCornerReachPx + 2 * rms, 15.0));
+    const CornerSource source = job.corners.empty() ? CornerSource::kFound : CornerSource::kNear;
+    if (const OutlineFitNeed need = NeedsBlockOutlineFit(cam, start, job.size_mm, source, rms, outline_unrefined);
+        need.needed) {
+      const BlockOutlineFit fit = FitBlockOutline({job.photo}, cam, job.size_mm, start, 1.0, need.reach_px);
       if (!fit.ok || !fit.converged)
         throw InputError(fmt::format("{}: the camera sees side faces of the block, and the block's outline fit did "
                                      "not settle (docs/capture.md, \"Side faces\"); give --corners alone, as "
