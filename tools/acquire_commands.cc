@@ -82,9 +82,11 @@ int RunPatterns(int argc, char** argv) {
   CLI::App app{"Write the projector images that light NxN regions of the sample's lit face, one\n"
                "condition each (docs/capture.md, step 6), from the camera and projector\n"
                "calibrations and the sample's place: its front face's corners in the camera image,\n"
-               "given or found in a photo of the sample on a dark background; and the images of a\n"
-               "few validation spots (acquire's solve stops on them). Also writes conditions.json,\n"
-               "the conditions list for capture.json.",
+               "given, or found (or given near them and refined) in a photo of the sample on a\n"
+               "dark background, through the lens's blur; where the camera sees side faces of\n"
+               "the block, from the block's outline in the photo. Also the images of a few\n"
+               "validation spots (acquire's solve stops on them), and conditions.json, the\n"
+               "conditions list for capture.json.",
                "translume patterns"};
   std::string camera_path, projector_path, size_text, setup = "back", corners_text, photo, response_path,
       lights = "4x4", out;
@@ -167,9 +169,11 @@ int RunPatterns(int argc, char** argv) {
 
 int RunAcquire(int argc, char** argv) {
   CLI::App app{"From a capture folder (docs/capture.md) to a material: calibration, HDR, sample\n"
-               "pose, mapping of the photos onto the grid nodes, the node-space dataset, the\n"
-               "solve, a report and previews. Intermediate results go to OUT_work/ and are\n"
-               "reused on a re-run unless their inputs changed (--force recomputes).\n"
+               "pose (corners given, or found and refined in the photos; the block's outline where\n"
+               "the camera sees side faces), mapping of the photos onto the grid nodes, the\n"
+               "node-space dataset, the solve, a report and previews. Intermediate results go\n"
+               "to OUT_work/ and are reused on a re-run unless their inputs changed (--force\n"
+               "recomputes).\n"
                "Ctrl-C stops at the next stage, or during the solve writes the best material so\n"
                "far (exit status 130); a second Ctrl-C ends at once.",
                "translume acquire"};
