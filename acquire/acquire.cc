@@ -565,20 +565,30 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   const bool exact = !cap.face_corners_px.empty() && !cap.face_corners_near;
   const CornerSource source = exact ? CornerSource::kExact
                               : cap.face_corners_near ? CornerSource::kNear : CornerSource::kFound;
-  if (const OutlineFitNeed need =
-          NeedsBlockOutlineFit(cam, camera_from_sample, size, source, rep.pose_rms_px, outline_unrefined);
-      need.needed) {
-    const BlockOutlineFit fit = FitBlockOutline(lit, cam, size, camera_from_sample,
-                                                cap.camera_blur_px.value_or(1.0), need.reach_px, black_level);
-    const bool settled = fit.ok && fit.converged;
-    std::string shows;
+  const OutlineFitNeed need =
+      NeedsBlockOutlineFit(cam, camera_from_sample, size, source, rep.pose_rms_px, outline_unrefined);
+  bool fitted = false;  // the block's outline fit placed the corners (or checked exact ones)
+  BlockOutlineFit fit;
+  bool settled = false;
+  std::string shows;  // the side faces seen
+  if (need.needed) {
+    fit = FitBlockOutline(lit, cam, size, camera_from_sample, cap.camera_blur_px.value_or(1.0), need.reach_px,
+                          black_level);
+    settled = fit.ok && fit.converged;
     const char* names[4] = {"x = 0", "x = X", "y = 0", "y = Y"};
     const std::array<double, 4> fit_px =
         SideFaceWidthsPx(cam, settled ? fit.camera_from_sample : camera_from_sample, size);
     for (int f = 0; f < 4; ++f)
       if (fit_px[size_t(f)] > kSideFaceShowsPx)
         shows += fmt::format("{}{} ({:.1f} px wide)", shows.empty() ? "" : ", ", names[f], fit_px[size_t(f)]);
+    // A fit that only looked for a side face near showing is kept where it found one.
+    fitted = need.required || (settled && !shows.empty());
     if (shows.empty()) shows = "none";
+    if (!fitted)
+      progress(settled ? "the block's outline shows no side face; refining the face's four corners"
+                       : "the block's outline fit did not settle; refining the face's four corners instead");
+  }
+  if (fitted) {
     progress(fmt::format("the pose is fitted to the block's outline; side faces the camera sees besides the front "
                          "face: {}", shows));
     double moved = 0;

@@ -693,23 +693,32 @@ struct OutlineDistance {
 
 }  // namespace
 
-std::array<double, 4> SideFaceWidthsPx(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
-                                       const std::array<double, 3>& size_mm) {
-  const cv::Vec3d o = camera_from_sample.Inverse().t;  // the camera's centre in the sample frame
-  // Per side face: its front edge's two corners (bits), and whether the camera is outside it.
+std::array<double, 4> SideFaceSignedWidthsPx(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
+                                             const std::array<double, 3>& size_mm) {
+  // Per side face: its front edge's two corners (bits); outward is away from the front face's
+  // centre.
   const int edges[4][2] = {{0, 2}, {1, 3}, {0, 1}, {2, 3}};
-  const bool outside[4] = {o[0] < 0, o[0] > size_mm[0], o[1] < 0, o[1] > size_mm[1]};
+  const cv::Point2d centre =
+      IdealImage(camera, camera_from_sample, cv::Vec3d(size_mm[0] / 2, size_mm[1] / 2, 0));
   std::array<double, 4> width{};
   for (int f = 0; f < 4; ++f) {
-    if (!outside[f]) continue;
     const cv::Point2d a = IdealImage(camera, camera_from_sample, BlockCorner(size_mm, edges[f][0]));
     const cv::Point2d b = IdealImage(camera, camera_from_sample, BlockCorner(size_mm, edges[f][1]));
     const cv::Point2d d = (b - a) * (1.0 / std::max(cv::norm(b - a), 1e-12));
+    const double outward = d.cross(centre - a) > 0 ? -1 : 1;
+    width[size_t(f)] = -INFINITY;
     for (int e : edges[f]) {
       const cv::Point2d back = IdealImage(camera, camera_from_sample, BlockCorner(size_mm, e | 4));
-      width[size_t(f)] = std::max(width[size_t(f)], std::abs(d.cross(back - a)));
+      width[size_t(f)] = std::max(width[size_t(f)], outward * d.cross(back - a));
     }
   }
+  return width;
+}
+
+std::array<double, 4> SideFaceWidthsPx(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
+                                       const std::array<double, 3>& size_mm) {
+  std::array<double, 4> width = SideFaceSignedWidthsPx(camera, camera_from_sample, size_mm);
+  for (double& w : width) w = std::max(w, 0.0);
   return width;
 }
 
@@ -810,10 +819,12 @@ BlockOutlineFit FitBlockOutlineFrom(const std::vector<cv::Mat>& images, const De
 OutlineFitNeed NeedsBlockOutlineFit(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
                                     const std::array<double, 3>& size_mm, CornerSource source,
                                     double pose_rms_px, bool outline_unrefined) {
-  const std::array<double, 4> side_px = SideFaceWidthsPx(camera, camera_from_sample, size_mm);
+  const std::array<double, 4> side_px = SideFaceSignedWidthsPx(camera, camera_from_sample, size_mm);
+  const double widest = *std::max_element(side_px.begin(), side_px.end());
   OutlineFitNeed need;
-  need.needed = *std::max_element(side_px.begin(), side_px.end()) > kSideFaceShowsPx ||
-                (source == CornerSource::kFound && (pose_rms_px > 1 || outline_unrefined));
+  need.required =
+      widest > kSideFaceShowsPx || (source == CornerSource::kFound && (pose_rms_px > 1 || outline_unrefined));
+  need.needed = need.required || (source != CornerSource::kExact && widest > -kSideFaceNearPx);
   need.reach_px = source == CornerSource::kExact ? 0 : std::min(kNearCornerReachPx + 2 * pose_rms_px, 15.0);
   return need;
 }

@@ -123,15 +123,27 @@ std::vector<cv::Point2d> RefineFaceCornersWithin(const std::vector<cv::Mat>& ima
 constexpr double kSideFaceShowsPx = 0.5;  // wider than this, a side face is taken as seen
 std::array<double, 4> SideFaceWidthsPx(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
                                        const std::array<double, 3>& size_mm);
+// The same distances signed: negative where the side face is turned away (its back corners
+// project inside the front face, by that much at most), so that a pose a little off tells how
+// near a side face is to showing.
+std::array<double, 4> SideFaceSignedWidthsPx(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
+                                             const std::array<double, 3>& size_mm);
 
 // Whether the pose from four corners gives way to FitBlockOutline's (acquire and `translume
-// patterns` alike): a side face wider than kSideFaceShowsPx shows at camera_from_sample, or
-// corners found in the photos fit no face (pose RMS above 1 px, or an outline whose sides did
-// not refine), the pose from them too far off to tell. reach_px: FitBlockOutline's first
-// round's, 0 for corners given as exact, else kNearCornerReachPx + 2 pose RMS (at most 15 px).
+// patterns` alike). `required`: a side face wider than kSideFaceShowsPx shows at
+// camera_from_sample, or corners found in the photos fit no face (pose RMS above 1 px, or an
+// outline whose sides did not refine); the four corners cannot stand in where the fit does not
+// settle. `needed`: that, or corners found or given near the face with a side face within
+// kSideFaceNearPx of showing: a strip up to ~2 px wide hides in the outline found (its outer
+// edge taken for the face's, the pose from those corners showing no side face, or one
+// narrower than kSideFaceShowsPx); the fit is then kept only where it shows a side face.
+// reach_px: FitBlockOutline's first round's, 0 for corners given as exact, else
+// kNearCornerReachPx + 2 pose RMS (at most 15 px).
+constexpr double kSideFaceNearPx = 1.0;
 enum class CornerSource { kExact, kNear, kFound };
 struct OutlineFitNeed {
   bool needed = false;
+  bool required = false;
   double reach_px = 0;
 };
 OutlineFitNeed NeedsBlockOutlineFit(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,

@@ -47,20 +47,25 @@ PatternSet MakeRegionPatterns(const PatternJob& job) {
     if (const OutlineFitNeed need = NeedsBlockOutlineFit(cam, start, job.size_mm, source, rms, outline_unrefined);
         need.needed) {
       const BlockOutlineFit fit = FitBlockOutline({job.photo}, cam, job.size_mm, start, 1.0, need.reach_px);
-      if (!fit.ok || !fit.converged)
+      const std::array<double, 4> side_px = SideFaceWidthsPx(cam, fit.camera_from_sample, job.size_mm);
+      const bool shows = *std::max_element(side_px.begin(), side_px.end()) > kSideFaceShowsPx;
+      if (fit.ok && fit.converged && (shows || need.required)) {
+        set.unrefined_corners = set.corners;
+        for (size_t k = 0; k < 4; ++k)
+          set.refine_moved_px = std::max(set.refine_moved_px, cv::norm(fit.corners[k] - set.corners[k]));
+        set.corners = fit.corners;
+        set.refined = true;
+        set.refine_blur_px = fit.blur_px;
+        set.outline_fit = true;
+        set.side_faces = shows;
+      } else if (need.required) {
         throw InputError(fmt::format("{}: the camera sees side faces of the block, and the block's outline fit did "
                                      "not settle (docs/capture.md, \"Side faces\"); give --corners alone, as "
                                      "measured", job.corners_source));
-      set.unrefined_corners = set.corners;
-      for (size_t k = 0; k < 4; ++k)
-        set.refine_moved_px = std::max(set.refine_moved_px, cv::norm(fit.corners[k] - set.corners[k]));
-      set.corners = fit.corners;
-      set.refined = true;
-      set.refine_blur_px = fit.blur_px;
-      set.side_faces = true;
+      }
     }
   }
-  if (!job.photo.empty() && !set.side_faces) {
+  if (!job.photo.empty() && !set.outline_fit) {
     set.unrefined_corners = set.corners;
     constexpr double kBlurStartPx = 1;  // the refinement's search spans 0..3 px, then follows what it finds
     const std::vector<cv::Point2d> refined =

@@ -45,7 +45,8 @@ struct PatternSet {
   std::vector<cv::Point2d> unrefined_corners;
   bool refined = false;
   double refine_moved_px = 0, refine_blur_px = 0;
-  bool side_faces = false;  // the camera sees side faces: the corners come from FitBlockOutline
+  bool outline_fit = false;  // the corners come from FitBlockOutline (NeedsBlockOutlineFit)
+  bool side_faces = false;   // ... which shows side faces besides the front face
   double pose_rms_px = 0;
   bool face_inside_projector = true;
   int64_t fewest_pixels = 0, most_pixels = 0;

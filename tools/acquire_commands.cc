@@ -155,7 +155,8 @@ int RunPatterns(int argc, char** argv) {
   const std::string how =
       !set.refined ? (corners.empty() ? "found in the photo" : "as given")
                    : fmt::format("{} in the photo through a lens blur of {:.2f} px (moved up to {:.2f} px)",
-                                 set.side_faces ? "from the block's outline (the camera sees side faces)"
+                                 set.side_faces    ? "from the block's outline (the camera sees side faces)"
+                                 : set.outline_fit ? "from the block's outline (no side face shows)"
                                  : corners.empty() ? "found and refined" : "refined",
                                  set.refine_blur_px, set.refine_moved_px);
   std::printf("patterns: front face corners (%.2f, %.2f) (%.2f, %.2f) (%.2f, %.2f) (%.2f, %.2f), %s; pose RMS %.2f "
