@@ -583,10 +583,30 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
         shows += fmt::format("{}{} ({:.1f} px wide)", shows.empty() ? "" : ", ", names[f], fit_px[size_t(f)]);
     // A fit that only looked for a side face near showing is kept where it found one.
     fitted = need.required || (settled && !shows.empty());
-    if (shows.empty()) shows = "none";
-    if (!fitted)
+    // Corners found that a face of another width fits well: sample_mm may be off (it is a whole
+    // number of spacings; a real block's is not). Then the block of that width is fitted too,
+    // and where it fits the outline settled, without the declared one or with less than 2/3 of
+    // its RMS, sample_mm is taken as off (a wider block turned to show a side face that is not
+    // there can fit a face's outline too): the face's four corners are refined, and the pose
+    // fits them as well as it can.
+    std::string hint = need.required && !exact ? SampleSizeHint(cam, corners, size, rep.pose_rms_px) : "";
+    if (!hint.empty()) {
+      const FaceWidthFit width = FaceWidthFittingCorners(cam, corners, size);
+      const std::array<double, 3> other = {width.width_mm, size[1], size[2]};
+      const BlockOutlineFit alt =
+          FitBlockOutline(lit, cam, other, EstimateSamplePose(cam, corners, other, cap.file, nullptr, false),
+                          cap.camera_blur_px.value_or(1.0), need.reach_px, black_level);
+      if (!(alt.ok && alt.converged && (!settled || fit.rms_px > 1.5 * alt.rms_px))) hint.clear();
+    }
+    if (!hint.empty()) {
+      progress(fmt::format("warning: {}: sample_mm may be off: {}, and a block of that width fits the outline in "
+                           "the photos better; the pose is fitted to the face's four corners", cap.file, hint));
+      fitted = false;
+    } else if (!fitted) {
       progress(settled ? "the block's outline shows no side face; refining the face's four corners"
                        : "the block's outline fit did not settle; refining the face's four corners instead");
+    }
+    if (shows.empty()) shows = "none";
   }
   if (fitted) {
     progress(fmt::format("the pose is fitted to the block's outline; side faces the camera sees besides the front "
@@ -657,7 +677,16 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
         rep.face_corners_edge_points = points;
         corners = refined;
         camera_from_sample = EstimateSamplePose(cam, corners, g, h, cap.file + ": face_corners_px", &rep.pose_rms_px);
-        if (!cap.camera_blur_px) estimate_blur();
+        // Where the pose's outline misses the face's (sample_mm off), the blur the refinement
+        // found on the face's own edges, not one read across the pose's outline.
+        if (!cap.camera_blur_px && rep.pose_rms_px > 1 && refine_blur > 0) {
+          rep.camera_blur_px = refine_blur;
+          rep.camera_blur_profiles = points;
+          blur_said = fmt::format("the lens's blur on the sample's photos: sigma {:.2f} px (from the face's edges; the "
+                                  "pose misses the corners by {:.2f} px RMS)", refine_blur, rep.pose_rms_px);
+        } else if (!cap.camera_blur_px) {
+          estimate_blur();
+        }
         progress(fmt::format("refined the corners on {} edge points through a lens blur of {:.2f} px (moved up to "
                              "{:.2f} px): ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})",
                              points, refine_blur, moved, corners[0].x, corners[0].y, corners[1].x, corners[1].y,

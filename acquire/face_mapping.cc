@@ -232,6 +232,47 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
   return pose;
 }
 
+FaceWidthFit FaceWidthFittingCorners(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
+                                     const std::array<double, 3>& size_mm) {
+  const auto rms_at = [&](double width) {
+    double rms = INFINITY;
+    try {
+      EstimateSamplePose(camera, corners, {width, size_mm[1], size_mm[2]}, "", &rms, false);
+    } catch (const InputError&) {
+    }
+    return rms;
+  };
+  // Every 1 % of the range, then golden sections about the best.
+  FaceWidthFit best;
+  const double lo = std::log(0.67), hi = std::log(1.5);
+  const int steps = 80;
+  int at = 0;
+  for (int k = 0; k <= steps; ++k) {
+    const double w = size_mm[0] * std::exp(lo + (hi - lo) * k / steps), r = rms_at(w);
+    if (r < best.rms_px) best = {w, r}, at = k;
+  }
+  if (!std::isfinite(best.rms_px)) return best;
+  double a = lo + (hi - lo) * std::max(0, at - 1) / steps, b = lo + (hi - lo) * std::min(steps, at + 1) / steps;
+  const double g = (std::sqrt(5.0) - 1) / 2;
+  for (int k = 0; k < 40; ++k) {
+    const double c = b - g * (b - a), d = a + g * (b - a);
+    if (rms_at(size_mm[0] * std::exp(c)) < rms_at(size_mm[0] * std::exp(d))) b = d;
+    else a = c;
+  }
+  const double w = size_mm[0] * std::exp((a + b) / 2), r = rms_at(w);
+  if (r < best.rms_px) best = {w, r};
+  return best;
+}
+
+std::string SampleSizeHint(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
+                           const std::array<double, 3>& size_mm, double rms_px) {
+  if (!(rms_px > 1)) return "";
+  const FaceWidthFit fit = FaceWidthFittingCorners(camera, corners, size_mm);
+  if (!(fit.rms_px < 0.5 * rms_px) || std::abs(fit.width_mm - size_mm[0]) < 0.005 * size_mm[0]) return "";
+  return fmt::format("the corners found fit a face of {:.2f} x {:g} mm (pose RMS {:.2f} px) better than {:g} x {:g} "
+                     "mm ({:.2f} px)", fit.width_mm, size_mm[1], fit.rms_px, size_mm[0], size_mm[1], rms_px);
+}
+
 namespace {
 
 // The corners where the lines through consecutive sides' edge points (image points of the four
@@ -496,7 +537,8 @@ std::vector<std::vector<cv::Point2f>> OutlineEdgePoints(const std::vector<cv::Ma
                                                         const std::vector<cv::Point2d>& corners, double blur_px,
                                                         const cv::Mat& black, double* blur_found, double reach_px,
                                                         bool search_blur = true,
-                                                        const std::vector<bool>& blur_sides = {}) {
+                                                        const std::vector<bool>& blur_sides = {},
+                                                        std::vector<size_t>* profiles = nullptr) {
   CV_Assert(corners.size() >= 3 && blur_px >= 0 && reach_px >= 0);
   for (const cv::Mat& img : images) CV_Assert(img.type() == CV_32FC3 && img.size() == camera.size);
   CV_Assert(black.empty() || (black.type() == CV_32FC3 && black.size() == camera.size));
@@ -542,6 +584,10 @@ std::vector<std::vector<cv::Point2f>> OutlineEdgePoints(const std::vector<cv::Ma
     }
   }
   const size_t P = positions.size();
+  if (profiles) {
+    profiles->assign(size_t(N), 0);
+    for (const Position& pos : positions) (*profiles)[size_t(pos.side)] += images.size();
+  }
 
   // Profile j (image j / P at position j % P) sampled at m's ts, less the black, over its
   // inside's level; false without an edge to speak of (a non-finite sample, or the inside not
@@ -747,6 +793,12 @@ BlockOutlineFit FitBlockOutlineFrom(const std::vector<cv::Mat>& images, const De
   // off the real edge (a side face predicted where none shows) finds no points in the usual
   // window, and nothing would move it.
   constexpr double kLaterReachPx = 3;
+  // A side of the outline is explained where at least kSideSupport of its profiles (over all
+  // images) find the edge within reach: the block's sides found 75-100 % on the simulated rigs
+  // (front-lit regions leave some dark), a side the pose puts where no edge is (a wrong
+  // sample_mm: the box cannot match all four of the face's edges) 4-8 %, from noise. Sides
+  // shorter than kSupportedSidePx (a narrow side face's ends) are not counted.
+  constexpr double kSideSupport = 0.25, kSupportedSidePx = 20;
   for (int round = 0; round < 16; ++round) {
     // The outline: the convex hull of the eight corners' ideal images, its corners in order.
     std::vector<cv::Point2f> ideal;
@@ -767,9 +819,10 @@ BlockOutlineFit FitBlockOutlineFrom(const std::vector<cv::Mat>& images, const De
     // window and the model does not follow (a strip of a few pixels read the blur as 1.5-2.4 px).
     std::vector<bool> front_edge;
     for (size_t k = 0; k < hull.size(); ++k) front_edge.push_back(hull[k] < 4 && hull[(k + 1) % hull.size()] < 4);
+    std::vector<size_t> profiles;
     const std::vector<std::vector<cv::Point2f>> sides =
         OutlineEdgePoints(images, camera, polygon, blur, black, &found_blur,
-                          round == 0 ? reach_px : kLaterReachPx, search, front_edge);
+                          round == 0 ? reach_px : kLaterReachPx, search, front_edge, &profiles);
     const bool blur_moved = std::isfinite(found_blur) && std::abs(found_blur - blur) >= 0.05;
     if (std::isfinite(found_blur)) blur = found_blur;
     ceres::Problem problem;
@@ -778,7 +831,12 @@ BlockOutlineFit FitBlockOutlineFrom(const std::vector<cv::Mat>& images, const De
     double rv[3] = {r[0], r[1], r[2]};
     double tv[3] = {fit.camera_from_sample.t[0], fit.camera_from_sample.t[1], fit.camera_from_sample.t[2]};
     fit.sides = fit.edge_points = 0;
+    fit.least_side_support = 1;
     for (size_t s = 0; s < sides.size(); ++s) {
+      const double length = cv::norm(ideal[size_t(hull[s])] - ideal[size_t(hull[(s + 1) % hull.size()])]);
+      if (length >= kSupportedSidePx)
+        fit.least_side_support =
+            std::min(fit.least_side_support, double(sides[s].size()) / double(std::max<size_t>(1, profiles[s])));
       if (sides[s].size() < 8) continue;
       ++fit.sides;
       const cv::Vec3d a = BlockCorner(size_mm, hull[s]), b = BlockCorner(size_mm, hull[(s + 1) % hull.size()]);
@@ -810,7 +868,7 @@ BlockOutlineFit FitBlockOutlineFrom(const std::vector<cv::Mat>& images, const De
   }
   fit.ok = true;
   fit.corners = front;
-  fit.converged = settled;
+  fit.converged = settled && fit.least_side_support >= kSideSupport;
   return fit;
 }
 

@@ -57,6 +57,21 @@ calib::Pose EstimateSamplePose(const DeviceIntrinsics& camera, const std::vector
                                const GridShape& grid, double h, const std::string& what,
                                double* rms_px = nullptr, bool fit_bound = true);
 
+// For corners that a face of size_mm fits badly: the front face's width (x extent, mm, its
+// height kept) whose pose fits them best (0.67 to 1.5 times size_mm[0]) and that pose's RMS
+// (px). Only the face's aspect ratio shows in one view; a wrong sample_mm shows as a better fit.
+struct FaceWidthFit {
+  double width_mm = 0, rms_px = INFINITY;
+};
+FaceWidthFit FaceWidthFittingCorners(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
+                                     const std::array<double, 3>& size_mm);
+
+// "" or, where the corners miss a face of size_mm by more than 1 px RMS (rms_px) and a face of
+// another width fits them in half that: "the corners found fit a face of W x Y mm (pose RMS r
+// px) better than X x Y mm (rms_px)", for the error that stops at those corners.
+std::string SampleSizeHint(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
+                           const std::array<double, 3>& size_mm, double rms_px);
+
 // Finds the front face's four corners in a linear image of the lit sample on a dark background
 // (e.g. the sum of every condition's HDR, or a photo whose background is clipped at 0): a
 // log-domain Otsu threshold after a 5x5 median, the largest blob, its four-sided outline, each
@@ -174,7 +189,12 @@ struct BlockOutlineFit {
   double rms_px = 0;                 // the edge points' RMS distance from the fitted outline
   int edge_points = 0, sides = 0;    // points and hull sides used in the last round
   double blur_px = 0;                // the lens's blur the last round found
-  bool converged = false;            // the last round moved the front corners by less than 0.02 px
+  // The smallest share, over the hull's sides at least 20 px long, of a side's profiles that
+  // found its edge (last round).
+  double least_side_support = 0;
+  // The last round moved the front corners by less than 0.02 px, and every side of the outline
+  // is explained: least_side_support at least 25 % (a wrong sample_mm leaves one near 5 %).
+  bool converged = false;
 };
 BlockOutlineFit FitBlockOutline(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
                                 const std::array<double, 3>& size_mm, const calib::Pose& camera_from_sample,

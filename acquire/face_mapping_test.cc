@@ -153,6 +153,31 @@ TEST(FaceMapping, PoseFromExactCorners) {
   }
 }
 
+// A sample_mm that is off (a whole number of spacings, where the real block is not) fits the
+// corners worse than the face's own width; FaceWidthFittingCorners finds that width, and
+// SampleSizeHint names it only where the size is off by enough to miss the corners by 1 px.
+TEST(FaceMapping, FaceWidthFromTheCornersNamesAWrongSampleSize) {
+  for (translume::Setup setup : {Setup::kBack, Setup::kFront}) {
+    const CaptureRig rig = DefaultCaptureRig(kGrid, kH, setup);
+    const std::array<double, 3> size = SampleSize(kGrid, kH);
+    for (double scale : {0.97, 1.0, 1.03}) {
+      const std::array<double, 3> declared = {size[0] * scale, size[1], size[2]};
+      const FaceWidthFit fit = FaceWidthFittingCorners(rig.camera, TrueCorners(rig), declared);
+      EXPECT_NEAR(fit.width_mm, size[0], 1e-3 * size[0]) << SetupName(setup) << " x " << scale;
+      EXPECT_LT(fit.rms_px, 0.01);
+      double rms = 0;
+      EstimateSamplePose(rig.camera, TrueCorners(rig), declared, "test", &rms, false);
+      const std::string hint = SampleSizeHint(rig.camera, TrueCorners(rig), declared, rms);
+      if (scale == 1.0) {
+        EXPECT_EQ(hint, "");
+      } else {
+        EXPECT_GT(rms, 1) << SetupName(setup) << " x " << scale;
+        EXPECT_NE(hint.find(fmt::format("a face of {:.2f} x {:g} mm", size[0], size[1])), std::string::npos) << hint;
+      }
+    }
+  }
+}
+
 TEST(FaceMapping, CornersInTheWrongOrderOrOutsideAreRejected) {
   const CaptureRig rig = DefaultCaptureRig(kGrid, kH, Setup::kBack);
   auto c = TrueCorners(rig);

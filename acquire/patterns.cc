@@ -59,6 +59,10 @@ PatternSet MakeRegionPatterns(const PatternJob& job) {
         set.outline_fit = true;
         set.side_faces = shows;
       } else if (need.required) {
+        if (const std::string hint = SampleSizeHint(cam, set.corners, job.size_mm, rms); !hint.empty())
+          throw InputError(fmt::format("{}: --sample-mm may be off: {}, and no pose of the block fits its outline "
+                                       "in the photo (docs/capture.md, \"Side faces\"); check --sample-mm, or give "
+                                       "--corners alone, as measured", job.corners_source, hint));
         throw InputError(fmt::format("{}: the camera sees side faces of the block, and the block's outline fit did "
                                      "not settle (docs/capture.md, \"Side faces\"); give --corners alone, as "
                                      "measured", job.corners_source));
