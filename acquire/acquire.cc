@@ -572,40 +572,23 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   bool settled = false;
   std::string shows;  // the side faces seen
   if (need.needed) {
-    fit = FitBlockOutline(lit, cam, size, camera_from_sample, cap.camera_blur_px.value_or(1.0), need.reach_px,
-                          black_level);
-    settled = fit.ok && fit.converged;
+    const OutlineChoice choice =
+        ChooseBlockOutline(lit, cam, size, camera_from_sample, corners, cap.camera_blur_px.value_or(1.0), need,
+                           black_level);
+    fit = choice.fit;
+    settled = choice.settled;
+    fitted = choice.use_fit;
     const char* names[4] = {"x = 0", "x = X", "y = 0", "y = Y"};
-    const std::array<double, 4> fit_px =
-        SideFaceWidthsPx(cam, settled ? fit.camera_from_sample : camera_from_sample, size);
     for (int f = 0; f < 4; ++f)
-      if (fit_px[size_t(f)] > kSideFaceShowsPx)
-        shows += fmt::format("{}{} ({:.1f} px wide)", shows.empty() ? "" : ", ", names[f], fit_px[size_t(f)]);
-    // A fit that only looked for a side face near showing is kept where it found one.
-    fitted = need.required || (settled && !shows.empty());
-    // Corners found that a face of another width fits well: sample_mm may be off (it is a whole
-    // number of spacings; a real block's is not). Then the block of that width is fitted too,
-    // and where it fits the outline settled, without the declared one or with less than 2/3 of
-    // its RMS, sample_mm is taken as off (a wider block turned to show a side face that is not
-    // there can fit a face's outline too): the face's four corners are refined, and the pose
-    // fits them as well as it can.
-    std::string hint = need.required && !exact ? SampleSizeHint(cam, corners, size, rep.pose_rms_px) : "";
-    if (!hint.empty()) {
-      const FaceWidthFit width = FaceWidthFittingCorners(cam, corners, size);
-      const std::array<double, 3> other = {width.width_mm, size[1], size[2]};
-      const BlockOutlineFit alt =
-          FitBlockOutline(lit, cam, other, EstimateSamplePose(cam, corners, other, cap.file, nullptr, false),
-                          cap.camera_blur_px.value_or(1.0), need.reach_px, black_level);
-      if (!(alt.ok && alt.converged && (!settled || fit.rms_px > 1.5 * alt.rms_px))) hint.clear();
-    }
-    if (!hint.empty()) {
+      if (choice.side_px[size_t(f)] > kSideFaceShowsPx)
+        shows += fmt::format("{}{} ({:.1f} px wide)", shows.empty() ? "" : ", ", names[f], choice.side_px[size_t(f)]);
+    if (!choice.size_hint.empty())
       progress(fmt::format("warning: {}: sample_mm may be off: {}, and a block of that width fits the outline in "
-                           "the photos better; the pose is fitted to the face's four corners", cap.file, hint));
-      fitted = false;
-    } else if (!fitted) {
+                           "the photos better; the pose is fitted to the face's four corners", cap.file,
+                           choice.size_hint));
+    else if (!fitted)
       progress(settled ? "the block's outline shows no side face; refining the face's four corners"
                        : "the block's outline fit did not settle; refining the face's four corners instead");
-    }
     if (shows.empty()) shows = "none";
   }
   if (fitted) {

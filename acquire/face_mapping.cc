@@ -884,6 +884,8 @@ OutlineFitNeed NeedsBlockOutlineFit(const DeviceIntrinsics& camera, const calib:
       widest > kSideFaceShowsPx || (source == CornerSource::kFound && (pose_rms_px > 1 || outline_unrefined));
   need.needed = need.required || (source != CornerSource::kExact && widest > -kSideFaceNearPx);
   need.reach_px = source == CornerSource::kExact ? 0 : std::min(kNearCornerReachPx + 2 * pose_rms_px, 15.0);
+  need.source = source;
+  need.pose_rms_px = pose_rms_px;
   return need;
 }
 
@@ -920,6 +922,32 @@ BlockOutlineFit FitBlockOutline(const std::vector<cv::Mat>& images, const Device
                                                 (f.converged == best->converged && f.rms_px < best->rms_px)))
       best = &f;
   return best ? *best : fits.front();
+}
+
+OutlineChoice ChooseBlockOutline(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
+                                 const std::array<double, 3>& size_mm, const calib::Pose& camera_from_sample,
+                                 const std::vector<cv::Point2d>& corners, double blur_px,
+                                 const OutlineFitNeed& need, const cv::Mat& black) {
+  OutlineChoice c;
+  c.fit = FitBlockOutline(images, camera, size_mm, camera_from_sample, blur_px, need.reach_px, black);
+  c.settled = c.fit.ok && c.fit.converged;
+  c.side_px = SideFaceWidthsPx(camera, c.settled ? c.fit.camera_from_sample : camera_from_sample, size_mm);
+  const bool shows = *std::max_element(c.side_px.begin(), c.side_px.end()) > kSideFaceShowsPx;
+  // A fit that only looked for a side face near showing is kept where it found one.
+  c.use_fit = need.required || (c.settled && shows);
+  if (!need.required || need.source == CornerSource::kExact) return c;
+  std::string hint = SampleSizeHint(camera, corners, size_mm, need.pose_rms_px);
+  if (hint.empty()) return c;
+  const std::array<double, 3> other = {FaceWidthFittingCorners(camera, corners, size_mm).width_mm, size_mm[1],
+                                       size_mm[2]};
+  const BlockOutlineFit alt = FitBlockOutline(
+      images, camera, other, EstimateSamplePose(camera, corners, other, "", nullptr, false), blur_px,
+      need.reach_px, black);
+  if (alt.ok && alt.converged && (!c.settled || c.fit.rms_px > 1.5 * alt.rms_px)) {
+    c.size_hint = hint;
+    c.use_fit = false;
+  }
+  return c;
 }
 
 FaceSamples ResampleFrontFace(const cv::Mat& img, const DeviceIntrinsics& camera,

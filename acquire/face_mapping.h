@@ -160,6 +160,8 @@ struct OutlineFitNeed {
   bool needed = false;
   bool required = false;
   double reach_px = 0;
+  CornerSource source = CornerSource::kFound;
+  double pose_rms_px = 0;  // the corners' pose RMS (px)
 };
 OutlineFitNeed NeedsBlockOutlineFit(const DeviceIntrinsics& camera, const calib::Pose& camera_from_sample,
                                     const std::array<double, 3>& size_mm, CornerSource source,
@@ -199,6 +201,27 @@ struct BlockOutlineFit {
 BlockOutlineFit FitBlockOutline(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
                                 const std::array<double, 3>& size_mm, const calib::Pose& camera_from_sample,
                                 double blur_px, double reach_px, const cv::Mat& black = cv::Mat());
+
+// What the block's outline says where NeedsBlockOutlineFit asks for it (acquire and `translume
+// patterns` alike): FitBlockOutline of the declared block from camera_from_sample (the pose
+// from `corners`) through blur_px, and whether it places the corners (use_fit: required, or
+// settled with a side face showing). Where the fit is required for corners found or given near
+// and SampleSizeHint names another width, the block of that width is fitted too; where that one
+// settles and the declared one does not, or fits with more than 1.5 times its RMS, sample_mm is
+// taken as off (a wider block turned to show a side face that is not there can fit a face's
+// outline too): size_hint holds SampleSizeHint's text and use_fit is false, the face's four
+// corners to be refined instead.
+struct OutlineChoice {
+  BlockOutlineFit fit;
+  bool settled = false;              // fit.ok && fit.converged
+  std::array<double, 4> side_px{};   // SideFaceWidthsPx at the fit's pose (settled) or the start's
+  bool use_fit = false;
+  std::string size_hint;
+};
+OutlineChoice ChooseBlockOutline(const std::vector<cv::Mat>& images, const DeviceIntrinsics& camera,
+                                 const std::array<double, 3>& size_mm, const calib::Pose& camera_from_sample,
+                                 const std::vector<cv::Point2d>& corners, double blur_px,
+                                 const OutlineFitNeed& need, const cv::Mat& black = cv::Mat());
 
 // Node-space front-face radiance from a linear RGB image (CV_32FC3; +inf = saturated): every
 // front-face node's value is the mean of the image over the node's dual box on the face (the

@@ -46,10 +46,9 @@ PatternSet MakeRegionPatterns(const PatternJob& job) {
     const CornerSource source = job.corners.empty() ? CornerSource::kFound : CornerSource::kNear;
     if (const OutlineFitNeed need = NeedsBlockOutlineFit(cam, start, job.size_mm, source, rms, outline_unrefined);
         need.needed) {
-      const BlockOutlineFit fit = FitBlockOutline({job.photo}, cam, job.size_mm, start, 1.0, need.reach_px);
-      const std::array<double, 4> side_px = SideFaceWidthsPx(cam, fit.camera_from_sample, job.size_mm);
-      const bool shows = *std::max_element(side_px.begin(), side_px.end()) > kSideFaceShowsPx;
-      if (fit.ok && fit.converged && (shows || need.required)) {
+      const OutlineChoice choice = ChooseBlockOutline({job.photo}, cam, job.size_mm, start, set.corners, 1.0, need);
+      if (choice.use_fit && choice.settled) {
+        const BlockOutlineFit& fit = choice.fit;
         set.unrefined_corners = set.corners;
         for (size_t k = 0; k < 4; ++k)
           set.refine_moved_px = std::max(set.refine_moved_px, cv::norm(fit.corners[k] - set.corners[k]));
@@ -57,12 +56,12 @@ PatternSet MakeRegionPatterns(const PatternJob& job) {
         set.refined = true;
         set.refine_blur_px = fit.blur_px;
         set.outline_fit = true;
-        set.side_faces = shows;
-      } else if (need.required) {
-        if (const std::string hint = SampleSizeHint(cam, set.corners, job.size_mm, rms); !hint.empty())
-          throw InputError(fmt::format("{}: --sample-mm may be off: {}, and no pose of the block fits its outline "
-                                       "in the photo (docs/capture.md, \"Side faces\"); check --sample-mm, or give "
-                                       "--corners alone, as measured", job.corners_source, hint));
+        set.side_faces = *std::max_element(choice.side_px.begin(), choice.side_px.end()) > kSideFaceShowsPx;
+      } else if (!choice.size_hint.empty()) {
+        set.warnings.push_back(fmt::format("{}: --sample-mm may be off: {}, and a block of that width fits the "
+                                           "outline in the photo better; the face's four corners are refined",
+                                           job.corners_source, choice.size_hint));
+      } else if (choice.use_fit) {
         throw InputError(fmt::format("{}: the camera sees side faces of the block, and the block's outline fit did "
                                      "not settle (docs/capture.md, \"Side faces\"); give --corners alone, as "
                                      "measured", job.corners_source));
