@@ -142,8 +142,11 @@ CaptureSpec ReadCapture(const std::string& path) {
                                          "the {:g} nodes a grid axis may have", a, s.size_mm[size_t(a)],
                                          cells, s.spacing_mm, double(kMaxGridAxis)));
       if (std::abs(cells - std::round(cells)) > 1e-3 * std::max(1.0, cells))
-        r.Fail("spacing_mm", fmt::format("sample_mm[{}] = {} is not a whole number of spacings {}",
-                                         a, s.size_mm[size_t(a)], s.spacing_mm));
+        r.Fail("spacing_mm",
+               fmt::format("sample_mm[{}] = {} is not a whole number of spacings {}: give {:g} or {:g} (the "
+                           "grid's extent; acquire warns where the photos show the block's width is off)",
+                           a, s.size_mm[size_t(a)], s.spacing_mm, std::floor(cells) * s.spacing_mm,
+                           std::ceil(cells) * s.spacing_mm));
       n[a] = int64_t(std::llround(cells)) + 1;
     }
   } else {

@@ -122,6 +122,9 @@ TEST_F(CaptureTest, EveryBrokenFieldIsNamed) {
   ExpectError([](auto& j) { j["setup"] = "side"; }, "setup: expected");
   ExpectError([](auto& j) { j["sample_mm"] = {1, 2}; }, "sample_mm: expected 3 numbers");
   ExpectError([](auto& j) { j["spacing_mm"] = 0.3; }, "spacing_mm: sample_mm[0]");
+  // A measured size that is no whole number of spacings: the two nearest that are.
+  ExpectError([](auto& j) { j["sample_mm"] = {11.62, 8.5, 2.5}; },
+              "spacing_mm: sample_mm[0] = 11.62 is not a whole number of spacings 0.5: give 11.5 or 12");
   ExpectError([](auto& j) { j["grid"] = {24, 18, 6}; }, "spacing_mm: give exactly one");
   ExpectError([](auto& j) { j["C"] = 2.0; }, "C: give eta or C");
   ExpectError([](auto& j) { j["face_corners_px"] = {{1, 2}}; }, "face_corners_px: expected 4");
