@@ -203,6 +203,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     // A line that ends in "..." announces work, and a stop comes before it, unprinted; the others
     // report work done, and are printed before a stop.
     std::string what = s;
+    if (what.rfind("warning: ", 0) == 0) rep.warnings.push_back(what.substr(9));
     const bool announces = what.size() >= 3 && what.compare(what.size() - 3, 3, "...") == 0;
     if (!announces && progress_fn) progress_fn(s);
     if (!solving && o.stop && o.stop()) {
@@ -875,6 +876,7 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
   for (const auto& [name, t] : rep.stage_seconds) st[name] = t;
   j["stage_seconds"] = st;
   j["reused"] = rep.reused;
+  j["warnings"] = rep.warnings;
   nlohmann::json cs = nlohmann::json::array();
   for (const auto& c : rep.conditions)
     cs.push_back({{"name", c.name}, {"measured_nodes", c.measured_nodes}, {"saturated_nodes", c.saturated_nodes},

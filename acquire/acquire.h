@@ -49,6 +49,7 @@ struct AcquireReport {
   std::string work_dir, dataset_dir, material, report_json;
   std::vector<std::pair<std::string, double>> stage_seconds;  // in order
   std::vector<std::string> reused;                            // stages taken from the work folder
+  std::vector<std::string> warnings;  // the "warning: " lines of the log, without that prefix
   // pose_rms_px: the corners' reprojection RMS; where the pose was fitted to the block's outline
   // (a camera that sees side faces: FitBlockOutline), the edge points' RMS distance from it.
   double camera_rms_px = -1, projector_rms_px = -1, pose_rms_px = -1;

@@ -252,6 +252,11 @@ TEST_F(AcquireTest, SampleSizeOffIsNamedAndTheFaceKept) {
     EXPECT_LT(d, 0.1) << "corner " << k;
   }
   EXPECT_LT(r.camera_blur_px, 1.0);  // from the face's edges, not across the pose's outline
+  // The warning is kept in report.json too.
+  const nlohmann::json rep = nlohmann::json::parse(std::ifstream(WorkDir(Out()) + "/report.json"));
+  bool kept = false;
+  for (const auto& w : rep["warnings"]) kept |= w.get<std::string>().find("sample_mm may be off") != std::string::npos;
+  EXPECT_TRUE(kept) << rep["warnings"].dump();
 }
 
 TEST_F(AcquireTest, CornersGivenNearTheFaceAreRefined) {
