@@ -93,6 +93,13 @@ class StageLog {
 };
 
 // Text for an HTML page: & < > " escaped.
+// "(x0, y0) (x1, y1) ..." (px, two decimals), for the log's lines about corners.
+std::string CornerList(const std::vector<cv::Point2d>& corners) {
+  std::string list;
+  for (const cv::Point2d& c : corners) list += fmt::format("{}({:.2f}, {:.2f})", list.empty() ? "" : " ", c.x, c.y);
+  return list;
+}
+
 std::string Html(const std::string& text) {
   std::string out;
   for (char ch : text) {
@@ -526,10 +533,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     if (corners.empty())
       throw InputError(fmt::format("{}: face_corners_px is \"auto\" but no four-sided sample was "
                                    "found in the images; give the corners", cap.file));
-    progress(fmt::format("found the {}: ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})",
-                         outline_unrefined ? "sample's outline" : "front face's corners",
-                         corners[0].x, corners[0].y, corners[1].x, corners[1].y, corners[2].x, corners[2].y,
-                         corners[3].x, corners[3].y));
+    progress(fmt::format("found the {}: {}", outline_unrefined ? "sample's outline" : "front face's corners",
+                         CornerList(corners)));
   }
   // The black level, subtracted from every condition: saturated (+inf) samples of it, which do
   // not occur in practice, count as 0 so that they cannot hide a condition's own saturation.
@@ -568,17 +573,11 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
                               : cap.face_corners_near ? CornerSource::kNear : CornerSource::kFound;
   const OutlineFitNeed need =
       NeedsBlockOutlineFit(cam, camera_from_sample, size, source, rep.pose_rms_px, outline_unrefined);
-  bool fitted = false;  // the block's outline fit placed the corners (or checked exact ones)
-  BlockOutlineFit fit;
-  bool settled = false;
-  std::string shows;  // the side faces seen
+  OutlineChoice choice;  // use_fit: the block's outline fit placed the corners (or checked exact ones)
+  std::string shows;     // the side faces seen
   if (need.needed) {
-    const OutlineChoice choice =
-        ChooseBlockOutline(lit, cam, size, camera_from_sample, corners, cap.camera_blur_px.value_or(1.0), need,
-                           black_level);
-    fit = choice.fit;
-    settled = choice.settled;
-    fitted = choice.use_fit;
+    choice = ChooseBlockOutline(lit, cam, size, camera_from_sample, corners, cap.camera_blur_px.value_or(1.0), need,
+                                black_level);
     const char* names[4] = {"x = 0", "x = X", "y = 0", "y = Y"};
     for (int f = 0; f < 4; ++f)
       if (choice.side_px[size_t(f)] > kSideFaceShowsPx)
@@ -587,12 +586,14 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       progress(fmt::format("warning: {}: sample_mm may be off: {}, and a block of that width fits the outline in "
                            "the photos better; the pose is fitted to the face's four corners", cap.file,
                            choice.size_hint));
-    else if (!fitted)
-      progress(settled ? "the block's outline shows no side face; refining the face's four corners"
+    else if (!choice.use_fit)
+      progress(choice.settled ? "the block's outline shows no side face; refining the face's four corners"
                        : "the block's outline fit did not settle; refining the face's four corners instead");
     if (shows.empty()) shows = "none";
   }
-  if (fitted) {
+  if (choice.use_fit) {
+    const BlockOutlineFit& fit = choice.fit;
+    const bool settled = choice.settled;
     progress(fmt::format("the pose is fitted to the block's outline; side faces the camera sees besides the front "
                          "face: {}", shows));
     double moved = 0;
@@ -606,11 +607,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     } else if (exact) {
       if (moved > 1)
         progress(fmt::format("warning: {}: face_corners_px lie up to {:.1f} px from the block's outline fitted in "
-                             "the photos (its front corners: ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) "
-                             "({:.2f}, {:.2f})); give them as {{\"near\": [...]}} to have them refined, or "
-                             "\"auto\"", cap.file, moved, fit.corners[0].x, fit.corners[0].y, fit.corners[1].x,
-                             fit.corners[1].y, fit.corners[2].x, fit.corners[2].y, fit.corners[3].x,
-                             fit.corners[3].y));
+                             "the photos (its front corners: {}); give them as {{\"near\": [...]}} to have them "
+                             "refined, or \"auto\"", cap.file, moved, CornerList(fit.corners)));
     } else {
       corners = fit.corners;
       camera_from_sample = fit.camera_from_sample;
@@ -618,10 +616,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
       rep.face_corners = "refined";
       rep.face_corners_edge_points = fit.edge_points;
       progress(fmt::format("fitted the block's outline on {} edge points of {} sides (RMS {:.2f} px) through a lens "
-                           "blur of {:.2f} px (the front corners moved up to {:.2f} px): ({:.2f}, {:.2f}) ({:.2f}, "
-                           "{:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})", fit.edge_points, fit.sides, fit.rms_px,
-                           fit.blur_px, moved, corners[0].x, corners[0].y, corners[1].x, corners[1].y, corners[2].x,
-                           corners[2].y, corners[3].x, corners[3].y));
+                           "blur of {:.2f} px (the front corners moved up to {:.2f} px): {}", fit.edge_points,
+                           fit.sides, fit.rms_px, fit.blur_px, moved, CornerList(corners)));
     }
     if (cap.camera_blur_px) {
       rep.camera_blur_px = *cap.camera_blur_px;
@@ -672,19 +668,15 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
           estimate_blur();
         }
         progress(fmt::format("refined the corners on {} edge points through a lens blur of {:.2f} px (moved up to "
-                             "{:.2f} px): ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})",
-                             points, refine_blur, moved, corners[0].x, corners[0].y, corners[1].x, corners[1].y,
-                             corners[2].x, corners[2].y, corners[3].x, corners[3].y));
+                             "{:.2f} px): {}", points, refine_blur, moved, CornerList(corners)));
       }
     } else if (const auto [close, close_moved] = refine(false); close.empty() || close_moved > 1) {
       // Off by more than a pixel, or by more than the usual pass reaches: the near passes.
       const auto [refined, moved] = refine(true);
       if (!refined.empty() && moved > 1)
         progress(fmt::format("warning: {}: face_corners_px lie up to {:.1f} px from the face's outline in the "
-                             "photos (refined: ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f}) ({:.2f}, {:.2f})); "
-                             "give them as {{\"near\": [...]}} to have them refined, or \"auto\"", cap.file, moved,
-                             refined[0].x, refined[0].y, refined[1].x, refined[1].y, refined[2].x, refined[2].y,
-                             refined[3].x, refined[3].y));
+                             "photos (refined: {}); give them as {{\"near\": [...]}} to have them refined, or "
+                             "\"auto\"", cap.file, moved, CornerList(refined)));
     }
   }
   if (!blur_said.empty()) progress(blur_said);

@@ -265,10 +265,11 @@ FaceWidthFit FaceWidthFittingCorners(const DeviceIntrinsics& camera, const std::
 }
 
 std::string SampleSizeHint(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
-                           const std::array<double, 3>& size_mm, double rms_px) {
+                           const std::array<double, 3>& size_mm, double rms_px, FaceWidthFit* width_fit) {
   if (!(rms_px > 1)) return "";
   const FaceWidthFit fit = FaceWidthFittingCorners(camera, corners, size_mm);
   if (!(fit.rms_px < 0.5 * rms_px) || std::abs(fit.width_mm - size_mm[0]) < 0.005 * size_mm[0]) return "";
+  if (width_fit) *width_fit = fit;
   return fmt::format("the corners found fit a face of {:.2f} x {:g} mm (pose RMS {:.2f} px) better than {:g} x {:g} "
                      "mm ({:.2f} px)", fit.width_mm, size_mm[1], fit.rms_px, size_mm[0], size_mm[1], rms_px);
 }
@@ -936,10 +937,10 @@ OutlineChoice ChooseBlockOutline(const std::vector<cv::Mat>& images, const Devic
   // A fit that only looked for a side face near showing is kept where it found one.
   c.use_fit = need.required || (c.settled && shows);
   if (!need.required || need.source == CornerSource::kExact) return c;
-  std::string hint = SampleSizeHint(camera, corners, size_mm, need.pose_rms_px);
+  FaceWidthFit width;
+  std::string hint = SampleSizeHint(camera, corners, size_mm, need.pose_rms_px, &width);
   if (hint.empty()) return c;
-  const std::array<double, 3> other = {FaceWidthFittingCorners(camera, corners, size_mm).width_mm, size_mm[1],
-                                       size_mm[2]};
+  const std::array<double, 3> other = {width.width_mm, size_mm[1], size_mm[2]};
   const BlockOutlineFit alt = FitBlockOutline(
       images, camera, other, EstimateSamplePose(camera, corners, other, "", nullptr, false), blur_px,
       need.reach_px, black);

@@ -68,9 +68,10 @@ FaceWidthFit FaceWidthFittingCorners(const DeviceIntrinsics& camera, const std::
 
 // "" or, where the corners miss a face of size_mm by more than 1 px RMS (rms_px) and a face of
 // another width fits them in half that: "the corners found fit a face of W x Y mm (pose RMS r
-// px) better than X x Y mm (rms_px)", for the error that stops at those corners.
+// px) better than X x Y mm (rms_px)", for the error that stops at those corners. *width_fit
+// (optional) receives FaceWidthFittingCorners' result where the hint is given.
 std::string SampleSizeHint(const DeviceIntrinsics& camera, const std::vector<cv::Point2d>& corners,
-                           const std::array<double, 3>& size_mm, double rms_px);
+                           const std::array<double, 3>& size_mm, double rms_px, FaceWidthFit* width_fit = nullptr);
 
 // Finds the front face's four corners in a linear image of the lit sample on a dark background
 // (e.g. the sum of every condition's HDR, or a photo whose background is clipped at 0): a
