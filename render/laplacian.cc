@@ -50,4 +50,26 @@ std::array<double, 6> AxisLaplacianWeights(const std::array<Vec3, 6>& offsets, d
   return w;
 }
 
+bool FirstOrderAxisWeights(const std::array<Vec3, 6>& offsets, const std::array<double, 6>& axis,
+                           std::array<double, 6>* weights) {
+  // min sum_j ((w_j - a_j) / a_j)^2 subject to B w = c: w = a + D B^T (B D B^T)^-1 (c - B a),
+  // D = diag(a_j^2).
+  Eigen::Matrix<double, 4, 6> B;
+  Eigen::Matrix<double, 6, 1> a, D;
+  for (int j = 0; j < 6; ++j) {
+    B.block<3, 1>(0, j) = offsets[j];
+    B(3, j) = offsets[j].squaredNorm();
+    a[j] = axis[j];
+    D[j] = axis[j] * axis[j];
+  }
+  const Eigen::Vector4d c(0, 0, 0, 6);
+  const Eigen::FullPivLU<Eigen::Matrix4d> lu(B * D.asDiagonal() * B.transpose());
+  if (!lu.isInvertible()) return false;
+  const Eigen::Matrix<double, 6, 1> w = a + D.asDiagonal() * B.transpose() * lu.solve(c - B * a);
+  for (int j = 0; j < 6; ++j)
+    if (!std::isfinite(w[j]) || w[j] < 0.05 * axis[j]) return false;
+  for (int j = 0; j < 6; ++j) (*weights)[j] = w[j];
+  return true;
+}
+
 }  // namespace translume

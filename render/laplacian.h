@@ -26,4 +26,14 @@ bool LaplacianWeights(const std::array<Vec3, 6>& offsets, std::array<double, 6>*
 // with the node (a grid folded onto itself).
 std::array<double, 6> AxisLaplacianWeights(const std::array<Vec3, 6>& offsets, double min_length = 0);
 
+// The weights nearest the per-axis ones (least squares relative to each axis weight) that keep
+// the conditions the 6x6 weights meet: first order exact (sum_j w_j offsets[j] = 0) and the
+// trace of the second order (sum_j w_j |offsets[j]|^2 = 6, so that Laplacian |x|^2 = 6 is
+// exact). For nodes whose 6x6 system gives a non-positive weight (first interior nodes along
+// the polycube's edges on a smooth shape): the axis weights alone add a drift along the skewed
+// grid lines there. Returns false (weights untouched) where a weight would fall below 5 % of
+// its axis weight or the system is singular.
+bool FirstOrderAxisWeights(const std::array<Vec3, 6>& offsets, const std::array<double, 6>& axis,
+                           std::array<double, 6>* weights);
+
 }  // namespace translume

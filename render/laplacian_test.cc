@@ -101,5 +101,60 @@ TEST(LaplacianWeights, DegenerateStencilIsRejected) {
   EXPECT_FALSE(LaplacianWeights(off, &w));
 }
 
+TEST(FirstOrderAxisWeights, KeepsTheAxisWeightsWhereTheyAreConsistent) {
+  const auto off = AxisStencil({0.4, 0.9, 0.7, 0.5, 1.2, 0.6});
+  const auto axis = AxisLaplacianWeights(off);
+  std::array<double, 6> w;
+  ASSERT_TRUE(FirstOrderAxisWeights(off, axis, &w));
+  for (int j = 0; j < 6; ++j) EXPECT_NEAR(w[j], axis[j], 1e-9 * axis[j]) << j;
+}
+
+// Stencils sheared so far that the 6x6 system gives a negative weight (as at the first interior
+// nodes along a polycube's edges on a sphere): the weights are exact for every linear function
+// and for |x|^2, where the axis weights add a drift (sum_j a_j offsets[j] != 0).
+TEST(FirstOrderAxisWeights, ExactForLinearFunctionsAndTheSquaredDistanceWhereThe6x6Fails) {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> len(0.5, 1.5), shear(-0.6, 0.6), coef(-2, 2);
+  int tested = 0;
+  for (int trial = 0; trial < 2000 && tested < 20; ++trial) {
+    std::array<double, 6> l;
+    for (double& x : l) x = len(rng);
+    auto off = AxisStencil(l);
+    for (auto& o : off)
+      for (int a = 0; a < 3; ++a)
+        if (o[a] == 0) o[a] = shear(rng) * o.norm();
+    std::array<double, 6> w6, w;
+    if (LaplacianWeights(off, &w6)) continue;
+    const auto axis = AxisLaplacianWeights(off);
+    if (!FirstOrderAxisWeights(off, axis, &w)) continue;
+    ++tested;
+    Vec3 drift_axis = Vec3::Zero(), drift = Vec3::Zero();
+    double trace = 0;
+    for (int j = 0; j < 6; ++j) {
+      EXPECT_GE(w[j], 0.05 * axis[j]);
+      drift_axis += axis[j] * off[j];
+      drift += w[j] * off[j];
+      trace += w[j] * off[j].squaredNorm();
+    }
+    EXPECT_GT(drift_axis.norm(), 1e-3);
+    EXPECT_LT(drift.norm(), 1e-9);
+    EXPECT_NEAR(trace, 6, 1e-9);
+    const Vec3 b(coef(rng), coef(rng), coef(rng));
+    const double alpha = coef(rng);
+    auto f = [&](const Vec3& x) { return 0.7 + b.dot(x) + alpha * x.squaredNorm(); };
+    double lap = 0;
+    for (int j = 0; j < 6; ++j) lap += w[j] * (f(off[j]) - f(Vec3::Zero()));
+    EXPECT_NEAR(lap, 6 * alpha, 1e-8) << trial;
+  }
+  EXPECT_EQ(tested, 20);
+}
+
+TEST(FirstOrderAxisWeights, RejectsAStencilWithAllNeighboursOnOneSide) {
+  std::array<Vec3, 6> off;
+  for (int j = 0; j < 6; ++j) off[j] = Vec3(1.0 + 0.1 * j, 0.2 * (j % 3) - 0.2, 0.3 * (j % 2) - 0.15);
+  std::array<double, 6> w;
+  EXPECT_FALSE(FirstOrderAxisWeights(off, AxisLaplacianWeights(off), &w));
+}
+
 }  // namespace
 }  // namespace translume

@@ -694,22 +694,30 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape,
 
   // Laplacian weights (Appendix B) and the boundary links.
   pg.weights.assign(N, {0, 0, 0, 0, 0, 0});
-  int64_t fallback = 0, inverted = 0;
-#pragma omp parallel for schedule(static) reduction(+ : fallback, inverted) if (pg.num_interior > 50000)
+  int64_t fallback = 0, axis_only = 0, inverted = 0;
+#pragma omp parallel for schedule(static) reduction(+ : fallback, axis_only, inverted) if (pg.num_interior > 50000)
   for (int64_t i = 0; i < pg.num_interior; ++i) {
     std::array<Vec3, 6> off;
     for (int j = 0; j < 6; ++j) off[j] = pg.position[pg.neighbours[i][j]] - pg.position[i];
     std::array<double, 6> w;
     if (!LaplacianWeights(off, &w)) {
-      // A neighbour on the node itself (a folded grid: a polycube that does not fit the shape;
-      // the bunny under one cube at 9^3 had 12 infinite weights, and its solve went to zero).
-      w = AxisLaplacianWeights(off, 1e-3 * pg.mean_boundary_spacing);
+      // The 6x6 system gives a non-positive weight (first interior nodes along the polycube's
+      // edges on a smooth shape) or is singular. The weights nearest the axis ones that keep
+      // its first-order and trace conditions; the axis weights themselves where those fail, such
+      // as a neighbour on the node itself (a folded grid: a polycube that does not fit the
+      // shape; the bunny under one cube at 9^3 had 12 infinite weights, and its solve went to zero).
+      const std::array<double, 6> axis = AxisLaplacianWeights(off, 1e-3 * pg.mean_boundary_spacing);
+      if (!FirstOrderAxisWeights(off, axis, &w)) {
+        w = axis;
+        ++axis_only;
+      }
       ++fallback;
     }
     for (int j = 0; j < 6; ++j) pg.weights[i][j] = float(w[j]);
     inverted += (off[1] - off[0]).dot((off[3] - off[2]).cross(off[5] - off[4])) <= 0;
   }
   pg.fallback_weights = fallback;
+  pg.axis_weights = axis_only;
   pg.inverted_cells = inverted;
   {
     const std::vector<double> area = BoundaryNodeAreas(pg);

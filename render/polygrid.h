@@ -96,7 +96,10 @@ struct Polygrid {
   std::vector<double> depth_mm;
   double mean_boundary_spacing = 0;  // mm
   double first_layer_distance = 0;   // d, mm
-  int64_t fallback_weights = 0;      // nodes whose 6x6 system failed (axis weights used)
+  // Interior nodes whose 6x6 system (LaplacianWeights) failed: they take FirstOrderAxisWeights,
+  // or where those fail too (axis_weights of them) AxisLaplacianWeights.
+  int64_t fallback_weights = 0;
+  int64_t axis_weights = 0;
   // Interior nodes whose grid is folded there: det J <= 0, J's columns the central differences
   // v_+a - v_-a of the lattice neighbours. Many (translume render notes more than 0.5 %) say
   // that the polycube does not follow the shape (one cube for the bunny: 3 % at 17^3).

@@ -10,10 +10,12 @@
 #include <cstdio>
 #include <functional>
 #include <map>
+#include <random>
 
 #include "render/diffusion.h"
 #include "render/material_map.h"
 #include "render/mesh_io.h"
+#include "render/test_metrics.h"
 #include "solver/forward.h"
 #include "solver/status.h"
 
@@ -305,11 +307,15 @@ TEST(Polygrid, BoundaryNodesStayEvenOnSmoothShapes) {
 
 // A homogeneous sphere (radius R = 10 mm) under uniform light q = 1 (RadialSphereRadiance): by
 // symmetry the exact boundary radiance is uniform. At 13^3 and 17^3 the polygrid's mean is
-// within 4 % of it (-3.2 %, -0.7 %), its sd under 2 % of the mean (1.0 %, 1.4 %). Before links
+// within 5 % of it (-4.6 %, -3.7 %), its sd under 1.5 % of the mean (1.1 %, 1.2 %). Before links
 // off the normal counted their normal extent, the sd was 8 % and the mean 9 % high; with the
 // paper's variance steps instead of Winslow's placement it is 1.6 %, 3.3 %. What is left comes
-// from the axis-fallback Laplacian weights (docs/render.md, "Accuracy on curved shapes"), and
-// at 9^3 from the coarse grid (mean -10 %, h = 2.5 mm against a diffusion length of 3.2 mm).
+// from the first interior nodes along the cube's edges, where the 6x6 weights fail
+// (docs/render.md, "Accuracy on curved shapes"): with the axis weights there the mean was
+// -3.2 %, -0.7 % but the sd 1.0 %, 1.4 % and growing with the resolution (2.6 % at 25^3, 3.0 %
+// at 33^3); FirstOrderAxisWeights keep it at 1.1-1.2 % and the mean converging (-2.9 %, -2.3 %
+// at 25^3, 33^3). At 9^3 the coarse grid adds its own error (h = 2.5 mm against a diffusion
+// length of 3.2 mm).
 TEST(Polygrid, UniformlyLitSphereMatchesTheRadialSolution) {
   const double R = 10, C = ReflectionParameterC(1.3), exact = RadialSphereRadiance(0.5, 0.05, R, C);
   const auto shape = MakeBuiltinShape("sphere", 2 * R);
@@ -321,16 +327,97 @@ TEST(Polygrid, UniformlyLitSphereMatchesTheRadialSolution) {
     std::printf("[polygrid] uniformly lit sphere %d^3: mean radiance %.5f (exact %.5f), sd %.4f, max - min %.4f of "
                 "the mean (%lld fallback nodes of %lld interior)\n", resolution, L.mean, exact, L.sd, L.range,
                 (long long)pg.fallback_weights, (long long)pg.num_interior);
-    EXPECT_NEAR(L.mean / exact, 1.0, 0.04) << resolution;
-    EXPECT_LT(L.sd, 0.02) << resolution;
-    EXPECT_LT(L.range, 0.08) << resolution;
+    EXPECT_NEAR(L.mean / exact, 1.0, 0.05) << resolution;
+    EXPECT_LT(L.sd, 0.015) << resolution;
+    EXPECT_LT(L.range, 0.05) << resolution;
   }
 }
 
+
+struct LitSphereError {
+  double rms = 0, far_rms = 0, worst = 0;  // relative; far: cos theta < -0.3
+};
+
+// The polygrid's boundary radiance (the reference solve) against LitSphereRadiance, over eight
+// light directions: along a face's normal (+z), towards a corner (1, 1, 1), and six random ones.
+LitSphereError DirectionallyLitSphereError(const Polygrid& pg, float kappa, float mu, double R, double C) {
+  const LitSphereRadiance exact(kappa, mu, R, C, [](double c) { return std::max(0.0, c); });
+  const NodeMaterial m = ConstantNodeMaterial(pg, {kappa, kappa, kappa}, {mu, mu, mu});
+  std::mt19937 rng(7);
+  std::normal_distribution<double> g;
+  double sq = 0, far_sq = 0;
+  int64_t n = 0, far_n = 0;
+  LitSphereError e;
+  for (int dir = 0; dir < 8; ++dir) {
+    const Vec3 d = dir == 0 ? Vec3(0, 0, 1)
+                   : dir == 1 ? Vec3(1, 1, 1).normalized()
+                              : Vec3(g(rng), g(rng), g(rng)).normalized();
+    std::vector<double> cos_theta(pg.num_boundary());
+    BoundaryLight q;
+    for (int64_t b = 0; b < pg.num_boundary(); ++b)
+      cos_theta[b] = pg.position[pg.num_interior + b].normalized().dot(d);
+    q[0].resize(pg.num_boundary());
+    for (int64_t b = 0; b < pg.num_boundary(); ++b) q[0][b] = float(std::max(0.0, cos_theta[b]));
+    q[1] = q[2] = q[0];
+    const std::vector<float> L = ShadedRadiance(pg, m, SolveReference(BuildJacobiSystem(pg, m, C, q), 1))[0];
+    for (int64_t b = 0; b < pg.num_boundary(); ++b) {
+      const double r = L[b] / exact(cos_theta[b]) - 1;
+      sq += r * r;
+      ++n;
+      e.worst = std::max(e.worst, std::abs(r));
+      if (cos_theta[b] < -0.3) {
+        far_sq += r * r;
+        ++far_n;
+      }
+    }
+  }
+  e.rms = std::sqrt(sq / double(n));
+  e.far_rms = std::sqrt(far_sq / double(far_n));
+  return e;
+}
+
+// Light through the sphere: kappa 1 mm, mu 0.02/mm (diffusion length 7.1 mm) in a 20 mm sphere,
+// so the far side gets ~6 % of the lit pole's radiance. The error sits along the single cube's
+// edges, where the 6x6 weights fail (first interior nodes): with the axis weights there, their
+// drift made dark lines on the far side (far-side rms 15.5 % at 17^3, 14.2 % at 25^3: not
+// converging); FirstOrderAxisWeights: 10.2 %, 8.2 %.
+TEST(Polygrid, DirectionallyLitSphereMatchesTheLegendreSolution) {
+  const double R = 10, C = ReflectionParameterC(1.3);
+  {
+    // The exact solution's own check: q = 1 is the radial solution; q = cos theta is the l = 1
+    // mode alone, with i_1(x) = cosh x / x - sinh x / x^2 and i_1' = i_0 - 2 i_1 / x (to the
+    // quadrature's 1e-6 over 160 modes).
+    const LitSphereRadiance uniform(0.5, 0.05, R, C, [](double) { return 1.0; });
+    EXPECT_NEAR(uniform(0.3) / RadialSphereRadiance(0.5, 0.05, R, C), 1.0, 1e-5);
+    const double l0 = std::sqrt(1.0 / 0.02), x = R / l0;
+    const double i0 = std::sinh(x) / x, i1 = std::cosh(x) / x - std::sinh(x) / (x * x);
+    const double mode1 = 1 / (1 + 2 * C * 1.0 * (i0 - 2 * i1 / x) / (l0 * i1)) / (2 * M_PI);
+    const LitSphereRadiance dipolar(1.0, 0.02, R, C, [](double t) { return t; });
+    EXPECT_NEAR(dipolar(-0.6) / (-0.6 * mode1), 1.0, 1e-5);
+  }
+  const auto shape = MakeBuiltinShape("sphere", 2 * R);
+  std::array<LitSphereError, 2> e;
+  for (int k = 0; k < 2; ++k) {
+    PolygridOptions o;
+    o.resolution = k ? 25 : 17;
+    const Polygrid pg = BuildPolygrid(BuiltinPolycube("sphere"), *shape, o);
+    e[k] = DirectionallyLitSphereError(pg, 1.0f, 0.02f, R, C);
+    std::printf("[polygrid] directionally lit sphere %d^3, 8 directions: radiance rms %.2f %% off the exact value, far "
+                "side (cos < -0.3) %.2f %%, worst node %.1f %%\n", o.resolution, 100 * e[k].rms, 100 * e[k].far_rms,
+                100 * e[k].worst);
+  }
+  EXPECT_LT(e[0].rms, 0.10);
+  EXPECT_LT(e[0].far_rms, 0.12);
+  EXPECT_LT(e[1].rms, 0.08);
+  EXPECT_LT(e[1].far_rms, 0.10);
+  EXPECT_LT(e[1].far_rms, 0.9 * e[0].far_rms);  // converging
+  EXPECT_LT(std::max(e[0].worst, e[1].worst), 0.5);
+}
+
 // With Winslow's placement the sphere's cells stay nearer orthogonal: about a third as many
-// nodes need the axis-fallback weights, and the radiance follows the radial solution more
-// closely, the more so the finer the grid (sd 1.4 %, 2.6 % at 17^3, 25^3 against 3.3 %, 4.9 %
-// with the variance steps; mean -0.7 %, +1.2 % against +0.4 %, +4.9 %).
+// nodes need fallback weights (the 6x6 system failing), and the radiance follows the radial
+// solution more closely (sd 1.2 %, 1.1 % at 17^3, 25^3 against 4.7 %, 2.4 % with the variance
+// steps; mean -3.7 %, -2.9 % against -14.1 %, -6.3 %).
 TEST(Polygrid, WinslowPlacementFollowsTheRadialSolutionMoreClosely) {
   const double R = 10, C = ReflectionParameterC(1.3), exact = RadialSphereRadiance(0.5, 0.05, R, C);
   const auto shape = MakeBuiltinShape("sphere", 2 * R);
@@ -348,8 +435,8 @@ TEST(Polygrid, WinslowPlacementFollowsTheRadialSolutionMoreClosely) {
                   "fallback nodes\n", resolution, k ? "winslow" : "variance", 100 * (L[k].mean / exact - 1), L[k].sd,
                   (long long)fallback[k]);
     }
-    EXPECT_NEAR(L[1].mean / exact, 1.0, 0.02) << resolution;
-    EXPECT_LT(L[1].sd, 0.03) << resolution;
+    EXPECT_NEAR(L[1].mean / exact, 1.0, 0.04) << resolution;
+    EXPECT_LT(L[1].sd, 0.015) << resolution;
     EXPECT_LT(L[1].sd, 0.6 * L[0].sd) << resolution;
     EXPECT_LT(fallback[1], fallback[0] / 2) << resolution;
   }

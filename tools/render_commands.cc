@@ -248,10 +248,11 @@ int RunRender(int argc, char** argv) {
                 "%.0f-degree steps frames lag the converged image (on a torus up to ~15 %% at 30 degrees, ~7 %% at "
                 "10); use 36 or more frames, or leave --coherence off\n", dopt.coherent_iterations, 360.0 / turntable);
   if (std::string err = dopt.Validate(); !err.empty()) throw InputError("--iterations/--depth: " + err);
-  std::printf("render: %s on %s, polygrid %zu cubes x %d^3 (%lld nodes, %lld boundary, %lld with axis-fallback "
-              "Laplacian weights), %zu levels, built in %.2f s\n", material.c_str(), shape->name().c_str(),
-              pc.cubes.size(), resolution, (long long)grids[0].size(), (long long)grids[0].num_boundary(),
-              (long long)grids[0].fallback_weights, grids.size(), build_s);
+  std::printf("render: %s on %s, polygrid %zu cubes x %d^3 (%lld nodes, %lld boundary, %lld with fallback "
+              "Laplacian weights, %lld of them per-axis), %zu levels, built in %.2f s\n", material.c_str(),
+              shape->name().c_str(), pc.cubes.size(), resolution, (long long)grids[0].size(),
+              (long long)grids[0].num_boundary(), (long long)grids[0].fallback_weights,
+              (long long)grids[0].axis_weights, grids.size(), build_s);
   for (const std::string& note : PolygridNotes(grids, levels, polycube_label, shape->name()))
     std::printf("render: note: %s\n", note.c_str());
   if (ro.model == "dipole") {
