@@ -105,7 +105,7 @@ TEST_F(Cli, DemoRunsThePipelineAndSaysWhereTheOutputsAre) {
   for (const char* f : {"capture/capture.json", "capture/truth/material.vdb", "capture/lighting/03/t09.png",
                         "recovered.vdb", "recovered_work/dataset/dataset.json", "recovered_work/report.json",
                         "recovered_work/previews/fit_00.png", "recovered_work/previews/index.html",
-                        "recovered_sphere.png"})
+                        "recovered_sphere.png", "truth_sphere.png"})
     EXPECT_TRUE(fs::exists(P("demo/") + f)) << f;
   // A re-run stopped by Ctrl-C while it simulates leaves the earlier capture as it was (it used to
   // delete it first) and no temporary folder; a re-run to the end replaces it.
