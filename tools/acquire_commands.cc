@@ -171,8 +171,9 @@ int RunPatterns(int argc, char** argv) {
 int RunAcquire(int argc, char** argv) {
   CLI::App app{"From a capture folder (docs/capture.md) to a material: calibration, HDR, sample\n"
                "pose (corners given, or found and refined in the photos; the block's outline where\n"
-               "the camera sees side faces), mapping of the photos onto the grid nodes, the\n"
-               "node-space dataset, the solve, a report and previews. Intermediate results go\n"
+               "the camera sees side faces; a warning naming the face width the corners fit where\n"
+               "sample_mm looks off), mapping of the photos onto the grid nodes, the node-space\n"
+               "dataset, the solve, a report (its warnings too) and previews. Intermediate results go\n"
                "to OUT_work/ and are reused on a re-run unless their inputs changed (--force\n"
                "recomputes).\n"
                "Ctrl-C stops at the next stage, or during the solve writes the best material so\n"
