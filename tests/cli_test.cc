@@ -102,10 +102,11 @@ TEST_F(Cli, DemoRunsThePipelineAndSaysWhereTheOutputsAre) {
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("held-out relighting error E ="), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("mapping from photos: L within"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("the recovered image is within"), std::string::npos) << r.output;
   for (const char* f : {"capture/capture.json", "capture/truth/material.vdb", "capture/lighting/03/t09.png",
                         "recovered.vdb", "recovered_work/dataset/dataset.json", "recovered_work/report.json",
                         "recovered_work/previews/fit_00.png", "recovered_work/previews/index.html",
-                        "recovered_sphere.png", "truth_sphere.png"})
+                        "recovered_sphere.png", "truth_sphere.png", "recovered_sphere.exr", "truth_sphere.exr"})
     EXPECT_TRUE(fs::exists(P("demo/") + f)) << f;
   // A re-run stopped by Ctrl-C while it simulates leaves the earlier capture as it was (it used to
   // delete it first) and no temporary folder; a re-run to the end replaces it.
