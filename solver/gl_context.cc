@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -126,19 +127,20 @@ bool TryDevice(std::string* why) {
     *why = "no EGL devices";
     return false;
   }
-  std::string reasons;
+  std::vector<std::string> reasons;
   for (EGLint d = 0; d < n; ++d) {
     const char* ext = egl.QueryDeviceString ? egl.QueryDeviceString(devices[d], EGL_EXTENSIONS) : "";
     if (ext && std::strstr(ext, "EGL_MESA_device_software")) {
-      reasons += "software device skipped; ";
+      reasons.push_back(fmt::format("device {} is Mesa's software renderer, which TRANSLUME_GL=surfaceless or "
+                                    "leaving TRANSLUME_GL unset uses", d));
       continue;
     }
     EGLDisplay dpy = egl.GetPlatformDisplay(EGL_PLATFORM_DEVICE_EXT, devices[d], nullptr);
-    std::string r;
+    std::string r = "no EGL display";
     if (dpy != EGL_NO_DISPLAY && EglContextOn(dpy, &r)) return true;
-    reasons += r + "; ";
+    reasons.push_back(fmt::format("device {}: {}", d, r));
   }
-  *why = "no usable GPU device (" + reasons + ")";
+  *why = fmt::format("no usable GPU device ({})", fmt::join(reasons, "; "));
   return false;
 }
 

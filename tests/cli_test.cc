@@ -182,6 +182,13 @@ TEST_F(Cli, GlPlatformsCanBeForcedAndBadOnesAreNamed) {
                                "TRANSLUME_GL=vulkan"),
                      "TRANSLUME_GL='vulkan'");
   EXPECT_FALSE(fs::exists(P("L.exr")));
+  // A GPU device forced where there is none (as on CI): one line that says why and what to use.
+  r = Translume("forward " + P("m.vdb") + " --backend gl -o " + P("L.exr"), "TRANSLUME_GL=device");
+  if (r.status != 0) {
+    ExpectOneLineError(r, "use --backend cpu");
+    EXPECT_EQ(r.output.find("; )"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(P("L.exr")));
+  }
   r = Translume("forward " + P("m.vdb") + " --backend gl -o " + P("L.exr"), "TRANSLUME_GL=osmesa");
   EXPECT_EQ(r.status, 0) << r.output;
   EXPECT_TRUE(fs::exists(P("L.exr")));
