@@ -723,6 +723,11 @@ TEST_F(Cli, RenderAndEdit) {
     EXPECT_EQ(img.width, 40);
     EXPECT_EQ(img.height, 30);
   }
+  // One auto exposure for every frame (it used to follow each frame), printed once.
+  const size_t at = r.output.find("render: exposure ");
+  ASSERT_NE(at, std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("from the first frame, for every frame", at), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("render: exposure ", at + 1), std::string::npos) << r.output;
   r = Translume("render homogeneous:0.2,0.02 --shape torus --resolution 5 --placement variance --variance-steps 0 "
                 "--image 16x16 -o " + P("v.png"));
   ASSERT_EQ(r.status, 0) << r.output;

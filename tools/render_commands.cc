@@ -131,7 +131,7 @@ int RunRender(int argc, char** argv) {
   app.add_option("--reflectance", ro.surface_reflectance, "Lambertian surface reflectance")->capture_default_str();
   app.add_flag("--clamp", clamp, "Clamp the material in u, v instead of tiling");
   app.add_option("--map-scale", map_scale, "Surface mm per material mm")->capture_default_str();
-  app.add_option("--exposure", exposure, "PNG exposure in stops (default: auto)");
+  app.add_option("--exposure", exposure, "PNG exposure in stops (default: auto, from the first frame; printed)");
   app.add_option("-o,--output", out, "Output image (.png or .exr)")->required();
   AddCommonOptions(app);
   if (ParseOrHelp(app, argc, argv)) return 0;
@@ -274,7 +274,15 @@ int RunRender(int argc, char** argv) {
     const auto tf = std::chrono::steady_clock::now();
     Image img = renderer.Render(L, 360.0 * f / turntable);
     const double frame_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tf).count();
-    if (ext == ".png") ToneMap(&img, exposure);
+    if (ext == ".png") {
+      // Auto exposure from the first frame only: a turntable's frames share it (no flicker).
+      const double scale = ToneMap(&img, exposure);
+      if (!exposure) {
+        exposure = std::log2(scale);
+        std::printf("render: exposure %+.2f stops (auto%s; --exposure %.2f renders others alike)\n", *exposure,
+                    turntable > 1 ? ", from the first frame, for every frame" : "", *exposure);
+      }
+    }
     const std::string path = FramePath(out, f, turntable);
     WriteImage(path, img);
     const FrameTimes& t = renderer.times();
