@@ -393,9 +393,9 @@ std::string ForwardBenchTable(const std::vector<ForwardBenchRow>& rows) {
                        "iters", "residual", "peer / ours");
     for (const auto& r : rows)
       for (const auto& p : r.peers)
-        out += fmt::format("{:>14} {:<30} {:>10.3f} {:>9} {:>10.2e} {:>12}\n", r.shape.ToString(),
+        out += fmt::format("{:>14} {:<30} {:>10.4f} {:>9} {:>10.2e} {:>12}\n", r.shape.ToString(),
                            p.name, p.seconds, p.iterations, p.residual,
-                           fmt::format("{}{:.1f}x", p.lower_bound ? ">= " : "", p.ratio));
+                           fmt::format("{}{:.2f}x", p.lower_bound ? ">= " : "", p.ratio));
   }
   return out;
 }
