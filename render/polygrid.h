@@ -21,7 +21,7 @@ namespace translume {
 //    edge-diagonal lattice neighbours. The paper names a conformal mapping as the ideal, for the
 //    orthogonality Appendix B's weights assume, and uses the variance steps as a practical
 //    stand-in; Winslow's grid keeps the cells nearer orthogonal, so a third as many nodes need
-//    the axis-fallback Laplacian weights and curved shapes come out closer to their exact
+//    the fallback Laplacian weights and curved shapes come out closer to their exact
 //    solutions (docs/render.md, "Accuracy on curved shapes"), in less build time.
 enum class InteriorPlacement { kVariance, kWinslow };
 InteriorPlacement ParseInteriorPlacement(const std::string& text);  // "variance" | "winslow"

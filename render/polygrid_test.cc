@@ -180,7 +180,7 @@ TEST(Polygrid, BuiltinShapesAreWellFormed) {
       EXPECT_NEAR((s - pg.position[b]).norm(), 0, 1e-6 * 20);
     }
     std::printf("[polygrid] %s: %lld interior + %lld boundary nodes, spacing %.3f mm, d %.4f mm, "
-                "%lld nodes with axis-fallback weights\n",
+                "%lld nodes with fallback weights\n",
                 name.c_str(), (long long)pg.num_interior, (long long)pg.num_boundary(),
                 pg.mean_boundary_spacing, pg.first_layer_distance, (long long)pg.fallback_weights);
   }
@@ -691,7 +691,7 @@ TEST(Polygrid, AutoPolycubeFollowsTheShape) {
 // polygrid of the unturned mesh turned by q: the same nodes, cells and weights, each node where
 // the turned one is to 0.008 spacings RMS (0.11 at most, at a few boundary nodes: on this
 // symmetric mesh the placement meets ties that round-off breaks either way). Without the axes
-// the turned mesh's polygrid folds 12 cells and has 40 % more axis-fallback weights.
+// the turned mesh's polygrid folds 12 cells and has 40 % more fallback weights.
 TEST(Polygrid, PolycubeAxesTurnThePolygridWithTheShape) {
   const auto torus = MakeMeshShape(MakeBuiltinShape("torus", 20, 24)->mesh(), "torus.obj", 20);
   const Eigen::Matrix3d q = TestTurn();
@@ -805,7 +805,7 @@ TEST(Polygrid, BunnyPolycube) {
     EXPECT_NEAR((s - pg.position[b]).norm(), 0, 1e-9);
   }
   std::printf("[polygrid] bunny 253 x 5^3: %lld interior + %lld boundary nodes, %lld nodes with "
-              "axis-fallback weights\n", (long long)pg.num_interior, (long long)pg.num_boundary(),
+              "fallback weights\n", (long long)pg.num_interior, (long long)pg.num_boundary(),
               (long long)pg.fallback_weights);
 }
 
