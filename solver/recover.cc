@@ -956,6 +956,7 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
       r.message = fmt::format("validation E has not come within {:g} % of its least for {} iterations",
                               100 * o.validation_margin, o.validation_patience);
     }
+    while (!r.message.empty() && r.message.back() == '.') r.message.pop_back();  // Ceres' messages end in one
     r.message += fmt::format("; the result is iteration {}'s iterate (validation E {:.3e})",
                              state->best_iteration, state->best_validation_error);
   }
