@@ -333,7 +333,6 @@ TEST(Polygrid, UniformlyLitSphereMatchesTheRadialSolution) {
   }
 }
 
-
 struct LitSphereError {
   double rms = 0, far_rms = 0, worst = 0;  // relative; far: cos theta < -0.3
 };
