@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <string_view>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -92,7 +93,6 @@ class StageLog {
   nlohmann::json log_;
 };
 
-// Text for an HTML page: & < > " escaped.
 // "(x0, y0) (x1, y1) ..." (px, two decimals), for the log's lines about corners.
 std::string CornerList(const std::vector<cv::Point2d>& corners) {
   std::string list;
@@ -100,6 +100,7 @@ std::string CornerList(const std::vector<cv::Point2d>& corners) {
   return list;
 }
 
+// Text for an HTML page: & < > " escaped.
 std::string Html(const std::string& text) {
   std::string out;
   for (char ch : text) {
@@ -210,7 +211,8 @@ AcquireReport Acquire(const CaptureSpec& cap, const std::string& out, const Acqu
     // A line that ends in "..." announces work, and a stop comes before it, unprinted; the others
     // report work done, and are printed before a stop.
     std::string what = s;
-    if (what.rfind("warning: ", 0) == 0) rep.warnings.push_back(what.substr(9));
+    constexpr std::string_view kWarning = "warning: ";
+    if (what.rfind(kWarning, 0) == 0) rep.warnings.push_back(what.substr(kWarning.size()));
     const bool announces = what.size() >= 3 && what.compare(what.size() - 3, 3, "...") == 0;
     if (!announces && progress_fn) progress_fn(s);
     if (!solving && o.stop && o.stop()) {

@@ -254,10 +254,17 @@ FaceWidthFit FaceWidthFittingCorners(const DeviceIntrinsics& camera, const std::
   if (!std::isfinite(best.rms_px)) return best;
   double a = lo + (hi - lo) * std::max(0, at - 1) / steps, b = lo + (hi - lo) * std::min(steps, at + 1) / steps;
   const double g = (std::sqrt(5.0) - 1) / 2;
+  // Each step keeps one of its two inner points (and its RMS) for the next.
+  double c = b - g * (b - a), d = a + g * (b - a);
+  double rc = rms_at(size_mm[0] * std::exp(c)), rd = rms_at(size_mm[0] * std::exp(d));
   for (int k = 0; k < 40; ++k) {
-    const double c = b - g * (b - a), d = a + g * (b - a);
-    if (rms_at(size_mm[0] * std::exp(c)) < rms_at(size_mm[0] * std::exp(d))) b = d;
-    else a = c;
+    if (rc < rd) {
+      b = d, d = c, rd = rc;
+      c = b - g * (b - a), rc = rms_at(size_mm[0] * std::exp(c));
+    } else {
+      a = c, c = d, rc = rd;
+      d = a + g * (b - a), rd = rms_at(size_mm[0] * std::exp(d));
+    }
   }
   const double w = size_mm[0] * std::exp((a + b) / 2), r = rms_at(w);
   if (r < best.rms_px) best = {w, r};
