@@ -225,16 +225,23 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
         const int32_t j = pg.neighbours[n][0];
         const int axis = pg.link_dir[b] / 2;
         const double kj = m.kappa[c][j], d = pg.link_length[b];
+        // The link's foot: phi_j's share, the rest from j's lateral neighbours (Polygrid::foot_weights).
+        const std::array<float, 6> foot =
+            pg.foot_weights.empty() ? std::array<float, 6>{} : pg.foot_weights[b];
+        double foot_j = 1;
+        for (int k = 0; k < 6; ++k) foot_j -= foot[k];
         double lateral_sum = 0;
         for (int k = 0; k < 6; ++k)
           if (k / 2 != axis) lateral_sum += pg.weights[j][k];
         // Capped where it would outweigh the link (w_0 < 0; see the header).
-        const double lateral = C * d * d * kn * kj * std::min(1.0, 2 * kn / (kj * d * d * lateral_sum));
-        double w_link = 2 * C * kn * kn;
+        const double lateral = C * d * d * kn * kj * std::min(1.0, 2 * kn * foot_j / (kj * d * d * lateral_sum));
+        double w_link = 2 * C * kn * kn * foot_j;
         for (int k = 0, slot = 1; k < 6; ++k) {
           if (k / 2 == axis) continue;
-          S.nb[n * 6 + slot] = pg.neighbours[j][k];
-          S.w[(n * 3 + c) * 6 + slot] = float(lateral * pg.weights[j][k]);
+          const int32_t nk = pg.neighbours[j][k];
+          S.nb[n * 6 + slot] = nk;
+          S.w[(n * 3 + c) * 6 + slot] =
+              float(lateral * pg.weights[j][k] + 2 * C * kn * kn * kj * foot[k] / m.kappa[c][nk]);
           w_link -= lateral * pg.weights[j][k];
           ++slot;
         }

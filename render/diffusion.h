@@ -26,11 +26,16 @@ struct NodeMaterial {
 //   w_k = w_ji kbar_ij kappa_i / kappa_j, s = 0,  1/inv_diag = mu_i + sum_j w_ji kbar_ij
 // (homogeneous: w_k = kappa w_ji, 1/inv_diag = mu + kappa sum_j w_ji, the paper's row times kappa).
 // Boundary node b linked to interior j, d = Polygrid::link_length (the link's extent along b's
-// normal, so that (phi_j - phi_b) / d estimates -dphi/dn): the Robin condition phi + 2 C kappa
-// dphi/dn = q (Equation (9)) as a balance over the slab of depth d/2 that b owns along its link
-// (vertex-centred finite volumes, the boundary half cells of SPEC section 3):
-//   (phi_b - q_b) / (2 C) = kappa_b (phi_j - phi_b) / d - (d/2) mu_b phi_b
+// normal, so that (phi_f - phi_b) / d estimates -dphi/dn, phi_f at the link's foot v_b - d n_b):
+// the Robin condition phi + 2 C kappa dphi/dn = q (Equation (9)) as a balance over the slab of
+// depth d/2 that b owns along its link (vertex-centred finite volumes, the boundary half cells
+// of SPEC section 3):
+//   (phi_b - q_b) / (2 C) = kappa_b (phi_f - phi_b) / d - (d/2) mu_b phi_b
 //                           + (d/2) sum_{k lateral} w_jk (phi'_k - phi'_j)
+// phi_f = phi_j where the link is a normal; a leaning link (j has two or three boundary links)
+// interpolates it, phi_f = (1 - sum_k a_k) phi_j + sum_k a_k phi_k over j's lateral neighbours k
+// (a = Polygrid::foot_weights), which adds 2 C kappa_b^2 kappa_j a_k / kappa_k to w_k below and
+// scales w_0's first term by 1 - sum_k a_k.
 // the flux through the link, the slab's absorption, and its lateral diffusion taken from the
 // four lateral terms of j's Laplacian (directions other than the link's axis). The paper's
 // one-sided form keeps only the first term, which is first order in d; this is second order.

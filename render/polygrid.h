@@ -89,6 +89,13 @@ struct Polygrid {
   std::vector<Vec3> normal;
   std::vector<int> link_dir;
   std::vector<double> link_length;
+  // The foot of a leaning link: phi at v_b - d_ji n_b (where the Robin condition's normal
+  // derivative is taken) interpolated from v_j towards j's lateral neighbours,
+  //   phi(foot) = (1 - sum_k alpha_k) phi_j + sum_k alpha_k phi_{neighbours[j][k]},
+  // alpha indexed by j's link direction k (0 on b's own axis, >= 0, summing to at most 1).
+  // All 0 where j has this one boundary link (its link is a normal); else the foot lies between
+  // j and the interior nodes beside it, away from the polycube's edge (SetLinkLengths).
+  std::vector<std::array<float, 6>> foot_weights;
   // Every node: hops to the nearest boundary node (0 on the boundary), the boundary node it
   // was reached from (the shell mapping's surface point), and its depth |v - v_src| (mm).
   std::vector<int> layer;

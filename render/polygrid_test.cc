@@ -328,7 +328,7 @@ TEST(Polygrid, UniformlyLitSphereMatchesTheRadialSolution) {
                 "the mean (%lld fallback nodes of %lld interior)\n", resolution, L.mean, exact, L.sd, L.range,
                 (long long)pg.fallback_weights, (long long)pg.num_interior);
     EXPECT_NEAR(L.mean / exact, 1.0, 0.05) << resolution;
-    EXPECT_LT(L.sd, 0.015) << resolution;
+    EXPECT_LT(L.sd, 0.0115) << resolution;  // 0.0113, 0.0121 before the links' feet
     EXPECT_LT(L.range, 0.05) << resolution;
   }
 }
@@ -375,11 +375,61 @@ LitSphereError DirectionallyLitSphereError(const Polygrid& pg, float kappa, floa
   return e;
 }
 
+// The boundary links of the sphere's first interior nodes along the single cube's edges lean
+// far off the normal; the Robin condition reads phi at each link's foot v_b - d n_b, interpolated
+// from the interior node and the nodes beside it (Polygrid::foot_weights). Interpolating the
+// positions themselves checks it for every linear field at once: the interpolated point lies
+// within a small fraction of a spacing of the foot, where the interior node itself (what the
+// condition read before) lies 0.66 spacings from it on average.
+TEST(Polygrid, LeaningLinksReadTheirFootBesideTheInteriorNode) {
+  const auto shape = MakeBuiltinShape("sphere", 20);
+  for (int resolution : {9, 17}) {
+    PolygridOptions o;
+    o.resolution = resolution;
+    const Polygrid pg = BuildPolygrid(BuiltinPolycube("sphere"), *shape, o);
+    double before_sum = 0, after_sum = 0, after_max = 0;
+    int leaning = 0;
+    for (int64_t b = pg.num_interior; b < pg.size(); ++b) {
+      const std::array<float, 6>& w = pg.foot_weights[b - pg.num_interior];
+      const int32_t j = pg.neighbours[b][0];
+      int links = 0;
+      for (int k = 0; k < 6; ++k) links += pg.is_boundary(pg.neighbours[j][k]);
+      double sum = 0;
+      for (int k = 0; k < 6; ++k) {
+        EXPECT_GE(w[k], 0.f);
+        EXPECT_TRUE(w[k] == 0 || !pg.is_boundary(pg.neighbours[j][k])) << "a weight on a boundary node";
+        sum += w[k];
+      }
+      EXPECT_LE(sum, 1 + 1e-6);
+      if (links == 1) {
+        EXPECT_EQ(sum, 0) << "a normal link has its foot on the interior node";
+        continue;
+      }
+      const Vec3 foot = pg.position[b] - pg.link_length[b - pg.num_interior] * pg.normal[b - pg.num_interior];
+      Vec3 at = (1 - sum) * pg.position[j];
+      for (int k = 0; k < 6; ++k) at += double(w[k]) * pg.position[pg.neighbours[j][k]];
+      const double before = (pg.position[j] - foot).norm() / pg.mean_boundary_spacing;
+      const double after = (at - foot).norm() / pg.mean_boundary_spacing;
+      before_sum += before;
+      after_sum += after;
+      after_max = std::max(after_max, after);
+      ++leaning;
+    }
+    std::printf("[polygrid] sphere %d^3: %d leaning links; their foot read %.3f spacings off on average (at most "
+                "%.3f), against %.3f at the interior node\n", resolution, leaning, after_sum / leaning, after_max,
+                before_sum / leaning);
+    EXPECT_GT(leaning, 0);
+    EXPECT_LT(after_sum, 0.25 * before_sum) << resolution;
+    EXPECT_LT(after_max, 0.2) << resolution;
+  }
+}
+
 // Light through the sphere: kappa 1 mm, mu 0.02/mm (diffusion length 7.1 mm) in a 20 mm sphere,
 // so the far side gets ~6 % of the lit pole's radiance. The error sits along the single cube's
 // edges, where the 6x6 weights fail (first interior nodes): with the axis weights there, their
 // drift made dark lines on the far side (far-side rms 15.5 % at 17^3, 14.2 % at 25^3: not
-// converging); FirstOrderAxisWeights: 10.2 %, 8.2 %.
+// converging); FirstOrderAxisWeights: 10.2 %, 8.2 %; reading the leaning links' feet
+// (Polygrid::foot_weights): 9.5 %, 8.0 %, the worst node 46 -> 34.5 % at 17^3.
 TEST(Polygrid, DirectionallyLitSphereMatchesTheLegendreSolution) {
   const double R = 10, C = ReflectionParameterC(1.3);
   {
@@ -410,7 +460,7 @@ TEST(Polygrid, DirectionallyLitSphereMatchesTheLegendreSolution) {
   EXPECT_LT(e[1].rms, 0.08);
   EXPECT_LT(e[1].far_rms, 0.10);
   EXPECT_LT(e[1].far_rms, 0.9 * e[0].far_rms);  // converging
-  EXPECT_LT(std::max(e[0].worst, e[1].worst), 0.5);
+  EXPECT_LT(std::max(e[0].worst, e[1].worst), 0.4);
 }
 
 // With Winslow's placement the sphere's cells stay nearer orthogonal: about a third as many

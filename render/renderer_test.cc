@@ -316,11 +316,16 @@ TEST(Render, DipoleAndPolygridAgreeOnTransmittedFalloff) {
               "fitted decay along the surface beyond the terminator (2-10 mm): polygrid %.4f/mm, "
               "dipole %.4f/mm, ratio %.3f; the sphere's exact solution %.4f/mm (polygrid %+.1f %%, dipole %+.1f %%)\n",
               rate_pg, rate_dp, rate_pg / rate_dp, rate_ex, 100 * (rate_pg / rate_ex - 1), 100 * (rate_dp / rate_ex - 1));
-  EXPECT_NEAR(rate_pg / rate_dp, 1.0, 0.10);
   // Both fall off faster than the sphere does (the dipole's half-space has no curvature that
-  // brings light around); the polygrid is the nearer.
-  EXPECT_LT(std::abs(rate_pg / rate_ex - 1), 0.2);
+  // brings light around); the polygrid is the nearer, and converges towards the exact rate
+  // with resolution (docs/benchmarks.md, "The Robin condition at a leaning link's foot").
+  EXPECT_LT(std::abs(rate_pg / rate_ex - 1), 0.14);
   EXPECT_LT(std::abs(rate_pg / rate_ex - 1), std::abs(rate_dp / rate_ex - 1));
+  // Issue 7's target, the polygrid's rate within 10 % of the dipole's, is not met: 0.886. The
+  // dipole is 27 % off the exact rate here, so only a polygrid more than 14 % off it could
+  // meet the target; it held (0.905) while the leaning links read phi at their interior node,
+  // and at 25^3 that polygrid missed it too (0.876). A bound against a gross change only:
+  EXPECT_NEAR(rate_pg / rate_dp, 1.0, 0.15);
   // The nodes' own areas sum to about the sphere's 4 pi R^2; (mean spacing)^2 per node falls
   // short of it. The dipole is linear in the areas.
   double raw = 0;
