@@ -192,6 +192,7 @@ std::vector<double> BoundarySourceCoefficients(const Polygrid& pg, const NodeMat
 
 JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double C,
                                const BoundaryLight& q) {
+  TL_CHECK(pg.foot_weights.empty() || int64_t(pg.foot_weights.size()) == pg.num_boundary());
   const std::vector<double> coef = BoundarySourceCoefficients(pg, m);
   JacobiSystem S;
   const int64_t N = pg.size();
@@ -229,7 +230,9 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
         const std::array<float, 6> foot =
             pg.foot_weights.empty() ? std::array<float, 6>{} : pg.foot_weights[b];
         double foot_j = 1;
-        for (int k = 0; k < 6; ++k) foot_j -= foot[k];
+        for (int k = 0; k < 6; ++k)
+          if (k / 2 != axis) foot_j -= foot[k];
+        foot_j = std::max(0.0, foot_j);  // the weights' float rounding
         double lateral_sum = 0;
         for (int k = 0; k < 6; ++k)
           if (k / 2 != axis) lateral_sum += pg.weights[j][k];
@@ -240,8 +243,9 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
           if (k / 2 == axis) continue;
           const int32_t nk = pg.neighbours[j][k];
           S.nb[n * 6 + slot] = nk;
-          S.w[(n * 3 + c) * 6 + slot] =
-              float(lateral * pg.weights[j][k] + 2 * C * kn * kn * kj * foot[k] / m.kappa[c][nk]);
+          double w = lateral * pg.weights[j][k];
+          if (foot[k] != 0) w += 2 * C * kn * kn * kj * foot[k] / m.kappa[c][nk];
+          S.w[(n * 3 + c) * 6 + slot] = float(w);
           w_link -= lateral * pg.weights[j][k];
           ++slot;
         }

@@ -39,11 +39,12 @@ struct NodeMaterial {
 // the flux through the link, the slab's absorption, and its lateral diffusion taken from the
 // four lateral terms of j's Laplacian (directions other than the link's axis). The paper's
 // one-sided form keeps only the first term, which is first order in d; this is second order.
-// Times 2 C kappa_b kappa_j d, with phi = phi' / kappa and W = sum_{k lateral} w_jk:
-//   w_0 (node j) = 2 C kappa_b^2 - C d^2 kappa_b kappa_j W,
-//   w_1..4 (j's lateral neighbours k) = C d^2 kappa_b kappa_j w_jk,
+// Times 2 C kappa_b kappa_j d, with phi = phi' / kappa, W = sum_{k lateral} w_jk and
+// A = 1 - sum_k a_k (1 for a normal link):
+//   w_0 (node j) = 2 C kappa_b^2 A - C d^2 kappa_b kappa_j W,
+//   w_1..4 (j's lateral neighbours k) = C d^2 kappa_b kappa_j w_jk + 2 C kappa_b^2 kappa_j a_k / kappa_k,
 //   s = q_b kappa_b kappa_j d,  1/inv_diag = kappa_j d + 2 C kappa_b kappa_j + C d^2 mu_b kappa_j
-// Where the lateral term would outweigh the link's (d^2 kappa_j W > 2 kappa_b, so w_0 < 0: on a
+// Where the lateral term would outweigh the link's (d^2 kappa_j W > 2 kappa_b A, so w_0 < 0: on a
 // regular grid d^2 W is ~0.04, but a grid whose boundary nodes crowd together, such as the voxel
 // polycube of a sharp-edged mesh, has W of 1/(tiny spacing)^2), the lateral weights are scaled
 // down to make w_0 = 0: the row stays diagonally dominant and the relaxation convergent (it

@@ -130,6 +130,7 @@ class PolygridBuilder {
     occupied_.assign(int64_t(cubes_[0]) * cubes_[1] * cubes_[2], 0);
     for (const auto& c : polycube.cubes) occupied_[c[0] + cubes_[0] * (c[1] + cubes_[1] * c[2])] = 1;
   }
+  // Once per builder: the polygrid is moved out.
   Polygrid Build();
 
  private:
@@ -854,7 +855,7 @@ void PolygridBuilder::SetLinkLengths() {
 }
 
 // foot - v_j as a combination of j's offsets to one lateral neighbour per lateral axis (the one
-// on the foot's side), by least squares; only interior neighbours, weights clamped to >= 0 and
+// on the foot's side), by non-negative least squares; only interior neighbours, the weights
 // scaled to sum to at most 1 (a convex combination of j and its neighbours).
 std::array<float, 6> PolygridBuilder::FootWeights(int64_t b, int32_t j, const Vec3& foot) const {
   const Vec3 t = foot - pg_.position[j];
@@ -872,21 +873,35 @@ std::array<float, 6> PolygridBuilder::FootWeights(int64_t b, int32_t j, const Ve
     }
     ++m;
   }
-  // The 2x2 normal equations over the axes that have a neighbour.
-  Eigen::Matrix2d A = Eigen::Matrix2d::Identity();
-  Eigen::Vector2d r = Eigen::Vector2d::Zero();
-  for (int p = 0; p < 2; ++p) {
-    if (dirs[p] < 0) continue;
-    r[p] = off[p].dot(t);
-    for (int q = 0; q < 2; ++q)
-      if (dirs[q] >= 0) A(p, q) = off[p].dot(off[q]);
+  // Non-negative least squares over the (at most two) axes that have a neighbour: the joint
+  // solution where it is well conditioned and non-negative, else the better of the single axes'
+  // projections (offsets nearly parallel, in a folded cell, would give huge weights of opposite
+  // signs), else none.
+  const auto residual = [&](const Eigen::Vector2d& a) {
+    Vec3 e = t;
+    for (int p = 0; p < 2; ++p)
+      if (dirs[p] >= 0) e -= a[p] * off[p];
+    return e.squaredNorm();
+  };
+  Eigen::Vector2d alpha = Eigen::Vector2d::Zero();
+  if (dirs[0] >= 0 && dirs[1] >= 0) {
+    Eigen::Matrix2d A;
+    A << off[0].dot(off[0]), off[0].dot(off[1]), off[1].dot(off[0]), off[1].dot(off[1]);
+    const double det = A.determinant();
+    if (det > 1e-6 * A(0, 0) * A(1, 1)) {
+      const Eigen::Vector2d joint = A.inverse() * Eigen::Vector2d(off[0].dot(t), off[1].dot(t));
+      if (joint.allFinite() && joint.minCoeff() >= 0) alpha = joint;
+    }
   }
-  Eigen::Vector2d alpha = A.ldlt().solve(r);
-  double sum = 0;
-  for (int p = 0; p < 2; ++p) {
-    alpha[p] = dirs[p] < 0 || !std::isfinite(alpha[p]) ? 0.0 : std::max(0.0, alpha[p]);
-    sum += alpha[p];
+  if (alpha.isZero()) {
+    for (int p = 0; p < 2; ++p) {
+      if (dirs[p] < 0 || !(off[p].squaredNorm() > 0)) continue;
+      Eigen::Vector2d single = Eigen::Vector2d::Zero();
+      single[p] = std::max(0.0, off[p].dot(t) / off[p].squaredNorm());
+      if (residual(single) < residual(alpha)) alpha = single;
+    }
   }
+  const double sum = alpha.sum();
   if (sum > 1) alpha /= sum;
   std::array<float, 6> w = {0, 0, 0, 0, 0, 0};
   for (int p = 0; p < 2; ++p)

@@ -93,8 +93,9 @@ struct Polygrid {
   // derivative is taken) interpolated from v_j towards j's lateral neighbours,
   //   phi(foot) = (1 - sum_k alpha_k) phi_j + sum_k alpha_k phi_{neighbours[j][k]},
   // alpha indexed by j's link direction k (0 on b's own axis, >= 0, summing to at most 1).
-  // All 0 where j has this one boundary link (its link is a normal); else the foot lies between
-  // j and the interior nodes beside it, away from the polycube's edge (SetLinkLengths).
+  // All 0 where j has this one boundary link (its link is a normal of length d; a split concave
+  // node's leans along the lattice on purpose, and reads j as before); with two or three the
+  // foot lies between j and the interior nodes beside it, away from the polycube's edge.
   std::vector<std::array<float, 6>> foot_weights;
   // Every node: hops to the nearest boundary node (0 on the boundary), the boundary node it
   // was reached from (the shell mapping's surface point), and its depth |v - v_src| (mm).

@@ -317,8 +317,8 @@ TEST(Render, DipoleAndPolygridAgreeOnTransmittedFalloff) {
               "dipole %.4f/mm, ratio %.3f; the sphere's exact solution %.4f/mm (polygrid %+.1f %%, dipole %+.1f %%)\n",
               rate_pg, rate_dp, rate_pg / rate_dp, rate_ex, 100 * (rate_pg / rate_ex - 1), 100 * (rate_dp / rate_ex - 1));
   // Both fall off faster than the sphere does (the dipole's half-space has no curvature that
-  // brings light around); the polygrid is the nearer, and converges towards the exact rate
-  // with resolution (docs/benchmarks.md, "The Robin condition at a leaning link's foot").
+  // brings light around); the polygrid is the nearer (and nearer still at 25^3: docs/benchmarks.md,
+  // "The Robin condition at a leaning link's foot").
   EXPECT_LT(std::abs(rate_pg / rate_ex - 1), 0.14);
   EXPECT_LT(std::abs(rate_pg / rate_ex - 1), std::abs(rate_dp / rate_ex - 1));
   // Issue 7's target, the polygrid's rate within 10 % of the dipole's, is not met: 0.886. The
