@@ -223,7 +223,7 @@ class AcquireRun {
   void MapOntoGrid();
   // 5. Solve, the material written, and the previews.
   void Solve(const RecoveryCallback& iteration);
-  // report.json; returns the report.
+  // report.json; returns the report (moved out: the last call).
   AcquireReport WriteReport();
 
  private:
@@ -1008,7 +1008,7 @@ AcquireReport AcquireRun::WriteReport() {
   j["previews"] = rep_.previews;
   rep_.report_json = (work_ / "report.json").string();
   WriteAtomically(rep_.report_json, [&](const std::string& tmp) { std::ofstream(tmp) << j.dump(2) << "\n"; });
-  return rep_;
+  return std::move(rep_);
 }
 
 }  // namespace

@@ -116,7 +116,6 @@ void TurnBack(const Eigen::Matrix3d& axes, Polygrid* pg) {
   for (Vec3& n : pg->normal) n = axes.transpose() * n;
 }
 
-
 // Laplacian smoothing's tolerance (boundary spacings) where it is the last placement step.
 constexpr double kTightSmoothing = 1e-6;
 
@@ -952,7 +951,6 @@ Polygrid BuildPolygrid(const Polycube& polycube, const Shape& shape, const Polyg
   }
   return PolygridBuilder(polycube, shape, options).Build();
 }
-
 
 std::array<int, 3> LatticeStep(int dir) {
   std::array<int, 3> s = {0, 0, 0};

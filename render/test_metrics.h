@@ -6,17 +6,9 @@
 #include <functional>
 #include <vector>
 
-namespace translume {
+#include "solver/image.h"  // RelativeL2, which the tests share with the tools
 
-// sqrt(sum (a - ref)^2 / sum ref^2), accumulated in double.
-inline double RelativeL2(const std::vector<float>& a, const std::vector<float>& ref) {
-  double num = 0, den = 0;
-  for (size_t i = 0; i < a.size(); ++i) {
-    num += (a[i] - ref[i]) * double(a[i] - ref[i]);
-    den += double(ref[i]) * ref[i];
-  }
-  return std::sqrt(num / den);
-}
+namespace translume {
 
 // The exact boundary radiance phi(R, theta) / (2 pi) of a homogeneous sphere (radius R mm, kappa
 // mm, mu 1/mm, C) whose boundary source q depends on cos theta only (a distant light along

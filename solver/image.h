@@ -19,6 +19,17 @@ struct Image {
   float at(int x, int y, int c) const { return data[(size_t(y) * width + x) * channels + c]; }
 };
 
+// sqrt(sum (a - ref)^2 / sum ref^2), accumulated in double: a's relative L2 difference from ref
+// (images' data, fields, radiance lists; the same size).
+inline double RelativeL2(const std::vector<float>& a, const std::vector<float>& ref) {
+  double num = 0, den = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    num += (a[i] - ref[i]) * double(a[i] - ref[i]);
+    den += double(ref[i]) * ref[i];
+  }
+  return std::sqrt(num / den);
+}
+
 // "pixel (X, Y) is not finite" at an image's first NaN or inf, "" if there is none.
 inline std::string NonFinitePixel(const Image& image) {
   for (size_t i = 0; i < image.data.size(); ++i)

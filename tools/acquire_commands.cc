@@ -369,17 +369,13 @@ int RunDemo(int argc, char** argv) {
     if (RunRender(int(av.size()), av.data()) != 0) return 1;
     linear[k] = ReadImage(stems[k] + ".exr");
   }
-  double num = 0, den = 0;
-  for (size_t i = 0; i < linear[0].data.size(); ++i) {
-    num += (linear[0].data[i] - linear[1].data[i]) * double(linear[0].data[i] - linear[1].data[i]);
-    den += double(linear[1].data[i]) * linear[1].data[i];
-  }
+  const double apart = RelativeL2(linear[0].data, linear[1].data);
   const double stops = std::log2(ToneMap(&linear[1], std::nullopt));
   ToneMap(&linear[0], stops);
   for (int k = 0; k < 2; ++k) WriteImage(stems[k] + ".png", linear[k]);
   std::printf("demo: 4/4 rendered the recovered and the true material on a sphere lit from behind (one exposure, "
               "%+.2f stops): the recovered image is within %.1f %% (relative L2, linear) of the truth's; %.1f s in all\n",
-              stops, 100 * std::sqrt(num / den), elapsed());
+              stops, 100 * apart, elapsed());
   std::printf("demo outputs:\n  capture     %s (photos, calibration, truth/)\n  recovered   %s\n"
               "  work        %s (calibration, HDR, dataset, report.json, previews/index.html)\n  rendering   %s.png "
               "(the truth: %s.png; linear: .exr)\n",
