@@ -282,13 +282,19 @@ double DecayRate(const Polygrid& pg, const std::vector<float>& L, const Vec3& li
   return -(n * sxy - sx * sy) / (n * sxx - sx * sx);
 }
 
-TEST(Render, DipoleAndPolygridAgreeOnTransmittedFalloff) {
-  const double R = 10;
+// Fitted decay rates (1/mm) beyond the terminator, 2-10 mm along the surface, of a homogeneous
+// sphere (radius R mm; kappa 0.2 mm, mu 0.05/mm: sigma_tr 0.5/mm) under a distant light: the
+// polygrid's (a resolution^3 single cube, the reference solve), the dipole's on the same nodes,
+// and the sphere's exact solution at the nodes' directions.
+struct FalloffRates {
+  double polygrid, dipole, exact;
+};
+FalloffRates SphereFalloff(double R, int resolution) {
   const auto shape = MakeBuiltinShape("sphere", 2 * R);
   PolygridOptions po;
-  po.resolution = 17;
+  po.resolution = resolution;
   const Polygrid pg = BuildPolygrid(BuiltinPolycube("sphere"), *shape, po);
-  const float kappa = 0.2f, mu = 0.05f;  // sigma_tr = sqrt(mu / kappa) = 0.5 / mm
+  const float kappa = 0.2f, mu = 0.05f;
   const NodeMaterial m = ConstantNodeMaterial(pg, {kappa, kappa, kappa}, {mu, mu, mu});
   const double C = ReflectionParameterC(1.3);
   const Vec3 light(1, 0, 0);
@@ -305,34 +311,54 @@ TEST(Render, DipoleAndPolygridAgreeOnTransmittedFalloff) {
   const BoundaryLight Lpg = BoundaryRadiance(pg, m, zero, SolveReference(BuildJacobiSystem(pg, m, C, q), 1));
   const std::vector<double> areas = BoundaryNodeAreas(pg, 4 * kPi * R * R);  // as the renderer
   const BoundaryLight Ldp = DipoleRadiance(pg, {kappa, kappa, kappa}, {mu, mu, mu}, C, q, areas);
-  const double rate_pg = DecayRate(pg, Lpg[0], light, R, 2, 10);
-  const double rate_dp = DecayRate(pg, Ldp[0], light, R, 2, 10);
-  // The sphere's exact solution under the same q, at the same nodes' directions.
-  const LitSphereRadiance exact(kappa, mu, R, C, [](double c) { return c > 0 ? c * FresnelTransmittance(c, 1.3) : 0; });
+  const LitSphereRadiance exact(kappa, mu, R, C, [](double c) { return c > 0 ? c * FresnelTransmittance(c, 1.3) : 0; },
+                                320);  // enough modes for the deep shadow up to sigma_tr R = 20
   std::vector<float> Lex(pg.num_boundary());
   for (int64_t b = 0; b < pg.num_boundary(); ++b) Lex[b] = float(exact(pg.normal[b].dot(light)));
-  const double rate_ex = DecayRate(pg, Lex, light, R, 2, 10);
-  std::printf("[falloff] homogeneous sphere R 10 mm, kappa 0.2 mm, mu 0.05/mm (sigma_tr 0.5/mm): "
-              "fitted decay along the surface beyond the terminator (2-10 mm): polygrid %.4f/mm, "
-              "dipole %.4f/mm, ratio %.3f; the sphere's exact solution %.4f/mm (polygrid %+.1f %%, dipole %+.1f %%)\n",
-              rate_pg, rate_dp, rate_pg / rate_dp, rate_ex, 100 * (rate_pg / rate_ex - 1), 100 * (rate_dp / rate_ex - 1));
-  // Both fall off faster than the sphere does (the dipole's half-space has no curvature that
-  // brings light around); the polygrid is the nearer (and nearer still at 25^3: docs/benchmarks.md,
-  // "The Robin condition at a leaning link's foot").
-  EXPECT_LT(std::abs(rate_pg / rate_ex - 1), 0.14);
-  EXPECT_LT(std::abs(rate_pg / rate_ex - 1), std::abs(rate_dp / rate_ex - 1));
-  // Issue 7's target, the polygrid's rate within 10 % of the dipole's, is not met: 0.886. The
-  // dipole is 27 % off the exact rate here, so only a polygrid more than 14 % off it could
-  // meet the target; it held (0.905) while the leaning links read phi at their interior node,
-  // and at 25^3 that polygrid missed it too (0.876). A bound against a gross change only:
-  EXPECT_NEAR(rate_pg / rate_dp, 1.0, 0.15);
+  const FalloffRates r{DecayRate(pg, Lpg[0], light, R, 2, 10), DecayRate(pg, Ldp[0], light, R, 2, 10),
+                       DecayRate(pg, Lex, light, R, 2, 10)};
+  std::printf("[falloff] homogeneous sphere R %g mm (sigma_tr R %g), %d^3, kappa 0.2 mm, mu 0.05/mm: fitted decay "
+              "along the surface beyond the terminator (2-10 mm): polygrid %.4f/mm, dipole %.4f/mm, ratio %.3f; the "
+              "sphere's exact solution %.4f/mm (polygrid %+.1f %%, dipole %+.1f %%)\n",
+              R, 0.5 * R, resolution, r.polygrid, r.dipole, r.polygrid / r.dipole, r.exact,
+              100 * (r.polygrid / r.exact - 1), 100 * (r.dipole / r.exact - 1));
+  return r;
+}
+
+// Issue 7's target: the polygrid's and the dipole's fall-off rates within 10 %. The dipole's
+// half-space holds where the sphere is large against the diffusion length 1 / sigma_tr; at a
+// radius of 10 diffusion lengths it is 12 % off the sphere's exact rate, at 5 it is 27 % off
+// (docs/benchmarks.md, "The dipole's fall-off against the exact sphere").
+TEST(Render, DipoleAndPolygridAgreeOnTransmittedFalloff) {
+  // R = 20 mm, sigma_tr R = 10; at 25^3 the spacing (1.24 mm) is 0.62 diffusion lengths, as
+  // 17^3 is on the 10 mm sphere.
+  const FalloffRates large = SphereFalloff(20, 25);
+  EXPECT_NEAR(large.polygrid / large.dipole, 1.0, 0.10);
+  EXPECT_LT(std::abs(large.dipole / large.exact - 1), 0.15);
+  EXPECT_LT(std::abs(large.polygrid / large.exact - 1), 0.13);
+  // R = 10 mm, sigma_tr R = 5: the dipole, whose half-space brings no light around the
+  // curvature, falls off 27 % faster than the exact sphere, so only a polygrid more than 14 %
+  // off the exact rate could meet the 10 %; this one is nearer (0.886 of the dipole's rate).
+  const FalloffRates small = SphereFalloff(10, 17);
+  EXPECT_LT(std::abs(small.polygrid / small.exact - 1), 0.14);
+  EXPECT_LT(std::abs(small.polygrid / small.exact - 1), std::abs(small.dipole / small.exact - 1));
+  EXPECT_GT(small.dipole / small.exact - 1, 0.2);
+  EXPECT_NEAR(small.polygrid / small.dipole, 1.0, 0.15);  // a guard against gross changes only
+}
+
+TEST(Render, BoundaryNodeAreasSumToTheSurface) {
+  const double R = 10;
+  const auto shape = MakeBuiltinShape("sphere", 2 * R);
+  PolygridOptions po;
+  po.resolution = 17;
+  const Polygrid pg = BuildPolygrid(BuiltinPolycube("sphere"), *shape, po);
   // The nodes' own areas sum to about the sphere's 4 pi R^2; (mean spacing)^2 per node falls
   // short of it. The dipole is linear in the areas.
   double raw = 0;
   for (double a : BoundaryNodeAreas(pg)) raw += a;
   const double sphere_area = 4 * kPi * R * R;
   const double spacing_area = pg.mean_boundary_spacing * pg.mean_boundary_spacing;
-  std::printf("[falloff] surface area: the nodes' areas sum to %.3f of 4 pi R^2, (mean spacing)^2 per node to %.3f\n",
+  std::printf("[dipole] surface area: the nodes' areas sum to %.3f of 4 pi R^2, (mean spacing)^2 per node to %.3f\n",
               raw / sphere_area, spacing_area * pg.num_boundary() / sphere_area);
   EXPECT_NEAR(raw / sphere_area, 1.0, 0.10);
   EXPECT_LT(spacing_area * pg.num_boundary() / sphere_area, 0.97);
@@ -944,6 +970,7 @@ TEST(Render, DirectionalLightBrightensTheFacingHalf) {
     }
   }
 }
+
 
 }  // namespace
 }  // namespace translume

@@ -16,14 +16,16 @@ namespace translume {
 // with l0 = sqrt(kappa / mu) and i_l the modified spherical Bessel functions; each mode meets the
 // Robin condition phi + 2 C kappa dphi/dr = q at r = R:
 //   phi_l(R) = q_l / (1 + 2 C kappa i_l'(x) / (l0 i_l(x))),  x = R / l0,
-//   q_l = (2l + 1) / 2 int_-1^1 q(t) P_l(t) dt  (Simpson; q may have a kink, as max(0, t)),
+//   q_l = (2l + 1) / 2 int_-1^1 q(t) P_l(t) dt  (Simpson, 400 steps per mode: its error grows as
+//         l^5 and must stay below the deep shadow's radiance; q may have a kink at t = 0, which
+//         falls on a panel's end),
 //   i_l' / i_l = i_(l-1) / i_l - (l + 1) / x, the ratio from the series of i_l (no underflow).
 class LitSphereRadiance {
  public:
   LitSphereRadiance(double kappa, double mu, double R, double C, const std::function<double(double)>& q,
                     int modes = 160) {
     const double l0 = std::sqrt(kappa / mu), x = R / l0;
-    constexpr int kSteps = 8000;  // even; over [-1, 1]
+    const int kSteps = 400 * modes;  // even; over [-1, 1]
     std::vector<double> ql(modes, 0.0), P(modes);
     for (int s = 0; s <= kSteps; ++s) {
       const double t = -1 + 2.0 * s / kSteps, w = (s == 0 || s == kSteps) ? 1 : (s % 2 ? 4 : 2);
