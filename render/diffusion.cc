@@ -15,6 +15,30 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
+// One relaxation step of rows [0, count) (n = active[i] where active is given): next = a p + s
+// (s: the boundary rows' sources, or null for none), or with Chebyshev's weights w (not
+// Jacobi's) prev + w (that - prev).
+void RelaxStep(const HierarchyRelaxer::Level& v, int64_t count, const int32_t* active, const float* s,
+               const float* p, const float* prev, float* next, const std::array<float, 3>& w) {
+  const bool jacobi = ChebyshevSchedule::IsJacobi(w);
+  const bool extras = !v.extra_start.empty();
+  const int64_t ni = v.num_interior;
+#pragma omp parallel for schedule(static) if (count > 50000)
+  for (int64_t i = 0; i < count; ++i) {
+    const int64_t n = active ? active[i] : i;
+    const int32_t* nb = &v.nb[n * 6];
+    for (int c = 0; c < 3; ++c) {
+      const float* a = &v.a[(n * 3 + c) * 6];
+      float acc = n < ni || !s ? 0.f : s[(n - ni) * 3 + c];
+      for (int k = 0; k < 6; ++k) acc += a[k] * p[nb[k] * 3 + c];
+      if (extras)
+        for (int32_t e = v.extra_start[n]; e < v.extra_start[n + 1]; ++e) acc += v.extra_a[e * 3 + c] * p[v.extra_nb[e] * 3 + c];
+      const int64_t j = n * 3 + c;
+      next[j] = jacobi ? acc : prev[j] + w[c] * (acc - prev[j]);
+    }
+  }
+}
+
 class CpuHierarchy : public HierarchyRelaxer {
  public:
   void Load(std::vector<Level> levels) override {
@@ -52,31 +76,14 @@ class CpuHierarchy : public HierarchyRelaxer {
   }
   void Relax(int l, bool adaptive, int iterations, bool repeated) override {
     const Level& v = L_[l];
-    const int64_t na = adaptive ? int64_t(v.active.size()) : v.size, ni = v.num_interior;
-    const int32_t* active = v.active.data();
-    const float* s = s_[l].data();
+    const int64_t count = adaptive ? int64_t(v.active.size()) : v.size;
     // phi[cur] is the iterate, phi[cur + 2] the one before it (read by Chebyshev's steps from
     // the second on) and phi[cur + 1] the next; all three agree outside the updated nodes.
     ChebyshevSchedule schedule(v.rho, iterations, repeated);
     for (int it = 0; it < iterations; ++it) {
-      const std::array<float, 3> w = schedule.Next();
-      const bool jacobi = ChebyshevSchedule::IsJacobi(w);
       const int cur = cur_[l];
-      const float* p = phi_[l][cur].data();
-      const float* prev = phi_[l][(cur + 2) % 3].data();
-      float* next = phi_[l][(cur + 1) % 3].data();
-#pragma omp parallel for schedule(static) if (na > 50000)
-      for (int64_t i = 0; i < na; ++i) {
-        const int64_t n = adaptive ? active[i] : i;
-        const int32_t* nb = &v.nb[n * 6];
-        for (int c = 0; c < 3; ++c) {
-          const float* a = &v.a[(n * 3 + c) * 6];
-          float acc = n < ni ? 0.f : s[(n - ni) * 3 + c];
-          for (int k = 0; k < 6; ++k) acc += a[k] * p[nb[k] * 3 + c];
-          const int64_t j = n * 3 + c;
-          next[j] = jacobi ? acc : prev[j] + w[c] * (acc - prev[j]);
-        }
-      }
+      RelaxStep(v, count, adaptive ? v.active.data() : nullptr, s_[l].data(), phi_[l][cur].data(),
+                phi_[l][(cur + 2) % 3].data(), phi_[l][(cur + 1) % 3].data(), schedule.Next());
       cur_[l] = (cur + 1) % 3;
     }
   }
@@ -126,6 +133,9 @@ std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& v, int 
         const int64_t j = v.nb[n * 6 + k];
         for (int c = 0; c < 3; ++c) acc[c] += double(v.a[(n * 3 + c) * 6 + k]) * x[j * 3 + c];
       }
+      if (!v.extra_start.empty())
+        for (int32_t e = v.extra_start[n]; e < v.extra_start[n + 1]; ++e)
+          for (int c = 0; c < 3; ++c) acc[c] += double(v.extra_a[e * 3 + c]) * x[v.extra_nb[e] * 3 + c];
       for (int c = 0; c < 3; ++c) {
         ax[n * 3 + c] = acc[c];
         ratio[c] = std::min(ratio[c], acc[c] / x[n * 3 + c]);
@@ -140,6 +150,30 @@ std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& v, int 
   }
   for (double& r : lowest) r = std::clamp(N > 0 ? r : 0.0, 0.0, 1.0);
   return lowest;
+}
+
+std::array<bool, 3> ChebyshevContracts(const HierarchyRelaxer::Level& v, int steps) {
+  // A fixed pseudo-random start in [-1, 1] (every mode, oscillating ones included), no source.
+  std::array<std::vector<float>, 3> x;
+  for (auto& b : x) b.resize(v.size * 3);
+  uint32_t state = 12345u;
+  for (float& e : x[0]) {
+    state = state * 1664525u + 1013904223u;
+    e = float(state >> 8) / float(1u << 23) - 1.f;
+  }
+  x[2] = x[0];
+  ChebyshevSchedule schedule(v.rho, steps, true);
+  int cur = 0;
+  for (int it = 0; it < steps; ++it) {
+    RelaxStep(v, v.size, nullptr, nullptr, x[cur].data(), x[(cur + 2) % 3].data(), x[(cur + 1) % 3].data(),
+              schedule.Next());
+    cur = (cur + 1) % 3;
+  }
+  // Jacobi's steps shrink the largest entry (the rows' weight sums are below 1); Chebyshev's,
+  // where they converge, shrink it faster.
+  std::array<double, 3> largest{};
+  for (int64_t i = 0; i < v.size * 3; ++i) largest[i % 3] = std::max(largest[i % 3], double(std::abs(x[cur][i])));
+  return {largest[0] <= 1, largest[1] <= 1, largest[2] <= 1};
 }
 
 std::array<float, 3> ChebyshevSchedule::Next() {
@@ -193,6 +227,9 @@ std::vector<double> BoundarySourceCoefficients(const Polygrid& pg, const NodeMat
 JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double C,
                                const BoundaryLight& q) {
   TL_CHECK(pg.foot_weights.empty() || int64_t(pg.foot_weights.size()) == pg.num_boundary());
+  const bool wide = !pg.stencil_weights.empty();
+  TL_CHECK(!wide || (int64_t(pg.stencil_weights.size()) == pg.num_interior &&
+                     int64_t(pg.diagonal_neighbours.size()) == pg.num_interior));
   const std::vector<double> coef = BoundarySourceCoefficients(pg, m);
   JacobiSystem S;
   const int64_t N = pg.size();
@@ -201,22 +238,41 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
   S.w.assign(N * 18, 0.f);
   S.s.assign(N * 3, 0.f);
   S.inv_diag.assign(N * 3, 0.f);
+  if (wide) S.extra_start.assign(N + 1, 0);
   for (int64_t n = 0; n < N; ++n) {
     for (int k = 0; k < 6; ++k) {
       const int32_t j = pg.neighbours[n][k];
       S.nb[n * 6 + k] = j >= 0 ? j : int32_t(n);
     }
+    const bool interior = !pg.is_boundary(n);
+    if (wide) {
+      S.extra_start[n + 1] = S.extra_start[n];
+      if (interior)
+        for (int k = 6; k < 18; ++k)
+          if (pg.stencil_weights[n][k] > 0) {
+            S.extra_nb.push_back(pg.diagonal_neighbours[n][k - 6]);
+            ++S.extra_start[n + 1];
+          }
+      S.extra_w.resize(S.extra_nb.size() * 3);
+    }
     for (int c = 0; c < 3; ++c) {
       const double kn = m.kappa[c][n];
-      if (!pg.is_boundary(n)) {
-        // SPEC section 3's flux w_ji (kappa_i + kappa_j) / 2 (phi_j - phi_i), in phi' = kappa phi.
+      if (interior) {
+        // SPEC section 3's flux w_ji (kappa_i + kappa_j) / 2 (phi_j - phi_i), in phi' = kappa phi,
+        // over the six face neighbours, and the edge-diagonal ones of Polygrid::stencil_weights.
         double sum = 0;
-        for (int k = 0; k < 6; ++k) {
-          const int32_t j = pg.neighbours[n][k];
+        auto flux = [&](double w, int32_t j) {
           const double kj = m.kappa[c][j], kbar = 0.5 * (kn + kj);
-          S.w[(n * 3 + c) * 6 + k] = float(pg.weights[n][k] * kbar * kn / kj);
-          sum += pg.weights[n][k] * kbar;
-        }
+          sum += w * kbar;
+          return float(w * kbar * kn / kj);
+        };
+        for (int k = 0; k < 6; ++k) S.w[(n * 3 + c) * 6 + k] = flux(wide ? pg.stencil_weights[n][k] : pg.weights[n][k], S.nb[n * 6 + k]);
+        if (wide)
+          for (int k = 6, e = S.extra_start[n]; k < 18; ++k)
+            if (pg.stencil_weights[n][k] > 0) {
+              S.extra_w[e * 3 + c] = flux(pg.stencil_weights[n][k], S.extra_nb[e]);
+              ++e;
+            }
         S.inv_diag[n * 3 + c] = float(1 / (m.mu[c][n] + sum));
       } else {
         // The Robin balance over the slab of depth d/2 that the boundary node owns (see the
@@ -268,9 +324,15 @@ HierarchyRelaxer::Level RelaxationRows(const Polygrid& pg, const NodeMaterial& m
   v.num_interior = pg.num_interior;
   v.nb = std::move(S.nb);
   v.a = std::move(S.w);
+  v.extra_start = std::move(S.extra_start);
+  v.extra_nb = std::move(S.extra_nb);
+  v.extra_a = std::move(S.extra_w);
   for (int64_t n = 0; n < v.size; ++n)
-    for (int c = 0; c < 3; ++c)
+    for (int c = 0; c < 3; ++c) {
       for (int k = 0; k < 6; ++k) v.a[(n * 3 + c) * 6 + k] *= S.inv_diag[n * 3 + c];
+      if (!v.extra_start.empty())
+        for (int32_t e = v.extra_start[n]; e < v.extra_start[n + 1]; ++e) v.extra_a[e * 3 + c] *= S.inv_diag[n * 3 + c];
+    }
   v.source_coef.assign(S.s.begin() + v.num_interior * 3, S.s.end());
   for (size_t i = 0; i < v.source_coef.size(); ++i) v.source_coef[i] *= S.inv_diag[v.num_interior * 3 + i];
   return v;
@@ -306,6 +368,8 @@ std::vector<float> SolveReference(const JacobiSystem& S, int channels, bool diag
         const double w = S.w[(n * 3 + c) * 6 + k];
         if (w != 0) t.emplace_back(n, S.nb[n * 6 + k], -w);
       }
+      if (!S.extra_start.empty())
+        for (int32_t e = S.extra_start[n]; e < S.extra_start[n + 1]; ++e) t.emplace_back(n, S.extra_nb[e], -S.extra_w[e * 3 + c]);
       b[n] = S.s[n * 3 + c];
     }
     Eigen::SparseMatrix<double> A(S.size, S.size);
@@ -376,7 +440,24 @@ PolygridDiffusion::PolygridDiffusion(const std::vector<Polygrid>* levels,
     // Over the whole level, also where the steps update only the active nodes: the principal
     // submatrix's own estimate, lower and further below its radius after 50 power steps, gave
     // larger errors (docs/benchmarks.md, "Chebyshev's radius in one pass").
-    if (options_.relaxation == Relaxation::kChebyshev) hl[l].rho = JacobiSpectralRadii(hl[l]);
+    if (options_.relaxation == Relaxation::kChebyshev) {
+      // Where Chebyshev's steps would grow (ChebyshevContracts), a smaller rho widens the ellipse
+      // of eigenvalues they shrink; Jacobi's steps (rho 0) where none of these does.
+      const std::array<double, 3> rho = JacobiSpectralRadii(hl[l]);
+      std::array<bool, 3> done{};
+      for (double f : {1.0, 0.95, 0.9, 0.8, 0.6, 0.0}) {
+        for (int c = 0; c < 3; ++c)
+          if (!done[c]) hl[l].rho[c] = f * rho[c];
+        if (f == 0) break;
+        const std::array<bool, 3> contracts = ChebyshevContracts(hl[l]);
+        for (int c = 0; c < 3; ++c) {
+          done[c] = done[c] || contracts[c];
+          if (!done[c] && f == 1) ++reduced_radii_;
+          if (!done[c] && f == 0.6) ++jacobi_fallbacks_;
+        }
+        if (done[0] && done[1] && done[2]) break;
+      }
+    }
   }
   if (options.backend == DiffusionBackend::kGl) {
     const Polygrid& pg = L[0];

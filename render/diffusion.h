@@ -50,12 +50,19 @@ struct NodeMaterial {
 // down to make w_0 = 0: the row stays diagonally dominant and the relaxation convergent (it
 // diverged to 1e12 on a tetrahedron), and the condition there falls back towards the paper's
 // first-order form.
+// Where the polygrid has Polygrid::stencil_weights, an interior row's face neighbours take the
+// first six of them, and its edge-diagonal neighbours of positive weight follow as the row's
+// extra entries (rows of equal width would make every row pay for the few sheared ones).
 // Layouts: nb[n * 6 + k] (unused slots point at n with weight 0), w[(n * 3 + c) * 6 + k],
-// s[n * 3 + c], inv_diag[n * 3 + c], and phi'[n * 3 + c].
+// s[n * 3 + c], inv_diag[n * 3 + c], and phi'[n * 3 + c]; extra entries e of row n for
+// extra_start[n] <= e < extra_start[n + 1], at node extra_nb[e] with weight extra_w[e * 3 + c]
+// (all three empty without the wide stencil).
 struct JacobiSystem {
   int64_t size = 0;
   std::vector<int32_t> nb;
   std::vector<float> w, s, inv_diag;
+  std::vector<int32_t> extra_start, extra_nb;
+  std::vector<float> extra_w;
 };
 
 // q: incoming light at the boundary nodes, q[c][b - num_interior] (the SPEC's q: the Robin
@@ -103,8 +110,9 @@ DiffusionBackend ParseDiffusionBackend(const std::string& text);
 // diagonal beforehand (RelaxationRows), and the source kept for the boundary rows only (the
 // interior rows' is 0):
 //   phi'_n <- sum_k a[n][k] phi'_{nb[n][k]} + (n boundary ? q_b g_b : 0)
-// so a step reads 6 neighbour indices, 18 weights and 3 values per node (and the active list
-// only when adaptive): nothing per interior node beyond the stencil.
+// so a step reads 6 neighbour indices, 18 weights and 3 values per node, and per extra entry
+// (JacobiSystem's) an index, 3 weights and 3 values (and the active list only when adaptive):
+// nothing per interior node beyond the stencil.
 // With Level::rho set, the steps of one Relax call are accelerated by Chebyshev's
 // semi-iteration (Golub & Van Loan, Section 11.2.8; Varga 1962):
 //   phi'_(k+1) = phi'_(k-1) + omega_(k+1) (J phi'_k - phi'_(k-1)),   J phi' = the step above,
@@ -117,6 +125,8 @@ class HierarchyRelaxer {
     int64_t num_interior = 0;        // the boundary rows are [num_interior, size)
     std::vector<int32_t> nb;         // JacobiSystem::nb
     std::vector<float> a;            // a[(n * 3 + c) * 6 + k] = w * inv_diag (JacobiSystem's)
+    std::vector<int32_t> extra_start, extra_nb;  // JacobiSystem's
+    std::vector<float> extra_a;                  // extra_a[e * 3 + c] = extra_w * inv_diag
     std::vector<float> source_coef;  // g[b * 3 + c]: boundary row b's source per unit q, over its diagonal
     std::vector<int32_t> active;     // the nodes that adaptive relaxation updates
     Prolongation prolong;            // from the next coarser level (empty on the coarsest)
@@ -165,6 +175,16 @@ HierarchyRelaxer::Level RelaxationRows(const Polygrid& pg, const NodeMaterial& m
 // imaginary part is 6e-3, Diffusion.SpectralRadiusEstimateIsCloseFromBelow.) Rows of tiny
 // weight sums pull the estimate towards 0, i.e. towards plain Jacobi steps.
 std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& level, int iterations = 50);
+
+// Whether Chebyshev's steps with level.rho (per channel) shrink the error: `steps` of them (as a
+// frame-coherent run: cycles with Jacobi tails) from a fixed pseudo-random start in [-1, 1]
+// without a source, the largest entry at most 1 at the end. The estimate above assumes a real
+// spectrum; an iteration matrix whose eigenvalues lie far off the real axis (rows far from
+// symmetric: a badly distorted grid, such as a tetrahedron's voxel polycube at 9^3 with the
+// wide stencil, |Im| up to ~0.5) makes Chebyshev's polynomials grow there, by 1e4 in 100
+// steps, where Jacobi's steps still converge. Where this says no, PolygridDiffusion tries smaller
+// radii (a wider ellipse), then Jacobi's steps.
+std::array<bool, 3> ChebyshevContracts(const HierarchyRelaxer::Level& level, int steps = 120);
 
 // The over-relaxation weights of Chebyshev's semi-iteration for spectral radii rho (per
 // channel): omega_1 = 1, omega_2 = 1 / (1 - rho^2 / 2), omega_(k+1) = 1 / (1 - rho^2 omega_k / 4)
@@ -249,6 +269,11 @@ class PolygridDiffusion {
   void SolveOnDevice(const std::vector<DeviceFloats>& q, DeviceFloats radiance);
   const std::vector<NodeMaterial>& materials() const { return materials_; }
   int last_iterations() const { return last_iterations_; }
+  // Channels of levels whose Chebyshev steps would grow with rho's estimate (ChebyshevContracts
+  // said no): they run with rho scaled by 0.95, 0.9, 0.8 or 0.6, the first with which they
+  // shrink (reduced_radii), or where none does, Jacobi's steps (jacobi_fallbacks, a subset).
+  int reduced_radii() const { return reduced_radii_; }
+  int jacobi_fallbacks() const { return jacobi_fallbacks_; }
   void ResetCoherence() { have_previous_ = false; }
 
  private:
@@ -267,6 +292,7 @@ class PolygridDiffusion {
   std::vector<float> phi_;
   bool have_previous_ = false;
   int last_iterations_ = 0;
+  int reduced_radii_ = 0, jacobi_fallbacks_ = 0;
 };
 
 }  // namespace translume

@@ -126,8 +126,19 @@ class GlHierarchy : public HierarchyRelaxer {
       Device& d = dev_[l];
       d.size = v.size;
       d.num_interior = v.num_interior;
-      d.nb.Set(v.nb);
-      d.a.Set(v.a);
+      if (v.extra_start.empty()) {
+        d.nb.Set(v.nb);
+        d.a.Set(v.a);
+      } else {  // the extra entries after the rows, in the same buffers (jacobi.comp)
+        d.extra_rows = v.size;
+        std::vector<int32_t> nb = v.nb;
+        nb.insert(nb.end(), v.extra_start.begin(), v.extra_start.end());
+        nb.insert(nb.end(), v.extra_nb.begin(), v.extra_nb.end());
+        std::vector<float> a = v.a;
+        a.insert(a.end(), v.extra_a.begin(), v.extra_a.end());
+        d.nb.Set(nb);
+        d.a.Set(a);
+      }
       d.coef.Set(v.source_coef);
       d.q.Set(nullptr, v.source_coef.size() * sizeof(float));
       d.s.Set(nullptr, v.source_coef.size() * sizeof(float));
@@ -189,6 +200,7 @@ class GlHierarchy : public HierarchyRelaxer {
     api.Uniform1i(0, int(count));
     api.Uniform1i(1, int(d.num_interior));
     api.Uniform1i(2, adaptive ? 1 : 0);
+    api.Uniform1i(5, int(d.extra_rows));
     // Without the list the shader never reads binding 3; the rows stand in for it.
     const Ssbo& list = adaptive ? d.active : d.nb;
     // phi[cur] is the iterate, phi[cur + 2] the one before it (read by Chebyshev's steps from
@@ -213,7 +225,7 @@ class GlHierarchy : public HierarchyRelaxer {
 
  private:
   struct Device {
-    int64_t size = 0, num_interior = 0, num_active = 0;
+    int64_t size = 0, num_interior = 0, num_active = 0, extra_rows = 0;  // extra_rows: 0 without extra entries
     int cur = 0;
     Ssbo nb, a, coef, q, s, active, p_start, p_index, p_weight, phi[3];
     std::array<double, 3> rho{};

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <array>
+#include <vector>
 
 #include "render/shape.h"
 
@@ -35,5 +36,31 @@ std::array<double, 6> AxisLaplacianWeights(const std::array<Vec3, 6>& offsets, d
 // its axis weight or the system is singular.
 bool FirstOrderAxisWeights(const std::array<Vec3, 6>& offsets, const std::array<double, 6>& axis,
                            std::array<double, 6>* weights);
+
+// The second-order Taylor conditions on a node's Laplacian weights w_j (1/mm^2) over offsets
+// d_j = v_j - v_0 (mm), met exactly when sum_j w_j (f(v_j) - f(v_0)) = Laplacian f(v_0) for every
+// quadratic f:
+//   sum_j w_j d_j = 0  (first order, 3),   sum_j w_j d_j d_j^T = 2 I  (second order, 6; the mixed
+//   terms included, which Appendix B's six weights leave out),
+// and, implied by them, the trace sum_j w_j |d_j|^2 = 6 (Laplacian |x|^2 = 6).
+// Returns their residual made dimensionless by the length `scale` (d / scale, w scale^2): the 2-norm
+// of the ten conditions' misfits, the first-order ones and the trace times consistency_weight:
+// those are what FirstOrderAxisWeights keep exactly where the 6x6 system fails, a drift along
+// the grid and a wrong mean (the uniformly lit sphere's: -13 % on the paper's variance-placed
+// grid at 17^3 with the trace weighted 1, -8 % with 10) weigh more than a misweighted curvature.
+double TaylorResidual(const std::vector<Vec3>& offsets, const std::vector<double>& weights, double scale,
+                      double consistency_weight = 10);
+
+// The non-negative weights over `offsets` (any number: a polygrid node's six face and twelve
+// edge-diagonal lattice neighbours) that meet those conditions best: non-negative least squares
+// (Lawson & Hanson 1974, the active-set method) on TaylorResidual's ten weighted conditions.
+// Where the six face neighbours cannot meet the mixed terms (a sheared cell), the diagonal
+// ones can, and non-negative weights keep the relaxation convergent. Returns the residual as
+// TaylorResidual; weights resized to offsets.size().
+// With lambda > 0, the least squares also pulls towards `toward` (1/mm^2, one per offset), by
+// lambda |(w - toward) scale^2|^2 on top.
+double StencilLaplacianWeights(const std::vector<Vec3>& offsets, double scale, std::vector<double>* weights,
+                               double consistency_weight = 10, const std::vector<double>& toward = {},
+                               double lambda = 0);
 
 }  // namespace translume

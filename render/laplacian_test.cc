@@ -3,7 +3,9 @@
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
+#include <cstdio>
 #include <random>
+#include <vector>
 
 namespace translume {
 namespace {
@@ -154,6 +156,79 @@ TEST(FirstOrderAxisWeights, RejectsAStencilWithAllNeighboursOnOneSide) {
   for (int j = 0; j < 6; ++j) off[j] = Vec3(1.0 + 0.1 * j, 0.2 * (j % 3) - 0.2, 0.3 * (j % 2) - 0.15);
   std::array<double, 6> w;
   EXPECT_FALSE(FirstOrderAxisWeights(off, AxisLaplacianWeights(off), &w));
+}
+
+// A sheared cell: the lattice's x, y, z steps mapped by a shear (y picks up 0.4 x, z 0.3 y), so
+// the face neighbours' offsets are not orthogonal. Appendix B's six weights cannot give the
+// mixed second derivatives there; with the twelve edge-diagonal neighbours, non-negative
+// weights meet all nine Taylor conditions, so the Laplacian of every quadratic is exact.
+TEST(StencilLaplacianWeights, ShearedCellIsExactForQuadraticsWithTheDiagonals) {
+  Eigen::Matrix3d shear;
+  shear << 1, 0, 0, 0.4, 1, 0, 0, 0.3, 1;
+  const double h = 0.7;
+  std::vector<Vec3> face, all;
+  for (int j = 0; j < 6; ++j) {
+    Vec3 g = Vec3::Zero();
+    g[j / 2] = j % 2 ? 1 : -1;
+    face.push_back(h * shear * g);
+  }
+  all = face;
+  constexpr int kPairs[3][2] = {{0, 1}, {1, 2}, {0, 2}};
+  for (const auto& p : kPairs)
+    for (int sa : {1, -1})
+      for (int sb : {1, -1}) {
+        Vec3 g = Vec3::Zero();
+        g[p[0]] = sa, g[p[1]] = sb;
+        all.push_back(h * shear * g);
+      }
+  std::array<Vec3, 6> face6;
+  std::copy(face.begin(), face.end(), face6.begin());
+  std::array<double, 6> w6;
+  ASSERT_TRUE(LaplacianWeights(face6, &w6));
+  const double face_residual = TaylorResidual(face, std::vector<double>(w6.begin(), w6.end()), h);
+  std::vector<double> w;
+  const double residual = StencilLaplacianWeights(all, h, &w);
+  std::printf("[laplacian] sheared cell: Taylor residual of the six weights %.3f, of the 18 %.2e\n", face_residual, residual);
+  EXPECT_GT(face_residual, 0.3);
+  EXPECT_LT(residual, 1e-9);
+  EXPECT_NEAR(TaylorResidual(all, w, h), residual, 1e-12);
+  ASSERT_EQ(w.size(), 18u);
+  for (double x : w) EXPECT_GE(x, 0);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> c(-2, 2);
+  for (int trial = 0; trial < 10; ++trial) {
+    Eigen::Matrix3d A;
+    for (int a = 0; a < 3; ++a)
+      for (int b = a; b < 3; ++b) A(a, b) = A(b, a) = c(rng);
+    const Vec3 g(c(rng), c(rng), c(rng));
+    auto f = [&](const Vec3& x) { return x.dot(A * x) + g.dot(x); };
+    double lap = 0, lap6 = 0;
+    for (size_t j = 0; j < all.size(); ++j) lap += w[j] * f(all[j]);
+    for (int j = 0; j < 6; ++j) lap6 += w6[j] * f(face[j]);
+    EXPECT_NEAR(lap, 2 * A.trace(), 1e-9 * (1 + std::abs(A.trace()))) << trial;
+    if (trial == 0) std::printf("[laplacian] sheared cell, a quadratic: six weights %.4f, 18 %.4f, exact %.4f\n", lap6, lap, 2 * A.trace());
+  }
+  // Pulled towards the six weights (as the polygrid builder does) the fit stays nearly exact.
+  std::vector<double> toward(w6.begin(), w6.end());
+  toward.resize(18, 0.0);
+  std::vector<double> pulled;
+  EXPECT_LT(StencilLaplacianWeights(all, h, &pulled, 10, toward, 0.03), 0.02);
+  for (double x : pulled) EXPECT_GE(x, 0);
+}
+
+// On an undistorted (stretched) grid the seven-point weights already meet every condition.
+TEST(StencilLaplacianWeights, TaylorResidualOfTheSevenPointStencilIsZero) {
+  const double hx = 0.5, hy = 0.25, hz = 1.5;
+  std::vector<Vec3> off;
+  std::vector<double> w;
+  for (int j = 0; j < 6; ++j) {
+    Vec3 d = Vec3::Zero();
+    const double hj = j / 2 == 0 ? hx : j / 2 == 1 ? hy : hz;
+    d[j / 2] = j % 2 ? hj : -hj;
+    off.push_back(d);
+    w.push_back(1 / (hj * hj));
+  }
+  EXPECT_LT(TaylorResidual(off, w, 0.7), 1e-12);
 }
 
 }  // namespace

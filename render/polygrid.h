@@ -50,6 +50,10 @@ struct PolygridOptions {
   // Laplacian-smoothed nodes are kept. Polygrid::placement_note says what happened.
   int winslow_iterations = 2000;
   int winslow_stall = 100;
+  // Interior rows over the face and the edge-diagonal lattice neighbours where Appendix B's six
+  // weights miss the second-order Taylor conditions (Polygrid::stencil_weights); false: the six
+  // face weights everywhere (the paper's rows, a third of the relaxation's reads).
+  bool diagonal_stencil = true;
   // Passes that align each boundary node and its first interior node with the grid line of the
   // free interior node behind them (then re-smooth): links along the normal, grid lines
   // continued to the surface. On a box this gives a tensor-product grid. Only on the sides of
@@ -97,6 +101,22 @@ struct Polygrid {
   // node's leans along the lattice on purpose, and reads j as before); with two or three the
   // foot lies between j and the interior nodes beside it, away from the polycube's edge.
   std::vector<std::array<float, 6>> foot_weights;
+  // The interior rows' Laplacian (empty unless PolygridOptions::diagonal_stencil and some node
+  // needs it): per interior node, 18 weights (1/mm^2) over the six face neighbours (the order of
+  // `neighbours`) and then the twelve edge-diagonal lattice neighbours in diagonal_neighbours
+  // (axis pairs xy, yz, xz, each with signs ++, +-, -+, --; an interior node, or a boundary node
+  // at that lattice point; -1 where there is none, weight 0):
+  //   Laplacian f(v_i) ~= sum_k stencil_weights[i][k] (f(v_k) - f(v_i)).
+  // Where `weights` (Appendix B's six, no mixed terms) nearly meet every second-order Taylor
+  // condition (TaylorResidual < 0.1 with the node's mean face-neighbour distance as the scale:
+  // an undistorted, stretched or slightly sheared cell) they are kept and the diagonal weights
+  // are 0; elsewhere (a sheared cell, such as the single cube's under a sphere) the non-negative
+  // weights over all 18 that meet them best (StencilLaplacianWeights), unless they meet them
+  // worse than `weights`. `weights` stay Appendix B's: the boundary rows' lateral slab term
+  // reads them.
+  std::vector<std::array<int32_t, 12>> diagonal_neighbours;
+  std::vector<std::array<float, 18>> stencil_weights;
+  int64_t diagonal_stencil_nodes = 0;  // interior nodes with a diagonal weight > 0
   // Every node: hops to the nearest boundary node (0 on the boundary), the boundary node it
   // was reached from (the shell mapping's surface point), and its depth |v - v_src| (mm).
   std::vector<int> layer;

@@ -6,6 +6,7 @@
 #include <functional>
 #include <vector>
 
+#include "render/shape.h"
 #include "solver/image.h"  // RelativeL2, which the tests share with the tools
 
 namespace translume {
@@ -64,5 +65,14 @@ class LitSphereRadiance {
   }
   std::vector<double> boundary_;  // the radiance's Legendre coefficients at r = R
 };
+
+// A 10 mm right-angled tetrahedron (outward faces): sharp edges and corners that a voxel
+// polycube cannot follow, so its polygrid has crowded boundary nodes and distorted cells.
+inline TriangleMesh TetrahedronMesh() {
+  TriangleMesh tet;
+  tet.vertices = {Vec3(0, 0, 0), Vec3(10, 0, 0), Vec3(0, 10, 0), Vec3(0, 0, 10)};
+  tet.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  return tet;
+}
 
 }  // namespace translume

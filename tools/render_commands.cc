@@ -84,7 +84,7 @@ int RunRender(int argc, char** argv) {
               camera, image = "256x256", iterations = "60,30,30", depth, backend = "cpu", placement = "winslow",
               relaxation = "chebyshev";
   double size_mm = 20, map_scale = 1, first_layer = 0.1;
-  int resolution = 17, levels = 3, turntable = 1, variance_steps = PolygridOptions().variance_iterations;
+  int resolution = 17, levels = 3, turntable = 1, variance_steps = PolygridOptions().variance_iterations, stencil = 18;
   bool coherence = false, clamp = false;
   std::optional<double> exposure;  // stops; none: auto exposure
   RenderOptions ro;
@@ -104,6 +104,12 @@ int RunRender(int argc, char** argv) {
   app.add_option("--placement", placement,
                  "Interior nodes: winslow (elliptic grid generation: nearer-orthogonal cells, more accurate on "
                  "curved shapes) or variance (the paper's edge-length variance steps); docs/render.md")
+      ->capture_default_str();
+  app.add_option("--stencil", stencil,
+                 "Interior rows' Laplacian: 18 (the face and edge-diagonal neighbours where the grid is "
+                 "sheared: second order there too) or 6 (the paper's Appendix B: less work per step on "
+                 "sheared grids); docs/render.md")
+      ->check(CLI::IsMember({6, 18}))
       ->capture_default_str();
   app.add_option("--variance-steps", variance_steps,
                  "With --placement variance: gradient steps on the interior nodes' edge-length variance (0: "
@@ -219,6 +225,7 @@ int RunRender(int argc, char** argv) {
   po.first_layer_fraction = first_layer;
   po.variance_iterations = variance_steps;
   po.placement = ParseInteriorPlacement(placement);
+  po.diagonal_stencil = stencil == 18;
   // The build takes seconds on large polycubes (the bunny: ~10 s on two cores): say so first.
   if (pc.cubes.size() > 16) {
     std::printf("render: building the polygrid of %s (%zu cubes x %d^3, up to %d level%s) ...\n",
@@ -249,10 +256,10 @@ int RunRender(int argc, char** argv) {
                 "10); use 36 or more frames, or leave --coherence off\n", dopt.coherent_iterations, 360.0 / turntable);
   if (std::string err = dopt.Validate(); !err.empty()) throw InputError("--iterations/--depth: " + err);
   std::printf("render: %s on %s, polygrid %zu cubes x %d^3 (%lld nodes, %lld boundary, %lld with fallback "
-              "Laplacian weights, %lld of them per-axis), %zu levels, built in %.2f s\n", material.c_str(),
-              shape->name().c_str(), pc.cubes.size(), resolution, (long long)grids[0].size(),
+              "Laplacian weights, %lld of them per-axis, %lld on the 18-point stencil), %zu levels, built in %.2f s\n",
+              material.c_str(), shape->name().c_str(), pc.cubes.size(), resolution, (long long)grids[0].size(),
               (long long)grids[0].num_boundary(), (long long)grids[0].fallback_weights,
-              (long long)grids[0].axis_weights, grids.size(), build_s);
+              (long long)grids[0].axis_weights, (long long)grids[0].diagonal_stencil_nodes, grids.size(), build_s);
   for (const std::string& note : PolygridNotes(grids, levels, polycube_label, shape->name()))
     std::printf("render: note: %s\n", note.c_str());
   if (ro.model == "dipole") {

@@ -55,7 +55,7 @@ int main(int argc, char** argv) {
   // Figure 15 allows 5e-3; docs/benchmarks.md, 2026-12-01).
   std::vector<int> iterations = {30, 15, 15};
   std::vector<int> depth;
-  int frames = 10, size = 256, coherent_iterations = 20;
+  int frames = 10, size = 256, coherent_iterations = 20, stencil = 18;
   bool skip_coherent = false, skip_error = false;
   app.add_option("--shapes", shapes, "Built-in shapes")->delimiter(',');
   app.add_option("--resolutions", resolutions, "Nodes per cube edge")->delimiter(',');
@@ -71,6 +71,9 @@ int main(int argc, char** argv) {
                  "Adaptive depth per level in node layers, coarsest first (-1: all nodes; the "
                  "default: all nodes on every level)")
       ->delimiter(',');
+  app.add_option("--stencil", stencil, "Interior rows' Laplacian: 18 (face and edge-diagonal neighbours) or 6")
+      ->check(CLI::IsMember({6, 18}))
+      ->capture_default_str();
   app.add_flag("--no-error", skip_error, "Skip the error against the converged solution (a sparse "
                                          "solve in double on the host)");
   app.add_option("--frames", frames, "Timed frames per configuration")->capture_default_str();
@@ -108,6 +111,7 @@ int main(int argc, char** argv) {
         const Polycube pc = BuiltinPolycube(name);
         PolygridOptions po;
         po.resolution = res;
+        po.diagonal_stencil = stencil == 18;
         const auto tb = std::chrono::steady_clock::now();
         const auto levels = BuildPolygridHierarchy(pc, *shape, po, 3);
         const double build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tb).count();

@@ -1,6 +1,9 @@
 // SPDX-License-Identifier: MIT
 // One relaxation step of the polygrid diffusion (render/diffusion.h, HierarchyRelaxer), RGB:
-//   dst[n] = sum_k a[n][k] src[nb[n][k]] + (n >= num_interior ? s[n - num_interior] : 0)
+//   dst[n] = sum_k a[n][k] src[nb[n][k]] + (n >= num_interior ? s[n - num_interior] : 0),
+// k < 6, plus with rows > 0 the row's extra entries (JacobiSystem's), which follow in the same
+// buffers: nb[rows * 6 + n] is extra_start[n], nb[rows * 7 + 1 + e] extra_nb[e], and
+// a[rows * 18 + e * 3 + c] extra_a[e * 3 + c]
 // for n = active[i] (adaptive) or n = i, i < count; with use_prev, Chebyshev's semi-iteration
 // (render/diffusion.h): dst[n] = prev[n] + omega (that - prev[n]), per channel.
 #version 430
@@ -17,6 +20,7 @@ layout(location = 1) uniform int num_interior;
 layout(location = 2) uniform int use_list;
 layout(location = 3) uniform int use_prev;
 layout(location = 4) uniform vec3 omega;
+layout(location = 5) uniform int rows;
 
 void main() {
   int i = int(gl_WorkGroupID.y * gl_NumWorkGroups.x * 256u + gl_GlobalInvocationID.x);
@@ -24,10 +28,16 @@ void main() {
   int n = use_list != 0 ? active_nodes[i] : i;
   int nbr[6];
   for (int k = 0; k < 6; ++k) nbr[k] = nb[n * 6 + k];
+  int e0 = 0, e1 = 0;
+  if (rows > 0) {
+    e0 = nb[rows * 6 + n];
+    e1 = nb[rows * 6 + n + 1];
+  }
   for (int c = 0; c < 3; ++c) {
     int row = (n * 3 + c) * 6;
     float acc = n < num_interior ? 0.0 : s[(n - num_interior) * 3 + c];
     for (int k = 0; k < 6; ++k) acc += a[row + k] * src[nbr[k] * 3 + c];
+    for (int e = e0; e < e1; ++e) acc += a[rows * 18 + e * 3 + c] * src[nb[rows * 7 + 1 + e] * 3 + c];
     dst[n * 3 + c] = use_prev != 0 ? prev[n * 3 + c] + omega[c] * (acc - prev[n * 3 + c]) : acc;
   }
 }
