@@ -14,7 +14,8 @@
 # and Marble with the line smoother by cyclic reduction (TRANSLUME_GL_LINE_PCR=1), a profile
 # of Wax I's solves per kernel and level on GPU timestamps (default and cyclic reduction), the
 # renderbench on the 253-cube bunny (17^3 nodes per cube, 3 levels, no frame coherence, the
-# default 30/15/15 Chebyshev steps) and a profile of its frames per shader on GPU timestamps,
+# default 30/15/15 Chebyshev steps; then with --stencil 6) and a profile of its frames per
+# shader on GPU timestamps,
 # the RGB recoveries with 16 conditions on the Wax I grid (default, cyclic reduction, then 15 s
 # with a GPU-timestamp profile per kernel and grid) and the Marble grid on the gl backend,
 # time-capped at 40 s and 30 s (their seconds per iteration give the time of the bench's full
@@ -186,6 +187,8 @@ for variant in TRANSLUME_GL_LINE_PCR=0 TRANSLUME_GL_LINE_PCR=1; do
 done
 if [ ${#render[@]} -gt 0 ]; then
   step "renderbench (bunny)" 60 "${render[@]}" "${render_args[@]}"
+  # The paper's six-point rows beside the default wide stencil (6 % of the bunny's rows wide).
+  step "renderbench (bunny, --stencil 6)" 40 "${render[@]}" "${render_args[@]}" --stencil 6
   # Where a frame's time goes, per shader, timed on the GPU without finishes.
   step "renderbench profile (bunny, TRANSLUME_GL_PROFILE=gpu)" 60 env TRANSLUME_GL_PROFILE=gpu \
     "${render[@]}" "${render_profile_args[@]}"
