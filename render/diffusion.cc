@@ -32,7 +32,8 @@ void RelaxStep(const HierarchyRelaxer::Level& v, int64_t count, const int32_t* a
       float acc = n < ni || !s ? 0.f : s[(n - ni) * 3 + c];
       for (int k = 0; k < 6; ++k) acc += a[k] * p[nb[k] * 3 + c];
       if (extras)
-        for (int32_t e = v.extra_start[n]; e < v.extra_start[n + 1]; ++e) acc += v.extra_a[e * 3 + c] * p[v.extra_nb[e] * 3 + c];
+        for (int32_t e = v.extra_start[n]; e < v.extra_start[n + 1]; ++e)
+          acc += v.extra_a[e * 3 + c] * p[v.extra_nb[e] * 3 + c];
       const int64_t j = n * 3 + c;
       next[j] = jacobi ? acc : prev[j] + w[c] * (acc - prev[j]);
     }
@@ -152,7 +153,7 @@ std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& v, int 
   return lowest;
 }
 
-std::array<bool, 3> ChebyshevContracts(const HierarchyRelaxer::Level& v, int steps) {
+std::array<bool, 3> ChebyshevContracts(const HierarchyRelaxer::Level& v, int steps, bool repeated) {
   // A fixed pseudo-random start in [-1, 1] (every mode, oscillating ones included), no source.
   std::array<std::vector<float>, 3> x;
   for (auto& b : x) b.resize(v.size * 3);
@@ -162,7 +163,7 @@ std::array<bool, 3> ChebyshevContracts(const HierarchyRelaxer::Level& v, int ste
     e = float(state >> 8) / float(1u << 23) - 1.f;
   }
   x[2] = x[0];
-  ChebyshevSchedule schedule(v.rho, steps, true);
+  ChebyshevSchedule schedule(v.rho, steps, repeated);
   int cur = 0;
   for (int it = 0; it < steps; ++it) {
     RelaxStep(v, v.size, nullptr, nullptr, x[cur].data(), x[(cur + 2) % 3].data(), x[(cur + 1) % 3].data(),
@@ -266,7 +267,8 @@ JacobiSystem BuildJacobiSystem(const Polygrid& pg, const NodeMaterial& m, double
           sum += w * kbar;
           return float(w * kbar * kn / kj);
         };
-        for (int k = 0; k < 6; ++k) S.w[(n * 3 + c) * 6 + k] = flux(wide ? pg.stencil_weights[n][k] : pg.weights[n][k], S.nb[n * 6 + k]);
+        for (int k = 0; k < 6; ++k)
+          S.w[(n * 3 + c) * 6 + k] = flux(wide ? pg.stencil_weights[n][k] : pg.weights[n][k], S.nb[n * 6 + k]);
         if (wide)
           for (int k = 6, e = S.extra_start[n]; k < 18; ++k)
             if (pg.stencil_weights[n][k] > 0) {
@@ -369,7 +371,8 @@ std::vector<float> SolveReference(const JacobiSystem& S, int channels, bool diag
         if (w != 0) t.emplace_back(n, S.nb[n * 6 + k], -w);
       }
       if (!S.extra_start.empty())
-        for (int32_t e = S.extra_start[n]; e < S.extra_start[n + 1]; ++e) t.emplace_back(n, S.extra_nb[e], -S.extra_w[e * 3 + c]);
+        for (int32_t e = S.extra_start[n]; e < S.extra_start[n + 1]; ++e)
+          t.emplace_back(n, S.extra_nb[e], -S.extra_w[e * 3 + c]);
       b[n] = S.s[n * 3 + c];
     }
     Eigen::SparseMatrix<double> A(S.size, S.size);
@@ -449,7 +452,13 @@ PolygridDiffusion::PolygridDiffusion(const std::vector<Polygrid>* levels,
         for (int c = 0; c < 3; ++c)
           if (!done[c]) hl[l].rho[c] = f * rho[c];
         if (f == 0) break;
-        const std::array<bool, 3> contracts = ChebyshevContracts(hl[l]);
+        // As a coherent run (cycles with Jacobi tails) and as a frame's own call of this
+        // level's steps (one plain sequence when they are at most a cycle).
+        std::array<bool, 3> contracts = ChebyshevContracts(hl[l], 120, true);
+        if (iterations_[l] > 0 && iterations_[l] <= ChebyshevSchedule::kMaxCycle) {
+          const std::array<bool, 3> plain = ChebyshevContracts(hl[l], iterations_[l], false);
+          for (int c = 0; c < 3; ++c) contracts[c] = contracts[c] && plain[c];
+        }
         for (int c = 0; c < 3; ++c) {
           done[c] = done[c] || contracts[c];
           if (!done[c] && f == 1) ++reduced_radii_;

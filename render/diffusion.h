@@ -176,15 +176,17 @@ HierarchyRelaxer::Level RelaxationRows(const Polygrid& pg, const NodeMaterial& m
 // weight sums pull the estimate towards 0, i.e. towards plain Jacobi steps.
 std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& level, int iterations = 50);
 
-// Whether Chebyshev's steps with level.rho (per channel) shrink the error: `steps` of them (as a
-// frame-coherent run: cycles with Jacobi tails) from a fixed pseudo-random start in [-1, 1]
-// without a source, the largest entry at most 1 at the end. The estimate above assumes a real
+// Whether Chebyshev's steps with level.rho (per channel) shrink the error: `steps` of them (as
+// ChebyshevSchedule runs them; `repeated`: as a frame-coherent run, in cycles with Jacobi tails)
+// over every row from a fixed pseudo-random start in [-1, 1] without a source, the largest
+// entry at most 1 at the end. (Adaptive steps run a subset of the rows; not checked apart.) The estimate above assumes a real
 // spectrum; an iteration matrix whose eigenvalues lie far off the real axis (rows far from
 // symmetric: a badly distorted grid, such as a tetrahedron's voxel polycube at 9^3 with the
 // wide stencil, |Im| up to ~0.5) makes Chebyshev's polynomials grow there, by 1e4 in 100
-// steps, where Jacobi's steps still converge. Where this says no, PolygridDiffusion tries smaller
-// radii (a wider ellipse), then Jacobi's steps.
-std::array<bool, 3> ChebyshevContracts(const HierarchyRelaxer::Level& level, int steps = 120);
+// steps, where Jacobi's steps still converge. PolygridDiffusion checks each level with 120 steps
+// as a coherent run and with its own step count as one call; where either says no, it tries
+// smaller radii (a wider ellipse), then Jacobi's steps.
+std::array<bool, 3> ChebyshevContracts(const HierarchyRelaxer::Level& level, int steps = 120, bool repeated = true);
 
 // The over-relaxation weights of Chebyshev's semi-iteration for spectral radii rho (per
 // channel): omega_1 = 1, omega_2 = 1 / (1 - rho^2 / 2), omega_(k+1) = 1 / (1 - rho^2 omega_k / 4)

@@ -95,7 +95,7 @@ void TaylorSystem(const std::vector<Vec3>& offsets, double scale, double consist
 
 double TaylorResidual(const std::vector<Vec3>& offsets, const std::vector<double>& weights, double scale,
                       double consistency_weight) {
-  TL_CHECK(weights.size() == offsets.size());
+  TL_CHECK(weights.size() == offsets.size() && offsets.size() <= 32);
   TaylorMatrix A;
   Eigen::Matrix<double, 10, 1> b;
   TaylorSystem(offsets, scale, consistency_weight, &A, &b);
@@ -106,11 +106,11 @@ double TaylorResidual(const std::vector<Vec3>& offsets, const std::vector<double
 
 double StencilLaplacianWeights(const std::vector<Vec3>& offsets, double scale, std::vector<double>* weights,
                                double consistency_weight, const std::vector<double>& toward, double lambda) {
+  const int n = int(offsets.size());
+  TL_CHECK(n <= 32);
   TaylorMatrix T;
   Eigen::Matrix<double, 10, 1> t;
   TaylorSystem(offsets, scale, consistency_weight, &T, &t);
-  const int n = int(offsets.size());
-  TL_CHECK(n <= 32);
   const bool tikhonov = lambda > 0 && !toward.empty();
   TL_CHECK(!tikhonov || int(toward.size()) == n);
   // The normal equations G x = h of |T x - t|^2 + lambda^2 |x - toward scale^2|^2.
@@ -120,20 +120,23 @@ double StencilLaplacianWeights(const std::vector<Vec3>& offsets, double scale, s
   Vector h = T.transpose() * t;
   if (tikhonov)
     for (int j = 0; j < n; ++j) G(j, j) += lambda * lambda, h[j] += lambda * lambda * toward[j] * scale * scale;
-  Vector x = Vector::Zero(n), z(n);
-  std::array<char, 32> passive{};
+  Vector x = Vector::Zero(n);
+  std::array<char, 32> passive{}, stuck{};
   std::array<int, 32> set;
   // Lawson & Hanson: move the variable with the largest gradient h - G x of -(the objective) / 2
   // into the passive set, solve the normal equations there, and step back towards the last
-  // feasible x where that solution has a non-positive entry (dropping what reaches 0).
+  // feasible x where that solution has a non-positive entry (dropping what reaches 0). A
+  // variable that is dropped again at once (its solution not positive: rounding on a
+  // near-singular system) is not tried again until x changes, so the loop cannot cycle on it.
   for (int outer = 0; outer < 3 * n; ++outer) {
     const Vector g = h - G * x;
     int best_j = -1;
     double best = 1e-10;
     for (int j = 0; j < n; ++j)
-      if (!passive[j] && g[j] > best) best = g[j], best_j = j;
+      if (!passive[j] && !stuck[j] && g[j] > best) best = g[j], best_j = j;
     if (best_j < 0) break;
     passive[best_j] = 1;
+    const Vector before = x;
     for (int inner = 0; inner < 3 * n; ++inner) {
       int k = 0;
       for (int j = 0; j < n; ++j)
@@ -153,6 +156,8 @@ double StencilLaplacianWeights(const std::vector<Vec3>& offsets, double scale, s
       for (int a = 0; a < k; ++a)
         if (x[set[a]] <= 1e-14) passive[set[a]] = 0, x[set[a]] = 0;
     }
+    if (x == before) stuck[best_j] = 1;
+    else stuck.fill(0);
   }
   weights->resize(n);
   for (int j = 0; j < n; ++j) (*weights)[j] = x[j] / (scale * scale);

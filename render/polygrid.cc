@@ -696,23 +696,15 @@ void PolygridBuilder::PlaceInteriorNodes() {
   else PlaceByVariance();
 }
 
-// Winslow smoothing of the free nodes (see InteriorPlacement). With unit lattice spacing,
-// x = (sum_a g^aa (x_-a + x_+a) + 2 sum_{a<b} g^ab x_ab) / (2 sum_a g^aa), where
-// x_ab = (x_{+a+b} - x_{+a-b} - x_{-a+b} + x_{-a-b}) / 4 and g = (J^-1)(J^-1)^T with J's
-// columns the central differences (x_+a - x_-a) / 2. A node whose edge-diagonal lattice
-// neighbours are not all interior, or whose J is singular, takes the mean of its six
-// neighbours instead. Gauss-Seidel over the 8 lattice parities (x, y, z mod 2): face and
-// edge-diagonal neighbours always differ in parity, so each colour updates in parallel.
-// Over-relaxed by the Laplacian smoothing's factor (the same fixed point, reached in fewer
-// sweeps), to 1e-4 boundary spacings.
 constexpr int kPairs[3][2] = {{0, 1}, {1, 2}, {0, 2}};  // the edge-diagonals' axis pairs
 
 // The edge-diagonal lattice neighbours of interior node i in Polygrid::diagonal_neighbours'
 // order (axis pairs kPairs, signs ++, +-, -+, --): interior nodes, or with `boundary` a boundary
-// node at that lattice point (the first by link direction where a concave one is split); -1
-// where there is none.
+// node at that lattice point (where a concave edge's node is split, the one linked to a face
+// neighbour of i, on i's side; all share the surface point); -1 where there is none.
 std::array<int32_t, 12> PolygridBuilder::EdgeDiagonals(int64_t i, bool boundary) const {
   std::array<int32_t, 12> diag;
+  diag.fill(-1);
   const auto& g = pg_.lattice[i];
   for (int p = 0, k = 0; p < 3; ++p)
     for (int sa : {1, -1})
@@ -722,12 +714,27 @@ std::array<int32_t, 12> PolygridBuilder::EdgeDiagonals(int64_t i, bool boundary)
         h[kPairs[p][1]] += sb;
         int32_t n = lat_.inside(h) ? interior_at_[lat_.index(h)] : -1;
         for (int dir = 0; n < 0 && boundary && dir < 6; ++dir)
-          if (auto it = boundary_at_.find(Key(h, dir)); it != boundary_at_.end()) n = it->second;
-        diag[k++] = n;
+          if (auto it = boundary_at_.find(Key(h, dir)); it != boundary_at_.end()) {
+            const auto& face = pg_.neighbours[i];
+            const bool beside = std::find(face.begin(), face.end(), pg_.neighbours[it->second][0]) != face.end();
+            if (beside || diag[k] < 0) diag[k] = it->second;  // the first, unless one is beside i
+            if (beside) n = it->second;
+          }
+        diag[k] = n >= 0 ? n : diag[k];
+        ++k;
       }
   return diag;
 }
 
+// Winslow smoothing of the free nodes (see InteriorPlacement). With unit lattice spacing,
+// x = (sum_a g^aa (x_-a + x_+a) + 2 sum_{a<b} g^ab x_ab) / (2 sum_a g^aa), where
+// x_ab = (x_{+a+b} - x_{+a-b} - x_{-a+b} + x_{-a-b}) / 4 and g = (J^-1)(J^-1)^T with J's
+// columns the central differences (x_+a - x_-a) / 2. A node whose edge-diagonal lattice
+// neighbours are not all interior, or whose J is singular, takes the mean of its six
+// neighbours instead. Gauss-Seidel over the 8 lattice parities (x, y, z mod 2): face and
+// edge-diagonal neighbours always differ in parity, so each colour updates in parallel.
+// Over-relaxed by the Laplacian smoothing's factor (the same fixed point, reached in fewer
+// sweeps), to 1e-4 boundary spacings.
 void PolygridBuilder::PlaceByWinslow() {
   std::vector<std::array<int32_t, 12>> diag(pg_.num_interior);
   std::array<std::vector<int32_t>, 8> parity;
@@ -846,7 +853,8 @@ void PolygridBuilder::SetWeights() {
 // distance. Rows whose six weights miss them by less than kMet keep those: on the blocky bunny
 // at 9^3 the median miss is 0.04 (slightly sheared cells everywhere), on the sphere's single
 // cube 1.1; a threshold of 0.1 instead of 1e-3 leaves the sphere's figures as they are (rms
-// 2.56 against 2.55 %) and puts 6 % of the bunny's rows on the wide stencil instead of 99 %. The fit is pulled a little towards Appendix B's weights (kTowardFace): where the
+// 2.56 against 2.55 %) and puts 6 % of the bunny's rows on the wide stencil instead of 99 %.
+// The fit is pulled a little towards Appendix B's weights (kTowardFace): where the
 // conditions leave a choice, neighbouring rows then choose alike, which keeps the rows nearer
 // symmetric and the relaxation's eigenvalues nearer the real axis that Chebyshev's steps
 // assume (largest imaginary part on the bunny at 3^3 0.71 without, 0.28 with, 0.32 for the six
@@ -857,8 +865,8 @@ void PolygridBuilder::SetStencil() {
   constexpr double kMet = 0.1, kTowardFace = 0.03;
   std::vector<std::array<int32_t, 12>> diag(pg_.num_interior);
   std::vector<std::array<float, 18>> stencil(pg_.num_interior);
-  int64_t with_diagonals = 0;
-#pragma omp parallel for schedule(dynamic, 256) reduction(+ : with_diagonals) if (pg_.num_interior > 20000)
+  int64_t with_diagonals = 0, refitted = 0;
+#pragma omp parallel for schedule(dynamic, 256) reduction(+ : with_diagonals, refitted) if (pg_.num_interior > 20000)
   for (int64_t i = 0; i < pg_.num_interior; ++i) {
     diag[i] = EdgeDiagonals(i, true);
     std::vector<Vec3> off;
@@ -882,15 +890,19 @@ void PolygridBuilder::SetStencil() {
     std::vector<double> toward = w;
     toward.resize(off.size(), 0.0);
     if (StencilLaplacianWeights(off, scale, &w, 10, toward, kTowardFace) >= face) continue;
+    ++refitted;
+    const double largest = *std::max_element(w.begin(), w.end());
     for (int k = 0; k < 6; ++k) stencil[i][k] = float(w[k]);
     bool any = false;
     for (size_t m = 0; m < slot.size(); ++m) {
-      stencil[i][6 + slot[m]] = float(w[6 + m]);
-      any |= w[6 + m] > 0;
+      // Weights below 1e-6 of the row's largest would cost a read each and change nothing.
+      const float wd = w[6 + m] < 1e-6 * largest ? 0.f : float(w[6 + m]);
+      stencil[i][6 + slot[m]] = wd;
+      any |= wd > 0;
     }
     with_diagonals += any;
   }
-  if (with_diagonals == 0) return;
+  if (refitted == 0) return;
   pg_.diagonal_neighbours = std::move(diag);
   pg_.stencil_weights = std::move(stencil);
   pg_.diagonal_stencil_nodes = with_diagonals;

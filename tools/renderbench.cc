@@ -102,6 +102,8 @@ int main(int argc, char** argv) {
     // the fastest and slowest frame's diffusion without coherence (a run's spread, to tell it
     // from differences between runs). E: the last frame without coherence against the
     // converged solution (ErrorAgainstConverged; the paper's Figure 15 keeps it below 0.5 %).
+    std::printf("interior rows: %s\n", stencil == 18 ? "the wide stencil where the grid is sheared (--stencil 18)"
+                                                     : "Appendix B's six weights (--stencil 6)");
     std::printf("%-7s %-14s %8s %8s %9s %9s %13s %9s %8s %9s %9s %8s %8s\n", "shape", "polygrid", "nodes",
                 "build s", "t1 ms", "t2 ms", "t2 range ms", "t3 ms", "fps", "diff fps", "t2coh ms", "fps coh",
                 "E");
