@@ -640,6 +640,21 @@ const BoundaryLight& Renderer::boundary_light() const {
   return q_finest_;
 }
 
+std::vector<std::string> Renderer::Notes() const {
+  std::vector<std::string> notes;
+  const PolygridDiffusion* d = impl_->diffusion.get();
+  if (d && d->reduced_radii() > 0)
+    notes.push_back(fmt::format(
+        "{} of the {} level channels take Chebyshev's steps with a smaller spectral radius than estimated "
+        "(with the estimate they would grow on this grid, whose rows are far from symmetric) and converge "
+        "a little more slowly{}",
+        d->reduced_radii(), 3 * impl_->levels->size(),
+        d->jacobi_fallbacks() > 0
+            ? fmt::format("; {} of them take Jacobi's steps, much more slowly: raise --iterations", d->jacobi_fallbacks())
+            : ""));
+  return notes;
+}
+
 const BoundaryLight& Renderer::boundary_radiance() const {
   boundary_light();
   return radiance_;

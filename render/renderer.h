@@ -82,6 +82,9 @@ class Renderer {
   // The gl backend keeps them on the GPU; the first call after a frame reads them back.
   const BoundaryLight& boundary_light() const;
   const BoundaryLight& boundary_radiance() const;
+  // What a user should know about the diffusion's steps, one sentence each: levels whose
+  // Chebyshev steps run with a smaller radius, or as Jacobi's (PolygridDiffusion::reduced_radii).
+  std::vector<std::string> Notes() const;
 
  private:
   struct Impl;

@@ -277,6 +277,7 @@ int RunRender(int argc, char** argv) {
     std::fflush(stdout);
   }
   Renderer renderer(shape.get(), &grids, std::move(mats), C, dopt, ro);
+  for (const std::string& note : renderer.Notes()) std::printf("render: note: %s\n", note.c_str());
   for (int f = 0; f < turntable; ++f) {
     const auto tf = std::chrono::steady_clock::now();
     Image img = renderer.Render(L, 360.0 * f / turntable);
