@@ -448,10 +448,9 @@ PolygridDiffusion::PolygridDiffusion(const std::vector<Polygrid>* levels,
       // of eigenvalues they shrink; Jacobi's steps (rho 0) where none of these does.
       const std::array<double, 3> rho = JacobiSpectralRadii(hl[l]);
       std::array<bool, 3> done{};
-      for (double f : {1.0, 0.95, 0.9, 0.8, 0.6, 0.0}) {
+      for (double f : {1.0, 0.95, 0.9, 0.8, 0.6}) {
         for (int c = 0; c < 3; ++c)
           if (!done[c]) hl[l].rho[c] = f * rho[c];
-        if (f == 0) break;
         // As a coherent run (cycles with Jacobi tails) and as a frame's own call of this
         // level's steps (one plain sequence when they are at most a cycle).
         std::array<bool, 3> contracts = ChebyshevContracts(hl[l], 120, true);
@@ -460,12 +459,13 @@ PolygridDiffusion::PolygridDiffusion(const std::vector<Polygrid>* levels,
           for (int c = 0; c < 3; ++c) contracts[c] = contracts[c] && plain[c];
         }
         for (int c = 0; c < 3; ++c) {
+          reduced_radii_ += f == 1 && !contracts[c];
           done[c] = done[c] || contracts[c];
-          if (!done[c] && f == 1) ++reduced_radii_;
-          if (!done[c] && f == 0.6) ++jacobi_fallbacks_;
         }
         if (done[0] && done[1] && done[2]) break;
       }
+      for (int c = 0; c < 3; ++c)
+        if (!done[c]) hl[l].rho[c] = 0, ++jacobi_fallbacks_;
     }
   }
   if (options.backend == DiffusionBackend::kGl) {

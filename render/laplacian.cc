@@ -99,7 +99,7 @@ double TaylorResidual(const std::vector<Vec3>& offsets, const std::vector<double
   TaylorMatrix A;
   Eigen::Matrix<double, 10, 1> b;
   TaylorSystem(offsets, scale, consistency_weight, &A, &b);
-  Eigen::VectorXd w(Eigen::Index(weights.size()));
+  Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 32, 1> w(Eigen::Index(weights.size()));  // no heap: per node
   for (size_t j = 0; j < weights.size(); ++j) w[j] = weights[j] * scale * scale;
   return (A * w - b).norm();
 }

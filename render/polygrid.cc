@@ -704,8 +704,8 @@ constexpr int kPairs[3][2] = {{0, 1}, {1, 2}, {0, 2}};  // the edge-diagonals' a
 // neighbour of i, on i's side; all share the surface point); -1 where there is none.
 std::array<int32_t, 12> PolygridBuilder::EdgeDiagonals(int64_t i, bool boundary) const {
   std::array<int32_t, 12> diag;
-  diag.fill(-1);
   const auto& g = pg_.lattice[i];
+  const auto& face = pg_.neighbours[i];
   for (int p = 0, k = 0; p < 3; ++p)
     for (int sa : {1, -1})
       for (int sb : {1, -1}) {
@@ -713,15 +713,15 @@ std::array<int32_t, 12> PolygridBuilder::EdgeDiagonals(int64_t i, bool boundary)
         h[kPairs[p][0]] += sa;
         h[kPairs[p][1]] += sb;
         int32_t n = lat_.inside(h) ? interior_at_[lat_.index(h)] : -1;
-        for (int dir = 0; n < 0 && boundary && dir < 6; ++dir)
-          if (auto it = boundary_at_.find(Key(h, dir)); it != boundary_at_.end()) {
-            const auto& face = pg_.neighbours[i];
+        if (n < 0 && boundary)
+          for (int dir = 0; dir < 6; ++dir) {
+            const auto it = boundary_at_.find(Key(h, dir));
+            if (it == boundary_at_.end()) continue;
             const bool beside = std::find(face.begin(), face.end(), pg_.neighbours[it->second][0]) != face.end();
-            if (beside || diag[k] < 0) diag[k] = it->second;  // the first, unless one is beside i
-            if (beside) n = it->second;
+            if (n < 0 || beside) n = it->second;  // the first, unless one is beside i
+            if (beside) break;
           }
-        diag[k] = n >= 0 ? n : diag[k];
-        ++k;
+        diag[k++] = n;
       }
   return diag;
 }
