@@ -12,6 +12,7 @@
 
 #include "render/boundary_interpolation.h"
 #include "render/render_passes.h"
+#include "solver/evaluate.h"
 #include "solver/status.h"
 
 namespace translume {
@@ -647,12 +648,21 @@ std::vector<std::string> Renderer::Notes() const {
     notes.push_back(fmt::format(
         "{} of the {} level channels take Chebyshev's steps with a smaller spectral radius than estimated "
         "(with the estimate they would grow on this grid, whose rows are far from symmetric) and converge "
-        "a little more slowly{}",
+        "more slowly{}",
         d->reduced_radii(), 3 * impl_->levels->size(),
         d->jacobi_fallbacks() > 0
             ? fmt::format("; {} of them take Jacobi's steps, much more slowly: raise --iterations", d->jacobi_fallbacks())
-            : ""));
+            : "; --check-error measures what a frame's steps leave"));
   return notes;
+}
+
+double Renderer::ErrorAgainstConverged() const {
+  const Impl& I = *impl_;
+  TL_CHECK_MSG(I.diffusion, "ErrorAgainstConverged: the dipole model has no diffusion to converge");
+  const Polygrid& pg = (*I.levels)[0];
+  const std::vector<float> phi =
+      SolveReference(BuildJacobiSystem(pg, I.materials[0], I.C, boundary_light()), 3, pg.size() > 100000);
+  return RelightingError({boundary_radiance()}, {ShadedRadiance(pg, I.materials[0], phi)});
 }
 
 const BoundaryLight& Renderer::boundary_radiance() const {

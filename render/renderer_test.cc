@@ -23,17 +23,25 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-// A small, fast scene: the marble sphere (20 mm, 9^3, 2 levels), cpu diffusion.
-Image RenderSmallSphere(const RenderOptions& ro) {
-  const auto shape = MakeBuiltinShape("sphere", 20, 24);
-  PolygridOptions po;
-  po.resolution = 9;
-  const auto levels = BuildPolygridHierarchy(BuiltinPolycube("sphere"), *shape, po, 2);
+// A small, fast scene: the marble sphere (20 mm, 9^3, 2 levels).
+struct SmallSphere {
+  std::unique_ptr<Shape> shape = MakeBuiltinShape("sphere", 20, 24);
+  std::vector<Polygrid> levels;
   std::vector<NodeMaterial> mats;
-  for (const Polygrid& pg : levels) mats.push_back(ProceduralNodeMaterial(pg, "marble"));
+  SmallSphere() {
+    PolygridOptions po;
+    po.resolution = 9;
+    levels = BuildPolygridHierarchy(BuiltinPolycube("sphere"), *shape, po, 2);
+    for (const Polygrid& pg : levels) mats.push_back(ProceduralNodeMaterial(pg, "marble"));
+  }
+};
+
+// The small sphere with cpu diffusion, converged.
+Image RenderSmallSphere(const RenderOptions& ro) {
+  const SmallSphere s;
   DiffusionOptions d;
   d.iterations = {200, 200};
-  Renderer r(shape.get(), &levels, mats, ReflectionParameterC(1.3), d, ro);
+  Renderer r(s.shape.get(), &s.levels, s.mats, ReflectionParameterC(1.3), d, ro);
   return r.Render(RenderLight::Parse("dir:1,0.3,0.6"));
 }
 
@@ -144,6 +152,30 @@ TEST(Render, GlPassesMatchCpu) {
 // sees the sphere in every pixel (asin(10 / 12) = 56 degrees against a 15-degree half field of
 // view), where the default distance shows it whole with background around (the gl passes
 // match the cpu's there too: GlPassesMatchCpu).
+// A frame's error against the converged solution (the paper's Figure 15 metric) falls with the
+// steps, to round-off when the steps converge (so the reference solves the frame's equations),
+// and the default steps keep it below the paper's 5e-3 on the marble sphere.
+TEST(Render, ErrorAgainstConvergedFallsWithTheSteps) {
+  const SmallSphere s;
+  RenderOptions ro;
+  ro.width = ro.height = 8;
+  std::vector<double> E;
+  for (const std::vector<int>& steps : std::vector<std::vector<int>>{{2, 1}, {8, 4}, {60, 30}, {600, 600}}) {
+    DiffusionOptions d;
+    d.iterations = steps;
+    Renderer r(s.shape.get(), &s.levels, s.mats, ReflectionParameterC(1.3), d, ro);
+    r.Render(RenderLight::Parse("dir:1,0.3,0.6"));
+    E.push_back(r.ErrorAgainstConverged());
+    std::printf("[render] sphere 9^3, %d / %d steps: E %.3g against the converged solution\n", steps[0], steps[1],
+                E.back());
+  }
+  EXPECT_GT(E[0], 1e-2);
+  EXPECT_LT(E[1], 0.5 * E[0]);
+  EXPECT_LT(E[2], 5e-3);
+  EXPECT_LT(E[2], 0.1 * E[1]);
+  EXPECT_LT(E[3], 1e-9);
+}
+
 TEST(Render, CloseUpCameraFillsTheImage) {
   RenderOptions ro;
   ro.width = ro.height = 24;
@@ -198,7 +230,7 @@ TEST(Render, SharpEdgedMeshStaysBounded) {
       most = std::max(most, L);
     }
     std::printf("[render] tetrahedron, %s: %d bad values, radiance at most %.3f\n", model, bad, most);
-    // Its finest level's Chebyshev steps run with a smaller radius (ChebyshevContracts): said.
+    // Its finest level's Chebyshev steps run with a smaller radius (ChebyshevRemainder): said.
     const std::vector<std::string> notes = r.Notes();
     if (ro.model == "polygrid") {
       ASSERT_EQ(notes.size(), 1u);

@@ -733,6 +733,21 @@ TEST_F(Cli, RenderAndEdit) {
   ASSERT_EQ(r.status, 0) << r.output;
   r = Translume("render homogeneous:0.2,0.02 --shape torus --resolution 5 --model dipole --image 16x16 -o " + P("t.exr"));
   ASSERT_EQ(r.status, 0) << r.output;
+  // --check-error prints each frame's error against the converged solution; the dipole has
+  // no steps to check.
+  r = Translume("render homogeneous:0.2,0.02 --shape sphere --resolution 5 --iterations 1 --check-error --image 8x8 -o " +
+                P("e.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("frame 0: diffusion E "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("above the paper's 5e-3: raise --iterations"), std::string::npos) << r.output;
+  r = Translume("render homogeneous:0.2,0.02 --shape sphere --resolution 5 --check-error --image 8x8 -o " + P("e.png"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("frame 0: diffusion E "), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("above the paper's"), std::string::npos) << r.output;
+  r = Translume("render homogeneous:0.2,0.02 --shape sphere --model dipole --check-error -o " + P("e.png"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--check-error: --model dipole has no diffusion steps to check"), std::string::npos)
+      << r.output;
   EXPECT_EQ(r.output.find("genus"), std::string::npos) << r.output;
   EXPECT_EQ(r.output.find("no light"), std::string::npos) << r.output;
   // A point light at the sphere's centre lights no surface: said, not a silent black image.
