@@ -133,6 +133,11 @@ class HierarchyRelaxer {
     // Per channel, the spectral radius of the step's iteration matrix (a) that Chebyshev's
     // semi-iteration assumes (JacobiSpectralRadii); 0: plain Jacobi steps.
     std::array<double, 3> rho{};
+    // A frame's own calls (at most ChebyshevSchedule::kMaxCycle steps) end in Jacobi tails too,
+    // as a coherent call's cycles do (ChebyshevSchedule's `repeated`): where the level's plain
+    // sequence would grow modes off the real axis that the tails shrink (PolygridDiffusion
+    // chooses per level).
+    bool tails = false;
     // The finest level's only, for WriteShadedRadiance: 1 / (2 pi kappa_b) per boundary node and
     // channel [b * 3 + c] (ShadedRadiance's factor); empty on the other levels.
     std::vector<float> radiance_scale;
@@ -176,17 +181,18 @@ HierarchyRelaxer::Level RelaxationRows(const Polygrid& pg, const NodeMaterial& m
 // weight sums pull the estimate towards 0, i.e. towards plain Jacobi steps.
 std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& level, int iterations = 50);
 
-// Whether Chebyshev's steps with level.rho (per channel) shrink the error: `steps` of them (as
-// ChebyshevSchedule runs them; `repeated`: as a frame-coherent run, in cycles with Jacobi tails)
-// over every row from a fixed pseudo-random start in [-1, 1] without a source, the largest
-// entry at most 1 at the end. (Adaptive steps run a subset of the rows; not checked apart.) The estimate above assumes a real
-// spectrum; an iteration matrix whose eigenvalues lie far off the real axis (rows far from
-// symmetric: a badly distorted grid, such as a tetrahedron's voxel polycube at 9^3 with the
-// wide stencil, |Im| up to ~0.5) makes Chebyshev's polynomials grow there, by 1e4 in 100
-// steps, where Jacobi's steps still converge. PolygridDiffusion checks each level with 120 steps
-// as a coherent run and with its own step count as one call; where either says no, it tries
-// smaller radii (a wider ellipse), then Jacobi's steps.
-std::array<bool, 3> ChebyshevContracts(const HierarchyRelaxer::Level& level, int steps = 120, bool repeated = true);
+// What Chebyshev's steps with level.rho (per channel) leave of an error: `steps` of them (as
+// ChebyshevSchedule runs them; `repeated`: in cycles with Jacobi tails, as a frame-coherent run)
+// over every row from a fixed pseudo-random start in [-1, 1] without a source; the largest
+// entry at the end, per channel (above 1: they grew it). (Adaptive steps run a subset of the
+// rows; not checked apart.) The estimate above assumes a real spectrum; an iteration matrix
+// whose eigenvalues lie far off the real axis (rows far from symmetric: a badly distorted grid,
+// such as a tetrahedron's voxel polycube at 9^3 with the wide stencil, |Im| up to ~0.5) makes
+// Chebyshev's polynomials grow there, by 1e4 in 100 steps, where Jacobi's steps still converge.
+// PolygridDiffusion checks each level with 120 steps as a coherent run and with its own step
+// count as one call, plain and with tails (Level::tails: the smaller of the two); where either
+// check grows, it tries smaller radii (a wider ellipse), then Jacobi's steps.
+std::array<double, 3> ChebyshevRemainder(const HierarchyRelaxer::Level& level, int steps = 120, bool repeated = true);
 
 // The over-relaxation weights of Chebyshev's semi-iteration for spectral radii rho (per
 // channel): omega_1 = 1, omega_2 = 1 / (1 - rho^2 / 2), omega_(k+1) = 1 / (1 - rho^2 omega_k / 4)
@@ -207,9 +213,11 @@ std::array<bool, 3> ChebyshevContracts(const HierarchyRelaxer::Level& level, int
 // have |z| 0.33-0.39, so Jacobi's steps shrink them fast: TailSteps(L) = ceil(L / 8) bounds a
 // cycle's gain on them by 1.1^(L - J) 0.4^J, 0.1-0.8 for L <= 60. The smooth modes, which the
 // acceleration is for, lose the J steps' share of it (2x the error after 30 steps), so a
-// frame's calls of up to kMaxCycle steps keep the plain sequence: their gain on those modes is
-// bounded by ~1.1^60 once, not compounded, and `render`'s 60 / 30 / 30 steps are as before
-// (docs/benchmarks.md, "Chebyshev's steps on the bunny").
+// frame's calls of up to kMaxCycle steps keep the plain sequence where it shrinks the error
+// more (their gain on those modes is bounded once, not compounded), and end in the tails where
+// those modes would grow more than the tails cost (HierarchyRelaxer::Level::tails: on the
+// bunny with the wide stencil, whose finest level's plain 30 steps grew such modes 36-139-fold;
+// docs/benchmarks.md, "Chebyshev's steps on the bunny", "Jacobi tails in a frame's calls").
 class ChebyshevSchedule {
  public:
   static constexpr int kMaxCycle = 60;
@@ -271,11 +279,14 @@ class PolygridDiffusion {
   void SolveOnDevice(const std::vector<DeviceFloats>& q, DeviceFloats radiance);
   const std::vector<NodeMaterial>& materials() const { return materials_; }
   int last_iterations() const { return last_iterations_; }
-  // Channels of levels whose Chebyshev steps would grow with rho's estimate (ChebyshevContracts
-  // said no): they run with rho scaled by 0.95, 0.9, 0.8 or 0.6, the first with which they
-  // shrink (reduced_radii), or where none does, Jacobi's steps (jacobi_fallbacks, a subset).
+  // Channels of levels whose Chebyshev steps would grow with rho's estimate (ChebyshevRemainder
+  // above 1, also where a frame's calls take the tails): they run with rho scaled by 0.95, 0.9,
+  // 0.8 or 0.6, the first with which they shrink (reduced_radii), or where none does, Jacobi's
+  // steps (jacobi_fallbacks, a subset).
   int reduced_radii() const { return reduced_radii_; }
   int jacobi_fallbacks() const { return jacobi_fallbacks_; }
+  // Levels whose frame calls end in Jacobi tails (HierarchyRelaxer::Level::tails).
+  int tailed_levels() const { return tailed_levels_; }
   void ResetCoherence() { have_previous_ = false; }
 
  private:
@@ -294,7 +305,7 @@ class PolygridDiffusion {
   std::vector<float> phi_;
   bool have_previous_ = false;
   int last_iterations_ = 0;
-  int reduced_radii_ = 0, jacobi_fallbacks_ = 0;
+  int reduced_radii_ = 0, jacobi_fallbacks_ = 0, tailed_levels_ = 0;
 };
 
 }  // namespace translume

@@ -146,6 +146,7 @@ class GlHierarchy : public HierarchyRelaxer {
       d.active.Set(v.active);
       d.num_active = int64_t(v.active.size());
       d.rho = v.rho;
+      d.tails = v.tails;
       d.p_start.Set(v.prolong.start);
       d.p_index.Set(v.prolong.index);
       d.p_weight.Set(v.prolong.weight);
@@ -205,7 +206,7 @@ class GlHierarchy : public HierarchyRelaxer {
     const Ssbo& list = adaptive ? d.active : d.nb;
     // phi[cur] is the iterate, phi[cur + 2] the one before it (read by Chebyshev's steps from
     // the second on) and phi[cur + 1] the next; all three agree outside the updated nodes.
-    ChebyshevSchedule schedule(d.rho, iterations, repeated);
+    ChebyshevSchedule schedule(d.rho, iterations, repeated || d.tails);
     for (int it = 0; it < iterations; ++it) {
       const std::array<float, 3> w = schedule.Next();
       const bool jacobi = ChebyshevSchedule::IsJacobi(w);
@@ -229,6 +230,7 @@ class GlHierarchy : public HierarchyRelaxer {
     int cur = 0;
     Ssbo nb, a, coef, q, s, active, p_start, p_index, p_weight, phi[3];
     std::array<double, 3> rho{};
+    bool tails = false;
   };
   GLuint jacobi_ = 0, source_ = 0, prolong_ = 0, radiance_ = 0;
   std::vector<Device> dev_;

@@ -30,15 +30,6 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-// The last frame's error in the paper's Figure 15 metric, over the finest level's boundary
-// nodes and RGB: E = sum (L - L0)^2 / sum L0^2, L0 the radiance of the converged solution of
-// the same equations and light (SolveReference, no hierarchy, no adaptive depth).
-double ErrorAgainstConverged(const Polygrid& pg, const NodeMaterial& m, double C, const Renderer& r) {
-  const BoundaryLight L0 = ShadedRadiance(
-      pg, m, SolveReference(BuildJacobiSystem(pg, m, C, r.boundary_light()), 3, pg.size() > 100000));
-  return RelightingError({r.boundary_radiance()}, {L0});
-}
-
 }  // namespace
 }  // namespace translume
 
@@ -51,9 +42,8 @@ int main(int argc, char** argv) {
   std::vector<std::string> shapes = {"sphere", "torus"};
   std::vector<int> resolutions = {9, 17};
   std::string backend = "gl", relaxation = "chebyshev", material = "procedural:marble";
-  // Chebyshev steps that keep E below 1e-3 on the bunny at 9^3 and 17^3 with --stencil 6 (5e-4;
-  // the paper's Figure 15 allows 5e-3; docs/benchmarks.md, 2026-12-01); with the wide stencil
-  // 2.3e-3 at 9^3 (docs/benchmarks.md, "Convergence on the bunny").
+  // Chebyshev steps that keep E below 1e-3 on the bunny at 9^3 and 17^3 (the paper's Figure 15
+  // allows 5e-3; docs/benchmarks.md, 2026-12-01 and "Jacobi tails in a frame's calls").
   std::vector<int> iterations = {30, 15, 15};
   std::vector<int> depth;
   int frames = 10, size = 256, coherent_iterations = 20, stencil = 18;
@@ -102,7 +92,7 @@ int main(int argc, char** argv) {
     // coherence (skipped: -). build s: the polygrid hierarchy's construction (once). t2 range:
     // the fastest and slowest frame's diffusion without coherence (a run's spread, to tell it
     // from differences between runs). E: the last frame without coherence against the
-    // converged solution (ErrorAgainstConverged; the paper's Figure 15 keeps it below 0.5 %).
+    // converged solution (Renderer::ErrorAgainstConverged; the paper's Figure 15 keeps it below 0.5 %).
     std::printf("interior rows: %s\n", stencil == 18 ? "the wide stencil where the grid is sheared (--stencil 18)"
                                                      : "Appendix B's six weights (--stencil 6)");
     std::printf("%-7s %-14s %8s %8s %9s %9s %13s %9s %8s %9s %9s %8s %8s\n", "shape", "polygrid", "nodes",
@@ -141,7 +131,7 @@ int main(int argc, char** argv) {
           fps[coh] = 1 / Median(frame);
           t2[coh] = Median(b);
           if (!coh) {
-            if (!skip_error) error = ErrorAgainstConverged(levels[0], mats[0], C, r);
+            if (!skip_error) error = r.ErrorAgainstConverged();
             t1 = Median(a), t3 = Median(c);
             t2_min = *std::min_element(b.begin(), b.end());
             t2_max = *std::max_element(b.begin(), b.end());
