@@ -150,7 +150,7 @@ class HierarchyRelaxer {
   // `iterations` steps on the level's active nodes (adaptive) or all nodes; the others keep
   // their values. Jacobi's steps, or with Level::rho Chebyshev's, whose sequence starts afresh
   // in every call (ChebyshevSchedule; `repeated`: a frame-coherent call, continuing from the
-  // last frame). Zero and Prolong set every iterate the backend keeps.
+  // last frame; it and Level::tails end the call's cycles in Jacobi tails). Zero and Prolong set every iterate the backend keeps.
   virtual void Relax(int level, bool adaptive, int iterations, bool repeated) = 0;
   // Rows [first_row, size) of the level's phi' into (*phi)[first_row * 3 ...]; phi holds
   // size * 3 values, the other rows are left as they are.
@@ -190,8 +190,9 @@ std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& level, 
 // such as a tetrahedron's voxel polycube at 9^3 with the wide stencil, |Im| up to ~0.5) makes
 // Chebyshev's polynomials grow there, by 1e4 in 100 steps, where Jacobi's steps still converge.
 // PolygridDiffusion checks each level with 120 steps as a coherent run and with its own step
-// count as one call, plain and with tails (Level::tails: the smaller of the two); where either
-// check grows, it tries smaller radii (a wider ellipse), then Jacobi's steps.
+// count as one call (plain, or with the tails where the plain call grows and the tails leave
+// less: Level::tails); where either check grows, it tries smaller radii (a wider ellipse), then
+// Jacobi's steps.
 std::array<double, 3> ChebyshevRemainder(const HierarchyRelaxer::Level& level, int steps = 120, bool repeated = true);
 
 // The over-relaxation weights of Chebyshev's semi-iteration for spectral radii rho (per
@@ -214,7 +215,7 @@ std::array<double, 3> ChebyshevRemainder(const HierarchyRelaxer::Level& level, i
 // cycle's gain on them by 1.1^(L - J) 0.4^J, 0.1-0.8 for L <= 60. The smooth modes, which the
 // acceleration is for, lose the J steps' share of it (2x the error after 30 steps), so a
 // frame's calls of up to kMaxCycle steps keep the plain sequence where it shrinks the error
-// more (their gain on those modes is bounded once, not compounded), and end in the tails where
+// (their gain on those modes is bounded once, not compounded), and end in the tails where
 // those modes would grow more than the tails cost (HierarchyRelaxer::Level::tails: on the
 // bunny with the wide stencil, whose finest level's plain 30 steps grew such modes 36-139-fold;
 // docs/benchmarks.md, "Chebyshev's steps on the bunny", "Jacobi tails in a frame's calls").
@@ -245,8 +246,9 @@ struct DiffusionOptions {
   DiffusionBackend backend = DiffusionBackend::kCpu;
   // Relaxation steps per level, COARSEST first; missing entries repeat the last one; with more
   // entries than levels the coarsest entries are dropped (the last is always the finest's).
-  // (Jacobi's steps needed 200 / 100 / 100 and more; Chebyshev's 60 / 30 / 30 leave E < 1e-4 on
-  // the bunny at 17^3, docs/benchmarks.md.)
+  // (Jacobi's steps needed 200 / 100 / 100 and more; Chebyshev's 60 / 30 / 30 leave E 1.7e-4 on
+  // the bunny at 17^3 under the procedural marble, 4.8e-4 under homogeneous 0.5, 0.05 (the
+  // paper's Figure 15 allows 5e-3); docs/benchmarks.md, "Jacobi tails in a frame's calls".)
   std::vector<int> iterations = {60, 30, 30};
   // Adaptive depth per level, COARSEST first: after prolongation, only nodes within this many
   // layers of the boundary are updated on that level (the deeper ones stay at the coarse
@@ -257,8 +259,8 @@ struct DiffusionOptions {
   // Frame-coherent frames run this many steps on the finest level.
   int coherent_iterations = 50;
   // The paper's Jacobi steps, or the same steps accelerated by Chebyshev's semi-iteration
-  // (HierarchyRelaxer): on the bunny at 17^3 with 60 / 30 / 30 steps, the error against the
-  // converged solution falls from 1.5e-2 to 7.6e-5 (docs/benchmarks.md).
+  // (HierarchyRelaxer): on the bunny at 17^3 with 60 / 30 / 30 steps and the six weights, the
+  // error against the converged solution falls from 1.5e-2 to 7.6e-5 (docs/benchmarks.md).
   Relaxation relaxation = Relaxation::kChebyshev;
 
   std::string Validate() const;
@@ -280,9 +282,9 @@ class PolygridDiffusion {
   const std::vector<NodeMaterial>& materials() const { return materials_; }
   int last_iterations() const { return last_iterations_; }
   // Channels of levels whose Chebyshev steps would grow with rho's estimate (ChebyshevRemainder
-  // above 1, also where a frame's calls take the tails): they run with rho scaled by 0.95, 0.9,
-  // 0.8 or 0.6, the first with which they shrink (reduced_radii), or where none does, Jacobi's
-  // steps (jacobi_fallbacks, a subset).
+  // above 1, the frame's call checked as it runs: with the tails where Level::tails): they run
+  // with rho scaled by 0.95, 0.9, 0.8 or 0.6, the first with which they shrink (reduced_radii),
+  // or where none does, Jacobi's steps (jacobi_fallbacks, a subset).
   int reduced_radii() const { return reduced_radii_; }
   int jacobi_fallbacks() const { return jacobi_fallbacks_; }
   // Levels whose frame calls end in Jacobi tails (HierarchyRelaxer::Level::tails).

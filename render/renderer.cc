@@ -660,6 +660,7 @@ double Renderer::ErrorAgainstConverged() const {
   const Impl& I = *impl_;
   TL_CHECK_MSG(I.diffusion, "ErrorAgainstConverged: the dipole model has no diffusion to converge");
   const Polygrid& pg = (*I.levels)[0];
+  TL_CHECK_MSG(boundary_light()[0].size() == size_t(pg.num_boundary()), "ErrorAgainstConverged: no frame rendered yet");
   const std::vector<float> phi =
       SolveReference(BuildJacobiSystem(pg, I.materials[0], I.C, boundary_light()), 3, pg.size() > 100000);
   return RelightingError({boundary_radiance()}, {ShadedRadiance(pg, I.materials[0], phi)});

@@ -90,7 +90,7 @@ class Renderer {
   // solution of the same equations and light (SolveReference, in double, with no hierarchy and
   // no adaptive depth, so E counts what the steps and the depth leave out; Figure 15 keeps it
   // below 5e-3). One sparse solve: a fraction of a second on a single cube at 17^3, seconds on
-  // the bunny at 9^3, a minute or more at 17^3 (1 M nodes). The polygrid model only.
+  // the bunny at 9^3, ~50 s at 17^3 (1 M nodes). The polygrid model only, after a frame.
   double ErrorAgainstConverged() const;
 
  private:
