@@ -153,9 +153,38 @@ std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& v, int 
   return lowest;
 }
 
-std::array<double, 3> ChebyshevRemainder(const HierarchyRelaxer::Level& v, int steps, bool repeated) {
+namespace {
+
+using StepWeights = std::vector<std::array<float, 3>>;
+
+StepWeights ScheduleWeights(const std::array<double, 3>& rho, int steps, bool repeated) {
+  ChebyshevSchedule schedule(rho, steps, repeated);
+  StepWeights w(std::max(0, steps));
+  for (auto& e : w) e = schedule.Next();
+  return w;
+}
+
+// ChebyshevRemainder for several schedules in one run: schedules[0] is run from the fixed start;
+// every other one shares its first steps (as many as have the same weights) and goes on from a
+// copy of the iterates where it parts from it.
+std::vector<std::array<double, 3>> Remainders(const HierarchyRelaxer::Level& v, const std::vector<StepWeights>& schedules) {
+  const StepWeights& trunk = schedules[0];
+  using Iterates = std::array<std::vector<float>, 3>;  // x[cur]: the iterate, x[cur + 2]: the one before
+  const auto largest = [&](const std::vector<float>& x) {
+    // Jacobi's steps shrink the largest entry (the rows' weight sums are below 1); Chebyshev's,
+    // where they converge, shrink it faster.
+    std::array<double, 3> m{};
+    for (int64_t i = 0; i < v.size * 3; ++i) m[i % 3] = std::max(m[i % 3], double(std::abs(x[i])));
+    return m;
+  };
+  const auto run = [&](Iterates& x, int& cur, const StepWeights& w, size_t from, size_t to) {
+    for (size_t t = from; t < to; ++t) {
+      RelaxStep(v, v.size, nullptr, nullptr, x[cur].data(), x[(cur + 2) % 3].data(), x[(cur + 1) % 3].data(), w[t]);
+      cur = (cur + 1) % 3;
+    }
+  };
   // A fixed pseudo-random start in [-1, 1] (every mode, oscillating ones included), no source.
-  std::array<std::vector<float>, 3> x;
+  Iterates x;
   for (auto& b : x) b.resize(v.size * 3);
   uint32_t state = 12345u;
   for (float& e : x[0]) {
@@ -163,18 +192,44 @@ std::array<double, 3> ChebyshevRemainder(const HierarchyRelaxer::Level& v, int s
     e = float(state >> 8) / float(1u << 23) - 1.f;
   }
   x[2] = x[0];
-  ChebyshevSchedule schedule(v.rho, steps, repeated);
   int cur = 0;
-  for (int it = 0; it < steps; ++it) {
-    RelaxStep(v, v.size, nullptr, nullptr, x[cur].data(), x[(cur + 2) % 3].data(), x[(cur + 1) % 3].data(),
-              schedule.Next());
-    cur = (cur + 1) % 3;
+  std::vector<std::array<double, 3>> out(schedules.size());
+  std::vector<std::pair<size_t, size_t>> forks;  // (the trunk's step where it parts, schedule)
+  for (size_t s = 1; s < schedules.size(); ++s) {
+    size_t fork = 0;
+    while (fork < schedules[s].size() && fork < trunk.size() && schedules[s][fork] == trunk[fork]) ++fork;
+    forks.emplace_back(fork, s);
   }
-  // Jacobi's steps shrink the largest entry (the rows' weight sums are below 1); Chebyshev's,
-  // where they converge, shrink it faster.
-  std::array<double, 3> largest{};
-  for (int64_t i = 0; i < v.size * 3; ++i) largest[i % 3] = std::max(largest[i % 3], double(std::abs(x[cur][i])));
-  return largest;
+  std::sort(forks.begin(), forks.end());
+  size_t t = 0;
+  for (const auto& [fork, s] : forks) {
+    run(x, cur, trunk, t, fork);
+    t = fork;
+    if (fork == schedules[s].size()) {
+      out[s] = largest(x[cur]);
+    } else {
+      Iterates y = x;
+      int c = cur;
+      run(y, c, schedules[s], fork, schedules[s].size());
+      out[s] = largest(y[c]);
+    }
+  }
+  run(x, cur, trunk, t, trunk.size());
+  out[0] = largest(x[cur]);
+  return out;
+}
+
+}  // namespace
+
+std::array<double, 3> ChebyshevRemainder(const HierarchyRelaxer::Level& v, int steps, bool repeated) {
+  return Remainders(v, {ScheduleWeights(v.rho, steps, repeated)})[0];
+}
+
+ChebyshevRemainders ChebyshevCallRemainders(const HierarchyRelaxer::Level& v, int call_steps, int steps) {
+  const std::vector<std::array<double, 3>> r =
+      Remainders(v, {ScheduleWeights(v.rho, steps, true), ScheduleWeights(v.rho, call_steps, false),
+                     ScheduleWeights(v.rho, call_steps, true)});
+  return {r[0], r[1], r[2]};
 }
 
 std::array<float, 3> ChebyshevSchedule::Next() {
@@ -460,23 +515,18 @@ PolygridDiffusion::PolygridDiffusion(const std::vector<Polygrid>* levels,
         // tails' gain is on rough modes, which cost E little, and the plain sequence's on the
         // smooth ones (the sphere at 17^3, renderbench's 30 / 15 / 15 steps: E 5.9e-6 plain, 9.6e-6
         // with the tails).
-        const std::array<double, 3> coherent = ChebyshevRemainder(hl[l], 120, true);
-        std::array<double, 3> call = coherent;
+        const ChebyshevRemainders r = ChebyshevCallRemainders(hl[l], one_cycle ? iterations_[l] : 0, 120);
+        std::array<double, 3> call = r.coherent;
         if (one_cycle) {
           if (f == 1) {
-            call = ChebyshevRemainder(hl[l], iterations_[l], false);
-            const double plain = *std::max_element(call.begin(), call.end());
-            if (plain > 1) {
-              const std::array<double, 3> tailed = ChebyshevRemainder(hl[l], iterations_[l], true);
-              hl[l].tails = *std::max_element(tailed.begin(), tailed.end()) < plain;
-              if (hl[l].tails) call = tailed, ++tailed_levels_;
-            }
-          } else {
-            call = ChebyshevRemainder(hl[l], iterations_[l], hl[l].tails);
+            const double plain = *std::max_element(r.plain.begin(), r.plain.end());
+            hl[l].tails = plain > 1 && *std::max_element(r.tailed.begin(), r.tailed.end()) < plain;
+            tailed_levels_ += hl[l].tails;
           }
+          call = hl[l].tails ? r.tailed : r.plain;
         }
         std::array<bool, 3> contracts;
-        for (int c = 0; c < 3; ++c) contracts[c] = coherent[c] <= 1 && call[c] <= 1;
+        for (int c = 0; c < 3; ++c) contracts[c] = r.coherent[c] <= 1 && call[c] <= 1;
         for (int c = 0; c < 3; ++c) {
           reduced_radii_ += f == 1 && !contracts[c];
           done[c] = done[c] || contracts[c];

@@ -195,6 +195,17 @@ std::array<double, 3> JacobiSpectralRadii(const HierarchyRelaxer::Level& level, 
 // Jacobi's steps.
 std::array<double, 3> ChebyshevRemainder(const HierarchyRelaxer::Level& level, int steps = 120, bool repeated = true);
 
+// The guard's three checks in one run (PolygridDiffusion): ChebyshevRemainder of `steps` as a
+// coherent run, and of a frame's own call of `call_steps` (0: none) plain and with the tails.
+// The calls are the coherent run's first steps as far as their weights agree (a plain call of
+// up to 52 steps, the first cycle's sequence of 120; a tailed one up to its tails) and go on
+// from a copy of its iterates where they part: the same numbers as three runs, in about
+// steps + call_steps / 8 steps instead of steps + 2 call_steps.
+struct ChebyshevRemainders {
+  std::array<double, 3> coherent, plain, tailed;
+};
+ChebyshevRemainders ChebyshevCallRemainders(const HierarchyRelaxer::Level& level, int call_steps, int steps = 120);
+
 // The over-relaxation weights of Chebyshev's semi-iteration for spectral radii rho (per
 // channel): omega_1 = 1, omega_2 = 1 / (1 - rho^2 / 2), omega_(k+1) = 1 / (1 - rho^2 omega_k / 4)
 // (omega_k decreases towards 2 / (1 + sqrt(1 - rho^2))); rho = 0 gives Jacobi (omega = 1).

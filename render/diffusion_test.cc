@@ -335,6 +335,24 @@ TEST(Diffusion, AFrameEndsInJacobiTailsWherePlainStepsWouldGrow) {
   EXPECT_EQ(plain.reduced_radii(), 0);
 }
 
+// The guard's three checks in one run give the same numbers as three runs, on a level whose
+// plain call is the coherent run's first steps (30) and on one where it is not (60: the
+// coherent run's first cycle has 52 sequence steps, then its tail), with a radius and without.
+TEST(Diffusion, OneRunServesTheGuardsThreeChecks) {
+  const BunnyCase bunny(5, 0.5f, 0.05f);
+  HierarchyRelaxer::Level v = RelaxationRows(bunny.levels[0], bunny.mats[0], ReflectionParameterC(1.3));
+  for (const std::array<double, 3>& rho : {JacobiSpectralRadii(v), std::array<double, 3>{0, 0, 0}}) {
+    v.rho = rho;
+    for (int call : {30, 60}) {
+      SCOPED_TRACE(call);
+      const ChebyshevRemainders r = ChebyshevCallRemainders(v, call, 120);
+      EXPECT_EQ(r.coherent, ChebyshevRemainder(v, 120, true));
+      EXPECT_EQ(r.plain, ChebyshevRemainder(v, call, false));
+      EXPECT_EQ(r.tailed, ChebyshevRemainder(v, call, true));
+    }
+  }
+}
+
 // Chebyshev's steps assume a real spectrum. A tetrahedron's voxel polycube at 9^3 leaves cells
 // so distorted that the rows (with the wide stencil) have eigenvalues far off the real axis, and
 // Chebyshev's steps grew the error by 1e4 in 100 steps, where Jacobi's converge (error against the
