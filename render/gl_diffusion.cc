@@ -3,6 +3,7 @@
 // three fluence buffers (Section 5.2's radiance buffers I_A, I_B, and the iterate before them
 // for Chebyshev's steps) in the solver's headless context.
 #include <algorithm>
+#include <cstdlib>
 #include <fmt/format.h>
 #include <map>
 #include <memory>
@@ -107,6 +108,19 @@ void Dispatch(std::initializer_list<GLuint> buffers, int64_t threads) {
 
 namespace {
 
+// The relaxation rows' layout in jacobi.comp: entry-major on GPUs, where it coalesces the
+// warps' loads (the bunny's 17^3 frame on the H200: 5.9 -> 5.2 ms of diffusion), node-major on
+// llvmpipe, whose invocations run as a CPU core's SIMD lanes and read a node's 18 weights from
+// one cache line better than from 18 streams (9^3 bunny: 320 ms against 390 ms entry-major).
+// TRANSLUME_GL_TUNING=llvmpipe|gpu forces one, as it does the solver's shaders (docs/gpu.md).
+bool RowsEntryMajor() {
+  const char* forced = std::getenv("TRANSLUME_GL_TUNING");
+  const std::string f = forced ? forced : "";
+  if (!f.empty() && f != "llvmpipe" && f != "gpu")
+    throw InputError(fmt::format("TRANSLUME_GL_TUNING='{}' is not llvmpipe or gpu", f));
+  return f.empty() ? GlContext::Get().info().renderer.find("llvmpipe") == std::string::npos : f == "gpu";
+}
+
 // Per level: the rows (neighbours, weights over the diagonal), the boundary rows' source
 // coefficients, q and sources, the active list, the prolongation from the coarser level, and
 // three fluence buffers (the current one is phi[cur]).
@@ -126,19 +140,24 @@ class GlHierarchy : public HierarchyRelaxer {
       Device& d = dev_[l];
       d.size = v.size;
       d.num_interior = v.num_interior;
-      if (v.extra_start.empty()) {
-        d.nb.Set(v.nb);
-        d.a.Set(v.a);
-      } else {  // the extra entries after the rows, in the same buffers (jacobi.comp)
+      std::vector<int32_t> nb = v.nb;
+      std::vector<float> a = v.a;
+      if (entry_major_) {  // nb[k * size + n], a[(c * 6 + k) * size + n] (jacobi.comp)
+        TL_CHECK(int64_t(v.nb.size()) == v.size * 6 && int64_t(v.a.size()) == v.size * 18);
+        for (int64_t n = 0; n < v.size; ++n)
+          for (int k = 0; k < 6; ++k) {
+            nb[k * v.size + n] = v.nb[n * 6 + k];
+            for (int c = 0; c < 3; ++c) a[(c * 6 + k) * v.size + n] = v.a[(n * 3 + c) * 6 + k];
+          }
+      }
+      if (!v.extra_start.empty()) {  // the extra entries after the rows, in the same buffers
         d.extra_rows = v.size;
-        std::vector<int32_t> nb = v.nb;
         nb.insert(nb.end(), v.extra_start.begin(), v.extra_start.end());
         nb.insert(nb.end(), v.extra_nb.begin(), v.extra_nb.end());
-        std::vector<float> a = v.a;
         a.insert(a.end(), v.extra_a.begin(), v.extra_a.end());
-        d.nb.Set(nb);
-        d.a.Set(a);
       }
+      d.nb.Set(nb);
+      d.a.Set(a);
       d.coef.Set(v.source_coef);
       d.q.Set(nullptr, v.source_coef.size() * sizeof(float));
       d.s.Set(nullptr, v.source_coef.size() * sizeof(float));
@@ -202,6 +221,9 @@ class GlHierarchy : public HierarchyRelaxer {
     api.Uniform1i(1, int(d.num_interior));
     api.Uniform1i(2, adaptive ? 1 : 0);
     api.Uniform1i(5, int(d.extra_rows));
+    api.Uniform1i(6, entry_major_ ? 1 : 6);
+    api.Uniform1i(7, entry_major_ ? 1 : 18);
+    api.Uniform1i(8, entry_major_ ? int(d.size) : 1);
     // Without the list the shader never reads binding 3; the rows stand in for it.
     const Ssbo& list = adaptive ? d.active : d.nb;
     // phi[cur] is the iterate, phi[cur + 2] the one before it (read by Chebyshev's steps from
@@ -233,6 +255,7 @@ class GlHierarchy : public HierarchyRelaxer {
     bool tails = false;
   };
   GLuint jacobi_ = 0, source_ = 0, prolong_ = 0, radiance_ = 0;
+  const bool entry_major_ = RowsEntryMajor();
   std::vector<Device> dev_;
   Ssbo radiance_scale_;
   std::vector<float> host_q_;
