@@ -121,6 +121,9 @@ bool RowsEntryMajor() {
   return f.empty() ? GlContext::Get().info().renderer.find("llvmpipe") == std::string::npos : f == "gpu";
 }
 
+// The fluence, the boundary sources and the weights are RGB vec4s on the device (jacobi.comp).
+constexpr size_t kVec4Bytes = 4 * sizeof(float);
+
 // Per level: the rows (neighbours, weights over the diagonal), the boundary rows' source
 // coefficients, q and sources, the active list, the prolongation from the coarser level, and
 // three fluence buffers (the current one is phi[cur]).
@@ -140,27 +143,31 @@ class GlHierarchy : public HierarchyRelaxer {
       Device& d = dev_[l];
       d.size = v.size;
       d.num_interior = v.num_interior;
-      std::vector<int32_t> nb = v.nb;
-      std::vector<float> a = v.a;
-      if (entry_major_) {  // nb[k * size + n], a[(c * 6 + k) * size + n] (jacobi.comp)
-        TL_CHECK(int64_t(v.nb.size()) == v.size * 6 && int64_t(v.a.size()) == v.size * 18);
-        for (int64_t n = 0; n < v.size; ++n)
-          for (int k = 0; k < 6; ++k) {
-            nb[k * v.size + n] = v.nb[n * 6 + k];
-            for (int c = 0; c < 3; ++c) a[(c * 6 + k) * v.size + n] = v.a[(n * 3 + c) * 6 + k];
-          }
-      }
+      TL_CHECK(int64_t(v.nb.size()) == v.size * 6 && int64_t(v.a.size()) == v.size * 18);
+      // Row entry j = n * node + k * entry (jacobi.comp); the weights as RGB vec4s.
+      const int64_t node = entry_major_ ? 1 : 6, entry = entry_major_ ? v.size : 1;
+      std::vector<int32_t> nb(v.nb.size());
+      std::vector<float> a(v.size * 6 * 4, 0.0f);
+      for (int64_t n = 0; n < v.size; ++n)
+        for (int k = 0; k < 6; ++k) {
+          const int64_t j = n * node + k * entry;
+          nb[j] = v.nb[n * 6 + k];
+          for (int c = 0; c < 3; ++c) a[j * 4 + c] = v.a[(n * 3 + c) * 6 + k];
+        }
       if (!v.extra_start.empty()) {  // the extra entries after the rows, in the same buffers
         d.extra_rows = v.size;
         nb.insert(nb.end(), v.extra_start.begin(), v.extra_start.end());
         nb.insert(nb.end(), v.extra_nb.begin(), v.extra_nb.end());
-        a.insert(a.end(), v.extra_a.begin(), v.extra_a.end());
+        const size_t extras = v.extra_a.size() / 3;
+        a.resize(a.size() + extras * 4, 0.0f);
+        for (size_t e = 0; e < extras; ++e)
+          for (int c = 0; c < 3; ++c) a[(v.size * 6 + e) * 4 + c] = v.extra_a[e * 3 + c];
       }
       d.nb.Set(nb);
       d.a.Set(a);
       d.coef.Set(v.source_coef);
       d.q.Set(nullptr, v.source_coef.size() * sizeof(float));
-      d.s.Set(nullptr, v.source_coef.size() * sizeof(float));
+      d.s.Set(nullptr, size_t(v.size - v.num_interior) * kVec4Bytes);
       d.s.Zero();
       d.active.Set(v.active);
       d.num_active = int64_t(v.active.size());
@@ -169,7 +176,7 @@ class GlHierarchy : public HierarchyRelaxer {
       d.p_start.Set(v.prolong.start);
       d.p_index.Set(v.prolong.index);
       d.p_weight.Set(v.prolong.weight);
-      for (Ssbo& b : d.phi) b.Set(nullptr, size_t(d.size) * 3 * sizeof(float));
+      for (Ssbo& b : d.phi) b.Set(nullptr, size_t(d.size) * kVec4Bytes);
     }
     if (!levels.empty() && !levels[0].radiance_scale.empty()) radiance_scale_.Set(levels[0].radiance_scale);
   }
@@ -186,9 +193,9 @@ class GlHierarchy : public HierarchyRelaxer {
     Device& d = dev_[l];
     const int64_t nb = d.size - d.num_interior;
     api.UseProgram(source_);
-    api.Uniform1i(0, int(nb * 3));
+    api.Uniform1i(0, int(nb));
     api.Uniform1i(1, int(q.first));
-    render_gl::Dispatch({q.buffer, d.coef.id, d.s.id}, nb * 3);
+    render_gl::Dispatch({q.buffer, d.coef.id, d.s.id}, nb);
   }
   void WriteShadedRadiance(DeviceFloats out) override {
     TL_CHECK_MSG(radiance_scale_.id != 0, "no radiance_scale loaded for the finest level");
@@ -210,7 +217,7 @@ class GlHierarchy : public HierarchyRelaxer {
     api.Uniform1i(0, int(d.size));
     render_gl::Dispatch({&d.p_start, &d.p_index, &d.p_weight, &coarse.phi[coarse.cur], &d.phi[d.cur]}, d.size);
     for (int k = 1; k < 3; ++k)
-      d.phi[(d.cur + k) % 3].CopyFrom(d.phi[d.cur], size_t(d.size) * 3 * sizeof(float));
+      d.phi[(d.cur + k) % 3].CopyFrom(d.phi[d.cur], size_t(d.size) * kVec4Bytes);
   }
   void Relax(int l, bool adaptive, int iterations, bool repeated) override {
     Device& d = dev_[l];
@@ -222,8 +229,7 @@ class GlHierarchy : public HierarchyRelaxer {
     api.Uniform1i(2, adaptive ? 1 : 0);
     api.Uniform1i(5, int(d.extra_rows));
     api.Uniform1i(6, entry_major_ ? 1 : 6);
-    api.Uniform1i(7, entry_major_ ? 1 : 18);
-    api.Uniform1i(8, entry_major_ ? int(d.size) : 1);
+    api.Uniform1i(7, entry_major_ ? int(d.size) : 1);
     // Without the list the shader never reads binding 3; the rows stand in for it.
     const Ssbo& list = adaptive ? d.active : d.nb;
     // phi[cur] is the iterate, phi[cur + 2] the one before it (read by Chebyshev's steps from
@@ -242,8 +248,10 @@ class GlHierarchy : public HierarchyRelaxer {
   void Read(int l, int64_t first_row, std::vector<float>* phi) override {
     const Device& d = dev_[l];
     TL_CHECK(int64_t(phi->size()) == d.size * 3);
-    d.phi[d.cur].Get(phi->data() + first_row * 3, size_t(d.size - first_row) * 3 * sizeof(float),
-                     size_t(first_row) * 3 * sizeof(float));
+    host_phi_.resize(size_t(d.size - first_row) * 4);
+    d.phi[d.cur].Get(host_phi_.data(), host_phi_.size() * sizeof(float), size_t(first_row) * kVec4Bytes);
+    for (int64_t n = first_row; n < d.size; ++n)
+      for (int c = 0; c < 3; ++c) (*phi)[n * 3 + c] = host_phi_[(n - first_row) * 4 + c];
   }
 
  private:
@@ -258,7 +266,7 @@ class GlHierarchy : public HierarchyRelaxer {
   const bool entry_major_ = RowsEntryMajor();
   std::vector<Device> dev_;
   Ssbo radiance_scale_;
-  std::vector<float> host_q_;
+  std::vector<float> host_q_, host_phi_;
 };
 
 }  // namespace
