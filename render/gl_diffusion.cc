@@ -109,10 +109,11 @@ void Dispatch(std::initializer_list<GLuint> buffers, int64_t threads) {
 namespace {
 
 // The relaxation rows' layout in jacobi.comp: entry-major on GPUs, where it coalesces the
-// warps' loads (the bunny's 17^3 frame on the H200: 5.9 -> 5.2 ms of diffusion), node-major on
-// llvmpipe, whose invocations run as a CPU core's SIMD lanes and read a node's 18 weights from
-// one cache line better than from 18 streams (9^3 bunny: 320 ms against 390 ms entry-major).
-// TRANSLUME_GL_TUNING=llvmpipe|gpu forces one, as it does the solver's shaders (docs/gpu.md).
+// warps' loads (the bunny's 17^3 frame on the H200, 2026-12-04: 4.5 ms of diffusion against 5.1
+// node-major), node-major on llvmpipe, whose invocations run as a CPU core's SIMD lanes and read
+// a node's six weights from neighbouring words (9^3 bunny: 159 against 169 ms entry-major, medians
+// of three alternated runs). TRANSLUME_GL_TUNING=llvmpipe|gpu forces one, as it does the solver's
+// shaders (docs/gpu.md).
 bool RowsEntryMajor() {
   const char* forced = std::getenv("TRANSLUME_GL_TUNING");
   const std::string f = forced ? forced : "";
