@@ -17,11 +17,11 @@
 # default 30/15/15 Chebyshev steps; then with --stencil 6) and a profile of its frames per
 # shader on GPU timestamps,
 # the RGB recoveries with 16 conditions on the Wax I grid (default, cyclic reduction, then 15 s
-# with a GPU-timestamp profile per kernel and grid) and the Marble grid on the gl backend,
+# with a GPU-timestamp profile per kernel and grid, then at L-BFGS rank 5) and the Marble grid on the gl backend,
 # time-capped at 40 s and 30 s (their seconds per iteration give the time of the bench's full
 # 300 iterations; run with --level-search 0, whose trials the cap would not stop), the level
 # search on Wax I (the homogeneous fit, the trials and one iteration: what a default recovery
-# adds to its 300 iterations), the bunny's variants (60/30/30 and 20/10/10 Chebyshev steps, the
+# adds to its 300 iterations), the bunny's variants (18/9/9 and 20/10/10 Chebyshev steps, the
 # 2026-11-30 runs' 60/30/30 Jacobi steps, the adaptive depth), and last the Wax I and Marble batches (no peer)
 # under other shader tunings side by side: line smoother blocks of 1 and 8 nodes against the
 # default 4, a coarse tail from 8192 nodes against 4096, cyclic reduction with tails from 1024
@@ -206,6 +206,9 @@ if [ $tunings = 1 ]; then
   # against its seconds per iteration it tells GPU-bound from host-bound (uploads, read-backs).
   step "profile recovery Wax I (TRANSLUME_GL_PROFILE=gpu2)" 45 env TRANSLUME_GL_PROFILE=gpu2 \
     "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${profile_recovery[@]}"
+  # The host's L-BFGS took 63 % of a Wax I iteration on 2026-12-04 at rank 20, 50 % at rank 5.
+  step "recovery Wax I (wax, gl, --lbfgs-rank 5)" "${limits[0]}" \
+    "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${wax[@]}" --lbfgs-rank 5
 fi
 step "recovery Marble (marble, gl)" "${limits[1]}" \
   "$run" bench recovery --presets marble "${one_case[@]}" --backend gl "${marble[@]}"
@@ -219,15 +222,16 @@ if [ "${limits[2]}" -gt 0 ]; then
   step "recovery Wax I (wax, cpu peer, time-capped)" "${limits[2]}" \
     "$run" bench recovery --presets wax "${one_case[@]}" --backend cpu "${peer[@]}"
 fi
-# The bunny's diffusion with twice and two thirds the default Chebyshev steps, and with the paper's Jacobi
+# The bunny's diffusion with 18,9,9 and two thirds the default Chebyshev steps, and with the paper's Jacobi
 # steps as measured on 2026-11-30 (60,30,30). Their errors against the converged solution (the
 # renderbench's E, a host solve that takes a minute at 17^3: --no-error here) do not depend on
 # the backend; docs/benchmarks.md has them from the cpu backend. Then the adaptive scheme
 # (Section 5.3): the finest level updates only its outer 4 node layers (E 5.8e-4 instead of
 # 4.7e-4 on the cpu, t2 0.73-0.87x there).
 if [ ${#render[@]} -gt 0 ]; then
-  step "renderbench (bunny, chebyshev 60,30,30)" 30 "${render[@]}" "${render_variant_args[@]}" \
-    --iterations 60,30,30
+  # Around the paper's E of 5e-3: 18,9,9 6.8e-3 on the cpu, 20,10,10 2.7e-3.
+  step "renderbench (bunny, chebyshev 18,9,9)" 30 "${render[@]}" "${render_variant_args[@]}" \
+    --iterations 18,9,9
   # Two thirds of the default steps: E 1.7e-3 on the cpu, a third of the paper's 5e-3.
   step "renderbench (bunny, chebyshev 20,10,10)" 30 "${render[@]}" "${render_variant_args[@]}" \
     --iterations 20,10,10
