@@ -28,8 +28,8 @@
 # and 8192 nodes and with four fields per value (slower with the serial smoother on
 # 2026-11-30: a quarter of the invocations); then the renderbench again.
 #
-# --long-recoveries: no tuning steps; Wax I runs its 300 iterations (cap 120 s, ~100 s on the
-# H200), Marble 300 s (~170 of its 300 iterations: 300 take ~520 s, more than one device call
+# --long-recoveries: no tuning steps; Wax I runs a whole default recovery, its absorption level
+# search and 300 iterations (cap 120 s, ~100 s on the H200 on 2026-12-04), Marble 300 s (~170 of its 300 iterations: 300 take ~520 s, more than one device call
 # holds), and the cpu backend's recovery on Wax I (20 s) runs as their peer.
 #
 # Output: "$OUT" (the device tool's output folder; default ./gpu-session): session.log (every
@@ -143,7 +143,7 @@ else
   profile_recovery=(--grid 130x53x37 --max-iterations 300 --max-seconds 15 --level-search 0)
   level=(--grid 130x53x37 --max-iterations 1 --level-search 10)
   if [ $long = 1 ]; then
-    wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 120 --level-search 0)
+    wax=(--grid 130x53x37 --max-iterations 300 --max-seconds 120)
     marble=(--grid 256x256x20 --max-iterations 300 --max-seconds 300 --level-search 0)
     limits=(150 345 45)
     tunings=0
