@@ -3,7 +3,7 @@
 // three fluence buffers (Section 5.2's radiance buffers I_A, I_B, and the iterate before them
 // for Chebyshev's steps) in the solver's headless context.
 #include <algorithm>
-#include <cstdlib>
+#include <bit>
 #include <fmt/format.h>
 #include <map>
 #include <memory>
@@ -108,21 +108,7 @@ void Dispatch(std::initializer_list<GLuint> buffers, int64_t threads) {
 
 namespace {
 
-// The relaxation rows' layout in jacobi.comp: entry-major on GPUs, where it coalesces the
-// warps' loads (the bunny's 17^3 frame on the H200, 2026-12-04: 4.5 ms of diffusion against 5.1
-// node-major), node-major on llvmpipe, whose invocations run as a CPU core's SIMD lanes and read
-// a node's six weights from neighbouring words (9^3 bunny: 159 against 169 ms entry-major, medians
-// of three alternated runs). TRANSLUME_GL_TUNING=llvmpipe|gpu forces one, as it does the solver's
-// shaders (docs/gpu.md).
-bool RowsEntryMajor() {
-  const char* forced = std::getenv("TRANSLUME_GL_TUNING");
-  const std::string f = forced ? forced : "";
-  if (!f.empty() && f != "llvmpipe" && f != "gpu")
-    throw InputError(fmt::format("TRANSLUME_GL_TUNING='{}' is not llvmpipe or gpu", f));
-  return f.empty() ? GlContext::Get().info().renderer.find("llvmpipe") == std::string::npos : f == "gpu";
-}
-
-// The fluence, the boundary sources and the weights are RGB vec4s on the device (jacobi.comp).
+// The fluence and the boundary sources are RGB vec4s on the device (jacobi.comp).
 constexpr size_t kVec4Bytes = 4 * sizeof(float);
 
 // Per level: the rows (neighbours, weights over the diagonal), the boundary rows' source
@@ -145,27 +131,26 @@ class GlHierarchy : public HierarchyRelaxer {
       d.size = v.size;
       d.num_interior = v.num_interior;
       TL_CHECK(int64_t(v.nb.size()) == v.size * 6 && int64_t(v.a.size()) == v.size * 18);
-      // Row entry j = n * node + k * entry (jacobi.comp); the weights as RGB vec4s.
-      const int64_t node = entry_major_ ? 1 : 6, entry = entry_major_ ? v.size : 1;
-      std::vector<int32_t> nb(v.nb.size());
-      std::vector<float> a(v.size * 6 * 4, 0.0f);
+      // Entry j as jacobi.comp reads it: (weight R, G, B as float bits, neighbour); the six
+      // entries entry-major, j = k * size + n, the extra ones after them.
+      const int64_t extras = int64_t(v.extra_nb.size());
+      std::vector<int32_t> rows((v.size * 6 + extras) * 4);
+      const auto put = [&](int64_t j, int32_t neighbour, float r, float g, float b) {
+        rows[j * 4] = std::bit_cast<int32_t>(r);
+        rows[j * 4 + 1] = std::bit_cast<int32_t>(g);
+        rows[j * 4 + 2] = std::bit_cast<int32_t>(b);
+        rows[j * 4 + 3] = neighbour;
+      };
       for (int64_t n = 0; n < v.size; ++n)
-        for (int k = 0; k < 6; ++k) {
-          const int64_t j = n * node + k * entry;
-          nb[j] = v.nb[n * 6 + k];
-          for (int c = 0; c < 3; ++c) a[j * 4 + c] = v.a[(n * 3 + c) * 6 + k];
-        }
-      if (!v.extra_start.empty()) {  // the extra entries after the rows, in the same buffers
+        for (int k = 0; k < 6; ++k)
+          put(k * v.size + n, v.nb[n * 6 + k], v.a[n * 18 + k], v.a[n * 18 + 6 + k], v.a[n * 18 + 12 + k]);
+      for (int64_t e = 0; e < extras; ++e)
+        put(v.size * 6 + e, v.extra_nb[e], v.extra_a[e * 3], v.extra_a[e * 3 + 1], v.extra_a[e * 3 + 2]);
+      d.rows.Set(rows);
+      if (!v.extra_start.empty()) {
         d.extra_rows = v.size;
-        nb.insert(nb.end(), v.extra_start.begin(), v.extra_start.end());
-        nb.insert(nb.end(), v.extra_nb.begin(), v.extra_nb.end());
-        const size_t extras = v.extra_a.size() / 3;
-        a.resize(a.size() + extras * 4, 0.0f);
-        for (size_t e = 0; e < extras; ++e)
-          for (int c = 0; c < 3; ++c) a[(v.size * 6 + e) * 4 + c] = v.extra_a[e * 3 + c];
+        d.extra_start.Set(v.extra_start);
       }
-      d.nb.Set(nb);
-      d.a.Set(a);
       d.coef.Set(v.source_coef);
       d.q.Set(nullptr, v.source_coef.size() * sizeof(float));
       d.s.Set(nullptr, size_t(v.size - v.num_interior) * kVec4Bytes);
@@ -229,10 +214,11 @@ class GlHierarchy : public HierarchyRelaxer {
     api.Uniform1i(1, int(d.num_interior));
     api.Uniform1i(2, adaptive ? 1 : 0);
     api.Uniform1i(5, int(d.extra_rows));
-    api.Uniform1i(6, entry_major_ ? 1 : 6);
-    api.Uniform1i(7, entry_major_ ? int(d.size) : 1);
-    // Without the list the shader never reads binding 3; the rows stand in for it.
-    const Ssbo& list = adaptive ? d.active : d.nb;
+    api.Uniform1i(6, int(d.size));
+    // Without the list (or the extra entries) the shader never reads binding 3 (or 0); the
+    // rows stand in for them.
+    const Ssbo& list = adaptive ? d.active : d.rows;
+    const Ssbo& extra_start = d.extra_rows > 0 ? d.extra_start : d.rows;
     // phi[cur] is the iterate, phi[cur + 2] the one before it (read by Chebyshev's steps from
     // the second on) and phi[cur + 1] the next; all three agree outside the updated nodes.
     ChebyshevSchedule schedule(d.rho, iterations, repeated || d.tails);
@@ -242,7 +228,7 @@ class GlHierarchy : public HierarchyRelaxer {
       api.Uniform1i(3, jacobi ? 0 : 1);
       api.Uniform3f(4, w[0], w[1], w[2]);
       const Ssbo &cur = d.phi[d.cur], &next = d.phi[(d.cur + 1) % 3], &prev = d.phi[(d.cur + 2) % 3];
-      render_gl::Dispatch({&d.nb, &d.a, &d.s, &list, &cur, &next, &prev}, count);
+      render_gl::Dispatch({&extra_start, &d.rows, &d.s, &list, &cur, &next, &prev}, count);
       d.cur = (d.cur + 1) % 3;
     }
   }
@@ -259,12 +245,11 @@ class GlHierarchy : public HierarchyRelaxer {
   struct Device {
     int64_t size = 0, num_interior = 0, num_active = 0, extra_rows = 0;  // extra_rows: 0 without extra entries
     int cur = 0;
-    Ssbo nb, a, coef, q, s, active, p_start, p_index, p_weight, phi[3];
+    Ssbo rows, extra_start, coef, q, s, active, p_start, p_index, p_weight, phi[3];
     std::array<double, 3> rho{};
     bool tails = false;
   };
   GLuint jacobi_ = 0, source_ = 0, prolong_ = 0, radiance_ = 0;
-  const bool entry_major_ = RowsEntryMajor();
   std::vector<Device> dev_;
   Ssbo radiance_scale_;
   std::vector<float> host_q_, host_phi_;

@@ -1,19 +1,17 @@
 // SPDX-License-Identifier: MIT
 // One relaxation step of the polygrid diffusion (render/diffusion.h, HierarchyRelaxer), RGB:
 //   dst[n] = sum_k a[n][k] src[nb[n][k]] + (n >= num_interior ? s[n - num_interior] : 0),
-// k < 6, every value an RGB vec4 (w unused: one load per neighbour, weight and node). The rows
-// at nb[n * node + k * entry], a[n * node + k * entry]: node-major as HierarchyRelaxer's Level
-// holds them (node 6, entry 1; llvmpipe) or entry-major, so that neighbouring invocations read
-// neighbouring words (node 1, entry size; GPUs: gl_diffusion.cc's RowsEntryMajor); plus with
-// rows > 0 (rows == size) the row's extra entries (JacobiSystem's), which follow in the same
-// buffers: nb[rows * 6 + n] is extra_start[n], nb[rows * 7 + 1 + e] extra_nb[e], and
-// a[rows * 6 + e] extra_a[e * 3 + c]'s three channels;
-// for n = active[i] (adaptive) or n = i, i < count; with use_prev, Chebyshev's semi-iteration
+// k < 6, the fluence and sources RGB vec4s (w unused). A row entry is one ivec4: the weight's
+// three channels as float bits in xyz, the neighbour in w (one load per entry), entry-major so
+// that neighbouring invocations read neighbouring words: row[k * stride + n], stride = the
+// level's size; with rows > 0 (rows == size) the row's extra entries (JacobiSystem's) follow,
+// row[rows * 6 + e] for extra_start[n] <= e < extra_start[n + 1]; for n = active[i]
+// (adaptive) or n = i, i < count; with use_prev, Chebyshev's semi-iteration
 // (render/diffusion.h): dst[n] = prev[n] + omega (that - prev[n]), per channel.
 #version 430
 layout(local_size_x = 256) in;
-layout(std430, binding = 0) readonly buffer Nb { int nb[]; };
-layout(std430, binding = 1) readonly buffer A { vec4 a[]; };
+layout(std430, binding = 0) readonly buffer ExtraStart { int extra_start[]; };
+layout(std430, binding = 1) readonly buffer Rows { ivec4 row[]; };
 layout(std430, binding = 2) readonly buffer S { vec4 s[]; };
 layout(std430, binding = 3) readonly buffer Active { int active_nodes[]; };
 layout(std430, binding = 4) readonly buffer Src { vec4 src[]; };
@@ -25,8 +23,7 @@ layout(location = 2) uniform int use_list;
 layout(location = 3) uniform int use_prev;
 layout(location = 4) uniform vec3 omega;
 layout(location = 5) uniform int rows;
-layout(location = 6) uniform int node;
-layout(location = 7) uniform int entry;
+layout(location = 6) uniform int stride;
 
 void main() {
   int i = int(gl_WorkGroupID.y * gl_NumWorkGroups.x * 256u + gl_GlobalInvocationID.x);
@@ -34,12 +31,15 @@ void main() {
   int n = use_list != 0 ? active_nodes[i] : i;
   vec3 acc = n < num_interior ? vec3(0.0) : s[n - num_interior].rgb;
   for (int k = 0; k < 6; ++k) {
-    int j = n * node + k * entry;
-    acc += a[j].rgb * src[nb[j]].rgb;
+    ivec4 r = row[k * stride + n];
+    acc += intBitsToFloat(r.xyz) * src[r.w].rgb;
   }
   if (rows > 0) {
-    int e1 = nb[rows * 6 + n + 1];
-    for (int e = nb[rows * 6 + n]; e < e1; ++e) acc += a[rows * 6 + e].rgb * src[nb[rows * 7 + 1 + e]].rgb;
+    int e1 = extra_start[n + 1];
+    for (int e = extra_start[n]; e < e1; ++e) {
+      ivec4 r = row[rows * 6 + e];
+      acc += intBitsToFloat(r.xyz) * src[r.w].rgb;
+    }
   }
   if (use_prev != 0) {
     vec3 p = prev[n].rgb;
