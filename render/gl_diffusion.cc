@@ -131,22 +131,32 @@ class GlHierarchy : public HierarchyRelaxer {
       d.size = v.size;
       d.num_interior = v.num_interior;
       TL_CHECK(int64_t(v.nb.size()) == v.size * 6 && int64_t(v.a.size()) == v.size * 18);
-      // Entry j as jacobi.comp reads it: (weight R, G, B as float bits, neighbour); the six
-      // entries entry-major, j = k * size + n, the extra ones after them.
+      // Entries as jacobi.comp reads them, (weight R, G, B as float bits, neighbour): k < 3 in
+      // rows0 at k * size + n, the others in rows1 at (k - 3) * size + n, then the extra ones.
       const int64_t extras = int64_t(v.extra_nb.size());
-      std::vector<int32_t> rows((v.size * 6 + extras) * 4);
-      const auto put = [&](int64_t j, int32_t neighbour, float r, float g, float b) {
-        rows[j * 4] = std::bit_cast<int32_t>(r);
-        rows[j * 4 + 1] = std::bit_cast<int32_t>(g);
-        rows[j * 4 + 2] = std::bit_cast<int32_t>(b);
-        rows[j * 4 + 3] = neighbour;
+      std::vector<int32_t> rows0(v.size * 3 * 4), rows1((v.size * 3 + extras) * 4);
+      const auto put = [](std::vector<int32_t>* rows, int64_t j, int32_t neighbour, float r, float g, float b) {
+        (*rows)[j * 4] = std::bit_cast<int32_t>(r);
+        (*rows)[j * 4 + 1] = std::bit_cast<int32_t>(g);
+        (*rows)[j * 4 + 2] = std::bit_cast<int32_t>(b);
+        (*rows)[j * 4 + 3] = neighbour;
       };
       for (int64_t n = 0; n < v.size; ++n)
         for (int k = 0; k < 6; ++k)
-          put(k * v.size + n, v.nb[n * 6 + k], v.a[n * 18 + k], v.a[n * 18 + 6 + k], v.a[n * 18 + 12 + k]);
+          put(k < 3 ? &rows0 : &rows1, (k % 3) * v.size + n, v.nb[n * 6 + k], v.a[n * 18 + k], v.a[n * 18 + 6 + k],
+              v.a[n * 18 + 12 + k]);
       for (int64_t e = 0; e < extras; ++e)
-        put(v.size * 6 + e, v.extra_nb[e], v.extra_a[e * 3], v.extra_a[e * 3 + 1], v.extra_a[e * 3 + 2]);
-      d.rows.Set(rows);
+        put(&rows1, v.size * 3 + e, v.extra_nb[e], v.extra_a[e * 3], v.extra_a[e * 3 + 1], v.extra_a[e * 3 + 2]);
+      // The largest buffers a shader binds (GL_MAX_SHADER_STORAGE_BLOCK_SIZE; 128 MiB on
+      // llvmpipe, which a level of ~2 M nodes reaches): past it the shader would read zeros.
+      const int64_t limit = GlContext::Get().info().max_ssbo_bytes, bytes = int64_t(rows1.size()) * 4;
+      if (limit > 0 && bytes > limit)
+        throw InputError(fmt::format("--backend gl: the polygrid's level of {} nodes needs a {:.0f} MiB buffer of "
+                                     "relaxation rows, over this GL's limit of {:.0f} MiB "
+                                     "(GL_MAX_SHADER_STORAGE_BLOCK_SIZE); use a lower resolution or --backend cpu",
+                                     v.size, bytes / 1048576.0, limit / 1048576.0));
+      d.rows0.Set(rows0);
+      d.rows1.Set(rows1);
       if (!v.extra_start.empty()) {
         d.extra_rows = v.size;
         d.extra_start.Set(v.extra_start);
@@ -217,8 +227,8 @@ class GlHierarchy : public HierarchyRelaxer {
     api.Uniform1i(6, int(d.size));
     // Without the list (or the extra entries) the shader never reads binding 3 (or 0); the
     // rows stand in for them.
-    const Ssbo& list = adaptive ? d.active : d.rows;
-    const Ssbo& extra_start = d.extra_rows > 0 ? d.extra_start : d.rows;
+    const Ssbo& list = adaptive ? d.active : d.rows0;
+    const Ssbo& extra_start = d.extra_rows > 0 ? d.extra_start : d.rows0;
     // phi[cur] is the iterate, phi[cur + 2] the one before it (read by Chebyshev's steps from
     // the second on) and phi[cur + 1] the next; all three agree outside the updated nodes.
     ChebyshevSchedule schedule(d.rho, iterations, repeated || d.tails);
@@ -228,7 +238,7 @@ class GlHierarchy : public HierarchyRelaxer {
       api.Uniform1i(3, jacobi ? 0 : 1);
       api.Uniform3f(4, w[0], w[1], w[2]);
       const Ssbo &cur = d.phi[d.cur], &next = d.phi[(d.cur + 1) % 3], &prev = d.phi[(d.cur + 2) % 3];
-      render_gl::Dispatch({&extra_start, &d.rows, &d.s, &list, &cur, &next, &prev}, count);
+      render_gl::Dispatch({&extra_start, &d.rows0, &d.s, &list, &cur, &next, &prev, &d.rows1}, count);
       d.cur = (d.cur + 1) % 3;
     }
   }
@@ -245,7 +255,7 @@ class GlHierarchy : public HierarchyRelaxer {
   struct Device {
     int64_t size = 0, num_interior = 0, num_active = 0, extra_rows = 0;  // extra_rows: 0 without extra entries
     int cur = 0;
-    Ssbo rows, extra_start, coef, q, s, active, p_start, p_index, p_weight, phi[3];
+    Ssbo rows0, rows1, extra_start, coef, q, s, active, p_start, p_index, p_weight, phi[3];
     std::array<double, 3> rho{};
     bool tails = false;
   };

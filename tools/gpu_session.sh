@@ -226,13 +226,13 @@ fi
 # steps as measured on 2026-11-30 (60,30,30). Their errors against the converged solution (the
 # renderbench's E, a host solve that takes a minute at 17^3: --no-error here) do not depend on
 # the backend; docs/benchmarks.md has them from the cpu backend. Then the adaptive scheme
-# (Section 5.3): the finest level updates only its outer 4 node layers (E 5.8e-4 instead of
-# 4.7e-4 on the cpu, t2 0.73-0.87x there).
+# (Section 5.3): the finest level updates only its outer 4 node layers (measured on the cpu
+# on 2026-12-01 with the six weights: E 5.8e-4 instead of 4.7e-4, t2 0.73-0.87x there).
 if [ ${#render[@]} -gt 0 ]; then
   # Around the paper's E of 5e-3: 18,9,9 6.8e-3 on the cpu, 20,10,10 2.7e-3.
   step "renderbench (bunny, chebyshev 18,9,9)" 30 "${render[@]}" "${render_variant_args[@]}" \
     --iterations 18,9,9
-  # Two thirds of the default steps: E 1.7e-3 on the cpu, a third of the paper's 5e-3.
+  # Two thirds of the default steps: E 2.7e-3 on the cpu (2026-12-04), about half the paper's 5e-3.
   step "renderbench (bunny, chebyshev 20,10,10)" 30 "${render[@]}" "${render_variant_args[@]}" \
     --iterations 20,10,10
   step "renderbench (bunny, jacobi 60,30,30)" 30 "${render[@]}" "${render_variant_args[@]}" \
