@@ -17,7 +17,8 @@
 # default 30/15/15 Chebyshev steps; then with --stencil 6) and a profile of its frames per
 # shader on GPU timestamps,
 # the RGB recoveries with 16 conditions on the Wax I grid (default, cyclic reduction, then 15 s
-# with a GPU-timestamp profile per kernel and grid, then at L-BFGS rank 5) and the Marble grid on the gl backend,
+# with a GPU-timestamp profile per kernel and grid, then at L-BFGS rank 5) and the Marble grid
+# on the gl backend,
 # time-capped at 40 s and 30 s (their seconds per iteration give the time of the bench's full
 # 300 iterations; run with --level-search 0, whose trials the cap would not stop), the level
 # search on Wax I (the homogeneous fit, the trials and one iteration: what a default recovery
@@ -29,8 +30,9 @@
 # 2026-11-30: a quarter of the invocations); then the renderbench again.
 #
 # --long-recoveries: no tuning steps; Wax I runs a whole default recovery, its absorption level
-# search and 300 iterations (cap 120 s, ~100 s on the H200 on 2026-12-04), Marble 300 s (~170 of its 300 iterations: 300 take ~520 s, more than one device call
-# holds), and the cpu backend's recovery on Wax I (20 s) runs as their peer.
+# search and 300 iterations (cap 120 s, ~100 s on the H200 on 2026-12-04), Marble 300 s (~170
+# of its 300 iterations: 300 take ~520 s, more than one device call holds), and the cpu
+# backend's recovery on Wax I (20 s) runs as their peer.
 #
 # Output: "$OUT" (the device tool's output folder; default ./gpu-session): session.log (every
 # step's full output, in order), summary.md (the figures for docs/benchmarks.md, also printed

@@ -28,21 +28,18 @@ layout(location = 4) uniform vec3 omega;
 layout(location = 5) uniform int rows;
 layout(location = 6) uniform int stride;
 
+// One entry's term: its weight (float bits) times its neighbour's fluence, per channel.
+vec3 Term(ivec4 r) { return intBitsToFloat(r.xyz) * src[r.w].rgb; }
+
 void main() {
   int i = int(gl_WorkGroupID.y * gl_NumWorkGroups.x * 256u + gl_GlobalInvocationID.x);
   if (i >= count) return;
   int n = use_list != 0 ? active_nodes[i] : i;
   vec3 acc = n < num_interior ? vec3(0.0) : s[n - num_interior].rgb;
-  for (int k = 0; k < 6; ++k) {
-    ivec4 r = k < 3 ? row0[k * stride + n] : row1[(k - 3) * stride + n];
-    acc += intBitsToFloat(r.xyz) * src[r.w].rgb;
-  }
+  for (int k = 0; k < 6; ++k) acc += Term(k < 3 ? row0[k * stride + n] : row1[(k - 3) * stride + n]);
   if (rows > 0) {
     int e1 = extra_start[n + 1];
-    for (int e = extra_start[n]; e < e1; ++e) {
-      ivec4 r = row1[rows * 3 + e];
-      acc += intBitsToFloat(r.xyz) * src[r.w].rgb;
-    }
+    for (int e = extra_start[n]; e < e1; ++e) acc += Term(row1[rows * 3 + e]);
   }
   if (use_prev != 0) {
     vec3 p = prev[n].rgb;
