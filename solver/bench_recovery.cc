@@ -82,7 +82,7 @@ RecoveryBenchRow RunCase(const Case& c, const RecoveryBenchOptions& o, const Rec
   r.setup = setup;
   r.noise = noise;
   r.shape = c.truth.shape;
-  r.optimizer = OptimizerName(ro.optimizer);
+  r.optimizer = std::string(OptimizerName(ro.optimizer)) + (ro.joint_optimizer ? "-joint" : "");
   r.lbfgs_rank = ro.optimizer == OptimizerKind::kLbfgs ? ro.lbfgs_rank : 0;
   r.solve_tolerance = ro.solve_tolerance;
   r.backend = ro.backend;

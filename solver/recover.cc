@@ -9,12 +9,15 @@
 #include <chrono>
 #include <climits>
 #include <cmath>
+#include <condition_variable>
 #include <exception>
 #include <fmt/format.h>
 #include <fstream>
 #include <limits>
 #include <map>
+#include <mutex>
 #include <nlohmann/json.hpp>
+#include <span>
 #include <thread>
 
 #include "solver/atomic_file.h"
@@ -57,6 +60,7 @@ class RecoveryProblem {
     mu_scale_ = m;
   }
   int64_t num_parameters() const { return 6 * n_; }
+  int threads_per_channel() const { return threads_; }
   int64_t cg_iterations() const {
     int64_t s = 0;
     for (const auto& c : channels_) s += c->cg_iterations();
@@ -70,10 +74,8 @@ class RecoveryProblem {
 
   // f(x) and, if grad is non-null, df/dx.
   double Evaluate(const double* x, double* grad) {
-    const auto t0 = Clock::now();
     std::array<double, 3> f{};
     ForEachChannel([&](int c) { f[c] = EvaluateChannel(c, x, grad); });
-    evaluation_seconds_ += Since(t0);
     return (f[0] + f[1] + f[2]) / 3.0;
   }
 
@@ -103,8 +105,12 @@ class RecoveryProblem {
       if (e) std::rethrow_exception(e);
   }
 
-  // Seconds spent in Evaluate so far.
-  double evaluation_seconds() const { return evaluation_seconds_; }
+  // Wall seconds so far during which an evaluation of some channel ran (EvaluateOneChannel;
+  // channels evaluated at once count once).
+  double evaluation_seconds() const {
+    std::lock_guard<std::mutex> lock(busy_mutex_);
+    return busy_seconds_ + (evaluating_ > 0 ? Since(busy_since_) : 0.0);
+  }
 
   // Whether every solve of the last evaluation converged (to within 100x the tolerance). Trial
   // points far outside the physical range can stall the solver; the optimisers then treat the
@@ -254,11 +260,22 @@ class RecoveryProblem {
   }
   static constexpr double kLowPassNodes = 2;
 
-  // f_c and df_c/dx_c of one channel on its own block of the unknowns, xk = (log kappa_c,
-  // log mu_c) (2 n values; g likewise, may be null), for optimisers that run the channels as
-  // separate problems (the level search's trials). Different channels may be evaluated at once
-  // from different threads (ForEachChannel).
+  // f_c and df_c/dx_c / 3 (the joint objective's gradient on this block) of one channel on its
+  // own block of the unknowns, xk = (log kappa_c, log mu_c) (2 n values; g likewise, may be
+  // null). Different channels may be evaluated at once from different threads (ForEachChannel,
+  // FitChannels on cpu).
   double EvaluateOneChannel(int c, const double* xk, double* g) {
+    {
+      std::lock_guard<std::mutex> lock(busy_mutex_);
+      if (evaluating_++ == 0) busy_since_ = Clock::now();
+    }
+    struct Done {
+      RecoveryProblem* p;
+      ~Done() {
+        std::lock_guard<std::mutex> lock(p->busy_mutex_);
+        if (--p->evaluating_ == 0) p->busy_seconds_ += Since(p->busy_since_);
+      }
+    } done{this};
     std::vector<double>& k = kappa_[c];
     std::vector<double>& m = mu_[c];
     const double* xm = xk + n_;
@@ -297,7 +314,10 @@ class RecoveryProblem {
   std::array<std::unique_ptr<ChannelObjective>, 3> channels_;
   std::array<std::vector<double>, 3> kappa_, mu_, gk_, gm_;
   std::array<double, 3> kappa_scale_{1, 1, 1}, mu_scale_{1, 1, 1};
-  double evaluation_seconds_ = 0;
+  mutable std::mutex busy_mutex_;  // guards the three below (evaluation_seconds)
+  int evaluating_ = 0;
+  Clock::time_point busy_since_;
+  double busy_seconds_ = 0;
 };
 
 double Norm(const std::vector<double>& v) {
@@ -421,11 +441,10 @@ OptimizerResult RunCeres(ceres::FirstOrderFunction* function, OptimizerKind kind
 // Table I): bracket the minimum along the direction by golden-ratio expansion or contraction,
 // then shrink the bracket by golden sections; only the accepted point gets a gradient (adjoint
 // solves); line-search points cost forward solves only.
-OptimizerResult RunPaper(const Objective& problem, int max_iterations, double tolerance,
-                         std::vector<double>* xp, const IterationHook& hook) {
+OptimizerResult RunPaper(const Objective& problem, int max_iterations, double tolerance, std::span<double> x,
+                         const IterationHook& hook) {
   constexpr double kGold = 1.618033988749895, kInvGold = 0.618033988749895;
   constexpr int kSectionSteps = 8;
-  std::vector<double>& x = *xp;
   const size_t n = x.size();
   std::vector<double> g(n), g_new(n), d(n), trial(n);
   OptimizerResult r;
@@ -517,9 +536,9 @@ OptimizerResult RunPaper(const Objective& problem, int max_iterations, double to
 // The factor on f that makes Ceres' first step from x (the gradient itself) change the largest
 // log-parameter by 0.1; 1 where it already does more. One evaluation with gradient, returned in
 // *at_x for the optimiser's first call.
-double FirstStepScale(const Objective& f, const std::vector<double>& x, Evaluation* at_x) {
+double FirstStepScale(const Objective& f, std::span<const double> x, Evaluation* at_x) {
   constexpr double kFirstChange = 0.1;
-  at_x->x = x;
+  at_x->x.assign(x.begin(), x.end());
   at_x->gradient.assign(x.size(), 0.0);
   at_x->value = f.evaluate(x.data(), at_x->gradient.data());
   at_x->ok = f.ok();
@@ -541,17 +560,198 @@ double FirstStepScale(const Objective& f, const std::vector<double>& x, Evaluati
 // decades: 0.404 -> 0.402 in 10 iterations, against 1.7e-3 at +0.5). The later steps and Ceres'
 // relative tolerances do not depend on the scale. RunPaper sizes its first trial the same way.
 OptimizerResult RunOptimizer(const Objective& f, const RecoveryOptions& o, int max_iterations,
-                             std::vector<double>* x, const IterationHook& hook) {
+                             std::span<double> x, const IterationHook& hook) {
   if (o.optimizer == OptimizerKind::kPaper) return RunPaper(f, max_iterations, o.tolerance, x, hook);
   Evaluation start;
-  const double scale = FirstStepScale(f, *x, &start);
+  const double scale = FirstStepScale(f, x, &start);
   const IterationHook unscaled = [&](int it, double v, double gnorm) {
     return hook ? hook(it, v / scale, gnorm / scale) : true;
   };
-  OptimizerResult r = RunCeres(new CeresFunction(f, int(x->size()), scale, std::move(start)), o.optimizer,
-                               max_iterations, o.lbfgs_rank, o.tolerance, x->data(), unscaled);
+  OptimizerResult r = RunCeres(new CeresFunction(f, int(x.size()), scale, std::move(start)), o.optimizer,
+                               max_iterations, o.lbfgs_rank, o.tolerance, x.data(), unscaled);
   r.initial /= scale;
   r.final /= scale;
+  return r;
+}
+
+// The run's optimiser on each channel's block of x (2 n values from x + 2 c n) at once, each
+// channel on its own thread, minimising f_c / 3 (recover.h: the channels' terms of the joint
+// objective). Channels whose `fit` is false are left alone. The channels are independent
+// problems; run as one, Ceres' L-BFGS does its vector work over all of them on one thread, and
+// that was 50-64 % of a Wax I iteration on the H200's gl backend (docs/benchmarks.md, "GPU
+// session 2026-12-04"). Per channel it runs on three threads, and on gl it overlaps the GPU's
+// work: the gl evaluations run on this thread (the context is current here), one at a time,
+// while the other channels' optimisers work. Each channel takes its own line-search steps (in
+// one joint run the channel furthest from its optimum set them for all).
+//
+// With a `hook`, the channels report their iterations in step: the hook runs once per iteration
+// k, on this thread, when every channel still running has made k, with k, the channels' summed
+// objective (that of the last iteration each made) and the norm of the joint gradient, while
+// x holds every channel's iterate of k (or its last); its false stops them all. A channel may
+// meanwhile work on iteration k + 1 (its optimiser works on its own copy of its block) but not
+// finish it before the hook of k has run, so the GPU need not idle while the host's optimisers
+// work. After a false, each channel stops at the end of the iteration it is in, and x keeps
+// their iterates of k. Without a hook, the channels run on to their own ends
+// (RecoveryOptions::stop still stops them).
+OptimizerResult FitChannels(RecoveryProblem* problem, const RecoveryOptions& o, int64_t n, int max_iterations,
+                            const std::array<bool, 3>& fit, double* x, const IterationHook& hook) {
+  const bool serve_here = o.backend == Backend::kGl;
+  struct Channel {
+    bool running = false;
+    int reported = 0;  // the last iteration whose iterate is in x
+    double f = 0, gnorm = 0;
+    // serve_here: an evaluation it asks for (at point, gradient into g, may be null), its answer.
+    bool requested = false;
+    const double* point = nullptr;
+    double* g = nullptr;
+    double value = 0;
+    std::exception_ptr evaluation_error, error;
+    std::vector<double> own;  // its optimiser's copy of its block
+    OptimizerResult result;
+  };
+  std::array<Channel, 3> ch;
+  std::mutex m;
+  std::condition_variable cv;
+  int released = 0;  // the last iteration whose hook has run
+  bool go_on = true, stopped = false;
+  std::exception_ptr hook_error;
+  const auto evaluate = [&](int c, const double* v, double* g) {
+    if (!serve_here) return problem->EvaluateOneChannel(c, v, g) / 3.0;
+    std::unique_lock<std::mutex> lock(m);
+    ch[c].point = v;
+    ch[c].g = g;
+    ch[c].requested = true;
+    cv.notify_all();
+    cv.wait(lock, [&] { return !ch[c].requested; });
+    if (ch[c].evaluation_error) std::rethrow_exception(std::exchange(ch[c].evaluation_error, nullptr));
+    return ch[c].value;
+  };
+  const auto run = [&](int c) {
+    try {
+      omp_set_num_threads(problem->threads_per_channel());
+      double* block = x + 2 * c * n;
+      std::vector<double>& own = ch[c].own;
+      own.assign(block, block + 2 * n);
+      const Objective objective{[&, c](const double* v, double* g) { return evaluate(c, v, g); },
+                                [&, c] { return problem->channel_ok(c); }};
+      const IterationHook step = [&, c](int it, double f, double gnorm) {
+        if (!hook) return !o.StopRequested();
+        std::unique_lock<std::mutex> lock(m);
+        cv.wait(lock, [&] { return released >= it - 1; });
+        if (!go_on) return false;
+        lock.unlock();
+        std::copy(own.begin(), own.end(), block);
+        lock.lock();
+        ch[c].f = f;
+        ch[c].gnorm = gnorm;
+        ch[c].reported = it;
+        cv.notify_all();
+        return true;
+      };
+      ch[c].result = RunOptimizer(objective, o, max_iterations, own, step);
+    } catch (...) {
+      ch[c].error = std::current_exception();
+    }
+    std::lock_guard<std::mutex> lock(m);
+    ch[c].running = false;
+    if (ch[c].reported == 0) ch[c].f = ch[c].result.final;
+    if (ch[c].error) go_on = false;
+    cv.notify_all();
+  };
+  std::vector<std::thread> threads;
+  for (int c = 0; c < 3; ++c)
+    if (fit[c]) {
+      ch[c].running = true;
+      threads.emplace_back(run, c);
+    }
+  {
+    std::unique_lock<std::mutex> lock(m);
+    // The next iteration's hook may run: some channel has reported it, and every one running has.
+    const auto hook_due = [&] {
+      bool any = false;
+      for (const Channel& c : ch) {
+        if (c.running && c.reported < released + 1) return false;
+        any = any || c.reported >= released + 1;
+      }
+      return any && go_on;
+    };
+    while (true) {
+      int asking = -1;
+      bool any_running = false;
+      cv.wait(lock, [&] {
+        asking = -1;
+        any_running = false;
+        for (int c = 0; c < 3; ++c) {
+          if (ch[c].requested) asking = c;
+          any_running = any_running || ch[c].running;
+        }
+        return asking >= 0 || !any_running || hook_due();
+      });
+      if (asking >= 0) {
+        Channel& a = ch[asking];
+        lock.unlock();
+        try {
+          a.value = problem->EvaluateOneChannel(asking, a.point, a.g) / 3.0;
+        } catch (...) {
+          a.evaluation_error = std::current_exception();
+        }
+        lock.lock();
+        a.requested = false;
+        cv.notify_all();
+        continue;
+      }
+      if (!hook_due()) break;  // none running, and every reported iteration's hook has run
+      const int it = released + 1;
+      double f = 0, g2 = 0;
+      for (const Channel& c : ch) {
+        f += c.f;
+        g2 += c.gnorm * c.gnorm;
+      }
+      lock.unlock();
+      bool keep = false;
+      try {
+        keep = hook(it, f, std::sqrt(g2));
+      } catch (...) {
+        hook_error = std::current_exception();
+      }
+      lock.lock();
+      if (!keep) stopped = true;
+      go_on = go_on && keep;
+      released = it;
+      cv.notify_all();
+    }
+  }
+  for (std::thread& t : threads) t.join();
+  if (hook_error) std::rethrow_exception(hook_error);
+  for (const Channel& c : ch)
+    if (c.error) std::rethrow_exception(c.error);
+  // Each channel's final iterate (a stopped one's of the last iteration reported is in x).
+  for (int c = 0; c < 3; ++c)
+    if (fit[c] && !(hook && stopped)) std::copy(ch[c].own.begin(), ch[c].own.end(), x + 2 * c * n);
+
+  OptimizerResult r;
+  static constexpr const char* kName[3] = {"R", "G", "B"};
+  bool failed = false, unfinished = false, same = true;
+  std::string first_message, messages;
+  for (int c = 0; c < 3; ++c) {
+    if (!fit[c]) continue;
+    const OptimizerResult& cr = ch[c].result;
+    r.initial += cr.initial;
+    r.final += ch[c].f;  // without a hook: result.final (the run's end)
+    r.iterations = std::max(r.iterations, hook ? ch[c].reported : cr.iterations);
+    failed = failed || cr.termination == RecoveryTermination::kFailed;
+    unfinished = unfinished || cr.termination == RecoveryTermination::kMaxIterations;
+    std::string message = cr.message;
+    while (!message.empty() && message.back() == '.') message.pop_back();  // Ceres' end in one
+    if (first_message.empty()) first_message = message;
+    same = same && message == first_message;
+    messages += fmt::format("{}{}: {}", messages.empty() ? "" : "; ", kName[c], message);
+  }
+  r.termination = stopped ? RecoveryTermination::kStopped
+                  : failed ? RecoveryTermination::kFailed
+                  : unfinished ? RecoveryTermination::kMaxIterations
+                               : RecoveryTermination::kConverged;
+  r.message = stopped ? "stopped by the caller (e.g. Ctrl-C) after this iteration" : same ? first_message : messages;
   return r;
 }
 
@@ -601,24 +801,18 @@ LevelSearchResult SearchAbsorptionLevel(RecoveryProblem* problem, const Recovery
     std::array<double, 3> mu_scale = state->mu_scale;
     for (int c = 0; c < 3; ++c) scale_mu(&x, &mu_scale, c, t[c]);
     problem->set_scales(state->kappa_scale, mu_scale);
-    // Each channel its own optimiser: in one joint run the channel furthest from its level
-    // (largest gradient) sets the line search's steps for all, and the others' objectives
-    // after the trial say more about it than about their own level.
+    // Each channel its own optimiser (FitChannels), run for the trial's few iterations from the
+    // level, its first step sized by FirstStepScale as every fit's.
+    FitChannels(problem, o, n, o.level_search, record, x.data(), {});
     std::array<double, 3> f{};
     problem->ForEachChannel([&](int c) {
       if (!record[c]) return;  // this channel's search is done
-      // The run's optimiser on the channel's block (so the trials need no more memory than it),
-      // its first step sized by FirstStepScale as every fit's.
-      std::vector<double> xc(x.begin() + 2 * c * n, x.begin() + 2 * (c + 1) * n);
-      const Objective channel{[&](const double* v, double* g) { return problem->EvaluateOneChannel(c, v, g); },
-                              [&] { return problem->channel_ok(c); }};
-      RunOptimizer(channel, o, o.level_search, &xc, [&](int, double, double) { return !o.StopRequested(); });
       // The trial's score: its objective with the data term low-passed. A wrong level leaves a
       // residual as smooth as diffusion makes it; the data's noise, which the trial's few
       // iterations have only begun to fit, is rough, and (1 % on wax 64x48x16) it added ~7e-5 to
       // every level's data term of ~1e-5 to 3e-5, so that no level was 1.5x below another. Low-
       // passed, the trials' scores with and without the noise agree within 15 %.
-      const double objective = problem->EvaluateOneChannel(c, xc.data(), nullptr);
+      const double objective = problem->EvaluateOneChannel(c, x.data() + 2 * c * n, nullptr);
       double raw = 0;
       const double low = problem->LowPassMisfit(c, &raw);
       f[c] = objective - raw + low;
@@ -799,8 +993,7 @@ int64_t RecoveryMemoryBytes(const GridShape& shape, int conditions, const Recove
   int vectors = 6;
   if (o.optimizer == OptimizerKind::kNcg) vectors = 32;
   if (o.optimizer == OptimizerKind::kLbfgs) vectors = 32 + 2 * o.lbfgs_rank;
-  // The level search's start, its trial's iterate and the channels' copies of it, and one for
-  // a margin (its peak varied 0.86-0.96 of the estimate in RecoverMemory's rank-20 case); its
+  // The level search's start, its trial's iterate, and two for a margin (its peak varied 0.86-0.96 of the estimate in RecoverMemory's rank-20 case); its
   // optimisers run per channel on a third of the unknowns each, so no more than the main fit.
   if (o.level_search > 0) vectors += 4;
   // Validation keeps the best iterate (RecoveryState::best_x), and its checks render up to
@@ -937,9 +1130,13 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
                                                                  "fit's level kept)" : "");
     r.initial = r.final = problem.Evaluate(state->x.data(), nullptr);
   } else {
-    const Objective whole{[&](const double* v, double* g) { return problem.Evaluate(v, g); },
-                          [&] { return problem.last_evaluation_ok(); }};
-    r = RunOptimizer(whole, o, remaining, &state->x, hook);
+    if (o.joint_optimizer) {
+      const Objective whole{[&](const double* v, double* g) { return problem.Evaluate(v, g); },
+                            [&] { return problem.last_evaluation_ok(); }};
+      r = RunOptimizer(whole, o, remaining, state->x, hook);
+    } else {
+      r = FitChannels(&problem, o, n, remaining, {true, true, true}, state->x.data(), hook);
+    }
   }
   sum.optimizer_seconds = std::max(
       0.0, Since(t_optimizer) - (problem.evaluation_seconds() - evaluation0) -

@@ -21,7 +21,9 @@ namespace translume {
 // The objective is the mean over channels of the per-channel objectives
 //   f_c = J_c(kappa_c, mu_c) + lambda R(kappa_c; s_kappa_c) [+ lambda R(mu_c; s_mu_c)]
 // (J_c: ChannelObjective, R: Regularize with reference scales s = the starting material's
-// geometric means). Channels are independent; each evaluation runs them in 3 threads.
+// geometric means). Channels are independent problems: each has its own optimiser, on its own
+// thread, over its block of x, and the three iterate in lockstep (Recover's callback sees
+// iteration k when every channel still running has made it).
 
 enum class OptimizerKind { kLbfgs, kNcg, kPaper };
 OptimizerKind ParseOptimizer(const std::string& text);  // lbfgs | ncg | paper
@@ -40,7 +42,8 @@ struct RecoveryOptions {
   // shape the search direction (Ceres' max_lbfgs_rank; 20, Ceres' default, is ~40 % of a
   // recovery's memory). A lower rank trades little for memory here (docs/inverse.md, "Memory").
   int lbfgs_rank = 20;
-  // Stop when an iteration lowers the objective by less than tolerance * objective.
+  // A channel's optimiser stops when an iteration lowers its objective by less than
+  // tolerance * objective (the fit ends when all three have, or on max_iterations).
   double tolerance = 1e-7;
   // First fit one (kappa, mu) per channel (Levenberg-Marquardt on 2 unknowns per channel, at
   // most this many iterations, stopping as above, or where its model promises less; 0 skips
@@ -75,6 +78,10 @@ struct RecoveryOptions {
   // the same fit and held-out E (docs/benchmarks.md, "The first step of every fit, and the
   // solves' tolerance"); it relies on every fit's first step being sized (RunOptimizer).
   double solve_tolerance = 1e-6;
+  // One optimiser over all 6 N unknowns (the fit until 2026-12-04) instead of one per channel:
+  // for side-by-side benchmarks only (`bench recovery --joint-optimizer`, tools/gpu_session.sh).
+  // The absorption level search runs per channel either way.
+  bool joint_optimizer = false;
   // OpenMP threads inside each channel's solver; 0: max(1, NumThreads() / 3).
   int threads_per_channel = 0;
   // Polled (from the channels' threads too) during the homogeneous fit, per iteration, and the
@@ -129,8 +136,9 @@ struct RecoverySummary {
   int iterations = 0;
   int64_t solves = 0;
   double seconds = 0, homogeneous_seconds = 0;
-  // Of this run's seconds after the homogeneous fit, those spent outside the objective's
-  // evaluations: the optimiser's own vector work and line search, and the callback.
+  // Of this run's seconds after the homogeneous fit, those in which no channel's evaluation of
+  // the objective ran: the optimisers' own vector work and line search where no channel's
+  // evaluation overlapped it, and the callback.
   double optimizer_seconds = 0;
   int64_t homogeneous_solves = 0;  // of `solves`, spent in the homogeneous fit
   // The absorption level search (RecoveryOptions::level_search): its seconds and solves (of

@@ -251,6 +251,42 @@ TEST_P(RecoverOnBackend, LevelSearchSeesThroughNoise) {
 }
 
 // Early stopping on validation conditions (RecoveryOptions::validation_every): noisy data from a
+// One optimiser per channel, each at most one iteration ahead of the reports (FitChannels): the
+// objective reported for iteration k is that of the iterate in the state the callback sees
+// with it, and a stop there leaves that iterate in the state.
+TEST_P(RecoverOnBackend, EachReportHoldsItsIterate) {
+  const Dataset d = DataOnTheRecoveryGrid(SynthesizeMaterial({.preset = "marble", .shape = {12, 10, 5}}));
+  RecoveryOptions ro;
+  ro.backend = GetParam();
+  ro.level_search = 0;
+  ro.max_iterations = 50;
+  ro.tolerance = 1e-15;
+  std::vector<std::vector<double>> xs;
+  std::vector<double> fs;
+  RecoveryState st;
+  const RecoverySummary s = Recover(d, ro, &st, [&](const IterationReport& r, const RecoveryState& state) {
+    xs.push_back(state.x);
+    fs.push_back(r.objective);
+    return r.iteration < 12;
+  });
+  std::printf("%s\n", s.BriefReport().c_str());
+  EXPECT_EQ(s.termination, RecoveryTermination::kStopped);
+  ASSERT_EQ(s.iterations, 12);
+  ASSERT_EQ(xs.size(), 12u);
+  EXPECT_EQ(st.x, xs.back());
+  for (const int k : {1, 6, 12}) {
+    // No iterations left: the run only evaluates the objective at the state's x.
+    RecoveryState at = st;
+    at.x = xs[k - 1];
+    RecoveryOptions none = ro;
+    none.max_iterations = at.iteration = k;
+    const RecoverySummary e = Recover(d, none, &at);
+    std::printf("iteration %d: reported %.6e, evaluated %.6e\n", k, fs[k - 1], e.final_objective);
+    EXPECT_NEAR(e.final_objective / fs[k - 1], 1.0, 1e-3) << k;
+  }
+  EXPECT_LT(fs[11], 0.5 * fs[0]);  // the iterates do differ
+}
+
 // 2x finer grid, where the fit's later iterations fit noise and discretisation error. The fit
 // stops validation_patience iterations after the best checked iterate, returns that iterate
 // (its validation error, recomputed, is the reported one and the least of the run's), and
@@ -620,6 +656,8 @@ struct MemoryCase {
 
 class RecoverMemory : public ::testing::TestWithParam<MemoryCase> {};
 
+bool first_recovery_in_process = true;
+
 TEST_P(RecoverMemory, PeakStaysWithinTheEstimate) {
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
   GTEST_SKIP() << "the sanitizer's allocator and shadow memory change the resident set";
@@ -660,9 +698,13 @@ TEST_P(RecoverMemory, PeakStaysWithinTheEstimate) {
     EXPECT_LE(used, double(estimate));
     // (The validation checks' solvers are counted in full, but may reuse memory that the fit
     // freed: ncg 0.60 of the estimate with them, 0.68 without.)
-    if (level_search == 0) {
+    // Only in the process's first recovery (ctest runs each case alone): the channels' optimisers
+    // run in their own threads, whose malloc arenas keep their freed tops resident (malloc_trim
+    // releases only the main arena's), and a later recovery reuses them unseen (0.36-0.44).
+    if (level_search == 0 && first_recovery_in_process) {
       EXPECT_GE(used, 0.55 * double(estimate));
     }
+    first_recovery_in_process = false;
   }
 }
 

@@ -153,11 +153,14 @@ void AddBenchRecovery(CLI::App& bench) {
   rec->add_option("--holdout-every", ro.holdout_every, "Also evaluate the held-out E every this "
                   "many iterations (its solves are not counted in the recovery's time; 0: off)")
       ->capture_default_str();
-  rec->add_option("--tolerance", ro.recovery.tolerance, "Stop when an iteration lowers the "
-                  "objective by less than this fraction (tiny: run all --max-iterations)")
+  rec->add_option("--tolerance", ro.recovery.tolerance, "A channel's optimiser stops when an "
+                  "iteration lowers its objective by less than this fraction (tiny: run all --max-iterations)")
       ->capture_default_str();
   rec->add_option("--lbfgs-rank", ro.recovery.lbfgs_rank, "L-BFGS history: pairs of vectors kept "
                   "(memory: 96 bytes per node each)")->capture_default_str();
+  rec->add_flag("--joint-optimizer", ro.recovery.joint_optimizer, "One optimiser over all three channels' "
+                "unknowns, as the fit was until 2026-12-04, instead of one per channel on three threads (for "
+                "comparisons; the row's optimizer reads e.g. lbfgs-joint)");
   rec->add_option("--level-search", ro.recovery.level_search, "Iterations per trial of the absorption level "
                   "search (0: off)")->capture_default_str();
   rec->add_option("--lambda", ro.recovery.lambda, "lambda for noise-free data")->capture_default_str();

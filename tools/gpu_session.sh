@@ -16,8 +16,9 @@
 # renderbench on the 253-cube bunny (17^3 nodes per cube, 3 levels, no frame coherence, the
 # default 30/15/15 Chebyshev steps; then with --stencil 6) and a profile of its frames per
 # shader on GPU timestamps,
-# the RGB recoveries with 16 conditions on the Wax I grid (default, cyclic reduction, then 15 s
-# with a GPU-timestamp profile per kernel and grid, then at L-BFGS rank 5) and the Marble grid
+# the RGB recoveries with 16 conditions on the Wax I grid (default, --joint-optimizer: one
+# optimiser over all channels as until 2026-12-04, then 15 s with a GPU-timestamp profile per
+# kernel and grid, then at L-BFGS rank 5) and the Marble grid
 # on the gl backend,
 # time-capped at 40 s and 30 s (their seconds per iteration give the time of the bench's full
 # 300 iterations; run with --level-search 0, whose trials the cap would not stop), the level
@@ -201,14 +202,18 @@ fi
 step "recovery Wax I (wax, gl)" "${limits[0]}" \
   "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${wax[@]}"
 if [ $tunings = 1 ]; then
-  step "recovery Wax I (wax, gl, TRANSLUME_GL_LINE_PCR=1)" "${limits[0]}" \
-    env TRANSLUME_GL_LINE_PCR=1 "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${wax[@]}"
+  # The host's L-BFGS took 63 % of a Wax I iteration on 2026-12-04 at rank 20, 50 % at rank 5,
+  # when one optimiser ran all three channels on one thread. Since then one per channel, on
+  # three threads and overlapping the GPU's evaluations; the joint optimiser right after it.
+  # (This step ran the recovery with TRANSLUME_GL_LINE_PCR=1 until then: 0.300 against 0.281 s
+  # an iteration.)
+  step "recovery Wax I (wax, gl, --joint-optimizer)" "${limits[0]}" \
+    "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${wax[@]}" --joint-optimizer
   # The recovery's GPU time per kernel (GPU timestamps, keyed by threads too, so that the
   # recovery grid's dispatches stand apart from the data simulation's on the 2x finer grid):
   # against its seconds per iteration it tells GPU-bound from host-bound (uploads, read-backs).
   step "profile recovery Wax I (TRANSLUME_GL_PROFILE=gpu2)" 45 env TRANSLUME_GL_PROFILE=gpu2 \
     "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${profile_recovery[@]}"
-  # The host's L-BFGS took 63 % of a Wax I iteration on 2026-12-04 at rank 20, 50 % at rank 5.
   step "recovery Wax I (wax, gl, --lbfgs-rank 5)" "${limits[0]}" \
     "$run" bench recovery --presets wax "${one_case[@]}" --backend gl "${wax[@]}" --lbfgs-rank 5
 fi

@@ -51,7 +51,8 @@ void AddRecoveryFlags(CLI::App& app, RecoveryFlags* f) {
                  "docs/inverse.md)")
       ->capture_default_str();
   app.add_option("--tolerance", f->options.tolerance,
-                 "Stop when an iteration lowers the objective by less than this fraction")
+                 "A channel's optimiser stops when an iteration lowers its objective by less than this "
+                 "fraction")
       ->capture_default_str();
   AddValidationFlags(app, &f->options);
   AddSolveToleranceFlag(app, &f->options);
