@@ -2,6 +2,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -76,7 +77,9 @@ class FrontFaceObjective : public ChannelObjective {
   std::vector<std::vector<double>> L_, w_, q_front_;
   std::vector<double> misfit_, norm_;
   double denom_ = 0, worst_ = 0;
-  int64_t solves_ = 0, cg_iterations_ = 0;
+  // Atomic: a recovery's progress report reads them while the channel's optimiser may be
+  // evaluating its next iteration (FitChannels, solver/recover.cc).
+  std::atomic<int64_t> solves_ = 0, cg_iterations_ = 0;
 };
 
 // The CPU backend: one MultigridSolver<double> per channel. The solver's OpenMP loops use the
