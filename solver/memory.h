@@ -66,8 +66,9 @@ void ReleaseFreedMemory();
 
 // Makes glibc's malloc keep freed memory for reuse: large blocks come from the heap instead of
 // fresh mappings, and up to 1 GiB of free memory stays at the heap's top. A recovery's optimiser
-// (Ceres' L-BFGS and Wolfe line search) allocates and frees vectors of 6 N doubles (12 MB on the
-// Wax I grid) several times per iteration; with glibc's defaults many of them are fresh mappings
+// (Ceres' L-BFGS and Wolfe line search, one per channel) allocates and frees vectors of 2 N
+// doubles (4 MB on the Wax I grid; 6 N with `bench recovery --joint-optimizer`) several times per
+// iteration; with glibc's defaults many of them are fresh mappings
 // whose pages fault in again, which took ~30 % of an iteration on a 96x96x16 cpu recovery
 // (docs/benchmarks.md, "The optimiser's page faults"). Process-wide and idempotent: call it at
 // start-up, before other threads run; the translume binaries do. A no-op without glibc.

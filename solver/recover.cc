@@ -105,8 +105,26 @@ class RecoveryProblem {
       if (e) std::rethrow_exception(e);
   }
 
-  // Wall seconds so far during which an evaluation of some channel ran (EvaluateOneChannel;
-  // channels evaluated at once count once).
+  // While one lives, the calling thread's work counts as an evaluation in evaluation_seconds.
+  class BusyScope {
+   public:
+    explicit BusyScope(RecoveryProblem* p) : p_(p) {
+      std::lock_guard<std::mutex> lock(p_->busy_mutex_);
+      if (p_->evaluating_++ == 0) p_->busy_since_ = Clock::now();
+    }
+    ~BusyScope() {
+      std::lock_guard<std::mutex> lock(p_->busy_mutex_);
+      if (--p_->evaluating_ == 0) p_->busy_seconds_ += Since(p_->busy_since_);
+    }
+    BusyScope(const BusyScope&) = delete;
+    BusyScope& operator=(const BusyScope&) = delete;
+
+   private:
+    RecoveryProblem* p_;
+  };
+
+  // Wall seconds so far during which an evaluation of some channel ran (EvaluateOneChannel), or
+  // other work under a BusyScope (Recover's validation checks); work at once counts once.
   double evaluation_seconds() const {
     std::lock_guard<std::mutex> lock(busy_mutex_);
     return busy_seconds_ + (evaluating_ > 0 ? Since(busy_since_) : 0.0);
@@ -265,17 +283,7 @@ class RecoveryProblem {
   // null). Different channels may be evaluated at once from different threads (ForEachChannel,
   // FitChannels on cpu).
   double EvaluateOneChannel(int c, const double* xk, double* g) {
-    {
-      std::lock_guard<std::mutex> lock(busy_mutex_);
-      if (evaluating_++ == 0) busy_since_ = Clock::now();
-    }
-    struct Done {
-      RecoveryProblem* p;
-      ~Done() {
-        std::lock_guard<std::mutex> lock(p->busy_mutex_);
-        if (--p->evaluating_ == 0) p->busy_seconds_ += Since(p->busy_since_);
-      }
-    } done{this};
+    const BusyScope busy(this);
     std::vector<double>& k = kappa_[c];
     std::vector<double>& m = mu_[c];
     const double* xm = xk + n_;
@@ -579,20 +587,22 @@ OptimizerResult RunOptimizer(const Objective& f, const RecoveryOptions& o, int m
 // objective). Channels whose `fit` is false are left alone. The channels are independent
 // problems; run as one, Ceres' L-BFGS does its vector work over all of them on one thread, and
 // that was 50-64 % of a Wax I iteration on the H200's gl backend (docs/benchmarks.md, "GPU
-// session 2026-12-04"). Per channel it runs on three threads, and on gl it overlaps the GPU's
-// work: the gl evaluations run on this thread (the context is current here), one at a time,
-// while the other channels' optimisers work. Each channel takes its own line-search steps (in
+// session 2026-12-04"). Here each channel's vector work runs on its own thread, and on gl it
+// overlaps the GPU's work: the gl evaluations run on this thread (the context is current
+// here), one at a time, in turn, while the other channels' optimisers work. Each channel takes its own line-search steps (in
 // one joint run the channel furthest from its optimum set them for all).
 //
 // With a `hook`, the channels report their iterations in step: the hook runs once per iteration
-// k, on this thread, when every channel still running has made k, with k, the channels' summed
-// objective (that of the last iteration each made) and the norm of the joint gradient, while
-// x holds every channel's iterate of k (or its last); its false stops them all. A channel may
-// meanwhile work on iteration k + 1 (its optimiser works on its own copy of its block) but not
-// finish it before the hook of k has run, so the GPU need not idle while the host's optimisers
-// work. After a false, each channel stops at the end of the iteration it is in, and x keeps
-// their iterates of k. Without a hook, the channels run on to their own ends
-// (RecoveryOptions::stop still stops them).
+// k, on this thread, when every channel still running has reported k, with k, the channels'
+// summed objective (of the last iteration each reported) and the norm of the joint gradient,
+// while x holds every channel's iterate of k (or of its last report); its false stops them
+// all. A channel may meanwhile work on iteration k + 1 (its optimiser works on its own copy of
+// its block) but not finish it before the hook of k has run, so the GPU need not idle while
+// the host's optimisers work. After a false, each channel stops at the end of the iteration it
+// is in. x ends with each channel's last reported iterate: a channel that converges does so in
+// an iteration that its optimiser does not report (Ceres), whose change is below the tolerance.
+// A channel's error stops the others too and is rethrown here. Without a hook, the channels run
+// on to their own ends (RecoveryOptions::stop still stops them) and x gets their final iterates.
 OptimizerResult FitChannels(RecoveryProblem* problem, const RecoveryOptions& o, int64_t n, int max_iterations,
                             const std::array<bool, 3>& fit, double* x, const IterationHook& hook) {
   const bool serve_here = o.backend == Backend::kGl;
@@ -637,7 +647,7 @@ OptimizerResult FitChannels(RecoveryProblem* problem, const RecoveryOptions& o, 
       const IterationHook step = [&, c](int it, double f, double gnorm) {
         if (!hook) return !o.StopRequested();
         std::unique_lock<std::mutex> lock(m);
-        cv.wait(lock, [&] { return released >= it - 1; });
+        cv.wait(lock, [&] { return released >= it - 1 || !go_on; });
         if (!go_on) return false;
         lock.unlock();
         std::copy(own.begin(), own.end(), block);
@@ -654,15 +664,24 @@ OptimizerResult FitChannels(RecoveryProblem* problem, const RecoveryOptions& o, 
     }
     std::lock_guard<std::mutex> lock(m);
     ch[c].running = false;
-    if (ch[c].reported == 0) ch[c].f = ch[c].result.final;
+    // Without reports (no hook, or none made): x's block is the start's with a hook (f the
+    // start's), the run's end without.
+    if (ch[c].reported == 0) ch[c].f = hook ? ch[c].result.initial : ch[c].result.final;
     if (ch[c].error) go_on = false;
     cv.notify_all();
   };
   std::vector<std::thread> threads;
-  for (int c = 0; c < 3; ++c)
+  std::exception_ptr start_error;
+  for (int c = 0; c < 3 && !start_error; ++c)
     if (fit[c]) {
-      ch[c].running = true;
-      threads.emplace_back(run, c);
+      std::lock_guard<std::mutex> lock(m);
+      try {
+        threads.emplace_back(run, c);
+        ch[c].running = true;
+      } catch (...) {  // no thread (std::system_error): the started ones stop at their first report
+        start_error = std::current_exception();
+        go_on = false;
+      }
     }
   {
     std::unique_lock<std::mutex> lock(m);
@@ -675,14 +694,16 @@ OptimizerResult FitChannels(RecoveryProblem* problem, const RecoveryOptions& o, 
       }
       return any && go_on;
     };
+    int served = 2;
     while (true) {
       int asking = -1;
       bool any_running = false;
       cv.wait(lock, [&] {
         asking = -1;
         any_running = false;
-        for (int c = 0; c < 3; ++c) {
-          if (ch[c].requested) asking = c;
+        for (int k = 1; k <= 3; ++k) {  // in turn, from the channel after the last one served
+          const int c = (served + k) % 3;
+          if (ch[c].requested && asking < 0) asking = c;
           any_running = any_running || ch[c].running;
         }
         return asking >= 0 || !any_running || hook_due();
@@ -697,6 +718,7 @@ OptimizerResult FitChannels(RecoveryProblem* problem, const RecoveryOptions& o, 
         }
         lock.lock();
         a.requested = false;
+        served = asking;
         cv.notify_all();
         continue;
       }
@@ -722,12 +744,13 @@ OptimizerResult FitChannels(RecoveryProblem* problem, const RecoveryOptions& o, 
     }
   }
   for (std::thread& t : threads) t.join();
+  if (start_error) std::rethrow_exception(start_error);
   if (hook_error) std::rethrow_exception(hook_error);
   for (const Channel& c : ch)
     if (c.error) std::rethrow_exception(c.error);
-  // Each channel's final iterate (a stopped one's of the last iteration reported is in x).
-  for (int c = 0; c < 3; ++c)
-    if (fit[c] && !(hook && stopped)) std::copy(ch[c].own.begin(), ch[c].own.end(), x + 2 * c * n);
+  if (!hook)
+    for (int c = 0; c < 3; ++c)
+      if (fit[c]) std::copy(ch[c].own.begin(), ch[c].own.end(), x + 2 * c * n);
 
   OptimizerResult r;
   static constexpr const char* kName[3] = {"R", "G", "B"};
@@ -737,8 +760,9 @@ OptimizerResult FitChannels(RecoveryProblem* problem, const RecoveryOptions& o, 
     if (!fit[c]) continue;
     const OptimizerResult& cr = ch[c].result;
     r.initial += cr.initial;
-    r.final += ch[c].f;  // without a hook: result.final (the run's end)
+    r.final += ch[c].f;  // that of the iterate left in x
     r.iterations = std::max(r.iterations, hook ? ch[c].reported : cr.iterations);
+    stopped = stopped || cr.termination == RecoveryTermination::kStopped;
     failed = failed || cr.termination == RecoveryTermination::kFailed;
     unfinished = unfinished || cr.termination == RecoveryTermination::kMaxIterations;
     std::string message = cr.message;
@@ -993,8 +1017,11 @@ int64_t RecoveryMemoryBytes(const GridShape& shape, int conditions, const Recove
   int vectors = 6;
   if (o.optimizer == OptimizerKind::kNcg) vectors = 32;
   if (o.optimizer == OptimizerKind::kLbfgs) vectors = 32 + 2 * o.lbfgs_rank;
-  // The level search's start, its trial's iterate, and two for a margin (its peak varied 0.86-0.96 of the estimate in RecoverMemory's rank-20 case); its
-  // optimisers run per channel on a third of the unknowns each, so no more than the main fit.
+  // (FitChannels' copies of the channels' blocks, one vector in all, are within that margin:
+  // RecoverMemory's rank-20 case measured 0.76 of the estimate with and without them.)
+  // The level search's start, its trial's iterate and two for a margin (its peak varied
+  // 0.86-0.96 of the estimate in RecoverMemory's rank-20 case); its optimisers run per channel
+  // on a third of the unknowns each, so no more than the main fit.
   if (o.level_search > 0) vectors += 4;
   // Validation keeps the best iterate (RecoveryState::best_x), and its checks render up to
   // kValidationBatch conditions at once, one forward solver each (cpu: in parallel threads).
@@ -1108,6 +1135,8 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
     rep.solves = solves();
     state->iteration = rep.iteration;
     if (validation.active() && rep.iteration % o.validation_every == 0) {
+      // Busy: on cpu the channels may evaluate their next iteration meanwhile (FitChannels).
+      const RecoveryProblem::BusyScope busy(&problem);
       rep.validation_error = validation.Check(rep.iteration, state);
       validated = rep.iteration - state->best_iteration >= o.validation_patience;
     }
@@ -1120,7 +1149,7 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
   };
   const int remaining = std::max(0, o.max_iterations - first_iteration);
   const auto t_optimizer = Clock::now();
-  const double evaluation0 = problem.evaluation_seconds(), validation0 = validation.seconds();
+  const double evaluation0 = problem.evaluation_seconds();
   OptimizerResult r;
   if (remaining == 0 || o.StopRequested()) {
     r.termination = remaining == 0 ? RecoveryTermination::kMaxIterations : RecoveryTermination::kStopped;
@@ -1138,9 +1167,8 @@ RecoverySummary Recover(const Dataset& d, const RecoveryOptions& o, RecoveryStat
       r = FitChannels(&problem, o, n, remaining, {true, true, true}, state->x.data(), hook);
     }
   }
-  sum.optimizer_seconds = std::max(
-      0.0, Since(t_optimizer) - (problem.evaluation_seconds() - evaluation0) -
-                     (validation.seconds() - validation0));
+  // (The validation checks count as evaluations: on cpu the channels may evaluate meanwhile.)
+  sum.optimizer_seconds = std::max(0.0, Since(t_optimizer) - (problem.evaluation_seconds() - evaluation0));
   if (validation.active()) {
     if (validation.last_checked() != state->iteration) validation.Check(state->iteration, state);
     if (state->best_iteration != state->iteration) state->x = state->best_x;

@@ -38,12 +38,14 @@ struct RecoveryOptions {
   RegularizerOptions regularizer;
   bool regularize_mu = false;
   int max_iterations = 300;
-  // lbfgs: how many past steps' pairs of vectors (6N doubles each, 96 bytes per node per pair)
+  // lbfgs: how many past steps' pairs of vectors (2N doubles per channel, 6N in all: 96 bytes
+  // per node per pair)
   // shape the search direction (Ceres' max_lbfgs_rank; 20, Ceres' default, is ~40 % of a
   // recovery's memory). A lower rank trades little for memory here (docs/inverse.md, "Memory").
   int lbfgs_rank = 20;
   // A channel's optimiser stops when an iteration lowers its objective by less than
-  // tolerance * objective (the fit ends when all three have, or on max_iterations).
+  // tolerance * objective (the fit ends when all three have, or on max_iterations; with
+  // joint_optimizer, the one optimiser on the mean objective).
   double tolerance = 1e-7;
   // First fit one (kappa, mu) per channel (Levenberg-Marquardt on 2 unknowns per channel, at
   // most this many iterations, stopping as above, or where its model promises less; 0 skips
@@ -136,9 +138,9 @@ struct RecoverySummary {
   int iterations = 0;
   int64_t solves = 0;
   double seconds = 0, homogeneous_seconds = 0;
-  // Of this run's seconds after the homogeneous fit, those in which no channel's evaluation of
-  // the objective ran: the optimisers' own vector work and line search where no channel's
-  // evaluation overlapped it, and the callback.
+  // Of this run's seconds after the homogeneous fit, those in which neither a channel's
+  // evaluation of the objective nor a validation check ran: the optimisers' own vector work and
+  // line search where nothing overlapped it, and the callback.
   double optimizer_seconds = 0;
   int64_t homogeneous_solves = 0;  // of `solves`, spent in the homogeneous fit
   // The absorption level search (RecoveryOptions::level_search): its seconds and solves (of

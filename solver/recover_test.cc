@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <filesystem>
@@ -250,7 +251,6 @@ TEST_P(RecoverOnBackend, LevelSearchSeesThroughNoise) {
   ExpectTruthLevel(truth, ro, Recover(SimulateDataset(truth, so).training, ro, &st));
 }
 
-// Early stopping on validation conditions (RecoveryOptions::validation_every): noisy data from a
 // One optimiser per channel, each at most one iteration ahead of the reports (FitChannels): the
 // objective reported for iteration k is that of the iterate in the state the callback sees
 // with it, and a stop there leaves that iterate in the state.
@@ -285,8 +285,16 @@ TEST_P(RecoverOnBackend, EachReportHoldsItsIterate) {
     EXPECT_NEAR(e.final_objective / fs[k - 1], 1.0, 1e-3) << k;
   }
   EXPECT_LT(fs[11], 0.5 * fs[0]);  // the iterates do differ
+  // Every channel had made the iteration by its report (a report before one had would show
+  // that channel's block unchanged since the last).
+  const size_t block = st.x.size() / 3;
+  for (size_t k = 1; k < xs.size(); ++k)
+    for (size_t c = 0; c < 3; ++c)
+      EXPECT_FALSE(std::equal(xs[k].begin() + c * block, xs[k].begin() + (c + 1) * block, xs[k - 1].begin() + c * block))
+          << "iteration " << k + 1 << ", channel " << c;
 }
 
+// Early stopping on validation conditions (RecoveryOptions::validation_every): noisy data from a
 // 2x finer grid, where the fit's later iterations fit noise and discretisation error. The fit
 // stops validation_patience iterations after the best checked iterate, returns that iterate
 // (its validation error, recomputed, is the reported one and the least of the run's), and
