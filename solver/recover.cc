@@ -671,6 +671,7 @@ OptimizerResult FitChannels(RecoveryProblem* problem, const RecoveryOptions& o, 
     cv.notify_all();
   };
   std::vector<std::thread> threads;
+  threads.reserve(3);  // (a reallocation's failure would destroy a running thread: std::terminate)
   std::exception_ptr start_error;
   for (int c = 0; c < 3 && !start_error; ++c)
     if (fit[c]) {
