@@ -42,7 +42,9 @@ void DispatchBound(int64_t threads) {
   if (profile.on()) {
     GLint prog = 0;
     api.GetIntegerv(GL_CURRENT_PROGRAM, &prog);
-    profile.After(program_files[GLuint(prog)]);
+    // (TRANSLUME_GL_PROFILE=gpu2 or 2: per level too, keyed by the invocations.)
+    const std::string& file = program_files[GLuint(prog)];
+    profile.After(profile.detailed() ? fmt::format("{} x {}", file, threads) : file);
   }
   api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
 }
@@ -203,17 +205,23 @@ class GlHierarchy : public HierarchyRelaxer {
     api.Uniform1i(2, int(out.first));
     render_gl::Dispatch({d.phi[d.cur].id, radiance_scale_.id, out.buffer}, nb);
   }
+  // Both set the three fluence buffers in one dispatch of prolong.comp (no copies, no clears).
   void Zero(int l) override {
-    for (Ssbo& b : dev_[l].phi) b.Zero();
+    Device& d = dev_[l];
+    const Ssbo& any = d.phi[0];  // (bindings 0-3, unread)
+    api.UseProgram(prolong_);
+    api.Uniform1i(0, int(d.size));
+    api.Uniform1i(1, 1);
+    render_gl::Dispatch({&any, &any, &any, &any, &d.phi[0], &d.phi[1], &d.phi[2]}, d.size);
   }
   void Prolong(int l) override {
     Device& d = dev_[l];
     const Device& coarse = dev_[l + 1];
     api.UseProgram(prolong_);
     api.Uniform1i(0, int(d.size));
-    render_gl::Dispatch({&d.p_start, &d.p_index, &d.p_weight, &coarse.phi[coarse.cur], &d.phi[d.cur]}, d.size);
-    for (int k = 1; k < 3; ++k)
-      d.phi[(d.cur + k) % 3].CopyFrom(d.phi[d.cur], size_t(d.size) * kVec4Bytes);
+    api.Uniform1i(1, 0);
+    render_gl::Dispatch(
+        {&d.p_start, &d.p_index, &d.p_weight, &coarse.phi[coarse.cur], &d.phi[0], &d.phi[1], &d.phi[2]}, d.size);
   }
   void Relax(int l, bool adaptive, int iterations, bool repeated) override {
     Device& d = dev_[l];

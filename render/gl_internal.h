@@ -45,15 +45,6 @@ struct Ssbo {
     gl::api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id);
     gl::api.ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
   }
-  // Copies the first `bytes` of src into this buffer. The barrier makes shaders' earlier
-  // writes to src visible to the copy (glCopyBufferSubData reads through the buffer-update
-  // path); later shaders see the copy without one (the GL orders its own writes).
-  void CopyFrom(const Ssbo& src, size_t bytes) {
-    gl::api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    gl::api.BindBuffer(GL_COPY_READ_BUFFER, src.id);
-    gl::api.BindBuffer(GL_COPY_WRITE_BUFFER, id);
-    gl::api.CopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, 0, bytes);
-  }
 };
 
 // Binds buffers to bindings 0.. of the program in use and dispatches `threads` invocations

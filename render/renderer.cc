@@ -745,7 +745,9 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
     I.device->Stamp(0);
     const std::vector<DeviceFloats> q = I.device->IncidentOnDevice(samples);
     I.device->Stamp(1);
+    const auto t_issue = std::chrono::steady_clock::now();
     I.diffusion->SolveOnDevice(q, I.device->RadianceOnDevice());
+    const double issue = Seconds(t_issue);
     I.device->Stamp(2);
     I.device->ShadeOnDevice(cam, samples);
     I.device->Stamp(3);
@@ -755,9 +757,11 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
     times_.incident = setup + gpu[0];
     times_.diffusion = gpu[1];
     times_.shading = gpu[2];
+    times_.diffusion_issue = issue;
     return img;
   }
   on_device_ = false;
+  times_.diffusion_issue = 0;
   std::vector<BoundaryLight> q = I.passes->Incident(samples);
   times_.incident = Seconds(t0);
 

@@ -65,6 +65,9 @@ struct RenderOptions {
 // incident pass's with the host's setup of the light samples before it.
 struct FrameTimes {
   double incident = 0, diffusion = 0, shading = 0;
+  // gl: the host's seconds to issue the diffusion pass's commands (it does not wait for the
+  // GPU there). Near `diffusion`, the GPU waited for the host's commands; 0 on the cpu.
+  double diffusion_issue = 0;
 };
 
 // Renders a shape with a polygrid hierarchy (finest first) and its per-level material.

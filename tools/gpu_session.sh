@@ -14,8 +14,8 @@
 # and Marble with the line smoother by cyclic reduction (TRANSLUME_GL_LINE_PCR=1), a profile
 # of Wax I's solves per kernel and level on GPU timestamps (default and cyclic reduction), the
 # renderbench on the 253-cube bunny (17^3 nodes per cube, 3 levels, no frame coherence, the
-# default 30/15/15 Chebyshev steps; then with --stencil 6) and a profile of its frames per
-# shader on GPU timestamps,
+# default 30/15/15 Chebyshev steps; then with --stencil 6), a profile of its frames per
+# shader and level on GPU timestamps and its frame's fixed cost (1/1/1 steps),
 # the RGB recoveries with 16 conditions on the Wax I grid (a whole default one, capped at
 # 100 s; then capped alike with --joint-optimizer, one optimiser over all channels as until
 # 2026-12-04, and without; then 15 s with a GPU-timestamp profile per kernel and grid) and the
@@ -197,9 +197,13 @@ if [ ${#render[@]} -gt 0 ]; then
   step "renderbench (bunny)" 60 "${render[@]}" "${render_args[@]}"
   # The paper's six-point rows beside the default wide stencil (6 % of the bunny's rows wide).
   step "renderbench (bunny, --stencil 6)" 40 "${render[@]}" "${render_args[@]}" --stencil 6
-  # Where a frame's time goes, per shader, timed on the GPU without finishes.
-  step "renderbench profile (bunny, TRANSLUME_GL_PROFILE=gpu)" 60 env TRANSLUME_GL_PROFILE=gpu \
+  # Where a frame's time goes, per shader and level, timed on the GPU without finishes.
+  step "renderbench profile (bunny, TRANSLUME_GL_PROFILE=gpu2)" 60 env TRANSLUME_GL_PROFILE=gpu2 \
     "${render[@]}" "${render_profile_args[@]}"
+  # A frame's fixed cost: one step per level. On 2026-12-04 (later) 1.6 ms of diffusion, ~1.2
+  # ms of it outside any dispatch (the fluence buffers' copies and clears, removed since).
+  step "renderbench (bunny, 1,1,1: the fixed cost)" 30 "${render[@]}" "${render_variant_args[@]}" \
+    --iterations 1,1,1
 else
   say "== renderbench: no translume-renderbench in $bundle or render-bundle/"
   failed=1
