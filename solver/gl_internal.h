@@ -61,11 +61,24 @@ struct Tuning {
   // levels whose columns fit a work group, instead of one invocation per column (SmoothLine).
   // Off by default until measured on a GPU (docs/gpu.md); TRANSLUME_GL_LINE_PCR=0|1 overrides.
   bool line_pcr = false;
+  // Buffer::Zero and CopyFrom as dispatches of copy.comp instead of glClearBufferData and
+  // glCopyBufferSubData (storage buffers only: not with `images`). On the H200 the renderer's
+  // copies and clears left ~1.2 ms of a frame outside its dispatches (docs/gpu.md); a V-cycle
+  // clears each coarse level's x. Off by default until measured on a GPU;
+  // TRANSLUME_GL_SHADER_CLEAR=0|1 overrides.
+  bool shader_clear = false;
 };
 const Tuning& GetTuning();
 
 // A buffer's element type: its image format when the shaders read it as an image buffer.
 enum class Elem { kFloat, kInt, kDouble, kVec4 };
+
+class Buffer;
+// Under Tuning::shader_clear: zeroes `dst`, or copies `bytes` bytes of src to dst from byte 0,
+// with copy.comp and returns true; false (nothing done) where the GL's own call must do it
+// (the tuning off, image buffers, sizes not in whole vec4s).
+bool ZeroByShader(Buffer& dst);
+bool CopyByShader(const Buffer& src, Buffer& dst, int64_t bytes);
 
 // A shader storage buffer (and, under Tuning::images, the buffer texture that shaders bind as
 // an image buffer).
@@ -97,16 +110,19 @@ class Buffer {
     api.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, offset, bytes, data);
   }
   void Zero() {
+    if (ZeroByShader(*this)) return;
     api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
     api.ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32F, GL_RED, GL_FLOAT, nullptr);
   }
   // Copies `bytes` bytes of src from byte src_offset to byte dst_offset of this buffer.
   void CopyFrom(const Buffer& src, int64_t bytes, int64_t src_offset = 0, int64_t dst_offset = 0) {
+    if (src_offset == 0 && dst_offset == 0 && CopyByShader(src, *this, bytes)) return;
     api.BindBuffer(GL_COPY_READ_BUFFER, src.id_);
     api.BindBuffer(GL_COPY_WRITE_BUFFER, id_);
     api.CopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, src_offset, dst_offset, bytes);
   }
   GLuint id() const { return id_; }
+  int64_t bytes() const { return bytes_; }
   // Makes this buffer a view of `of`'s storage that shaders read as `elem` (a float buffer as
   // vec4: four fields per node, common.glsl's FIELDS4). The view owns nothing and cannot be
   // allocated; make it again after `of` is reallocated.

@@ -150,6 +150,7 @@ const Tuning& GetTuning() {
     if (const char* q = std::getenv("TRANSLUME_GL_QUARTERS")) t.quarters = std::atoi(q) != 0;
     if (const char* b = std::getenv("TRANSLUME_GL_LINE_BLOCK")) t.line_block = std::clamp(std::atoi(b), 1, 16);
     if (const char* l = std::getenv("TRANSLUME_GL_LINE_PCR")) t.line_pcr = std::atoi(l) != 0;
+    if (const char* c = std::getenv("TRANSLUME_GL_SHADER_CLEAR")) t.shader_clear = std::atoi(c) != 0;
     return t;
   }();
   return tuning;
@@ -160,13 +161,14 @@ const Tuning& GetTuning() {
 std::string GlShaderTuning() {
   const gl_internal::Tuning& t = gl_internal::GetTuning();
   return fmt::format("{} ({}, {}-invocation groups, {} field(s) per value in batches, single "
-                     "fields {}, line smoother {}; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)",
+                     "fields {}, line smoother {}{}; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)",
                      t.images ? "llvmpipe" : "gpu",
                      t.images ? "image buffers, z-column invocations" : "storage buffers, one node per invocation",
                      t.group, t.pack_fields, t.quarters ? "in quarter rows" : "plain",
                      t.line_pcr ? fmt::format("by cyclic reduction where a column fits a work group, else in blocks of {}",
                                               t.line_block)
-                                : fmt::format("in blocks of {}", t.line_block));
+                                : fmt::format("in blocks of {}", t.line_block),
+                     t.shader_clear ? ", clears and copies by shader" : "");
 }
 
 namespace gl_internal {
@@ -293,6 +295,22 @@ int64_t RunBatch(const char* name, std::initializer_list<const Buffer*> buffers,
                  std::initializer_list<int> ints, int64_t threads, int fields,
                  const char* defines) {
   return Dispatch(name, buffers, ints, threads, fields, -1, 0, defines);
+}
+
+bool ZeroByShader(Buffer& dst) {
+  if (!GetTuning().shader_clear || GetTuning().images || dst.bytes() % 16 != 0) return false;
+  const int64_t n4 = dst.bytes() / 16;
+  Run("copy", {&dst, &dst}, {int(n4)}, FlatThreads(n4), -1, 0, "#define ZERO\n");  // (src unread)
+  api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);  // (an Upload after it lands after it)
+  return true;
+}
+
+bool CopyByShader(const Buffer& src, Buffer& dst, int64_t bytes) {
+  if (!GetTuning().shader_clear || GetTuning().images || bytes % 16 != 0) return false;
+  const int64_t n4 = bytes / 16;
+  Run("copy", {&src, &dst}, {int(n4)}, FlatThreads(n4));
+  api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+  return true;
 }
 
 }  // namespace gl_internal

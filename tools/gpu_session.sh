@@ -11,7 +11,8 @@
 # within --budget seconds (default 400, 560 with --long-recoveries; a step gets at most what is
 # left, a step with under 20 s left is skipped): nvidia-smi, gl-info, bench forward --backend gl
 # on Wax I, Marble and 129^3 with a batch of 16 (the cpu solver as the peer), the same on Wax I
-# and Marble with the line smoother by cyclic reduction (TRANSLUME_GL_LINE_PCR=1), a profile
+# and Marble with the line smoother by cyclic reduction (TRANSLUME_GL_LINE_PCR=1) and with the
+# buffer clears and copies by shader (TRANSLUME_GL_SHADER_CLEAR=1), a profile
 # of Wax I's solves per kernel and level on GPU timestamps (default and cyclic reduction), the
 # renderbench on the 253-cube bunny (17^3 nodes per cube, 3 levels, no frame coherence, the
 # default 30/15/15 Chebyshev steps; then with --stencil 6), a profile of its frames per
@@ -187,6 +188,11 @@ step "bench forward (gl, batch ${batch})" 90 \
 # default for a side-by-side comparison: single solves and batches on Wax I and Marble.
 step "bench forward (gl, batch ${batch}, TRANSLUME_GL_LINE_PCR=1)" 60 \
   env TRANSLUME_GL_LINE_PCR=1 "$run" "${batches[@]}"
+# The solver's buffer clears (each coarse level's x in every V-cycle) and CG's restart copy as
+# dispatches of copy.comp (Tuning::shader_clear, off by default): the renderer's copies and
+# clears cost ~1.2 ms a frame on 2026-12-04 (later).
+step "bench forward (gl, batch ${batch}, TRANSLUME_GL_SHADER_CLEAR=1)" 60 \
+  env TRANSLUME_GL_SHADER_CLEAR=1 "$run" "${batches[@]}"
 # Where a Wax I solve's time goes, per kernel and level, timed on the GPU without finishes
 # (TRANSLUME_GL_PROFILE=gpu2; a single solve and a batch), default and cyclic reduction.
 for variant in TRANSLUME_GL_LINE_PCR=0 TRANSLUME_GL_LINE_PCR=1; do

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
-// dst = src: the bandwidth reference for `bench forward --backend gl` (a grid-stride loop).
+// dst = src: the bandwidth reference for `bench forward --backend gl` (a grid-stride loop),
+// and Buffer::CopyFrom under Tuning::shader_clear; with ZERO, dst = 0 (Buffer::Zero; src unread).
 #ifdef TL_IMAGES
 layout(binding = 0, rgba32f) readonly uniform imageBuffer src;
 layout(binding = 1, rgba32f) writeonly uniform imageBuffer dst;
@@ -11,7 +12,11 @@ layout(location = 0) uniform int n4;
 
 void main() {
   for (uint i = ThreadIndex(); i < uint(n4); i += Stride()) {
-#ifdef TL_IMAGES
+#if defined(ZERO) && defined(TL_IMAGES)
+#error ZERO is for storage buffers (image buffers clear with glClearBufferData)
+#elif defined(ZERO)
+    dst[i] = vec4(0.0);
+#elif defined(TL_IMAGES)
     imageStore(dst, int(i), imageLoad(src, int(i)));
 #else
     dst[i] = src[i];
