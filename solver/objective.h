@@ -78,7 +78,7 @@ class FrontFaceObjective : public ChannelObjective {
   std::vector<double> misfit_, norm_;
   double denom_ = 0, worst_ = 0;
   // Atomic: a recovery's progress report reads them while the channel's optimiser may be
-  // evaluating its next iteration (FitChannels, solver/recover.cc).
+  // evaluating its next iteration (FitChannels, solver/optimizer.h).
   std::atomic<int64_t> solves_ = 0, cg_iterations_ = 0;
 };
 
