@@ -73,6 +73,10 @@ struct ForwardBenchRow {
   // them, the most iterations of any field).
   int batch_fields = 0, batch_iterations = 0;
   double batch_seconds = 0;
+  // gl only: the stencil applied to the batch's fields in one dispatch (as the batch's solve and
+  // the recovery's evaluations apply it): its effective bandwidth, ApplyBytes(batch_fields) /
+  // median seconds (the coefficients read once for every field).
+  double batch_apply_bandwidth = 0;
   std::vector<PeerResult> peers;
 };
 

@@ -1014,11 +1014,12 @@ double MedianSeconds(int repetitions, int per_run, F&& body) {
 
 }  // namespace
 
-double GlMultigridSolver::TimeApply(int repetitions) {
+double GlMultigridSolver::TimeApply(int repetitions, int fields) {
   Impl& I = *impl_;
+  TL_CHECK_MSG(fields >= 1 && fields <= I.capacity, "TimeApply: more fields than a batch has reserved");
   GLevel& L = *I.levels[0];
   return MedianSeconds(repetitions, 10, [&] {
-    for (int k = 0; k < 10; ++k) I.Stencil(L, L.x, L.x, I.q, 1, 1);
+    for (int k = 0; k < 10; ++k) I.Stencil(L, L.x, L.x, I.q, 1, fields);
   });
 }
 
@@ -1056,7 +1057,7 @@ double GlMultigridSolver::TimeCopy(int64_t bytes, int repetitions) {
   });
 }
 
-int64_t GlMultigridSolver::ApplyBytes() const { return impl_->n0 * 4 * 6; }
+int64_t GlMultigridSolver::ApplyBytes(int fields) const { return impl_->n0 * 4 * (4 + 2 * int64_t(fields)); }
 
 std::string GlMultigridSolver::CopyReference() const {
   return GetTuning().images ? "host memcpy, all threads (llvmpipe: device memory is host memory)"

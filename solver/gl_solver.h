@@ -46,15 +46,18 @@ class GlMultigridSolver {
   // Levels the coarse tail covers (0: none).
   int coarse_tail_levels() const;
 
-  // Benchmarks: median seconds of one stencil application on the finest level, and of one
-  // device-to-device copy of `bytes` bytes by a compute shader (on llvmpipe: a host memcpy on
-  // every thread, see CopyReference), each over `repetitions` runs.
-  double TimeApply(int repetitions);
+  // Benchmarks: median seconds of one stencil application on the finest level to `fields`
+  // fields at once (one dispatch, as a batch's solve and the recovery's evaluations apply it;
+  // more than 1 only after a SolveBatch of at least that many), and of one device-to-device
+  // copy of `bytes` bytes by a compute shader (on llvmpipe: a host memcpy on every thread, see
+  // CopyReference), each over `repetitions` runs.
+  double TimeApply(int repetitions, int fields = 1);
   double TimeCopy(int64_t bytes, int repetitions);
   // What TimeCopy measured, in words.
   std::string CopyReference() const;
-  // Bytes one stencil application must move at least: x, cx, cy, cz, sigma read, y written.
-  int64_t ApplyBytes() const;
+  // Bytes one stencil application to `fields` fields must move at least: cx, cy, cz, sigma
+  // read once, each field's x read and y written.
+  int64_t ApplyBytes(int fields = 1) const;
   // Median seconds of a dispatch that does nothing (one work group of an empty loop, and its
   // barrier): the fixed cost every dispatch pays (on llvmpipe its thread pool's hand-off).
   double TimeEmptyDispatch(int repetitions);

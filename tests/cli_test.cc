@@ -500,6 +500,7 @@ TEST_F(Cli, BenchForwardGlReportsBandwidthAndAccuracy) {
   EXPECT_LT(j[0]["gl_error_l2"].get<double>(), 1e-5);
   EXPECT_LT(j[0]["gl_error_front"].get<double>(), 1e-4);
   EXPECT_EQ(j[0]["batch_fields"].get<int>(), 2);
+  EXPECT_GT(j[0]["batch_stencil_bytes_per_second"].get<double>(), 0.0);
 }
 
 // TRANSLUME_GL_PROFILE=gpu times every dispatch with GPU timestamps (no finishes) and prints
