@@ -114,9 +114,12 @@ class Buffer {
     api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
     api.ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32F, GL_RED, GL_FLOAT, nullptr);
   }
-  // Copies `bytes` bytes of src from byte src_offset to byte dst_offset of this buffer.
+  // Copies `bytes` bytes of src from byte src_offset to byte dst_offset of this buffer. (The
+  // barrier: glCopyBufferSubData reads what shaders wrote into src only after one with
+  // GL_BUFFER_UPDATE_BARRIER_BIT; later shaders see the copy without one.)
   void CopyFrom(const Buffer& src, int64_t bytes, int64_t src_offset = 0, int64_t dst_offset = 0) {
     if (src_offset == 0 && dst_offset == 0 && CopyByShader(src, *this, bytes)) return;
+    api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     api.BindBuffer(GL_COPY_READ_BUFFER, src.id_);
     api.BindBuffer(GL_COPY_WRITE_BUFFER, id_);
     api.CopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, src_offset, dst_offset, bytes);
