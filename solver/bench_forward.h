@@ -73,9 +73,11 @@ struct ForwardBenchRow {
   // them, the most iterations of any field).
   int batch_fields = 0, batch_iterations = 0;
   double batch_seconds = 0;
-  // gl only: the stencil applied to the batch's fields in one dispatch (as the batch's solve and
-  // the recovery's evaluations apply it): its effective bandwidth, ApplyBytes(batch_fields) /
-  // median seconds (the coefficients read once for every field).
+  // gl only: the stencil applied to batch_apply_fields fields in one dispatch (the batch's, or
+  // the most one dispatch takes: GlMultigridSolver::max_batch), as a GPU's batched solves and
+  // the recovery's evaluations apply it: its effective bandwidth, ApplyBytes(fields) / median
+  // seconds (the coefficients read once for every field).
+  int batch_apply_fields = 0;
   double batch_apply_bandwidth = 0;
   std::vector<PeerResult> peers;
 };

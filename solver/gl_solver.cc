@@ -168,7 +168,7 @@ std::string GlShaderTuning() {
                      t.line_pcr ? fmt::format("by cyclic reduction where a column fits a work group, else in blocks of {}",
                                               t.line_block)
                                 : fmt::format("in blocks of {}", t.line_block),
-                     t.shader_clear ? ", clears and copies by shader" : "");
+                     t.shader_clear && !t.images ? ", clears and copies by shader" : "");
 }
 
 namespace gl_internal {

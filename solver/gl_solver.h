@@ -47,8 +47,9 @@ class GlMultigridSolver {
   int coarse_tail_levels() const;
 
   // Benchmarks: median seconds of one stencil application on the finest level to `fields`
-  // fields at once (one dispatch, as a batch's solve and the recovery's evaluations apply it;
-  // more than 1 only after a SolveBatch of at least that many), and of one device-to-device
+  // fields at once (one dispatch in the plain layout, as batches apply it on a GPU, whose
+  // pack_fields is 1; more than 1 only after a SolveBatch of at least that many, at most
+  // max_batch()), and of one device-to-device
   // copy of `bytes` bytes by a compute shader (on llvmpipe: a host memcpy on every thread, see
   // CopyReference), each over `repetitions` runs.
   double TimeApply(int repetitions, int fields = 1);

@@ -290,7 +290,10 @@ OptimizerResult FitChannels(const ChannelObjectives& problem, const RecoveryOpti
       const Objective objective{[&, c](const double* v, double* g) { return evaluate(c, v, g); },
                                 [&, c] { return problem.ok(c); }};
       const IterationHook step = [&, c](int it, double f, double gnorm) {
-        if (!hook) return !o.StopRequested();
+        if (!hook) {  // (go_on: false once a channel has failed)
+          std::lock_guard<std::mutex> lock(m);
+          return go_on && !o.StopRequested();
+        }
         std::unique_lock<std::mutex> lock(m);
         cv.wait(lock, [&] { return released >= it - 1 || !go_on; });
         if (!go_on) return false;

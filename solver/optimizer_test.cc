@@ -6,9 +6,11 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <future>
 #include <stdexcept>
+#include <thread>
 #include <vector>
 
 namespace translume {
@@ -43,7 +45,8 @@ template <typename Fn>
 void WithinAMinute(Fn&& fn) {
   auto done = std::async(std::launch::async, std::forward<Fn>(fn));
   if (done.wait_for(std::chrono::seconds(60)) != std::future_status::ready) {
-    ADD_FAILURE() << "FitChannels did not return within 60 s";
+    std::fprintf(stderr, "FitChannels did not return within 60 s\n");
+    std::fflush(nullptr);
     std::_Exit(1);
   }
   done.get();
@@ -135,6 +138,45 @@ TEST_P(FitChannelsTest, AChannelsErrorStopsTheFitAndIsRethrown) {
       });
     }
   }
+}
+
+// Without a hook too, a channel's error stops the others: here channel 1 fails at its first
+// evaluation and the others, held until 50 ms after that failure and each evaluation 2 ms
+// long, stop after their first iteration instead of running their ~30 evaluations each.
+TEST(FitChannels, AChannelsErrorStopsTheOthersWithoutAHook) {
+  RecoveryOptions o;
+  o.tolerance = 1e-14;
+  ChannelObjectives p = Bowls(false);
+  std::atomic<bool> failed{false};
+  std::atomic<int> others{0};
+  p.evaluate = [&](int c, const double* v, double* g) {
+    if (c == 1) {
+      failed = true;
+      throw std::runtime_error("channel 1 failed");
+    }
+    while (!failed) std::this_thread::yield();
+    if (++others <= 2) std::this_thread::sleep_for(std::chrono::milliseconds(50));  // (the first two)
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    return Bowl(c, v, g);
+  };
+  std::vector<double> x(6 * kN, 0.0);
+  WithinAMinute([&] { EXPECT_THROW(FitChannels(p, o, kN, 200, {true, true, true}, x.data(), {}), std::runtime_error); });
+  // Unstopped, the two would take 2 x ~30 evaluations (the test below counts them).
+  EXPECT_LE(others.load(), 10);
+}
+
+TEST(FitChannels, UnstoppedBowlsTakeTensOfEvaluations) {
+  RecoveryOptions o;
+  o.tolerance = 1e-14;
+  ChannelObjectives p = Bowls(false);
+  std::atomic<int> evaluations{0};
+  p.evaluate = [&](int c, const double* v, double* g) {
+    if (c == 0) ++evaluations;
+    return Bowl(c, v, g);
+  };
+  std::vector<double> x(6 * kN, 0.0);
+  WithinAMinute([&] { FitChannels(p, o, kN, 200, {true, true, true}, x.data(), {}); });
+  EXPECT_GE(evaluations.load(), 20);
 }
 
 TEST_P(FitChannelsTest, TheHooksErrorIsRethrownAndAFalseStops) {

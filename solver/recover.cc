@@ -1,15 +1,12 @@
 // SPDX-License-Identifier: MIT
 #include "solver/recover.h"
 
-#include <ceres/gradient_problem.h>
-#include <ceres/gradient_problem_solver.h>
 #include <omp.h>
 
 #include <algorithm>
 #include <chrono>
 #include <climits>
 #include <cmath>
-#include <condition_variable>
 #include <exception>
 #include <fmt/format.h>
 #include <fstream>

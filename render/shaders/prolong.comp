@@ -23,5 +23,8 @@ void main() {
   vec3 acc = vec3(0.0);
   if (zero == 0)
     for (int k = start[f]; k < start[f + 1]; ++k) acc += weight[k] * coarse[index[k]].rgb;
-  fine0[f] = fine1[f] = fine2[f] = vec4(acc, 0.0);
+  const vec4 v = vec4(acc, 0.0);
+  fine0[f] = v;
+  fine1[f] = v;
+  fine2[f] = v;
 }

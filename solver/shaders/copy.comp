@@ -5,8 +5,8 @@
 layout(binding = 0, rgba32f) readonly uniform imageBuffer src;
 layout(binding = 1, rgba32f) writeonly uniform imageBuffer dst;
 #else
-layout(std430, binding = 0) readonly buffer Src { vec4 src[]; };
-layout(std430, binding = 1) writeonly buffer Dst { vec4 dst[]; };
+layout(std430, binding = 0) readonly buffer Src { uvec4 src[]; };  // (raw bits: any element type)
+layout(std430, binding = 1) writeonly buffer Dst { uvec4 dst[]; };
 #endif
 layout(location = 0) uniform int n4;
 
@@ -15,7 +15,7 @@ void main() {
 #if defined(ZERO) && defined(TL_IMAGES)
 #error ZERO is for storage buffers (image buffers clear with glClearBufferData)
 #elif defined(ZERO)
-    dst[i] = vec4(0.0);
+    dst[i] = uvec4(0u);
 #elif defined(TL_IMAGES)
     imageStore(dst, int(i), imageLoad(src, int(i)));
 #else
