@@ -205,24 +205,8 @@ class GlHierarchy : public HierarchyRelaxer {
     api.Uniform1i(2, int(out.first));
     render_gl::Dispatch({d.phi[d.cur].id, radiance_scale_.id, out.buffer}, nb);
   }
-  // Both set the three fluence buffers in one dispatch of prolong.comp (no copies, no clears).
-  void Zero(int l) override {
-    Device& d = dev_[l];
-    const Ssbo& any = d.phi[0];  // (bindings 0-3, unread)
-    api.UseProgram(prolong_);
-    api.Uniform1i(0, int(d.size));
-    api.Uniform1i(1, 1);
-    render_gl::Dispatch({&any, &any, &any, &any, &d.phi[0], &d.phi[1], &d.phi[2]}, d.size);
-  }
-  void Prolong(int l) override {
-    Device& d = dev_[l];
-    const Device& coarse = dev_[l + 1];
-    api.UseProgram(prolong_);
-    api.Uniform1i(0, int(d.size));
-    api.Uniform1i(1, 0);
-    render_gl::Dispatch(
-        {&d.p_start, &d.p_index, &d.p_weight, &coarse.phi[coarse.cur], &d.phi[0], &d.phi[1], &d.phi[2]}, d.size);
-  }
+  void Zero(int l) override { Start(l, false); }
+  void Prolong(int l) override { Start(l, true); }
   void Relax(int l, bool adaptive, int iterations, bool repeated) override {
     Device& d = dev_[l];
     const int64_t count = adaptive ? d.num_active : d.size;
@@ -267,6 +251,23 @@ class GlHierarchy : public HierarchyRelaxer {
     std::array<double, 3> rho{};
     bool tails = false;
   };
+  // Sets the level's three fluence buffers in one dispatch of prolong.comp (no copies, no
+  // clears): prolonged from the next coarser level's current one, or zeros.
+  void Start(int l, bool prolong) {
+    Device& d = dev_[l];
+    api.UseProgram(prolong_);
+    api.Uniform1i(0, int(d.size));
+    api.Uniform1i(1, prolong ? 0 : 1);
+    if (prolong) {
+      const Device& coarse = dev_[l + 1];
+      render_gl::Dispatch(
+          {&d.p_start, &d.p_index, &d.p_weight, &coarse.phi[coarse.cur], &d.phi[0], &d.phi[1], &d.phi[2]}, d.size);
+    } else {
+      const Ssbo& any = d.phi[0];  // (bindings 0-3, unread)
+      render_gl::Dispatch({&any, &any, &any, &any, &d.phi[0], &d.phi[1], &d.phi[2]}, d.size);
+    }
+  }
+
   GLuint jacobi_ = 0, source_ = 0, prolong_ = 0, radiance_ = 0;
   std::vector<Device> dev_;
   Ssbo radiance_scale_;

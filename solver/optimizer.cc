@@ -20,6 +20,9 @@
 namespace translume {
 namespace {
 
+// The message of a run that the hook stopped (RunCeres, FitChannels).
+constexpr const char* kStoppedMessage = "stopped by the caller (e.g. Ctrl-C) after this iteration";
+
 double Norm(const std::vector<double>& v) {
   double s = 0;
   for (double a : v) s += a * a;
@@ -112,7 +115,7 @@ OptimizerResult RunCeres(ceres::FirstOrderFunction* function, OptimizerKind kind
   r.iterations = int(sum.iterations.size()) - 1;
   r.initial = sum.initial_cost;
   r.final = sum.final_cost;
-  r.message = cb.stopped ? "stopped by the caller (e.g. Ctrl-C) after this iteration" : sum.message;
+  r.message = cb.stopped ? kStoppedMessage : sum.message;
   if (cb.stopped) r.termination = RecoveryTermination::kStopped;
   else if (sum.termination_type == ceres::CONVERGENCE) r.termination = RecoveryTermination::kConverged;
   else if (sum.termination_type == ceres::NO_CONVERGENCE) r.termination = RecoveryTermination::kMaxIterations;
@@ -424,7 +427,7 @@ OptimizerResult FitChannels(const ChannelObjectives& problem, const RecoveryOpti
                   : failed ? RecoveryTermination::kFailed
                   : unfinished ? RecoveryTermination::kMaxIterations
                                : RecoveryTermination::kConverged;
-  r.message = stopped ? "stopped by the caller (e.g. Ctrl-C) after this iteration" : same ? first_message : messages;
+  r.message = stopped ? kStoppedMessage : same ? first_message : messages;
   return r;
 }
 
