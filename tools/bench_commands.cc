@@ -70,7 +70,8 @@ void AddBenchForward(CLI::App& bench) {
                 "Time with the process's CPU clock, not the wall clock (cpu backend, with "
                 "--threads 1: unaffected by other jobs on a shared machine)");
   fwd->add_option("--batch", f->o.batch, "gl: also solve this many right-hand sides (4x4 region "
-                                         "lights) as one batch; 0 skips")
+                                         "lights) as one batch, and time the stencil on them in one "
+                                         "dispatch; 0 skips")
       ->capture_default_str()
       ->check(CLI::Range(0, 4096));
   fwd->add_option("--smoothing", f->o.smoothing, "Our solver's V(N, N) cycle on the finest level: "
