@@ -92,7 +92,8 @@ class GlRenderPasses : public DeviceRenderPasses {
   }
 
   ~GlRenderPasses() override {
-    if (stamps_[0] != 0) api.DeleteQueries(4, stamps_.data());
+    for (auto& stamps : stamps_)
+      if (stamps[0] != 0) api.DeleteQueries(4, stamps.data());
   }
 
   std::vector<DeviceFloats> IncidentOnDevice(const std::vector<LightSample>& samples) override {
@@ -169,15 +170,40 @@ class GlRenderPasses : public DeviceRenderPasses {
     }
   }
 
-  Image ReadImage() override {
+  void QueueImage(int slot) override {
+    TL_CHECK(slot >= 0 && slot < kFrameSlots);
+    Staging& st = staging_[slot];
+    TL_CHECK_MSG(st.fence == nullptr, "QueueImage: the slot's last image was not taken");
+    st.width = image_width_;
+    st.height = image_height_;
+    st.Reserve(size_t(st.width) * st.height * 3 * sizeof(float));
+    api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);  // the copy reads what shade.comp wrote
+    api.BindBuffer(GL_COPY_READ_BUFFER, image_.id);
+    api.BindBuffer(GL_COPY_WRITE_BUFFER, st.id);
+    api.CopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, 0, 0, GLsizeiptr(st.bytes));
+    st.fence = api.FenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
+  }
+
+  Image TakeImage(int slot) override {
+    TL_CHECK(slot >= 0 && slot < kFrameSlots);
+    Staging& st = staging_[slot];
+    TL_CHECK_MSG(st.fence != nullptr, "TakeImage: no image queued in the slot");
+    GLenum waited;
+    do waited = api.ClientWaitSync(st.fence, GL_SYNC_FLUSH_COMMANDS_BIT, 1000000000);  // 1 s, again
+    while (waited == GL_TIMEOUT_EXPIRED);
+    TL_CHECK_MSG(waited != GL_WAIT_FAILED, "glClientWaitSync failed");
+    api.DeleteSync(st.fence);
+    st.fence = nullptr;
     Image img;
-    img.width = image_width_;
-    img.height = image_height_;
+    img.width = st.width;
+    img.height = st.height;
     img.channels = 3;
     img.data.resize(size_t(img.width) * img.height * 3);
-    image_.Get(img.data.data(), img.data.size() * sizeof(float));
+    st.Read(img.data.data());
     return img;
   }
+
+  void Flush() override { api.Flush(); }
 
   Image Shade(const PassView& cam, const BoundaryLight& radiance,
               const std::vector<LightSample>& samples) override {
@@ -185,7 +211,8 @@ class GlRenderPasses : public DeviceRenderPasses {
     for (int c = 0; c < 3; ++c) std::copy(radiance[c].begin(), radiance[c].end(), rad.begin() + c * num_finest_);
     UploadRadiance(rad.data());
     ShadeOnDevice(cam, samples);
-    return ReadImage();
+    QueueImage(0);
+    return TakeImage(0);
   }
 
   BoundaryLight ReadFinestQ() override { return ReadQ(0); }
@@ -199,15 +226,16 @@ class GlRenderPasses : public DeviceRenderPasses {
     return out;
   }
 
-  void Stamp(int k) override {
-    TL_CHECK(k >= 0 && k < 4);
-    if (stamps_[0] == 0) api.GenQueries(4, stamps_.data());
-    api.QueryCounter(stamps_[k], GL_TIMESTAMP);
+  void Stamp(int slot, int k) override {
+    TL_CHECK(slot >= 0 && slot < kFrameSlots && k >= 0 && k < 4);
+    if (stamps_[slot][0] == 0) api.GenQueries(4, stamps_[slot].data());
+    api.QueryCounter(stamps_[slot][k], GL_TIMESTAMP);
   }
 
-  std::array<double, 3> StampSeconds() override {
+  std::array<double, 3> StampSeconds(int slot) override {
+    TL_CHECK(slot >= 0 && slot < kFrameSlots && stamps_[slot][0] != 0);
     std::array<uint64_t, 4> t{};
-    for (int k = 0; k < 4; ++k) api.GetQueryObjectui64v(stamps_[k], GL_QUERY_RESULT, &t[k]);
+    for (int k = 0; k < 4; ++k) api.GetQueryObjectui64v(stamps_[slot][k], GL_QUERY_RESULT, &t[k]);
     return {(t[1] - t[0]) * 1e-9, (t[2] - t[1]) * 1e-9, (t[3] - t[2]) * 1e-9};
   }
 
@@ -334,7 +362,49 @@ class GlRenderPasses : public DeviceRenderPasses {
   int num_tris_ = 0, map_size_ = 0, image_width_ = 0, image_height_ = 0;
   int64_t num_nodes_ = 0, num_finest_ = 0;  // boundary nodes of every level, of the finest
   size_t shadow_texels_ = 0;
-  std::array<GLuint, 4> stamps_{};
+  std::array<std::array<GLuint, 4>, kFrameSlots> stamps_{};
+  // A slot's image on its way to the host: a buffer that only QueueImage's copy writes,
+  // persistently mapped for reading where the context has glBufferStorage (GL 4.4), so that
+  // once the copy's fence has signalled the host reads it without waiting for later commands.
+  struct Staging {
+    GLuint id = 0;
+    size_t bytes = 0;
+    const float* map = nullptr;
+    GLsync fence = nullptr;  // the queued copy's, until TakeImage
+    int width = 0, height = 0;
+    Staging() = default;
+    Staging(const Staging&) = delete;
+    ~Staging() {
+      if (fence) api.DeleteSync(fence);
+      if (id) api.DeleteBuffers(1, &id);  // (unmaps it)
+    }
+    void Reserve(size_t n) {
+      if (id && n == bytes) return;
+      if (id) api.DeleteBuffers(1, &id);
+      bytes = n;
+      api.GenBuffers(1, &id);
+      api.BindBuffer(GL_COPY_WRITE_BUFFER, id);
+      const size_t size = std::max<size_t>(n, 16);
+      if (GlContext::Get().info().buffer_storage) {
+        const GLbitfield flags = GL_MAP_READ_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT;
+        api.BufferStorage(GL_COPY_WRITE_BUFFER, GLsizeiptr(size), nullptr, flags | GL_CLIENT_STORAGE_BIT);
+        map = static_cast<const float*>(api.MapBufferRange(GL_COPY_WRITE_BUFFER, 0, GLsizeiptr(size), flags));
+        TL_CHECK_MSG(map != nullptr, "glMapBufferRange of a persistent read buffer failed");
+      } else {
+        map = nullptr;
+        api.BufferData(GL_COPY_WRITE_BUFFER, GLsizeiptr(size), nullptr, GL_STREAM_READ);
+      }
+    }
+    void Read(float* out) const {
+      if (map) {
+        std::memcpy(out, map, bytes);
+      } else {
+        api.BindBuffer(GL_COPY_READ_BUFFER, id);
+        api.GetBufferSubData(GL_COPY_READ_BUFFER, 0, GLsizeiptr(bytes), out);
+      }
+    }
+  };
+  std::array<Staging, kFrameSlots> staging_;
   std::vector<int64_t> level_start_;
   size_t cam_pixels_ = 0;
   // Large triangles drawn in tiles (raster.comp) where GlInfo::loop_budget limits the loop

@@ -136,28 +136,38 @@ class RenderPasses {
 
 // The gl passes, which can also leave a frame's data on the GPU: with the gl relaxation
 // (PolygridDiffusion::SolveOnDevice) a frame is IncidentOnDevice, the relaxation, ShadeOnDevice
-// and ReadImage, and only the light samples go up and the image comes back (the frame's one
-// wait). Incident and Shade above are these plus the transfers of q and the radiance.
+// and QueueImage, and only the light samples go up and the image comes back (TakeImage, the
+// frame's one wait). Incident and Shade above are these plus the transfers of q and the
+// radiance. Frames pipeline over kFrameSlots slots: frame k's image and timestamps are kept in
+// slot k % kFrameSlots, so the host can issue frame k + 1 before it takes frame k's image.
 class DeviceRenderPasses : public RenderPasses {
  public:
+  static constexpr int kFrameSlots = 2;
   // Pass 1 as Incident, q left on the GPU: level l's boundary node b, channel c at float
   // result[l].first + b * 3 + c of buffer result[l].buffer.
   virtual std::vector<DeviceFloats> IncidentOnDevice(const std::vector<LightSample>& samples) = 0;
   // Where ShadeOnDevice reads the finest level's radiance: c * num_boundary + b from first.
   virtual DeviceFloats RadianceOnDevice() = 0;
   // Pass 3 as Shade, with the radiance in RadianceOnDevice's buffer; the image stays on the
-  // GPU until ReadImage.
+  // GPU until QueueImage.
   virtual void ShadeOnDevice(const PassView& camera, const std::vector<LightSample>& samples) = 0;
-  virtual Image ReadImage() = 0;
-  // What the last frame left on the GPU: q of the finest level's boundary nodes, and the
-  // radiance in RadianceOnDevice's buffer.
+  // Queues the copy of the last ShadeOnDevice's image into `slot` (0 .. kFrameSlots - 1)
+  // without waiting; TakeImage waits for that copy (only: commands issued after QueueImage may
+  // still run) and returns the image. A slot holds one image until taken.
+  virtual void QueueImage(int slot) = 0;
+  virtual Image TakeImage(int slot) = 0;
+  // Submits the commands issued so far to the GPU without waiting (glFlush), so that it works
+  // while the host issues the next ones.
+  virtual void Flush() = 0;
+  // What the last frame issued leaves on the GPU: q of the finest level's boundary nodes, and
+  // the radiance in RadianceOnDevice's buffer.
   virtual BoundaryLight ReadFinestQ() = 0;
   virtual BoundaryLight ReadRadiance() = 0;
-  // Takes GPU timestamp k (0 .. 3) once the commands issued before it have completed
-  // (GL_TIMESTAMP), without waiting; StampSeconds waits for them and returns the seconds from
-  // stamp k to stamp k + 1 (k = 0, 1, 2).
-  virtual void Stamp(int k) = 0;
-  virtual std::array<double, 3> StampSeconds() = 0;
+  // Takes the slot's GPU timestamp k (0 .. 3) once the commands issued before it have
+  // completed (GL_TIMESTAMP), without waiting; StampSeconds waits for the slot's four and
+  // returns the seconds from stamp k to stamp k + 1 (k = 0, 1, 2).
+  virtual void Stamp(int slot, int k) = 0;
+  virtual std::array<double, 3> StampSeconds(int slot) = 0;
 };
 
 std::unique_ptr<RenderPasses> MakeCpuRenderPasses(const PassScene* scene);        // renderer.cc

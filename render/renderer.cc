@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <deque>
 #include <fmt/format.h>
 #include <limits>
 #include <sstream>
@@ -548,7 +549,18 @@ struct Renderer::Impl {
   TriangleMesh shading_mesh;  // ShadingMesh of the shape's
   std::vector<double> node_areas;  // the finest boundary nodes' areas, mm^2 (dipole)
   std::vector<std::pair<Vec3, std::array<double, 3>>> env;
+  // Frames submitted and not collected, oldest first: on the GPU, the slot of its image and
+  // timestamps and the host's seconds (setup, issue); else the image and times.
+  struct Pending {
+    int slot = -1;
+    double setup = 0, issue = 0;
+    Image image;
+    FrameTimes times;
+  };
+  std::deque<Pending> pending;
+  int next_slot = 0;
 };
+static_assert(Renderer::kMaxInFlight <= DeviceRenderPasses::kFrameSlots);
 
 Renderer::Renderer(const Shape* shape, const std::vector<Polygrid>* levels,
                    std::vector<NodeMaterial> materials, double C, const DiffusionOptions& diffusion,
@@ -673,8 +685,34 @@ const BoundaryLight& Renderer::boundary_radiance() const {
 
 Renderer::~Renderer() = default;
 
-Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
+Image Renderer::Render(const RenderLight& light, double turn_deg) {
+  Submit(light, turn_deg);
+  return Collect();
+}
+
+int Renderer::in_flight() const { return int(impl_->pending.size()); }
+
+Image Renderer::Collect() {
   Impl& I = *impl_;
+  TL_CHECK_MSG(!I.pending.empty(), "Renderer::Collect: no frame submitted");
+  Impl::Pending p = std::move(I.pending.front());
+  I.pending.pop_front();
+  if (p.slot < 0) {
+    times_ = p.times;
+    return std::move(p.image);
+  }
+  Image img = I.device->TakeImage(p.slot);
+  const std::array<double, 3> gpu = I.device->StampSeconds(p.slot);
+  times_.incident = p.setup + gpu[0];
+  times_.diffusion = gpu[1];
+  times_.shading = gpu[2];
+  times_.diffusion_issue = p.issue;
+  return img;
+}
+
+void Renderer::Submit(const RenderLight& light_in, double turn_deg) {
+  Impl& I = *impl_;
+  TL_CHECK_MSG(int(I.pending.size()) < kMaxInFlight, "Renderer::Submit: kMaxInFlight frames not collected");
   const RenderOptions& o = I.scene.options;
   const auto rot = [&](const Vec3& v) {
     const double a = turn_deg * kPi / 180;
@@ -740,30 +778,32 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
   if (I.device) {
     // The three passes on the GPU, q and the radiance kept there: the passes' times come from
     // GPU timestamps between them (the host does not wait between passes), the light samples'
-    // setup counted in the first and the image's transfer in none.
-    const double setup = Seconds(t0);
-    I.device->Stamp(0);
+    // setup counted in the first and the image's transfer in none. The flushes let the GPU
+    // start each part while the host issues the next.
+    Impl::Pending p;
+    p.setup = Seconds(t0);
+    p.slot = I.next_slot;
+    I.device->Stamp(p.slot, 0);
     const std::vector<DeviceFloats> q = I.device->IncidentOnDevice(samples);
-    I.device->Stamp(1);
+    I.device->Stamp(p.slot, 1);
+    I.device->Flush();
     const auto t_issue = std::chrono::steady_clock::now();
     I.diffusion->SolveOnDevice(q, I.device->RadianceOnDevice());
-    const double issue = Seconds(t_issue);
-    I.device->Stamp(2);
+    p.issue = Seconds(t_issue);
+    I.device->Stamp(p.slot, 2);
     I.device->ShadeOnDevice(cam, samples);
-    I.device->Stamp(3);
-    Image img = I.device->ReadImage();
+    I.device->Stamp(p.slot, 3);
+    I.device->QueueImage(p.slot);
+    I.device->Flush();
     on_device_ = true;
-    const std::array<double, 3> gpu = I.device->StampSeconds();
-    times_.incident = setup + gpu[0];
-    times_.diffusion = gpu[1];
-    times_.shading = gpu[2];
-    times_.diffusion_issue = issue;
-    return img;
+    I.next_slot = (p.slot + 1) % DeviceRenderPasses::kFrameSlots;
+    I.pending.push_back(std::move(p));
+    return;
   }
   on_device_ = false;
-  times_.diffusion_issue = 0;
+  Impl::Pending p;
   std::vector<BoundaryLight> q = I.passes->Incident(samples);
-  times_.incident = Seconds(t0);
+  p.times.incident = Seconds(t0);
 
   // Pass 2: diffusion (or the dipole baseline).
   t0 = std::chrono::steady_clock::now();
@@ -782,13 +822,13 @@ Image Renderer::Render(const RenderLight& light_in, double turn_deg) {
     radiance_ = DipoleRadiance(pg, k, m, I.C, q[0], I.node_areas);
   }
   q_finest_ = q[0];
-  times_.diffusion = Seconds(t0);
+  p.times.diffusion = Seconds(t0);
 
   // Pass 3: shading, supersampled.
   t0 = std::chrono::steady_clock::now();
-  Image img = I.passes->Shade(cam, radiance_, samples);
-  times_.shading = Seconds(t0);
-  return img;
+  p.image = I.passes->Shade(cam, radiance_, samples);
+  p.times.shading = Seconds(t0);
+  I.pending.push_back(std::move(p));
 }
 
 }  // namespace translume

@@ -79,10 +79,23 @@ class Renderer {
   ~Renderer();
   // Linear RGB radiance image (width x height, 3 channels). `turn_deg` rotates camera and light
   // together about the z axis (a turntable, so the light moves relative to the object).
+  // Submit then Collect.
   Image Render(const RenderLight& light, double turn_deg = 0);
+  // Pipelined frames: Submit issues a frame and Collect returns the oldest submitted frame's
+  // image (the frames in the order submitted, each as Render would return it), with times()
+  // then that frame's. On the gl backend Submit issues the frame's GPU work without waiting
+  // for it, so submitting frame k + 1 before collecting frame k keeps the GPU busy while the
+  // host takes frame k's image and sets up the next (a turntable, renderbench's "fps pipe");
+  // elsewhere Submit renders the whole frame. At most kMaxInFlight frames submitted and not
+  // collected (more is a bug: CHECK).
+  static constexpr int kMaxInFlight = 2;
+  void Submit(const RenderLight& light, double turn_deg = 0);
+  Image Collect();
+  int in_flight() const;
   const FrameTimes& times() const { return times_; }
-  // Incident light q and outgoing radiance L at the finest level's boundary nodes (last frame).
-  // The gl backend keeps them on the GPU; the first call after a frame reads them back.
+  // Incident light q and outgoing radiance L at the finest level's boundary nodes of the last
+  // frame submitted. The gl backend keeps them on the GPU; the first call after a frame reads
+  // them back (waiting for that frame).
   const BoundaryLight& boundary_light() const;
   const BoundaryLight& boundary_radiance() const;
   // What a user should know about the diffusion's steps, one sentence each: levels whose

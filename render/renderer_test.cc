@@ -151,6 +151,50 @@ TEST(Render, GlPassesMatchCpu) {
 // A frame's error against the converged solution (the paper's Figure 15 metric) falls with the
 // steps, to round-off when the steps converge (so the reference solves the frame's equations),
 // on both backends alike (gl: the frame's q and radiance read back from the GPU).
+// Frames submitted ahead (two in flight, the way a turntable pipelines them) come back in the
+// order submitted, each equal to the frame Render returns on its own, on both backends, with
+// and without frame coherence (each frame starting from the last one's solution); and
+// boundary_light() is then the last submitted frame's.
+TEST(Render, PipelinedFramesMatchOneAtATime) {
+  const SmallSphere s;
+  RenderOptions ro;
+  ro.width = 40;
+  ro.height = 32;
+  const RenderLight light = RenderLight::Parse("dir:1,0.3,0.6");
+  for (DiffusionBackend backend : {DiffusionBackend::kCpu, DiffusionBackend::kGl})
+    for (bool coherent : {false, true}) {
+      SCOPED_TRACE(std::string(backend == DiffusionBackend::kGl ? "gl" : "cpu") + (coherent ? ", coherent" : ""));
+      DiffusionOptions d;
+      d.backend = backend;
+      d.iterations = {20, 20};
+      d.frame_coherence = coherent;
+      const double C = ReflectionParameterC(1.3);
+      Renderer one(s.shape.get(), &s.levels, s.mats, C, d, ro), ahead(s.shape.get(), &s.levels, s.mats, C, d, ro);
+      std::vector<Image> want, got;
+      for (int f = 0; f < 4; ++f) want.push_back(one.Render(light, 30.0 * f));
+      ahead.Submit(light, 0);
+      ahead.Submit(light, 30);
+      EXPECT_EQ(ahead.in_flight(), 2);
+      got.push_back(ahead.Collect());
+      ahead.Submit(light, 60);
+      got.push_back(ahead.Collect());
+      ahead.Submit(light, 90);
+      EXPECT_EQ(ahead.in_flight(), 2);
+      got.push_back(ahead.Collect());
+      got.push_back(ahead.Collect());
+      EXPECT_EQ(ahead.in_flight(), 0);
+      for (int f = 0; f < 4; ++f) {
+        ASSERT_EQ(got[f].width, 40);
+        ASSERT_EQ(got[f].height, 32);
+        EXPECT_TRUE(got[f].data == want[f].data) << "frame " << f;
+      }
+      EXPECT_FALSE(want[0].data == want[1].data);  // the frames differ (the light turns)
+      for (int c = 0; c < 3; ++c) EXPECT_TRUE(ahead.boundary_light()[c] == one.boundary_light()[c]);
+      EXPECT_GT(ahead.times().diffusion, 0);
+      EXPECT_GT(ahead.times().shading, 0);
+    }
+}
+
 TEST(Render, ErrorAgainstConvergedFallsWithTheSteps) {
   const SmallSphere s;
   RenderOptions ro;

@@ -51,14 +51,24 @@ namespace translume::gl {
   X(PFNGLTEXBUFFERPROC, TexBuffer)                                       \
   X(PFNGLBINDIMAGETEXTUREPROC, BindImageTexture)                         \
   X(PFNGLFINISHPROC, Finish)                                             \
+  X(PFNGLFLUSHPROC, Flush)                                               \
+  X(PFNGLFENCESYNCPROC, FenceSync)                                       \
+  X(PFNGLCLIENTWAITSYNCPROC, ClientWaitSync)                             \
+  X(PFNGLDELETESYNCPROC, DeleteSync)                                     \
+  X(PFNGLMAPBUFFERRANGEPROC, MapBufferRange)                             \
+  X(PFNGLUNMAPBUFFERPROC, UnmapBuffer)                                   \
   X(PFNGLGENQUERIESPROC, GenQueries)                                     \
   X(PFNGLDELETEQUERIESPROC, DeleteQueries)                               \
   X(PFNGLQUERYCOUNTERPROC, QueryCounter)                                 \
   X(PFNGLGETQUERYOBJECTUI64VPROC, GetQueryObjectui64v)
 
+// Entry points past GL 4.3, null where the context lacks them (GlInfo says which it has).
+#define TL_GL_OPTIONAL_FUNCTIONS(X) X(PFNGLBUFFERSTORAGEPROC, BufferStorage)
+
 struct Api {
 #define TL_GL_DECLARE(type, name) type name = nullptr;
   TL_GL_FUNCTIONS(TL_GL_DECLARE)
+  TL_GL_OPTIONAL_FUNCTIONS(TL_GL_DECLARE)
 #undef TL_GL_DECLARE
 };
 

@@ -204,6 +204,9 @@ bool LoadGl(std::string* why) {
   }
   TL_GL_FUNCTIONS(TL_GL_LOAD)
 #undef TL_GL_LOAD
+#define TL_GL_LOAD_OPTIONAL(type, name) gl::api.name = reinterpret_cast<type>(get_proc("gl" #name));
+  TL_GL_OPTIONAL_FUNCTIONS(TL_GL_LOAD_OPTIONAL)
+#undef TL_GL_LOAD_OPTIONAL
   return true;
 }
 
@@ -213,10 +216,11 @@ std::string GlInfo::ToString() const {
   return fmt::format(
       "platform {}\nGL_VENDOR {}\nGL_RENDERER {}\nGL_VERSION {}\n"
       "GL_MAX_COMPUTE_WORK_GROUP_COUNT {} x {} x {}\nGL_MAX_COMPUTE_WORK_GROUP_INVOCATIONS {}\n"
-      "GL_MAX_SHADER_STORAGE_BLOCK_SIZE {} bytes\nloop budget {}",
+      "GL_MAX_SHADER_STORAGE_BLOCK_SIZE {} bytes\nloop budget {}\nglBufferStorage {}",
       platform, vendor, renderer, version, max_work_group_count[0], max_work_group_count[1],
       max_work_group_count[2], max_work_group_invocations, max_ssbo_bytes,
-      loop_budget ? std::to_string(loop_budget) + " iterations per invocation (llvmpipe)" : std::string("none"));
+      loop_budget ? std::to_string(loop_budget) + " iterations per invocation (llvmpipe)" : std::string("none"),
+      buffer_storage ? "yes (images read through persistent maps)" : "no");
 }
 
 GlContext& GlContext::Get() {
@@ -270,6 +274,8 @@ GlContext& GlContext::Get() {
       GLint64 ssbo = 0;
       gl::api.GetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &ssbo);
       info.max_ssbo_bytes = ssbo;
+      // (A platform's GetProcAddress may return an entry point the context does not have.)
+      info.buffer_storage = major * 10 + minor >= 44 && gl::api.BufferStorage != nullptr;
       context = c;
       return;
     }

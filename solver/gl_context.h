@@ -29,6 +29,9 @@ struct GlInfo {
   // contains "llvmpipe", else 0. Shaders whose loops grow with the input keep each invocation's
   // share well within it (docs/gpu.md, "llvmpipe's loop budget").
   int64_t loop_budget = 0;
+  // GL >= 4.4's glBufferStorage: buffers persistently mapped for reading (the renderer's
+  // pipelined frames read their images through one; without it, glGetBufferSubData).
+  bool buffer_storage = false;
   std::string ToString() const;
 };
 

@@ -724,6 +724,16 @@ TEST_F(Cli, RenderAndEdit) {
     EXPECT_EQ(img.width, 40);
     EXPECT_EQ(img.height, 30);
   }
+  // On gl the turntable's frames pipeline (one submitted ahead); each is still its own frame.
+  CommandRun g = Translume("render " + P("m.vdb") + " --shape sphere --resolution 9 --levels 2 --backend gl "
+                           "--image 40x30 --turntable 3 --exposure 0 -o " + P("g.png"));
+  ASSERT_EQ(g.status, 0) << g.output;
+  std::vector<Image> frames;
+  for (const char* f : {"g_000.png", "g_001.png", "g_002.png"}) frames.push_back(ReadImage(P(f)));
+  for (const Image& img : frames) EXPECT_EQ(img.width, 40);
+  EXPECT_FALSE(frames[1].data == frames[0].data);
+  EXPECT_FALSE(frames[2].data == frames[1].data);
+  EXPECT_NE(g.output.find("frame 2: incident"), std::string::npos) << g.output;
   // One auto exposure for every frame (it used to follow each frame), printed once.
   const size_t at = r.output.find("render: exposure ");
   ASSERT_NE(at, std::string::npos) << r.output;

@@ -284,9 +284,18 @@ int RunRender(int argc, char** argv) {
   }
   Renderer renderer(shape.get(), &grids, std::move(mats), C, dopt, ro);
   for (const std::string& note : renderer.Notes()) std::printf("render: note: %s\n", note.c_str());
+  // Frames pipelined after the first (Renderer::Submit): frame f + 1 is issued before frame f
+  // is taken and written, so on the gl backend the GPU renders it meanwhile. Frame 0 alone, so
+  // that its boundary radiance is at hand below; --check-error measures each frame alone.
+  // The fps printed: 1 / the host's time in this iteration's Submit and Collect calls (not
+  // the file's writing, which the GPU's work on the next frame overlaps).
+  int submitted = 0;
   for (int f = 0; f < turntable; ++f) {
     const auto tf = std::chrono::steady_clock::now();
-    Image img = renderer.Render(L, 360.0 * f / turntable);
+    const int ahead = f > 0 && !check_error ? 1 : 0;
+    for (; submitted < turntable && submitted <= f + ahead; ++submitted)
+      renderer.Submit(L, 360.0 * submitted / turntable);
+    Image img = renderer.Collect();
     const double frame_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tf).count();
     if (ext == ".png") {
       // Auto exposure from the first frame only: a turntable's frames share it (no flicker).

@@ -90,7 +90,9 @@ int main(int argc, char** argv) {
     // Medians over the timed frames: t1 incident light, t2 diffusion, t3 shading (ms; gl: GPU
     // timestamps between the passes, Renderer::times); t2 host: the host's time to issue the
     // diffusion's commands (gl; near t2, the GPU waited for them); fps = 1 / median frame time
-    // (host); diff fps = 1 / median t2 (diffusion only); coh: with frame
+    // (host); fps pipe: the same frames again pipelined (Renderer::Submit one frame ahead of
+    // Collect, as `translume render --turntable` does), frames / their total time; diff fps =
+    // 1 / median t2 (diffusion only); coh: with frame
     // coherence (skipped: -). build s: the polygrid hierarchy's construction (once). setup s: the
     // Renderer's without coherence (the relaxation rows, Chebyshev's radii and their guard,
     // PolygridDiffusion; on gl the upload too). t2 range:
@@ -99,8 +101,8 @@ int main(int argc, char** argv) {
     // converged solution (Renderer::ErrorAgainstConverged; the paper's Figure 15 keeps it below 0.5 %).
     std::printf("interior rows: %s\n", stencil == 18 ? "the wide stencil where the grid is sheared (--stencil 18)"
                                                      : "Appendix B's six weights (--stencil 6)");
-    std::printf("%-7s %-14s %8s %8s %8s %9s %9s %13s %10s %9s %8s %9s %9s %8s %8s\n", "shape", "polygrid", "nodes",
-                "build s", "setup s", "t1 ms", "t2 ms", "t2 range ms", "t2 host ms", "t3 ms", "fps", "diff fps",
+    std::printf("%-7s %-14s %8s %8s %8s %9s %9s %13s %10s %9s %8s %8s %9s %9s %8s %8s\n", "shape", "polygrid", "nodes",
+                "build s", "setup s", "t1 ms", "t2 ms", "t2 range ms", "t2 host ms", "t3 ms", "fps", "fps pipe", "diff fps",
                 "t2coh ms", "fps coh", "E");
     for (const std::string& name : shapes)
       for (int res : resolutions) {
@@ -118,18 +120,19 @@ int main(int argc, char** argv) {
         RenderOptions ro;
         ro.width = ro.height = size;
         ro.supersample = 1;
-        double fps[2] = {0, 0}, t1 = 0, t2[2] = {0, 0}, t3 = 0, t2_min = 0, t2_max = 0, error = -1, setup_s = 0,
+        double fps[2] = {0, 0}, fps_pipe = 0, t1 = 0, t2[2] = {0, 0}, t3 = 0, t2_min = 0, t2_max = 0, error = -1, setup_s = 0,
                t2_issue = 0;
         for (int coh = 0; coh < (skip_coherent ? 1 : 2); ++coh) {
           d.frame_coherence = coh;
           const auto ts = std::chrono::steady_clock::now();
           Renderer r(shape.get(), &levels, mats, C, d, ro);
           if (!coh) setup_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
-          r.Render(RenderLight::Parse("dir:1,0.3,0.6"), 0);  // warm-up (shader compile, first solve)
+          const RenderLight light = RenderLight::Parse("dir:1,0.3,0.6");
+          r.Render(light, 0);  // warm-up (shader compile, first solve)
           std::vector<double> frame, a, b, c, issue;
           for (int f = 1; f <= frames; ++f) {
             const auto t0 = std::chrono::steady_clock::now();
-            r.Render(RenderLight::Parse("dir:1,0.3,0.6"), 2.0 * f);  // the light moves 2 deg/frame
+            r.Render(light, 2.0 * f);  // the light moves 2 deg/frame
             frame.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
             a.push_back(r.times().incident);
             b.push_back(r.times().diffusion);
@@ -137,6 +140,15 @@ int main(int argc, char** argv) {
             issue.push_back(r.times().diffusion_issue);
           }
           fps[coh] = 1 / Median(frame);
+          if (!coh) {
+            const auto tp = std::chrono::steady_clock::now();
+            r.Submit(light, 2.0);
+            for (int f = 1; f <= frames; ++f) {
+              if (f < frames) r.Submit(light, 2.0 * (f + 1));
+              r.Collect();
+            }
+            fps_pipe = frames / std::chrono::duration<double>(std::chrono::steady_clock::now() - tp).count();
+          }
           t2[coh] = Median(b);
           if (!coh) {
             if (!skip_error) error = r.ErrorAgainstConverged();
@@ -149,10 +161,10 @@ int main(int argc, char** argv) {
         const std::string coh_fps = skip_coherent ? "-" : std::to_string(fps[1]).substr(0, 7);
         const std::string range = fmt::format("{:.1f}-{:.1f}", 1e3 * t2_min, 1e3 * t2_max);
         const std::string e = error < 0 ? "-" : fmt::format("{:.1e}", error);
-        std::printf("%-7s %-14s %8lld %8.1f %8.2f %9.1f %9.1f %13s %10.2f %9.1f %8.2f %9.2f %9s %8s %8s\n",
+        std::printf("%-7s %-14s %8lld %8.1f %8.2f %9.1f %9.1f %13s %10.2f %9.1f %8.2f %8.2f %9.2f %9s %8s %8s\n",
                     name.c_str(), (std::to_string(pc.cubes.size()) + "x" + std::to_string(res) + "^3").c_str(),
                     (long long)levels[0].size(), build_s, setup_s, 1e3 * t1, 1e3 * t2[0], range.c_str(),
-                    1e3 * t2_issue, 1e3 * t3, fps[0], 1 / t2[0], coh_ms.c_str(), coh_fps.c_str(), e.c_str());
+                    1e3 * t2_issue, 1e3 * t3, fps[0], fps_pipe, 1 / t2[0], coh_ms.c_str(), coh_fps.c_str(), e.c_str());
         std::fflush(stdout);
       }
   } catch (const std::exception& e) {
