@@ -233,6 +233,7 @@ class GlHierarchy : public HierarchyRelaxer {
       render_gl::Dispatch({&extra_start, &d.rows0, &d.s, &list, &cur, &next, &prev, &d.rows1}, count);
       d.cur = (d.cur + 1) % 3;
     }
+    api.Flush();  // the GPU starts on the level's steps while the host issues what follows
   }
   void Read(int l, int64_t first_row, std::vector<float>* phi) override {
     const Device& d = dev_[l];

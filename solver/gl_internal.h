@@ -67,6 +67,11 @@ struct Tuning {
   // clears each coarse level's x. Off by default until measured on a GPU;
   // TRANSLUME_GL_SHADER_CLEAR=0|1 overrides.
   bool shader_clear = false;
+  // glFlush after every flush_every dispatches (0: never). A driver may hold the commands
+  // issued since the last wait (a read-back) until its buffer fills, so that the GPU idles
+  // while the host issues them; a flush hands them over. Off by default until measured on a
+  // GPU (docs/gpu.md); TRANSLUME_GL_FLUSH_EVERY=N overrides.
+  int flush_every = 0;
 };
 const Tuning& GetTuning();
 

@@ -151,6 +151,7 @@ const Tuning& GetTuning() {
     if (const char* b = std::getenv("TRANSLUME_GL_LINE_BLOCK")) t.line_block = std::clamp(std::atoi(b), 1, 16);
     if (const char* l = std::getenv("TRANSLUME_GL_LINE_PCR")) t.line_pcr = std::atoi(l) != 0;
     if (const char* c = std::getenv("TRANSLUME_GL_SHADER_CLEAR")) t.shader_clear = std::atoi(c) != 0;
+    if (const char* f = std::getenv("TRANSLUME_GL_FLUSH_EVERY")) t.flush_every = std::max(0, std::atoi(f));
     return t;
   }();
   return tuning;
@@ -161,14 +162,15 @@ const Tuning& GetTuning() {
 std::string GlShaderTuning() {
   const gl_internal::Tuning& t = gl_internal::GetTuning();
   return fmt::format("{} ({}, {}-invocation groups, {} field(s) per value in batches, single "
-                     "fields {}, line smoother {}{}; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)",
+                     "fields {}, line smoother {}{}{}; TRANSLUME_GL_TUNING=gpu|llvmpipe overrides)",
                      t.images ? "llvmpipe" : "gpu",
                      t.images ? "image buffers, z-column invocations" : "storage buffers, one node per invocation",
                      t.group, t.pack_fields, t.quarters ? "in quarter rows" : "plain",
                      t.line_pcr ? fmt::format("by cyclic reduction where a column fits a work group, else in blocks of {}",
                                               t.line_block)
                                 : fmt::format("in blocks of {}", t.line_block),
-                     t.shader_clear && !t.images ? ", clears and copies by shader" : "");
+                     t.shader_clear && !t.images ? ", clears and copies by shader" : "",
+                     t.flush_every > 0 ? fmt::format(", a flush every {} dispatches", t.flush_every) : "");
 }
 
 namespace gl_internal {
@@ -233,6 +235,7 @@ int64_t Dispatch(const char* name, std::initializer_list<const Buffer*> buffers,
   if (profile.on()) profile.Before();
   api.DispatchCompute(GLuint(gx), GLuint(gy), GLuint(fields));
   ++dispatch_count;
+  if (const int every = GetTuning().flush_every; every > 0 && dispatch_count % every == 0) api.Flush();
   if (profile.on()) profile.After(profile.detailed() ? ProfileKey(name, defines, threads, fields) : name);
   api.MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
   return gx * gy;

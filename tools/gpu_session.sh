@@ -26,7 +26,7 @@
 # search on Wax I (the homogeneous fit, the trials and one iteration: what a default recovery
 # adds to its 300 iterations), the bunny's variants (18/9/9 and 20/10/10 Chebyshev steps, the
 # 2026-11-30 runs' 60/30/30 Jacobi steps, the adaptive depth), and last the Wax I and Marble batches (no peer)
-# under other shader tunings side by side: line smoother blocks of 1 and 8 nodes against the
+# under other shader tunings side by side: a glFlush every 16 dispatches, line smoother blocks of 1 and 8 nodes against the
 # default 4, a coarse tail from 8192 nodes against 4096, cyclic reduction with tails from 1024
 # and 8192 nodes and with four fields per value (slower with the serial smoother on
 # 2026-11-30: a quarter of the invocations); then the renderbench again.
@@ -265,7 +265,10 @@ fi
 # The shader tunings side by side (gl_internal.h's Tuning; each an environment override).
 if [ $tunings = 1 ]; then
   # (A variant may set several variables, separated by spaces.)
-  for variant in TRANSLUME_GL_LINE_BLOCK=1 TRANSLUME_GL_LINE_BLOCK=8 TRANSLUME_GL_TAIL_NODES=8192 \
+  # First a flush every 16 dispatches (Tuning::flush_every, off by default): whether the
+  # driver held a solve's commands while the host issued them.
+  for variant in TRANSLUME_GL_FLUSH_EVERY=16 TRANSLUME_GL_LINE_BLOCK=1 TRANSLUME_GL_LINE_BLOCK=8 \
+                 TRANSLUME_GL_TAIL_NODES=8192 \
                  "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_TAIL_NODES=1024" \
                  "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_TAIL_NODES=8192" \
                  "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_PACK_FIELDS=4"; do
