@@ -287,16 +287,23 @@ int RunRender(int argc, char** argv) {
   // Frames pipelined after the first (Renderer::Submit): frame f + 1 is issued before frame f
   // is taken and written, so on the gl backend the GPU renders it meanwhile. Frame 0 alone, so
   // that its boundary radiance is at hand below; --check-error measures each frame alone.
-  // The fps printed: 1 / the host's time in this iteration's Submit and Collect calls (not
-  // the file's writing, which the GPU's work on the next frame overlaps).
+  // The fps printed: 1 / the host's time in the frame's Submit and Collect calls (not the
+  // file's writing, which the GPU's work on the next frame overlaps).
+  const auto since = [](std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  };
+  std::vector<double> submit_s(turntable, 0.0);
   int submitted = 0;
   for (int f = 0; f < turntable; ++f) {
-    const auto tf = std::chrono::steady_clock::now();
     const int ahead = f > 0 && !check_error ? 1 : 0;
-    for (; submitted < turntable && submitted <= f + ahead; ++submitted)
+    for (; submitted < turntable && submitted <= f + ahead; ++submitted) {
+      const auto ts = std::chrono::steady_clock::now();
       renderer.Submit(L, 360.0 * submitted / turntable);
+      submit_s[submitted] = since(ts);
+    }
+    const auto tc = std::chrono::steady_clock::now();
     Image img = renderer.Collect();
-    const double frame_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tf).count();
+    const double frame_s = submit_s[f] + since(tc);
     if (ext == ".png") {
       // Auto exposure from the first frame only: a turntable's frames share it (no flicker).
       const double scale = ToneMap(&img, exposure);
