@@ -686,6 +686,7 @@ const BoundaryLight& Renderer::boundary_radiance() const {
 Renderer::~Renderer() = default;
 
 Image Renderer::Render(const RenderLight& light, double turn_deg) {
+  TL_CHECK_MSG(impl_->pending.empty(), "Renderer::Render with frames in flight (it would return the oldest)");
   Submit(light, turn_deg);
   return Collect();
 }

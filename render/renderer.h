@@ -79,7 +79,7 @@ class Renderer {
   ~Renderer();
   // Linear RGB radiance image (width x height, 3 channels). `turn_deg` rotates camera and light
   // together about the z axis (a turntable, so the light moves relative to the object).
-  // Submit then Collect.
+  // Submit then Collect, with no frame in flight (CHECK).
   Image Render(const RenderLight& light, double turn_deg = 0);
   // Pipelined frames: Submit issues a frame and Collect returns the oldest submitted frame's
   // image (the frames in the order submitted, each as Render would return it), with times()
