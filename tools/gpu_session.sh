@@ -26,10 +26,10 @@
 # search on Wax I (the homogeneous fit, the trials and one iteration: what a default recovery
 # adds to its 300 iterations), the bunny's variants (18/9/9 and 20/10/10 Chebyshev steps, the
 # 2026-11-30 runs' 60/30/30 Jacobi steps, the adaptive depth), and last the Wax I and Marble batches (no peer)
-# under other shader tunings side by side: a glFlush every 16 dispatches, line smoother blocks of 1 and 8 nodes against the
-# default 4, a coarse tail from 8192 nodes against 4096, cyclic reduction with tails from 1024
-# and 8192 nodes and with four fields per value (slower with the serial smoother on
-# 2026-11-30: a quarter of the invocations); then the renderbench again.
+# under other shader tunings side by side: a glFlush every 16 dispatches, that with cyclic
+# reduction, the tail from 1024 nodes and shader clears all at once, line smoother blocks of 1
+# node against the default 4, a coarse tail from 8192 nodes against 4096, cyclic reduction with
+# tails from 1024 and 8192 nodes; then the renderbench again.
 #
 # --long-recoveries: no tuning steps; Wax I runs a whole default recovery, its absorption level
 # search and 300 iterations (cap 120 s, ~100 s on the H200 on 2026-12-04), Marble 300 s (~170
@@ -266,12 +266,15 @@ fi
 if [ $tunings = 1 ]; then
   # (A variant may set several variables, separated by spaces.)
   # First a flush every 16 dispatches (Tuning::flush_every, off by default): whether the
-  # driver held a solve's commands while the host issued them.
-  for variant in TRANSLUME_GL_FLUSH_EVERY=16 TRANSLUME_GL_LINE_BLOCK=1 TRANSLUME_GL_LINE_BLOCK=8 \
-                 TRANSLUME_GL_TAIL_NODES=8192 \
+  # driver held a solve's commands while the host issued them; then every option that has
+  # helped Wax I's single solve at once (cyclic reduction, the tail from 1024 nodes, shader
+  # clears, flushes), against its 5 ms. Line blocks of 8 and four fields per value, slower in
+  # both sessions of 2026-12-04, are no longer run.
+  for variant in TRANSLUME_GL_FLUSH_EVERY=16 \
+                 "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_TAIL_NODES=1024 TRANSLUME_GL_SHADER_CLEAR=1 TRANSLUME_GL_FLUSH_EVERY=16" \
+                 TRANSLUME_GL_LINE_BLOCK=1 TRANSLUME_GL_TAIL_NODES=8192 \
                  "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_TAIL_NODES=1024" \
-                 "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_TAIL_NODES=8192" \
-                 "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_PACK_FIELDS=4"; do
+                 "TRANSLUME_GL_LINE_PCR=1 TRANSLUME_GL_TAIL_NODES=8192"; do
     # shellcheck disable=SC2086  # the variant's words are the assignments
     step "bench forward (gl, batch ${batch}, ${variant})" 40 env $variant "$run" "${batches[@]}"
   done
