@@ -191,9 +191,9 @@ class GlRenderPasses : public DeviceRenderPasses {
     GLenum waited;
     do waited = api.ClientWaitSync(st.fence, GL_SYNC_FLUSH_COMMANDS_BIT, 1000000000);  // 1 s, again
     while (waited == GL_TIMEOUT_EXPIRED);
-    TL_CHECK_MSG(waited != GL_WAIT_FAILED, "glClientWaitSync failed");
     api.DeleteSync(st.fence);
     st.fence = nullptr;
+    TL_CHECK_MSG(waited != GL_WAIT_FAILED, "glClientWaitSync failed");
     Image img;
     img.width = st.width;
     img.height = st.height;

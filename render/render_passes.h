@@ -152,8 +152,10 @@ class DeviceRenderPasses : public RenderPasses {
   // GPU until QueueImage.
   virtual void ShadeOnDevice(const PassView& camera, const std::vector<LightSample>& samples) = 0;
   // Queues the copy of the last ShadeOnDevice's image into `slot` (0 .. kFrameSlots - 1)
-  // without waiting; TakeImage waits for that copy (only: commands issued after QueueImage may
-  // still run) and returns the image. A slot holds one image until taken.
+  // without waiting; TakeImage waits for that copy and returns the image. With persistent
+  // maps (GlInfo::buffer_storage) it waits for nothing else, so commands issued after
+  // QueueImage may still run; without, glGetBufferSubData may wait for more. A slot holds one
+  // image until taken.
   virtual void QueueImage(int slot) = 0;
   virtual Image TakeImage(int slot) = 0;
   // Submits the commands issued so far to the GPU without waiting (glFlush), so that it works

@@ -56,7 +56,6 @@ namespace translume::gl {
   X(PFNGLCLIENTWAITSYNCPROC, ClientWaitSync)                             \
   X(PFNGLDELETESYNCPROC, DeleteSync)                                     \
   X(PFNGLMAPBUFFERRANGEPROC, MapBufferRange)                             \
-  X(PFNGLUNMAPBUFFERPROC, UnmapBuffer)                                   \
   X(PFNGLGENQUERIESPROC, GenQueries)                                     \
   X(PFNGLDELETEQUERIESPROC, DeleteQueries)                               \
   X(PFNGLQUERYCOUNTERPROC, QueryCounter)                                 \

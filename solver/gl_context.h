@@ -31,6 +31,7 @@ struct GlInfo {
   int64_t loop_budget = 0;
   // GL >= 4.4's glBufferStorage: buffers persistently mapped for reading (the renderer's
   // pipelined frames read their images through one; without it, glGetBufferSubData).
+  // TRANSLUME_GL_BUFFER_STORAGE=0 turns it off.
   bool buffer_storage = false;
   std::string ToString() const;
 };

@@ -91,7 +91,8 @@ int main(int argc, char** argv) {
     // timestamps between the passes, Renderer::times); t2 host: the host's time to issue the
     // diffusion's commands (gl; near t2, the GPU waited for them); fps = 1 / median frame time
     // (host); fps pipe: the same frames again pipelined (Renderer::Submit one frame ahead of
-    // Collect, as `translume render --turntable` does), frames / their total time; diff fps =
+    // Collect, as `translume render --turntable` does), 1 / the median time from one frame's
+    // image to the next's; diff fps =
     // 1 / median t2 (diffusion only); coh: with frame
     // coherence (skipped: -). build s: the polygrid hierarchy's construction (once). setup s: the
     // Renderer's without coherence (the relaxation rows, Chebyshev's radii and their guard,
@@ -141,13 +142,17 @@ int main(int argc, char** argv) {
           }
           fps[coh] = 1 / Median(frame);
           if (!coh) {
-            const auto tp = std::chrono::steady_clock::now();
+            std::vector<double> gaps;
+            auto last = std::chrono::steady_clock::now();
             r.Submit(light, 2.0);
             for (int f = 1; f <= frames; ++f) {
               if (f < frames) r.Submit(light, 2.0 * (f + 1));
               r.Collect();
+              const auto now = std::chrono::steady_clock::now();
+              gaps.push_back(std::chrono::duration<double>(now - last).count());
+              last = now;
             }
-            fps_pipe = frames / std::chrono::duration<double>(std::chrono::steady_clock::now() - tp).count();
+            fps_pipe = 1 / Median(gaps);
           }
           t2[coh] = Median(b);
           if (!coh) {
