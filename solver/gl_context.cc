@@ -274,8 +274,8 @@ GlContext& GlContext::Get() {
       GLint64 ssbo = 0;
       gl::api.GetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &ssbo);
       info.max_ssbo_bytes = ssbo;
-      // (A platform's GetProcAddress may return an entry point the context does not have.)
-      // TRANSLUME_GL_BUFFER_STORAGE=0 does without it (for tests).
+      // By the version: a platform's GetProcAddress may return an entry point the context
+      // does not have. TRANSLUME_GL_BUFFER_STORAGE=0 does without it (for tests).
       const char* storage = std::getenv("TRANSLUME_GL_BUFFER_STORAGE");
       info.buffer_storage = major * 10 + minor >= 44 && gl::api.BufferStorage != nullptr &&
                             !(storage && std::string(storage) == "0");

@@ -92,8 +92,7 @@ int main(int argc, char** argv) {
     // diffusion's commands (gl; near t2, the GPU waited for them); fps = 1 / median frame time
     // (host); fps pipe: the same frames again pipelined (Renderer::Submit one frame ahead of
     // Collect, as `translume render --turntable` does), 1 / the median time from one frame's
-    // image to the next's; diff fps =
-    // 1 / median t2 (diffusion only); coh: with frame
+    // image to the next's; diff fps = 1 / median t2 (diffusion only); coh: with frame
     // coherence (skipped: -). build s: the polygrid hierarchy's construction (once). setup s: the
     // Renderer's without coherence (the relaxation rows, Chebyshev's radii and their guard,
     // PolygridDiffusion; on gl the upload too). t2 range:
