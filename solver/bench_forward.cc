@@ -367,13 +367,13 @@ std::string ForwardBenchTable(const std::vector<ForwardBenchRow>& rows) {
     for (const auto& r : rows) {
       out += fmt::format("{:>14} {:>14.1f} {:>14.1f} {:>11.0f}%", r.shape.ToString(), r.apply_bandwidth / 1e9,
                          r.copy_bandwidth / 1e9, 100 * r.apply_bandwidth / r.copy_bandwidth);
-      if (nb > 0 && r.batch_apply_fields == nb)
-        out += fmt::format(" {:>16.1f} {:>13.0f}%", r.batch_apply_bandwidth / 1e9,
+      if (nb > 0) {
+        // (Labelled where a grid's buffers hold fewer fields per dispatch.)
+        const std::string gbs = fmt::format("{:.1f}", r.batch_apply_bandwidth / 1e9);
+        out += fmt::format(" {:>16} {:>13.0f}%",
+                           r.batch_apply_fields == nb ? gbs : fmt::format("{} (x{})", gbs, r.batch_apply_fields),
                            100 * r.batch_apply_bandwidth / r.copy_bandwidth);
-      else if (nb > 0)  // (a grid whose buffers hold fewer fields per dispatch)
-        out += fmt::format(" {:>16} {:>14}", fmt::format("{:.1f} (x{})", r.batch_apply_bandwidth / 1e9,
-                                                         r.batch_apply_fields),
-                           fmt::format("{:.0f}%", 100 * r.batch_apply_bandwidth / r.copy_bandwidth));
+      }
       out += "\n";
     }
     out += fmt::format("(copy: {}{})\n", rows[0].copy_reference,

@@ -79,11 +79,10 @@ const Tuning& GetTuning();
 enum class Elem { kFloat, kInt, kDouble, kVec4 };
 
 class Buffer;
-// Under Tuning::shader_clear: zeroes `dst`, or copies `bytes` bytes of src to dst from byte 0,
-// with copy.comp and returns true; false (nothing done) where the GL's own call must do it
-// (the tuning off, image buffers, sizes not in whole vec4s).
-bool ZeroByShader(Buffer& dst);
-bool CopyByShader(const Buffer& src, Buffer& dst, int64_t bytes);
+// Under Tuning::shader_clear: copies the first `bytes` bytes of *src to dst, or with src null
+// zeroes them, with copy.comp and returns true; false (nothing done) where the GL's own call
+// must do it (the tuning off, image buffers, sizes not in whole vec4s).
+bool CopyOrZeroByShader(const Buffer* src, Buffer& dst, int64_t bytes);
 
 // A shader storage buffer (and, under Tuning::images, the buffer texture that shaders bind as
 // an image buffer).
@@ -115,7 +114,7 @@ class Buffer {
     api.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, offset, bytes, data);
   }
   void Zero() {
-    if (ZeroByShader(*this)) return;
+    if (CopyOrZeroByShader(nullptr, *this, bytes_)) return;
     api.BindBuffer(GL_SHADER_STORAGE_BUFFER, id_);
     api.ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32F, GL_RED, GL_FLOAT, nullptr);
   }
@@ -123,14 +122,13 @@ class Buffer {
   // barrier: glCopyBufferSubData reads what shaders wrote into src only after one with
   // GL_BUFFER_UPDATE_BARRIER_BIT; later shaders see the copy without one.)
   void CopyFrom(const Buffer& src, int64_t bytes, int64_t src_offset = 0, int64_t dst_offset = 0) {
-    if (src_offset == 0 && dst_offset == 0 && CopyByShader(src, *this, bytes)) return;
+    if (src_offset == 0 && dst_offset == 0 && CopyOrZeroByShader(&src, *this, bytes)) return;
     api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     api.BindBuffer(GL_COPY_READ_BUFFER, src.id_);
     api.BindBuffer(GL_COPY_WRITE_BUFFER, id_);
     api.CopyBufferSubData(GL_COPY_READ_BUFFER, GL_COPY_WRITE_BUFFER, src_offset, dst_offset, bytes);
   }
   GLuint id() const { return id_; }
-  int64_t bytes() const { return bytes_; }
   // Makes this buffer a view of `of`'s storage that shaders read as `elem` (a float buffer as
   // vec4: four fields per node, common.glsl's FIELDS4). The view owns nothing and cannot be
   // allocated; make it again after `of` is reallocated.

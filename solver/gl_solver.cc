@@ -300,19 +300,12 @@ int64_t RunBatch(const char* name, std::initializer_list<const Buffer*> buffers,
   return Dispatch(name, buffers, ints, threads, fields, -1, 0, defines);
 }
 
-bool ZeroByShader(Buffer& dst) {
-  if (!GetTuning().shader_clear || GetTuning().images || dst.bytes() % 16 != 0) return false;
-  const int64_t n4 = dst.bytes() / 16;
-  Run("copy", {&dst, &dst}, {int(n4)}, FlatThreads(n4), -1, 0, "#define ZERO\n");  // (src unread)
-  api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);  // (an Upload after it lands after it)
-  return true;
-}
-
-bool CopyByShader(const Buffer& src, Buffer& dst, int64_t bytes) {
+bool CopyOrZeroByShader(const Buffer* src, Buffer& dst, int64_t bytes) {
   if (!GetTuning().shader_clear || GetTuning().images || bytes % 16 != 0) return false;
   const int64_t n4 = bytes / 16;
-  Run("copy", {&src, &dst}, {int(n4)}, FlatThreads(n4));
-  api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+  // (Zeroing binds dst as the unread src.)
+  Run("copy", {src ? src : &dst, &dst}, {int(n4)}, FlatThreads(n4), -1, 0, src ? "" : "#define ZERO\n");
+  api.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);  // (an Upload or a GL copy after it lands after it)
   return true;
 }
 

@@ -33,8 +33,9 @@ struct Objective {
 
 // The run's optimiser (o.optimizer) on f from x, in place; each iteration goes to `hook`
 // (optional; its false stops the run). The objective is scaled for Ceres so that its first step
-// changes the largest log-parameter by 0.1 (FirstStepScale, optimizer.cc). Ceres' first step is the gradient itself (no curvature known yet), whose size
-// is the objective's and not the problem's: from a homogeneous start on 64x48x16 it changed the
+// changes the largest log-parameter by 0.1 (FirstStepScale, optimizer.cc). Ceres' first step
+// is the gradient itself (no curvature known yet), whose size is the objective's and not the
+// problem's: from a homogeneous start on 64x48x16 it changed the
 // log-parameters by ~3e-6 (35000x short of FirstStepScale's 0.1: J is normalised, so the
 // gradient per node falls as the nodes grow in number), and late in a fit (a resumed
 // checkpoint, --init) by ~1e-7. Warm-started solves register so small a change only where their
